@@ -1,0 +1,175 @@
+"""Readers and writers for MOTChallenge text files (gt, det, tracks), validating every line.
+
+Formats (comma separated, frames 1-based, boxes top-left x, y, width, height in pixels):
+
+- gt:     ``frame,id,x,y,w,h,conf,class,vis``   (``conf=0``: box to ignore, MOT15 "ambiguous")
+- det:    ``frame,-1,x,y,w,h,score,-1,-1,-1``   (public detections; extra columns allowed)
+- tracks: ``frame,id,x,y,w,h,-1,-1,-1,-1``      (tracker output, MOTChallenge submission)
+
+A malformed line raises :class:`~trackers.errors.InputError` naming ``file:line``.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError
+from ..types import Detections, GroundTruth, TrackSet
+
+KINDS = ("gt", "det", "tracks")
+_MIN_COLS = {"gt": 6, "det": 7, "tracks": 6}
+
+
+@dataclass(frozen=True)
+class MotTable:
+    """All rows of one MOT file as columns. ``frame (N,) int64, id (N,) int64,
+    boxes (N,4) float64, score (N,) float64`` (score is ``conf`` for gt), ``cls``, ``vis``."""
+
+    frame: np.ndarray
+    id: np.ndarray
+    boxes: np.ndarray
+    score: np.ndarray
+    cls: np.ndarray
+    vis: np.ndarray
+    path: str = ""
+
+    def __len__(self) -> int:
+        return len(self.frame)
+
+    @property
+    def last_frame(self) -> int:
+        return int(self.frame.max()) if len(self.frame) else 0
+
+    def rows_at(self, frame: int) -> np.ndarray:
+        """Indices of the rows of ``frame`` (uses the sort order built on first call)."""
+        if not hasattr(self, "_index"):
+            order = np.argsort(self.frame, kind="stable")
+            object.__setattr__(self, "_index", (order, self.frame[order]))
+        order, sorted_frames = self._index  # type: ignore[attr-defined]
+        lo, hi = np.searchsorted(sorted_frames, [frame, frame + 1])
+        return order[lo:hi]
+
+    def detections(self, frame: int, min_score: float = -math.inf) -> Detections:
+        r = self.rows_at(frame)
+        r = r[self.score[r] >= min_score]
+        return Detections(self.boxes[r], self.score[r])
+
+    def ground_truth(self, frame: int) -> GroundTruth:
+        r = self.rows_at(frame)
+        return GroundTruth(self.id[r], self.boxes[r], self.score[r] == 0)
+
+    def tracks(self, frame: int) -> TrackSet:
+        r = self.rows_at(frame)
+        return TrackSet(self.id[r], self.boxes[r])
+
+
+def read_mot(path: str | os.PathLike, kind: str = "gt") -> MotTable:
+    """Read and validate a MOT text file. Empty files give an empty table."""
+    if kind not in KINDS:
+        raise ValueError(f"kind must be one of {KINDS}")
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except FileNotFoundError:
+        raise InputError(f"{path}: no such {kind} file") from None
+    except (OSError, UnicodeDecodeError) as e:
+        raise InputError(f"{path}: cannot read {kind} file ({e.__class__.__name__}: {e})") from None
+    rows = []
+    min_cols = _MIN_COLS[kind]
+    for lineno, line in enumerate(text.splitlines(), start=1):
+        s = line.strip()
+        if not s or s.startswith("#"):
+            continue
+        parts = [p.strip() for p in s.replace(";", ",").split(",")]
+        if len(parts) == 1:
+            parts = s.split()
+        where = f"{path}:{lineno}"
+        if len(parts) < min_cols:
+            raise InputError(f"{where}: expected at least {min_cols} comma-separated values "
+                             f"for a {kind} line, got {len(parts)}: {s[:60]!r}")
+        try:
+            vals = [float(p) for p in parts[:10]]
+        except ValueError:
+            raise InputError(f"{where}: not a number in {s[:60]!r}") from None
+        if not all(math.isfinite(v) for v in vals):
+            raise InputError(f"{where}: NaN or infinite value in {s[:60]!r}")
+        frame, tid, x, y, w, h = vals[:6]
+        if frame != int(frame) or frame < 1:
+            raise InputError(f"{where}: frame must be a positive integer, got {parts[0]!r}")
+        if tid != int(tid):
+            raise InputError(f"{where}: id must be an integer, got {parts[1]!r}")
+        if kind in ("gt", "tracks") and tid < 0:
+            raise InputError(f"{where}: {kind} id must be >= 0, got {parts[1]!r}")
+        if w <= 0 or h <= 0:
+            raise InputError(f"{where}: box width and height must be positive, got w={w:g} h={h:g}")
+        score = vals[6] if len(vals) > 6 else 1.0
+        cls = vals[7] if len(vals) > 7 else -1.0
+        vis = vals[8] if len(vals) > 8 else -1.0
+        rows.append((frame, tid, x, y, w, h, score, cls, vis))
+    arr = np.array(rows, dtype=np.float64).reshape(-1, 9)
+    return MotTable(frame=arr[:, 0].astype(np.int64), id=arr[:, 1].astype(np.int64),
+                    boxes=arr[:, 2:6].copy(), score=arr[:, 6].copy(), cls=arr[:, 7].copy(),
+                    vis=arr[:, 8].copy(), path=str(path))
+
+
+def format_rows(kind: str, frame, ids, boxes, score=None, cls=None, vis=None) -> list[str]:
+    """Format rows of one kind as MOT text lines (no trailing newline)."""
+    frame = np.asarray(frame, dtype=np.int64).reshape(-1)
+    ids = np.asarray(ids, dtype=np.int64).reshape(-1)
+    boxes = np.asarray(boxes, dtype=np.float64).reshape(-1, 4)
+    n = len(frame)
+    score = np.ones(n) if score is None else np.asarray(score, dtype=np.float64).reshape(-1)
+    lines = []
+    for i in range(n):
+        x, y, w, h = boxes[i]
+        head = f"{frame[i]},{ids[i]},{x:.3f},{y:.3f},{w:.3f},{h:.3f}"
+        if kind == "gt":
+            c = 1 if cls is None else int(cls[i])
+            v = -1 if vis is None else float(vis[i])
+            lines.append(f"{head},{int(score[i])},{c},{v:.3f}")
+        elif kind == "det":
+            lines.append(f"{head},{score[i]:.3f},-1,-1,-1")
+        else:
+            lines.append(f"{head},-1,-1,-1,-1")
+    return lines
+
+
+def write_mot(path: str | os.PathLike, kind: str, frame, ids, boxes, score=None, cls=None,
+              vis=None) -> None:
+    """Write a whole MOT file atomically (temp file + rename: never half-written)."""
+    path = Path(path)
+    lines = format_rows(kind, frame, ids, boxes, score, cls, vis)
+    tmp = path.with_name(path.name + ".part")
+    try:
+        tmp.write_text("".join(line + "\n" for line in lines))
+        os.replace(tmp, path)
+    except OSError as e:
+        raise InputError(f"{path}: cannot write ({e.strerror or e})") from None
+
+
+class TrackWriter:
+    """Appends a TrackSet per frame to ``path + '.part'`` and renames it on close, so a
+    complete-looking tracks file only exists once the run finished (or was stopped cleanly)."""
+
+    def __init__(self, path: str | os.PathLike):
+        self.path = Path(path)
+        self._tmp = self.path.with_name(self.path.name + ".part")
+        try:
+            self._fh = open(self._tmp, "w")
+        except OSError as e:
+            raise InputError(f"{self.path}: cannot write tracks ({e.strerror or e})") from None
+
+    def write(self, frame: int, tracks: TrackSet) -> None:
+        if len(tracks):
+            lines = format_rows("tracks", np.full(len(tracks), frame), tracks.ids, tracks.boxes)
+            self._fh.write("".join(line + "\n" for line in lines))
+
+    def close(self) -> None:
+        if not self._fh.closed:
+            self._fh.close()
+            os.replace(self._tmp, self.path)
