@@ -1,0 +1,57 @@
+"""Shared test helpers: where the real data is, and reading recordings back."""
+
+from __future__ import annotations
+
+import os
+from collections import defaultdict
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def data_root() -> Path | None:
+    env = os.environ.get("PFSCOPE_DATA")
+    for cand in ([Path(env)] if env else []) + [REPO.parent / "shared" / "data"]:
+        if cand.is_dir():
+            return cand
+    return None
+
+
+def sequence(name: str) -> Path:
+    root = data_root()
+    if root is None or not (root / name).is_dir():
+        pytest.skip(f"{name} not found: set PFSCOPE_DATA to the folder holding it "
+                    f"(default ../shared/data)")
+    return root / name
+
+
+@pytest.fixture
+def pets() -> Path:
+    return sequence("PETS09-S2L1")
+
+
+def read_rrd(path, footer: bool = True) -> dict:
+    """Entity path -> list of (timeline values dict, columns dict) per row, read with
+    ``rr.chunk.RrdReader``. ``footer=False`` streams a file that was never finished."""
+    import rerun as rr
+
+    reader = rr.chunk.RrdReader(str(path))
+    chunks = reader.store().stream() if footer else reader.stream()
+    out: dict = defaultdict(list)
+    for ch in chunks:
+        rb = ch.to_record_batch()
+        names = rb.schema.names
+        times = {t: rb.column(t).to_pylist() for t in ch.timeline_names
+                 if t in names and t != "log_time"}
+        cols = {n: rb.column(n).to_pylist() for n in names
+                if n not in times and n not in ("log_time", "rerun.controls.RowId")}
+        for i in range(rb.num_rows):
+            out[ch.entity_path].append(({t: v[i] for t, v in times.items()},
+                                        {c: v[i] for c, v in cols.items()}))
+    return dict(out)
+
+
+def rows_at(rec: dict, entity: str, frame: int) -> list:
+    return [c for t, c in rec.get(entity, []) if t.get("frame") == frame]

@@ -1,0 +1,221 @@
+"""`pfscope record` end to end: what lands in the recording, bad input, interruption,
+determinism."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from conftest import REPO, read_rrd, rows_at
+from trackers.data.motio import read_mot
+from viewer_app.cli import main
+
+cv2 = pytest.importorskip("cv2")
+
+
+def _toy(tmp_path, n=6, det_lines=None, gt=True):
+    """A small MOT folder with a bright square moving right, its gt and dets."""
+    root = tmp_path / "toy"
+    (root / "img1").mkdir(parents=True)
+    (root / "det").mkdir()
+    (root / "gt").mkdir()
+    det, gtl = [], []
+    for k in range(1, n + 1):
+        img = np.full((60, 80, 3), 30, np.uint8)
+        x = 5 + 4 * k
+        img[20:40, x:x + 10] = 220
+        cv2.imwrite(str(root / "img1" / f"{k:06d}.jpg"), img)
+        det.append(f"{k},-1,{x},20,10,20,0.9,-1,-1,-1")
+        gtl.append(f"{k},1,{x},20,10,20,1,1,1")
+    (root / "seqinfo.ini").write_text(
+        f"[Sequence]\nname=toy\nimDir=img1\nframeRate=5\nseqLength={n}\nimWidth=80\n"
+        "imHeight=60\nimExt=.jpg\n")
+    (root / "det" / "det.txt").write_text("\n".join(det_lines or det) + "\n")
+    if gt:
+        (root / "gt" / "gt.txt").write_text("\n".join(gtl) + "\n")
+    return root
+
+
+def _run(argv, capsys):
+    rc = main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    return rc, out, err
+
+
+def test_record_toy_sequence_contents(tmp_path, capsys):
+    root = _toy(tmp_path)
+    out = tmp_path / "x.rrd"
+    rc, stdout, _ = _run(["record", root, "--tracker", "passthrough", "--out", out,
+                          "--tracks-out", tmp_path / "t.txt", "--quiet"], capsys)
+    assert rc == 0
+    assert f"rerun {out}" in stdout
+    rec = read_rrd(out)
+    for ent in ("/video", "/video/detections", "/video/gt", "/video/tracks"):
+        assert ent in rec, ent
+    frames = sorted({t["frame"] for t, _ in rec["/video"]})
+    assert frames == [1, 2, 3, 4, 5, 6]
+    # detections and gt of frame 3 are where the files say (Boxes2D stored as centre/half size)
+    det = rows_at(rec, "/video/detections", 3)[0]
+    assert np.allclose(det["Boxes2D:centers"], [[17 + 5, 30]])
+    assert np.allclose(det["Boxes2D:half_sizes"], [[5, 10]])
+    gt = rows_at(rec, "/video/gt", 3)[0]
+    assert gt["Boxes2D:labels"] == ["gt 1"]
+    # every frame's image is a JPEG
+    img = rows_at(rec, "/video", 1)[0]
+    assert img["EncodedImage:media_type"] == ["image/jpeg"]
+    tracks = read_mot(tmp_path / "t.txt", "tracks")
+    assert sorted(set(tracks.frame.tolist())) == frames
+
+
+def test_refuses_to_overwrite_without_force(tmp_path, capsys):
+    root = _toy(tmp_path)
+    out = tmp_path / "x.rrd"
+    out.write_bytes(b"precious")
+    rc, _, err = _run(["record", root, "--tracker", "passthrough", "--out", out, "--quiet"], capsys)
+    assert rc == 2 and "--force" in err and out.read_bytes() == b"precious"
+    rc, _, _ = _run(["record", root, "--tracker", "passthrough", "--out", out, "--quiet",
+                     "--force"], capsys)
+    assert rc == 0 and out.stat().st_size > 1000
+
+
+@pytest.mark.parametrize("bad, needle", [
+    ("3,-1,10,20,nan,20,0.9,-1,-1,-1", "det.txt:3: NaN"),
+    ("3,-1,10,20,-10,20,0.9,-1,-1,-1", "det.txt:3: box width and height must be positive"),
+    ("3,-1,10,20", "det.txt:3: expected at least 7"),
+])
+def test_bad_det_line_one_line_error_and_no_output(tmp_path, capsys, bad, needle):
+    good = [f"{k},-1,10,20,10,20,0.9,-1,-1,-1" for k in (1, 2)]
+    root = _toy(tmp_path, det_lines=good + [bad])
+    out = tmp_path / "x.rrd"
+    rc, _, err = _run(["record", root, "--tracker", "passthrough", "--out", out, "--quiet"], capsys)
+    assert rc == 2
+    assert needle in err and err.count("\n") == 1 and "Traceback" not in err
+    assert not out.exists()
+
+
+def test_missing_image_mid_run_leaves_incomplete_file(tmp_path, capsys):
+    root = _toy(tmp_path)
+    (root / "img1" / "000004.jpg").unlink()
+    out = tmp_path / "x.rrd"
+    rc, _, err = _run(["record", root, "--tracker", "passthrough", "--out", out, "--quiet"], capsys)
+    assert rc == 2 and "000004.jpg: frame 4" in err and err.count("\n") == 1
+    assert not out.exists()  # nothing half-written looks complete
+    partial = tmp_path / "x.incomplete.rrd"
+    rec = read_rrd(partial)
+    assert sorted({t["frame"] for t, _ in rec["/video"]}) == [1, 2, 3]
+
+
+def test_missing_seqinfo(tmp_path, capsys):
+    root = _toy(tmp_path)
+    (root / "seqinfo.ini").unlink()
+    rc, _, err = _run(["record", root, "--out", tmp_path / "x.rrd", "--quiet"], capsys)
+    assert rc == 2 and "seqinfo.ini: missing" in err
+
+
+def test_empty_video(tmp_path, capsys):
+    (tmp_path / "v.mp4").write_bytes(b"")
+    rc, _, err = _run(["record", tmp_path / "v.mp4", "--out", tmp_path / "x.rrd", "--quiet"], capsys)
+    assert rc == 2 and "v.mp4: unreadable or empty video" in err
+
+
+def test_unwritable_output_folder(tmp_path, capsys):
+    root = _toy(tmp_path)
+    blocker = tmp_path / "file"
+    blocker.write_text("I am a file, not a folder")
+    rc, _, err = _run(["record", root, "--tracker", "passthrough",
+                       "--out", blocker / "sub" / "x.rrd", "--quiet"], capsys)
+    assert rc == 2 and "cannot create output folder" in err
+
+
+def test_file_detector_without_det_file(tmp_path, capsys):
+    root = _toy(tmp_path)
+    (root / "det" / "det.txt").unlink()
+    rc, _, err = _run(["record", root, "--detector", "file", "--out", tmp_path / "x.rrd",
+                       "--quiet"], capsys)
+    assert rc == 2 and "det" in err
+
+
+def _spawn_record(out: Path, extra=()) -> subprocess.Popen:
+    cmd = [sys.executable, "-m", "viewer_app.cli", "record", "--tracker", "passthrough",
+           "--frames", "100000", "--out", str(out), "--quiet", *extra]
+    env = dict(os.environ, RERUN_ANALYTICS="0")
+    return subprocess.Popen(cmd, cwd=REPO, env=env, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE)
+
+
+def _wait_for_frames(out: Path, proc, min_bytes=200_000, timeout=60):
+    t0 = time.time()
+    while time.time() - t0 < timeout:
+        if out.exists() and out.stat().st_size > min_bytes:
+            return
+        if proc.poll() is not None:
+            raise AssertionError(f"recorder ended early: {proc.stderr.read().decode()}")
+        time.sleep(0.2)
+    raise AssertionError("recorder wrote nothing in time")
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_interrupt_finishes_a_readable_file(tmp_path, sig):
+    out = tmp_path / "run.rrd"
+    proc = _spawn_record(out)
+    _wait_for_frames(out, proc)
+    proc.send_signal(sig)
+    proc.wait(timeout=60)
+    assert proc.returncode == 130, proc.stderr.read().decode()
+    rec = read_rrd(out, footer=True)  # footer written: the full store loads
+    frames = {t["frame"] for t, _ in rec["/video"]}
+    assert len(frames) >= 2
+    assert any("interrupted" in str(c.get("TextLog:text")) for _, c in rec.get("/log", []))
+
+
+def test_sigkill_still_leaves_a_readable_file(tmp_path):
+    out = tmp_path / "run.rrd"
+    proc = _spawn_record(out)
+    _wait_for_frames(out, proc)
+    proc.kill()
+    proc.wait(timeout=30)
+    rec = read_rrd(out, footer=False)
+    assert len({t["frame"] for t, _ in rec["/video"]}) >= 2
+
+
+def test_same_seed_same_recording(tmp_path, capsys):
+    a, b, c = tmp_path / "a.rrd", tmp_path / "b.rrd", tmp_path / "c.rrd"
+    for out, seed in ((a, 3), (b, 3), (c, 4)):
+        rc, _, _ = _run(["record", "--frames", "12", "--seed", seed, "--out", out,
+                         "--level", "particles", "--quiet"], capsys)
+        assert rc == 0
+    rerun = Path(sys.executable).with_name("rerun")
+    same = subprocess.run([str(rerun), "rrd", "compare", str(a), str(b)], capture_output=True)
+    assert same.returncode == 0, same.stderr.decode()[-2000:]
+    diff = subprocess.run([str(rerun), "rrd", "compare", str(a), str(c)], capture_output=True)
+    assert diff.returncode != 0
+
+
+def test_levels_change_what_is_recorded(tmp_path, capsys):
+    sizes = {}
+    for level in ("tracks", "particles"):
+        out = tmp_path / f"{level}.rrd"
+        rc, _, _ = _run(["record", "--frames", "10", "--level", level, "--out", out, "--quiet"],
+                        capsys)
+        assert rc == 0
+        sizes[level] = out.stat().st_size
+        ents = set(read_rrd(out))
+        has_particles = any("particles" in e for e in ents)
+        assert has_particles == (level == "particles"), (level, sorted(ents))
+    assert sizes["particles"] > sizes["tracks"]
+
+
+def test_default_record_writes_under_recordings(tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    rc, stdout, _ = _run(["record", "--frames", "5", "--quiet"], capsys)
+    assert rc == 0
+    files = list((tmp_path / "recordings").glob("*.rrd"))
+    assert len(files) == 1 and "phd" in files[0].name
+    assert f"rerun {Path('recordings') / files[0].name}" in stdout

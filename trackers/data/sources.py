@@ -1,0 +1,206 @@
+"""Frame sources: a MOTChallenge sequence folder, any OpenCV-readable video file, a folder of
+images, and the built-in synthetic scene.  Each yields :class:`~trackers.types.Frame`s with a
+1-based index and a timestamp in seconds.
+
+Problems (missing ``seqinfo.ini``, a missing or unreadable image, an unreadable or empty video)
+raise :class:`~trackers.errors.InputError` naming the file or frame.
+"""
+
+from __future__ import annotations
+
+import configparser
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Iterator, Optional
+
+import cv2
+import numpy as np
+
+from ..errors import InputError
+from ..types import Frame
+from .motio import MotTable, read_mot
+
+IMAGE_EXTS = (".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff", ".webp")
+
+
+@dataclass
+class Source:
+    """Base class. ``length`` is the number of frames when known; ``gt``/``det`` are the
+    sequence's ground truth and public detections when it has them."""
+
+    name: str
+    fps: float
+    length: Optional[int]
+    width: int
+    height: int
+    gt: Optional[MotTable] = None
+    det: Optional[MotTable] = None
+    kind: str = "source"
+    location: str = ""
+    extra: dict = field(default_factory=dict)
+
+    def frames(self, limit: Optional[int] = None) -> Iterator[Frame]:  # pragma: no cover
+        raise NotImplementedError
+
+    def describe(self) -> dict:
+        d = dict(kind=self.kind, name=self.name, location=self.location, fps=self.fps,
+                 length=self.length, width=self.width, height=self.height,
+                 has_gt=self.gt is not None, has_det=self.det is not None)
+        d.update(self.extra)
+        return d
+
+
+def _read_image(path: Path, index: int) -> np.ndarray:
+    if not path.is_file():
+        raise InputError(f"{path}: frame {index}: image file missing")
+    img = cv2.imread(str(path), cv2.IMREAD_COLOR)
+    if img is None:
+        raise InputError(f"{path}: frame {index}: cannot decode image")
+    return img
+
+
+class MOTFolderSource(Source):
+    """A MOTChallenge sequence: ``seqinfo.ini``, ``img1/000001.jpg ...``, optional
+    ``gt/gt.txt`` and ``det/det.txt``."""
+
+    def __init__(self, root: str | os.PathLike):
+        root = Path(root)
+        ini = root / "seqinfo.ini"
+        if not ini.is_file():
+            raise InputError(f"{ini}: missing (a MOTChallenge folder needs seqinfo.ini)")
+        cp = configparser.ConfigParser()
+        try:
+            cp.read(ini)
+            seq = cp["Sequence"]
+            name = seq.get("name", root.name)
+            fps = float(seq.get("frameRate", "25"))
+            length = int(seq["seqLength"])
+            width = int(seq.get("imWidth", "0"))
+            height = int(seq.get("imHeight", "0"))
+            self.im_dir = root / seq.get("imDir", "img1")
+            self.im_ext = seq.get("imExt", ".jpg")
+        except (KeyError, ValueError, configparser.Error) as e:
+            raise InputError(f"{ini}: malformed seqinfo.ini ({e.__class__.__name__}: {e})") from None
+        if length <= 0 or fps <= 0:
+            raise InputError(f"{ini}: seqLength and frameRate must be positive")
+        if not self.im_dir.is_dir():
+            raise InputError(f"{self.im_dir}: image folder missing")
+        gt_path, det_path = root / "gt" / "gt.txt", root / "det" / "det.txt"
+        gt = read_mot(gt_path, "gt") if gt_path.is_file() else None
+        det = read_mot(det_path, "det") if det_path.is_file() else None
+        if width <= 0 or height <= 0:
+            first = _read_image(self._path(1), 1)
+            height, width = first.shape[:2]
+        super().__init__(name=name, fps=fps, length=length, width=width, height=height, gt=gt,
+                         det=det, kind="mot", location=str(root))
+
+    def _path(self, index: int) -> Path:
+        return self.im_dir / f"{index:06d}{self.im_ext}"
+
+    def frames(self, limit: Optional[int] = None) -> Iterator[Frame]:
+        n = self.length if limit is None else min(limit, self.length)
+        for k in range(1, n + 1):
+            yield Frame(k, (k - 1) / self.fps, _read_image(self._path(k), k))
+
+
+class VideoFileSource(Source):
+    """Any video file OpenCV can read. Timestamps come from the container when it has them."""
+
+    def __init__(self, path: str | os.PathLike):
+        path = Path(path)
+        if not path.is_file():
+            raise InputError(f"{path}: no such file or folder")
+        cap = cv2.VideoCapture(str(path))
+        ok = cap.isOpened()
+        ok_frame, first = cap.read() if ok else (False, None)
+        if not ok or not ok_frame or first is None:
+            cap.release()
+            raise InputError(f"{path}: unreadable or empty video (OpenCV decoded no frame)")
+        fps = cap.get(cv2.CAP_PROP_FPS)
+        fps = float(fps) if fps and np.isfinite(fps) and fps > 0 else 25.0
+        n = int(cap.get(cv2.CAP_PROP_FRAME_COUNT))
+        cap.release()
+        super().__init__(name=path.stem, fps=fps, length=n if n > 0 else None,
+                         width=first.shape[1], height=first.shape[0], kind="video",
+                         location=str(path))
+        self.path = path
+
+    def frames(self, limit: Optional[int] = None) -> Iterator[Frame]:
+        cap = cv2.VideoCapture(str(self.path))
+        try:
+            k = 0
+            while limit is None or k < limit:
+                ok, img = cap.read()
+                if not ok or img is None:
+                    if k == 0:
+                        raise InputError(f"{self.path}: frame 1: cannot decode")
+                    return
+                k += 1
+                yield Frame(k, (k - 1) / self.fps, img)
+        finally:
+            cap.release()
+
+
+class ImageFolderSource(Source):
+    """A folder of images, taken in name order."""
+
+    def __init__(self, root: str | os.PathLike, fps: float = 25.0):
+        root = Path(root)
+        files = sorted(p for p in root.iterdir() if p.suffix.lower() in IMAGE_EXTS and p.is_file())
+        if not files:
+            raise InputError(f"{root}: no images ({', '.join(IMAGE_EXTS)}) and no seqinfo.ini")
+        first = _read_image(files[0], 1)
+        super().__init__(name=root.name, fps=fps, length=len(files), width=first.shape[1],
+                         height=first.shape[0], kind="images", location=str(root))
+        self.files = files
+
+    def frames(self, limit: Optional[int] = None) -> Iterator[Frame]:
+        files = self.files if limit is None else self.files[:limit]
+        for k, p in enumerate(files, start=1):
+            yield Frame(k, (k - 1) / self.fps, _read_image(p, k))
+
+
+class SyntheticSource(Source):
+    """The built-in synthetic scene (:mod:`trackers.data.synthetic`), rendered on the fly."""
+
+    def __init__(self, config=None):
+        from .synthetic import SceneConfig, SyntheticScene
+
+        self.scene = SyntheticScene(config or SceneConfig())
+        c = self.scene.config
+        super().__init__(name=f"synthetic-seed{c.seed}", fps=c.fps, length=c.frames,
+                         width=c.width, height=c.height, gt=self.scene.gt, det=self.scene.det,
+                         kind="synthetic", location="built-in",
+                         extra=dict(scene=_dataclass_dict(c)))
+
+    def frames(self, limit: Optional[int] = None) -> Iterator[Frame]:
+        for f in self.scene.frames():
+            if limit is not None and f.index > limit:
+                return
+            yield f
+
+
+def _dataclass_dict(obj) -> dict:
+    from dataclasses import asdict, is_dataclass
+
+    return asdict(obj) if is_dataclass(obj) else dict(vars(obj))
+
+
+def open_source(spec: str | os.PathLike | None, *, fps: Optional[float] = None,
+                synthetic_config=None) -> Source:
+    """Open ``spec``: None or ``"synthetic"`` -> the synthetic scene; a folder with
+    ``seqinfo.ini`` or ``img1/`` -> MOT sequence; another folder -> images; a file -> video."""
+    if spec is None or str(spec) == "synthetic":
+        return SyntheticSource(synthetic_config)
+    path = Path(spec)
+    if path.is_dir():
+        if (path / "seqinfo.ini").exists() or (path / "img1").is_dir():
+            return MOTFolderSource(path)
+        return ImageFolderSource(path, fps=fps or 25.0)
+    if path.exists():
+        src = VideoFileSource(path)
+        if fps:
+            src.fps = fps
+        return src
+    raise InputError(f"{path}: no such file or folder")

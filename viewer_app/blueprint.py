@@ -1,0 +1,36 @@
+"""Default Rerun blueprints: the video with its overlays, the stage views a tracker declares,
+time series and the text log."""
+
+from __future__ import annotations
+
+from typing import Sequence
+
+import rerun.blueprint as rrb
+
+#: Overlays every 2D view shows under the tracker's own entities.
+BASE_2D = ["video", "video/detections", "video/gt"]
+
+
+def default_blueprint(views: Sequence[tuple[str, Sequence[str]]] = (),
+                      plots: Sequence[tuple[str, Sequence[str]]] = ()) -> rrb.Blueprint:
+    """``views``: (title, engine paths) pairs, each becoming a 2D view over the video that shows
+    those paths (``"phd/particles/**"`` ...) on top of the frame; ``plots``: (title, paths)
+    pairs of scalar series.  The first tab shows everything."""
+    tabs = [rrb.Spatial2DView(origin="video", name="All stages")]
+    for title, paths in views:
+        contents = BASE_2D + [f"video/{p}" for p in paths]
+        tabs.append(rrb.Spatial2DView(origin="video", contents=contents, name=title))
+    series = [rrb.TimeSeriesView(origin="plots", name="Series")]
+    for title, paths in plots:
+        series.append(rrb.TimeSeriesView(origin="plots", contents=[f"plots/{p}" for p in paths],
+                                         name=title))
+    return rrb.Blueprint(
+        rrb.Horizontal(
+            rrb.Tabs(*tabs, name="Video"),
+            rrb.Vertical(rrb.Tabs(*series), rrb.TextLogView(origin="log", name="Log"),
+                         row_shares=[3, 1]),
+            column_shares=[3, 2],
+        ),
+        rrb.TimePanel(state="expanded"),
+        collapse_panels=False,
+    )

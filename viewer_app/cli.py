@@ -1,0 +1,154 @@
+"""The ``pfscope`` command line.
+
+    pfscope record [SOURCE] [--tracker phd|mt|passthrough] [--out FILE.rrd] [--frames N]
+                   [--seed S] [--detector file|hog|haar|bgsub] [--level tracks|clusters|particles]
+                   [--tracks-out FILE.txt] [--force] [--spawn | --serve]
+    pfscope synth --out DIR [--frames N --targets K --clutter R --seed S]
+
+Bad input ends with one line on stderr naming the file/line/frame and exit status 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from pathlib import Path
+from typing import Optional, Sequence
+
+from trackers.errors import InputError
+
+EXIT_BAD_INPUT = 2
+EXIT_INTERRUPTED = 130
+
+
+def _synth_config(args, frames: Optional[int]):
+    from trackers.data.synthetic import SceneConfig
+
+    kw = {"seed": args.seed}
+    for name in ("targets", "clutter"):
+        v = getattr(args, name, None)
+        if v is not None:
+            kw[name] = v
+    if frames is not None:
+        kw["frames"] = frames
+    return SceneConfig(**kw)
+
+
+def _add_synth_options(p: argparse.ArgumentParser, *, frames_help: str) -> None:
+    p.add_argument("--frames", type=int, default=None, help=frames_help)
+    p.add_argument("--targets", type=int, default=None,
+                   help="synthetic scene: number of people (default 6)")
+    p.add_argument("--clutter", type=float, default=None,
+                   help="synthetic scene: mean false detections per frame (default 2)")
+    p.add_argument("--seed", type=int, default=0, help="random seed (scene and tracker)")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from trackers.base import DEFAULT_TRACKER, TRACKERS
+    from trackers.detect import DETECTORS
+    from trackers.observer import LEVELS
+
+    ap = argparse.ArgumentParser(prog="pfscope", description=(
+        "Particle-filter multi-target tracking that shows its work: run a tracker and "
+        "record every stage to a Rerun .rrd file."))
+    sub = ap.add_subparsers(dest="command", required=True)
+
+    r = sub.add_parser("record", help="run a tracker and write a Rerun recording",
+                       description="Run a tracker on SOURCE (default: the built-in synthetic "
+                                   "scene) and write a Rerun recording.")
+    r.add_argument("source", nargs="?", default=None,
+                   help="MOTChallenge folder, video file, image folder, or 'synthetic' (default)")
+    r.add_argument("--tracker", default=DEFAULT_TRACKER, choices=list(TRACKERS),
+                   help=f"tracker (default {DEFAULT_TRACKER})")
+    r.add_argument("--out", type=Path, default=None,
+                   help="recording file (default recordings/<source>-<tracker>.rrd)")
+    _add_synth_options(r, frames_help="stop after N frames (default: all)")
+    r.add_argument("--detector", choices=list(DETECTORS), default=None,
+                   help="detections: 'file' = the sequence's det/det.txt (default when present), "
+                        "otherwise HOG people")
+    r.add_argument("--min-score", type=float, default=float("-inf"),
+                   help="drop file detections scoring below this")
+    r.add_argument("--level", choices=list(LEVELS), default="clusters",
+                   help="how much to record: tracks < clusters < particles (default clusters)")
+    r.add_argument("--max-points", type=int, default=3000,
+                   help="decimate each particle cloud to at most this many points per frame")
+    r.add_argument("--fps", type=float, default=None, help="frame rate of an image folder")
+    r.add_argument("--tracks-out", type=Path, default=None, help="also write MOT tracks here")
+    r.add_argument("--force", action="store_true", help="overwrite existing output files")
+    live = r.add_mutually_exclusive_group()
+    live.add_argument("--spawn", action="store_true", help="also stream to a native viewer")
+    live.add_argument("--serve", action="store_true", help="also serve a web viewer")
+    r.add_argument("--quiet", action="store_true", help="no progress bar")
+
+    s = sub.add_parser("synth", help="write the synthetic scene as a MOTChallenge folder")
+    s.add_argument("--out", type=Path, required=True, help="output folder (must not exist)")
+    _add_synth_options(s, frames_help="number of frames (default 150)")
+    s.add_argument("--quiet", action="store_true")
+    return ap
+
+
+def cmd_record(args) -> int:
+    from trackers.data.sources import open_source
+
+    from .run import RecordOptions, default_out_path, record
+
+    if args.max_points <= 0:
+        raise InputError("--max-points must be positive")
+    if args.frames is not None and args.frames <= 0:
+        raise InputError("--frames must be positive")
+    synthetic = args.source in (None, "synthetic")
+    if not synthetic and (args.targets is not None or args.clutter is not None):
+        raise InputError("--targets/--clutter only apply to the synthetic scene")
+    source = open_source(args.source, fps=args.fps,
+                         synthetic_config=_synth_config(args, args.frames) if synthetic else None)
+    out = args.out or default_out_path(source, args.tracker)
+    opts = RecordOptions(tracker=args.tracker, detector=args.detector, min_score=args.min_score,
+                         level=args.level, max_points=args.max_points, frames=args.frames,
+                         seed=args.seed, force=args.force, tracks_out=args.tracks_out,
+                         spawn=args.spawn, serve=args.serve)
+    res = record(source, out, opts, progress=not args.quiet)
+    size = res.bytes / 1e6
+    state = "interrupted; recording finished and readable" if res.interrupted else "done"
+    print(f"{state}: {res.frames} frames in {res.seconds:.1f} s "
+          f"({res.frames / max(res.seconds, 1e-9):.1f} fps), {size:.1f} MB -> {res.out}")
+    if res.tracks_out:
+        print(f"tracks (MOT format): {res.tracks_out}")
+    print(f"open it with:  rerun {res.out}")
+    if args.serve:
+        input("web viewer running; press Enter to stop\n") if sys.stdin.isatty() else None
+    return EXIT_INTERRUPTED if res.interrupted else 0
+
+
+def cmd_synth(args) -> int:
+    from trackers.data.synthetic import write_sequence
+
+    def progress(i, n):
+        if not args.quiet and (i == n or i % max(1, n // 10) == 0):
+            print(f"synth: {i}/{n} frames", file=sys.stderr)
+
+    path = write_sequence(args.out, _synth_config(args, args.frames), progress=progress)
+    print(f"wrote synthetic MOT sequence to {path}")
+    print(f"record it with:  pfscope record {path}")
+    return 0
+
+
+def main(argv: Optional[Sequence[str]] = None) -> int:
+    os.environ.setdefault("RERUN_ANALYTICS", "0")
+    args = build_parser().parse_args(argv)
+    try:
+        if args.command == "record":
+            return cmd_record(args)
+        if args.command == "synth":
+            return cmd_synth(args)
+    except InputError as e:
+        print(f"pfscope: error: {e}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except KeyboardInterrupt:
+        print("pfscope: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    return 1
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,266 @@
+"""``pfscope record``: run a tracker over a source and write tracks and a Rerun recording.
+
+Safety rules the code keeps:
+- an existing recording or tracks file is never overwritten unless ``force``;
+- all input is opened and validated before the output file is created;
+- Ctrl-C (SIGINT) and SIGTERM finish the file so it stays readable (and say so inside it);
+- data is flushed every frame, so even SIGKILL leaves a readable file missing at most a frame;
+- a run that fails on bad input mid-way is closed and renamed ``*.incomplete.rrd`` so it
+  never looks like a complete recording.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import platform
+import signal
+import sys
+import time
+from collections import deque
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable, Optional
+
+import numpy as np
+
+from trackers import __version__
+from trackers.base import make_tracker
+from trackers.data.motio import TrackWriter
+from trackers.data.sources import Source
+from trackers.detect import make_detector
+from trackers.errors import InputError
+from trackers.observer import level_rank
+
+RECORDINGS_DIR = Path("recordings")
+
+
+class Interrupted(Exception):
+    """Raised from the SIGTERM handler so the loop can finish the file."""
+
+
+@dataclass
+class RecordOptions:
+    tracker: str = "phd"
+    detector: Optional[str] = None  # None: 'file' when the source has detections, else 'hog'
+    min_score: float = float("-inf")
+    level: str = "clusters"
+    max_points: int = 3000
+    frames: Optional[int] = None
+    seed: int = 0
+    force: bool = False
+    tracks_out: Optional[Path] = None
+    spawn: bool = False
+    serve: bool = False
+    trails: int = 30
+    tracker_options: dict = field(default_factory=dict)
+
+
+@dataclass
+class RecordResult:
+    out: Path
+    frames: int
+    seconds: float
+    interrupted: bool
+    tracks_out: Optional[Path]
+    bytes: int
+
+
+def default_out_path(source: Source, tracker: str) -> Path:
+    return RECORDINGS_DIR / f"{source.name}-{tracker}.rrd"
+
+
+def check_output(path: Path, force: bool, what: str = "recording") -> Path:
+    """Refuse to overwrite without ``force``; make sure the folder exists and is writable."""
+    path = Path(path)
+    if path.exists() and not force:
+        raise InputError(f"{path}: {what} exists; pass --force to overwrite it")
+    if path.exists() and path.is_dir():
+        raise InputError(f"{path}: is a folder, not a {what} file")
+    parent = path.parent if str(path.parent) else Path(".")
+    try:
+        parent.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise InputError(f"{parent}: cannot create output folder ({e.strerror or e})") from None
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise InputError(f"{parent}: output folder is not writable")
+    return path
+
+
+def _versions() -> dict:
+    import cv2
+    import rerun
+    import scipy
+
+    return {"pfscope": __version__, "rerun-sdk": rerun.__version__, "numpy": np.__version__,
+            "scipy": scipy.__version__, "opencv": cv2.__version__,
+            "python": platform.python_version()}
+
+
+class Progress:
+    """A one-line progress bar on stderr (a line every ~10 % when stderr is not a terminal)."""
+
+    def __init__(self, total: Optional[int], label: str, stream=None, enabled: bool = True):
+        self.total, self.label, self.enabled = total, label, enabled
+        self.stream = stream or sys.stderr
+        self.tty = hasattr(self.stream, "isatty") and self.stream.isatty()
+        self.t0 = time.perf_counter()
+        self._last_draw = 0.0
+        self._last_decile = -1
+
+    def update(self, done: int) -> None:
+        if not self.enabled:
+            return
+        now = time.perf_counter()
+        rate = done / max(now - self.t0, 1e-9)
+        if self.tty:
+            if now - self._last_draw < 0.1 and done != self.total:
+                return
+            self._last_draw = now
+            if self.total:
+                frac = min(done / self.total, 1.0)
+                bar = "#" * int(frac * 30)
+                eta = (self.total - done) / rate if rate > 0 else 0
+                msg = f"\r{self.label} [{bar:<30}] {done}/{self.total} {rate:5.1f} fps ETA {eta:4.0f}s"
+            else:
+                msg = f"\r{self.label} {done} frames {rate:5.1f} fps"
+            self.stream.write(msg)
+            self.stream.flush()
+        else:
+            decile = int(10 * done / self.total) if self.total else done // 100
+            if decile != self._last_decile:
+                self._last_decile = decile
+                tot = f"/{self.total}" if self.total else ""
+                self.stream.write(f"{self.label}: {done}{tot} frames, {rate:.1f} fps\n")
+                self.stream.flush()
+
+    def close(self) -> None:
+        if self.enabled and self.tty:
+            self.stream.write("\n")
+            self.stream.flush()
+
+
+class TrailBuffer:
+    """Recent centres of each live track (bounded: ``length`` points per track, tracks unseen
+    for ``forget`` frames are dropped)."""
+
+    def __init__(self, length: int = 30, forget: int = 50):
+        self.length, self.forget = length, forget
+        self.trails: dict[int, deque] = {}
+        self.last_seen: dict[int, int] = {}
+
+    def update(self, frame: int, ids: np.ndarray, boxes: np.ndarray):
+        centres = boxes[:, :2] + boxes[:, 2:] / 2.0
+        for tid, c in zip(ids.tolist(), centres):
+            self.trails.setdefault(tid, deque(maxlen=self.length)).append(c)
+            self.last_seen[tid] = frame
+        for tid in [t for t, f in self.last_seen.items() if frame - f > self.forget]:
+            del self.trails[tid], self.last_seen[tid]
+        live = [t for t in ids.tolist() if len(self.trails[t]) >= 2]
+        return np.asarray(live, dtype=np.int64), [np.asarray(self.trails[t]) for t in live]
+
+
+def resolve_detector_name(source: Source, name: Optional[str]) -> str:
+    if name:
+        return name
+    return "file" if source.det is not None else "hog"
+
+
+def record(source: Source, out: Path, opts: RecordOptions, *,
+           progress: bool = True, on_frame: Optional[Callable[[int], None]] = None) -> RecordResult:
+    """Run ``opts.tracker`` on ``source`` and write the recording to ``out``."""
+    import rerun as rr
+
+    from .blueprint import default_blueprint
+    from .recorder import RerunObserver, recording_id_for
+
+    level_rank(opts.level)
+    out = check_output(Path(out), opts.force)
+    tracks_out = check_output(Path(opts.tracks_out), opts.force, "tracks file") if opts.tracks_out else None
+    det_name = resolve_detector_name(source, opts.detector)
+    detector = make_detector(det_name, det_table=source.det,
+                             **({"min_score": opts.min_score} if det_name == "file" else {}))
+    tracker = make_tracker(opts.tracker, seed=opts.seed, **opts.tracker_options)
+    total = source.length if opts.frames is None else (
+        min(opts.frames, source.length) if source.length else opts.frames)
+
+    config = {
+        "tracker": opts.tracker, "detector": det_name, "min_score": opts.min_score,
+        "level": opts.level, "max_points": opts.max_points, "frames": total, "seed": opts.seed,
+        "source": json.dumps(source.describe(), sort_keys=True, default=str),
+        "tracker_config": json.dumps(tracker.config(), sort_keys=True, default=str),
+    }
+    rec = rr.RecordingStream("pfscope", recording_id=recording_id_for(config),
+                             send_properties=False)
+    views = getattr(tracker, "views", lambda: ([], []))()
+    blueprint = default_blueprint(*views)
+    rec.save(str(out), default_blueprint=blueprint)
+    if opts.spawn:
+        rec.spawn(connect=False)
+        rec.set_sinks(rr.FileSink(str(out)), rr.GrpcSink(), default_blueprint=blueprint)
+    elif opts.serve:
+        grpc = rr.GrpcServerSink()
+        rec.set_sinks(rr.FileSink(str(out)), grpc, default_blueprint=blueprint)
+        rr.serve_web_viewer(connect_to=grpc.uri, open_browser=False)
+        print(f"serving the web viewer for {grpc.uri}", file=sys.stderr)
+    rec.send_recording_name(f"{source.name} · {opts.tracker}")
+    rec.send_property("config", rr.AnyValues(**{k: str(v) for k, v in config.items()}))
+    rec.send_property("versions", rr.AnyValues(**_versions()))
+
+    obs = RerunObserver(rec, level=opts.level, max_points=opts.max_points)
+    writer = TrackWriter(tracks_out) if tracks_out else None
+    trails = TrailBuffer(opts.trails)
+    bar = Progress(total, f"{opts.tracker} on {source.name}", enabled=progress)
+    interrupted = False
+    failed: Optional[InputError] = None
+    done = 0
+
+    def on_term(signum, _frame):
+        raise Interrupted()
+
+    old_term = signal.signal(signal.SIGTERM, on_term)
+    t0 = time.perf_counter()
+    try:
+        for frame in source.frames(total):
+            obs.begin_frame(frame)
+            dets = detector(frame)
+            obs.boxes("detections", dets.boxes,
+                      labels=[f"{s:.2f}" for s in dets.scores] if len(dets) < 100 else None)
+            if source.gt is not None:
+                gt = source.gt.ground_truth(frame.index)
+                obs.boxes("gt", gt.boxes, labels=[f"gt {i}" for i in gt.ids],
+                          colors=(60, 255, 60, 255))
+            tracks = tracker.step(frame, dets, obs)
+            obs.stage("output")
+            obs.boxes("tracks", tracks.boxes, ids=tracks.ids, radii=2.0)
+            live, strips = trails.update(frame.index, tracks.ids, tracks.boxes)
+            obs.strips("tracks/trails", strips, ids=live)
+            obs.scalar("tracks/count", len(tracks))
+            obs.scalar("detections/count", len(dets))
+            if writer:
+                writer.write(frame.index, tracks)
+            obs.end_frame()
+            done += 1
+            bar.update(done)
+            if on_frame:
+                on_frame(done)
+    except (KeyboardInterrupt, Interrupted):
+        interrupted = True
+        obs.text("", f"run interrupted after {done} frames", level="WARN")
+    except InputError as e:
+        failed = e
+        obs.text("", f"run failed: {e}", level="ERROR")
+    finally:
+        signal.signal(signal.SIGTERM, old_term)
+        bar.close()
+        if writer:
+            writer.close()
+        rec.flush()
+        rec.disconnect()
+    seconds = time.perf_counter() - t0
+    if failed is not None:
+        bad = out.with_name(out.stem + ".incomplete.rrd")
+        os.replace(out, bad)
+        raise InputError(f"{failed} (partial recording kept as {bad})")
+    return RecordResult(out=out, frames=done, seconds=seconds, interrupted=interrupted,
+                        tracks_out=tracks_out, bytes=out.stat().st_size)
