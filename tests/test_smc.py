@@ -1,0 +1,178 @@
+"""trackers.smc: log-weights, the four resampling schemes, the size-aware motion model."""
+
+import numpy as np
+import pytest
+from scipy.stats import multivariate_normal
+
+from trackers.smc import (SCHEMES, ParticleSet, ess, logsumexp, normalise, predict_mean,
+                          propagate, resample, resample_indices, transition_logpdf)
+
+# ----------------------------------------------------------------------------- weights
+
+
+def test_logsumexp_matches_naive_and_survives_underflow():
+    x = np.array([-1.0, 0.5, 2.0, -3.0])
+    assert logsumexp(x) == pytest.approx(np.log(np.exp(x).sum()))
+    # exp(-1000) underflows to 0 in linear space; the log-space sum must not.
+    assert logsumexp(x - 1000.0) == pytest.approx(np.log(np.exp(x).sum()) - 1000.0)
+    assert logsumexp(np.array([])) == -np.inf
+    assert logsumexp(np.array([-np.inf, -np.inf])) == -np.inf
+    assert logsumexp(np.array([-np.inf, 0.0])) == 0.0
+    m = np.log(np.array([[1.0, 2.0], [3.0, 4.0]]))
+    np.testing.assert_allclose(logsumexp(m, axis=0), np.log([4.0, 6.0]))
+    np.testing.assert_allclose(logsumexp(m, axis=1), np.log([3.0, 7.0]))
+
+
+def test_normalise_and_ess():
+    lw = np.log(np.array([1.0, 1.0, 2.0]))
+    nl, lse = normalise(lw)
+    np.testing.assert_allclose(np.exp(nl), [0.25, 0.25, 0.5])
+    assert lse == pytest.approx(np.log(4.0))
+    assert ess(np.zeros(10)) == pytest.approx(10.0)
+    assert ess(np.array([0.0, -np.inf, -np.inf])) == pytest.approx(1.0)
+    assert ess(np.log([0.5, 0.25, 0.25])) == pytest.approx(1.0 / (0.25 + 2 * 0.0625))
+    with pytest.raises(ValueError):
+        normalise(np.array([-np.inf]))
+
+
+def test_particle_set_checks_and_mass():
+    ps = ParticleSet(np.zeros((3, 6)), np.log([0.2, 0.3, 0.5]) + np.log(2.0))
+    assert ps.mass == pytest.approx(2.0)
+    assert len(ps) == 3 and ps.dim == 6
+    assert ps.concat(ps).mass == pytest.approx(4.0)
+    assert ParticleSet.empty().mass == 0.0
+    with pytest.raises(ValueError):
+        ParticleSet(np.zeros((3, 6)), np.zeros(2))
+    with pytest.raises(ValueError):
+        ParticleSet(np.zeros(6), np.zeros(6))
+
+
+# ----------------------------------------------------------------------------- resampling
+
+
+@pytest.mark.parametrize("scheme", SCHEMES)
+def test_resampling_preserves_mass(scheme):
+    rng = np.random.default_rng(3)
+    states = rng.normal(size=(400, 6))
+    lw = rng.normal(size=400) * 3.0 - 900.0          # tiny weights: only log space survives
+    ps = ParticleSet(states, lw)
+    for n in (1, 7, 400, 1234):
+        out = resample(ps, n, rng, scheme)
+        assert len(out) == n
+        assert out.log_mass == pytest.approx(ps.log_mass, abs=1e-9)
+        np.testing.assert_allclose(out.log_weights, ps.log_mass - np.log(n))
+        # every offspring is a copy of an input particle
+        assert np.isin(out.states[:, 0], states[:, 0]).all()
+
+
+@pytest.mark.parametrize("scheme", SCHEMES)
+def test_resampling_counts_are_unbiased(scheme):
+    rng = np.random.default_rng(11)
+    w = np.array([0.02, 0.13, 0.3, 0.05, 0.0, 0.5])
+    lw = np.log(np.where(w > 0, w, 1.0)) + np.where(w > 0, 0.0, -np.inf)
+    n, runs = 10, 3000
+    counts = np.zeros((runs, len(w)))
+    for r in range(runs):
+        counts[r] = np.bincount(resample_indices(lw, n, rng, scheme), minlength=len(w))
+    mean = counts.mean(axis=0)
+    # multinomial variance n w (1 - w) bounds the others; 5 standard errors
+    se = np.sqrt(n * w * (1 - w) / runs)
+    assert np.all(np.abs(mean - n * w) <= 5 * se + 1e-12), (mean, n * w)
+    assert counts[:, 4].sum() == 0                    # zero weight is never drawn
+    assert (counts.sum(axis=1) == n).all()
+
+
+def test_low_variance_schemes_keep_their_guarantees():
+    rng = np.random.default_rng(5)
+    w = rng.dirichlet(np.ones(50))
+    lw = np.log(w)
+    for _ in range(50):
+        c_sys = np.bincount(resample_indices(lw, 200, rng, "systematic"), minlength=50)
+        assert np.all(np.abs(c_sys - 200 * w) < 1.0)     # systematic: within 1 of n w
+        c_res = np.bincount(resample_indices(lw, 200, rng, "residual"), minlength=50)
+        assert np.all(c_res >= np.floor(200 * w))        # residual: floor(n w) copies kept
+
+
+def test_resampling_is_seeded_and_checks_its_scheme():
+    lw = np.log(np.random.default_rng(0).dirichlet(np.ones(30)))
+    for scheme in SCHEMES:
+        a = resample_indices(lw, 100, np.random.default_rng(42), scheme)
+        b = resample_indices(lw, 100, np.random.default_rng(42), scheme)
+        np.testing.assert_array_equal(a, b)
+    with pytest.raises(ValueError, match="unknown resampling scheme"):
+        resample_indices(lw, 10, np.random.default_rng(0), "bogus")
+    assert len(resample(ParticleSet.empty(), 10, np.random.default_rng(0))) == 0
+
+
+# ----------------------------------------------------------------------------- motion
+
+
+def _state(n, y=(100.0, 50.0), v=(2.0, -1.0), size=(20.0, 40.0)):
+    return np.tile(np.r_[y, v, size], (n, 1))
+
+
+def test_propagate_is_first_order_on_position_zero_order_on_size():
+    x = _state(5)
+    out = propagate(x, np.random.default_rng(0), sigma_v=0.0, sigma_size=0.0)
+    np.testing.assert_allclose(out[:, 0:2], x[:, 0:2] + x[:, 2:4])
+    np.testing.assert_allclose(out[:, 2:], x[:, 2:])
+    np.testing.assert_allclose(predict_mean(x, 3)[:, 0:2], x[:, 0:2] + 3 * x[:, 2:4])
+
+
+def test_propagate_noise_is_proportional_to_size():
+    rng = np.random.default_rng(1)
+    n = 20000
+    for w, h in ((10.0, 30.0), (100.0, 300.0)):
+        x = _state(n, size=(w, h))
+        out = propagate(x, rng)
+        dv = out[:, 2:4] - x[:, 2:4]
+        np.testing.assert_allclose(dv.std(axis=0), [0.03 * w, 0.03 * h], rtol=0.03)
+        np.testing.assert_allclose(out[:, 4:6].std(axis=0), [0.1 * w, 0.1 * h], rtol=0.03)
+        # the acceleration enters the position with gain 1/2 (constant over the frame)
+        dy = out[:, 0:2] - x[:, 0:2] - x[:, 2:4]
+        np.testing.assert_allclose(dy, 0.5 * dv, atol=1e-9)
+    tiny = propagate(_state(n, size=(1.0, 1.0)), rng)
+    assert tiny[:, 4:6].min() >= 1.0
+
+
+def test_propagate_is_seeded():
+    x = np.random.default_rng(0).uniform(10, 50, size=(100, 6))
+    a = propagate(x, np.random.default_rng(9))
+    b = propagate(x, np.random.default_rng(9))
+    np.testing.assert_array_equal(a, b)
+    assert not np.array_equal(a, propagate(x, np.random.default_rng(10)))
+
+
+@pytest.mark.parametrize("include_velocity", [False, True])
+def test_transition_logpdf_matches_simulated_motion(include_velocity):
+    # With no size noise the frozen-scale Gaussian is exact: compare with a Gaussian fitted
+    # to many simulated 3-frame trajectories.
+    rng = np.random.default_rng(2)
+    x0 = _state(1)
+    sims = np.repeat(x0, 100000, axis=0)
+    for _ in range(3):
+        sims = propagate(sims, rng, sigma_size=0.0)
+    cols = [0, 1, 2, 3] if include_velocity else [0, 1]
+    fit = multivariate_normal(sims[:, cols].mean(0), np.cov(sims[:, cols].T))
+    probe = sims[:5]
+    # sigma_size = 0 leaves only the min_std floor on the size part: subtract it below.
+    # (The floor also enters position/velocity variances; 1e-6 is negligible there.)
+    got = transition_logpdf(probe, x0, gap=3, sigma_size=0.0, min_std=1e-3,
+                            include_velocity=include_velocity)
+    size_part = 2 * (-0.5 * np.log(2 * np.pi * 1e-6))
+    assert got.shape == (1, 5)
+    np.testing.assert_allclose(got[0] - size_part, fit.logpdf(probe[:, cols]), atol=0.02)
+
+
+def test_transition_logpdf_prefers_the_predicted_state_and_widens_with_gap():
+    x0 = _state(1)
+    near = predict_mean(x0, 2)
+    far = near + [15.0, 0, 0, 0, 0, 0]
+    lp = transition_logpdf(np.vstack([near, far]), np.vstack([x0, x0]), gap=np.array([2, 10]))
+    assert lp.shape == (2, 2)
+    assert lp[0, 0] > lp[0, 1]
+    # a 15 px miss costs less after 10 frames than after 2
+    d2 = transition_logpdf(far, x0, gap=2)[0, 0] - transition_logpdf(near, x0, gap=2)[0, 0]
+    d10 = (transition_logpdf(predict_mean(x0, 10) + [15.0, 0, 0, 0, 0, 0], x0, gap=10)[0, 0]
+           - transition_logpdf(predict_mean(x0, 10), x0, gap=10)[0, 0])
+    assert d10 > d2

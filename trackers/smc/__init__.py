@@ -1,0 +1,15 @@
+"""Sequential Monte Carlo building blocks shared by the trackers.
+
+- :mod:`.weights` — log-weight utilities (logsumexp normalisation, ESS) and :class:`ParticleSet`.
+- :mod:`.resampling` — systematic, stratified, residual and multinomial resampling
+  (explicit ``numpy.random.Generator``; mass-preserving :func:`resample`).
+- :mod:`.motion` — the size-aware motion model of maggio2007 §2/§4.
+"""
+
+from .motion import predict_mean, propagate, transition_logpdf
+from .resampling import SCHEMES, resample, resample_indices
+from .weights import ParticleSet, ess, logsumexp, normalise, normalised_weights
+
+__all__ = ["ParticleSet", "ess", "logsumexp", "normalise", "normalised_weights",
+           "SCHEMES", "resample", "resample_indices",
+           "propagate", "predict_mean", "transition_logpdf"]

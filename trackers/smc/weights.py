@@ -1,0 +1,121 @@
+"""Log-weight utilities and the weighted particle set shared by every particle filter.
+
+Weights are kept as natural-log weights so that products of many small likelihoods never
+underflow (maggio2007 §2, eq. (5) multiplies Gaussian likelihoods of 4-D observations; the
+PHD weights of a large cloud are ~1/ρ each).  A :class:`ParticleSet` is *unnormalised*: its
+total weight ``mass`` is meaningful (for the PHD filter it is the expected number of
+targets, maggio2007 §2 "M̂_{k|k} is the total mass"); single-target filters simply keep
+mass 1.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+def logsumexp(log_w: np.ndarray, axis=None) -> np.ndarray | float:
+    """``log(sum(exp(log_w)))`` without overflow/underflow; ``-inf`` for an empty or all ``-inf``
+    input (an empty sum is 0)."""
+    a = np.asarray(log_w, dtype=np.float64)
+    if a.size == 0:
+        if axis is None:
+            return -np.inf
+        return np.full(np.delete(a.shape, axis), -np.inf)
+    m = np.max(a, axis=axis, keepdims=True)
+    m = np.where(np.isfinite(m), m, 0.0)  # all -inf slices: exp(-inf - 0) = 0 -> log 0 = -inf
+    with np.errstate(divide="ignore"):
+        out = np.log(np.sum(np.exp(a - m), axis=axis, keepdims=True)) + m
+    if axis is None:
+        return float(out.reshape(()))
+    return np.squeeze(out, axis=axis)
+
+
+def normalise(log_w: np.ndarray) -> tuple[np.ndarray, float]:
+    """Return ``(log_w - logsumexp(log_w), logsumexp(log_w))``: normalised log-weights (summing
+    to 1 in linear space) and the log of the total mass that was divided out.
+
+    An empty or zero-mass input raises ``ValueError`` (there is nothing to normalise)."""
+    lse = logsumexp(log_w)
+    if not np.isfinite(lse):
+        raise ValueError("cannot normalise weights with zero (or non-finite) total mass")
+    return np.asarray(log_w, dtype=np.float64) - lse, lse
+
+
+def normalised_weights(log_w: np.ndarray) -> np.ndarray:
+    """Linear weights summing to 1 (float64, (N,))."""
+    lw, _ = normalise(log_w)
+    return np.exp(lw)
+
+
+def ess(log_w: np.ndarray) -> float:
+    """Effective sample size ``1 / sum(w_i^2)`` of the normalised weights, in ``[1, N]``
+    (Arulampalam et al. 2002, cited as [1] in maggio2007).  0 for an empty set."""
+    if np.size(log_w) == 0:
+        return 0.0
+    lw, _ = normalise(log_w)
+    # 1/sum(w^2) = exp(-logsumexp(2 lw)), computed in log space for tiny weights.
+    return float(np.exp(-logsumexp(2.0 * lw)))
+
+
+@dataclass(frozen=True)
+class ParticleSet:
+    """Weighted particles, structure-of-arrays.
+
+    states: (N, D) float64 — for PHD-MT ``D = 6``, ``x = (y1, y2, v1, v2, w, h)``: box centre
+    (pixels), velocity (pixels/frame), box size (pixels) (maggio2007 §2).
+    log_weights: (N,) float64 natural-log weights, unnormalised (their sum is the mass).
+    """
+
+    states: np.ndarray
+    log_weights: np.ndarray
+
+    def __post_init__(self):
+        s = np.asarray(self.states, dtype=np.float64)
+        lw = np.asarray(self.log_weights, dtype=np.float64).reshape(-1)
+        if s.ndim != 2:
+            raise ValueError(f"ParticleSet.states: expected shape (N, D), got {s.shape}")
+        if len(lw) != len(s):
+            raise ValueError(f"ParticleSet: {len(s)} states but {len(lw)} log-weights")
+        object.__setattr__(self, "states", s)
+        object.__setattr__(self, "log_weights", lw)
+
+    @classmethod
+    def empty(cls, dim: int = 6) -> "ParticleSet":
+        return cls(np.zeros((0, dim)), np.zeros(0))
+
+    def __len__(self) -> int:
+        return len(self.log_weights)
+
+    @property
+    def dim(self) -> int:
+        return int(self.states.shape[1])
+
+    @property
+    def log_mass(self) -> float:
+        return float(logsumexp(self.log_weights))
+
+    @property
+    def mass(self) -> float:
+        """Total weight ``exp(logsumexp(log_weights))`` (0 for an empty set)."""
+        return float(np.exp(self.log_mass))
+
+    @property
+    def weights(self) -> np.ndarray:
+        """Linear (unnormalised) weights, (N,)."""
+        return np.exp(self.log_weights)
+
+    def ess(self) -> float:
+        return ess(self.log_weights)
+
+    def concat(self, other: "ParticleSet") -> "ParticleSet":
+        """This set followed by ``other`` (same dimension)."""
+        if other.dim != self.dim:
+            raise ValueError(f"ParticleSet.concat: dimension {self.dim} vs {other.dim}")
+        return ParticleSet(np.concatenate([self.states, other.states]),
+                           np.concatenate([self.log_weights, other.log_weights]))
+
+    def take(self, index: np.ndarray) -> "ParticleSet":
+        """Subset / reordering by an index array or boolean mask (weights unchanged)."""
+        return ParticleSet(self.states[index], self.log_weights[index])
