@@ -1,0 +1,357 @@
+"""Graph-matching data association (maggio2007 §3, Shafique & Shah 2005): trackers/phd/association.py."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.stats import multivariate_normal
+
+from trackers.phd.association import (
+    AssocParams,
+    GraphAssociator,
+    boxes_xywh,
+    max_weight_matching,
+    propagate,
+    score_edges,
+    tail_velocity,
+)
+
+NAN = np.nan
+
+
+def brute_force_best_matching(weights: np.ndarray) -> tuple[float, list[tuple[int, int]]]:
+    """Best total weight over every matching of a small (T, M) graph; -inf marks a missing edge.
+
+    Enumerates, for each row in turn, "unmatched" or every free column (exponential: tiny graphs
+    only).  Returns (best total, one best list of (row, col))."""
+    T, M = weights.shape
+    best = [0.0, []]
+
+    def rec(r, used, total, pairs):
+        if r == T:
+            if total > best[0] + 1e-12:
+                best[0], best[1] = total, list(pairs)
+            return
+        rec(r + 1, used, total, pairs)
+        for c in range(M):
+            if not used[c] and np.isfinite(weights[r, c]):
+                used[c] = True
+                pairs.append((r, c))
+                rec(r + 1, used, total + weights[r, c], pairs)
+                pairs.pop()
+                used[c] = False
+
+    rec(0, [False] * M, 0.0, [])
+    return best[0], best[1]
+
+
+def state(y1, y2, w=40.0, h=80.0, v1=NAN, v2=NAN):
+    return [y1, y2, v1, v2, w, h]
+
+
+# --------------------------------------------------------------------------- optimality
+
+
+def test_matching_equals_brute_force_on_random_small_graphs():
+    rng = np.random.default_rng(0)
+    n_nontrivial = 0
+    for _ in range(300):
+        T, M = rng.integers(0, 6, size=2)
+        w = rng.normal(1.0, 2.0, size=(T, M))  # some negative: never worth taking
+        allowed = rng.random((T, M)) < 0.6
+        rows, cols = max_weight_matching(w, allowed)
+        # a valid matching on allowed edges
+        assert len(set(rows.tolist())) == len(rows) and len(set(cols.tolist())) == len(cols)
+        assert np.all(allowed[rows, cols])
+        bw = np.where(allowed, w, -np.inf)
+        best, pairs = brute_force_best_matching(bw)
+        assert w[rows, cols].sum() == pytest.approx(best, abs=1e-9)
+        n_nontrivial += len(pairs) >= 2
+    assert n_nontrivial > 50  # the comparison is not vacuous
+
+
+def _contested_scene(rng, n_frames=40):
+    """Up to 4 targets of size 40x80 crowded into a 60 px square, with missed detections and
+    clutter: many tails compete for each new vertex."""
+    pos = rng.uniform(0, 60, size=(4, 2))
+    vel = rng.normal(0, 1.0, size=(4, 2))
+    for k in range(1, n_frames + 1):
+        pos = pos + vel
+        seen = rng.random(4) < 0.7
+        pts = pos[seen] + rng.normal(0, 2.0, size=(seen.sum(), 2))
+        if rng.random() < 0.3:
+            pts = np.vstack([pts, rng.uniform(0, 60, size=(1, 2))])
+        rng.shuffle(pts)
+        yield k, np.array([state(x, y) for x, y in pts]).reshape(-1, 6)
+
+
+def test_each_step_is_the_best_extension_of_the_cover():
+    rng = np.random.default_rng(1)
+    assoc = GraphAssociator(AssocParams(depth=8))
+    contested = 0
+    for k, states in _contested_scene(rng):
+        r = assoc.step(k, states)
+        if len(r.edges_gain) == 0:
+            continue
+        src = np.unique(r.edges_src_id)
+        W = np.full((len(src), len(states)), -np.inf)
+        W[np.searchsorted(src, r.edges_src_id), r.edges_dst_index] = r.edges_weight
+        assert np.all(r.edges_weight > 0)  # admissible edges all have positive weight
+        best, _ = brute_force_best_matching(W)
+        assert r.edges_weight[r.chosen].sum() == pytest.approx(best, rel=1e-12, abs=1e-9)
+        # a chosen edge continues the source's track id; an unchosen target vertex gets a new id
+        assert np.array_equal(r.ids[r.edges_dst_index[r.chosen]], r.edges_src_id[r.chosen])
+        contested += (np.bincount(r.edges_dst_index) >= 2).any()
+    assert contested >= 10
+
+
+# --------------------------------------------------------------------------- the density
+
+
+def _explicit_cov(tail, gap, p, P0):
+    """Σ of the observable marginal: F^i P0 F^iᵀ + Σ_{j<i} F^j Q F^jᵀ + R (6-D matrices)."""
+    F = np.eye(6)
+    F[0, 2] = F[1, 3] = 1.0
+    G = np.zeros((6, 4))
+    c = p.accel_to_position  # y ← y + v + c·a: piecewise-constant acceleration
+    G[0, 0], G[2, 0], G[1, 1], G[3, 1] = c, 1.0, c, 1.0
+    G[4, 2] = G[5, 3] = 1.0
+    w, h = tail[4], tail[5]
+    Qa = np.diag([(p.sigma_v * w) ** 2, (p.sigma_v * h) ** 2, (p.sigma_size * w) ** 2, (p.sigma_size * h) ** 2])
+    Q = G @ Qa @ G.T
+    S = np.zeros((6, 6))
+    Fj = np.eye(6)
+    for _ in range(gap):
+        S += Fj @ Q @ Fj.T
+        Fj = F @ Fj
+    Fi = np.linalg.matrix_power(F, gap)
+    full = Fi @ P0 @ Fi.T + S
+    idx = [0, 1, 4, 5]
+    sw, sh = max(p.sigma_obs * w, p.sigma_obs_min), max(p.sigma_obs * h, p.sigma_obs_min)
+    R = np.diag([(sw / 2) ** 2, (sh / 2) ** 2, sw ** 2, sh ** 2])
+    return full[np.ix_(idx, idx)] + R, R
+
+
+@pytest.mark.parametrize("c", [0.5, 0.0])
+@pytest.mark.parametrize("mode", ["given", "prior", "two"])
+@pytest.mark.parametrize("gap", [1, 7, 50])
+def test_closed_form_propagation_equals_matrix_sum(mode, gap, c):
+    p = AssocParams(accel_to_position=c)
+    tail = np.array([100.0, 50.0, 1.5, -0.5, 30.0, 70.0])
+    prev = np.array([97.0, 51.5, NAN, NAN, 20.0, 5.0])  # tiny h: σ^z hits its 1 px minimum
+    d = 2
+    if mode != "given":
+        tail[2:4] = NAN
+    T = tail[None]
+    v, b, c = tail_velocity(T, prev[None], np.array([d if mode == "two" else 0]), p)
+    mean, var = propagate(T, v, b, c, np.array([gap]), p)
+    # explicit initial covariance of the tail-side error (y1, y2, v1, v2, w, h)
+    _, R = _explicit_cov(tail, 1, p, np.zeros((6, 6)))
+    Rt = np.diag([R[0, 0], R[1, 1], 0, 0, R[2, 2], R[3, 3]])
+    P0 = Rt.copy()
+    if mode == "prior":
+        P0[2, 2], P0[3, 3] = (p.speed_prior * tail[4]) ** 2, (p.speed_prior * tail[5]) ** 2
+        v_exp = np.zeros(2)
+    elif mode == "two":
+        _, Rp = _explicit_cov(prev, 1, p, np.zeros((6, 6)))
+        for a in range(2):  # v̂ = (y_t − y_p)/Δ: cov(y_t, v̂) = σ_t²/Δ, var v̂ = (σ_t² + σ_p²)/Δ²
+            P0[2 + a, 2 + a] = (R[a, a] + Rp[a, a]) / d ** 2
+            P0[a, 2 + a] = P0[2 + a, a] = R[a, a] / d
+        v_exp = (tail[:2] - prev[:2]) / d
+    else:
+        v_exp = tail[2:4]
+    cov, _ = _explicit_cov(tail, gap, p, P0)
+    assert np.allclose(np.diag(var[0]), cov, rtol=1e-12, atol=1e-9)  # diagonal: no cross terms
+    assert np.allclose(mean[0], [*(tail[:2] + gap * v_exp), tail[4], tail[5]])
+    # the gain is the log of that Gaussian density at the new vertex
+    new = np.array([[tail[0] + 5, tail[1] - 3, NAN, NAN, 33.0, 66.0]])
+    sc = score_edges(T, v, b, c, np.array([gap]), new, p)
+    expect = multivariate_normal(mean[0], cov).logpdf(new[0, [0, 1, 4, 5]])
+    assert sc.gain[0, 0] == pytest.approx(expect, rel=1e-10)
+    # weight = gain − log-density at the gate of the gap-K edge of the same tail
+    covK, _ = _explicit_cov(tail, p.depth, p, P0)
+    floor = -0.5 * p.gate_d2 - 0.5 * np.linalg.slogdet(2 * np.pi * covK)[1]
+    assert sc.weight[0, 0] == pytest.approx(expect - floor, rel=1e-10)
+
+
+# --------------------------------------------------------------------------- gaps and ids
+
+
+def _two_targets(n_frames, hidden, velocity_known, rng):
+    """Target A moves right and is hidden on the frames in ``hidden``; target B is far away."""
+    for k in range(1, n_frames + 1):
+        rows = []
+        a = np.array([50.0 + 1.0 * k, 100.0 + 0.5 * k])
+        if k not in hidden:
+            rows.append(state(*(a + rng.normal(0, 1.0, 2)), 40, 80,
+                              *((1.0, 0.5) if velocity_known else (NAN, NAN))))
+        b = np.array([600.0 - 0.8 * k, 400.0])
+        rows.append(state(*(b + rng.normal(0, 1.0, 2)), 30, 60, *((-0.8, 0) if velocity_known else (NAN, NAN))))
+        yield k, np.array(rows)
+
+
+@pytest.mark.parametrize("velocity_known", [True, False], ids=["phd-centres", "mt-detections"])
+@pytest.mark.parametrize("gap, recovered", [(31, True), (50, True), (51, False)])
+def test_id_survives_a_gap_up_to_K_frames(velocity_known, gap, recovered):
+    K = 50
+    last_seen = 12
+    hidden = set(range(last_seen + 1, last_seen + gap))  # reappears at last_seen + gap
+    assoc = GraphAssociator(AssocParams(depth=K))
+    rng = np.random.default_rng(3)
+    ids_a, ended = {}, {}
+    for k, states in _two_targets(last_seen + gap + 8, hidden, velocity_known, rng):
+        r = assoc.step(k, states)
+        if k not in hidden:
+            ids_a[k] = int(r.ids[0])
+        ended[k] = r.ended.tolist()
+    before = ids_a[last_seen]
+    after = ids_a[last_seen + gap]
+    assert len({ids_a[k] for k in ids_a if k <= last_seen}) == 1
+    assert len({ids_a[k] for k in ids_a if k >= last_seen + gap}) == 1
+    if recovered:
+        assert after == before
+        assert all(before not in e for e in ended.values())
+    else:
+        assert after != before and after > before  # a new id, never a reused one
+        assert ended[last_seen + K + 1] == [before]  # the tail fell out of the window
+
+
+def test_a_dormant_tail_does_not_steal_an_active_track():
+    """A stands still and is lost at frame 10; B walks through A's place. At frame 13 B's
+    detection fits A's (gap-3) prediction *better* than B's own (gap-1) one in Mahalanobis terms,
+    but the likelihood log f keeps B's identity (the log-determinant favours the short gap)."""
+    p = AssocParams()
+    assoc = GraphAssociator(p)
+    rA = np.array([127.0, 100.0])
+    for k in range(1, 11):
+        xb = 100.0 + 2.0 * k
+        r = assoc.step(k, np.array([state(*rA, 40, 80, 0, 0), state(xb, 100.0, 40, 80, 2.0, 0.0)]))
+    id_a, id_b = r.ids
+    for k in (11, 12):
+        r = assoc.step(k, np.array([state(100.0 + 2.0 * k, 100.0, 40, 80, 2.0, 0.0)]))
+        assert r.ids.tolist() == [id_b]
+    det = np.array([state(127.5, 100.0, 40, 80, 2.0, 0.0)])  # B predicted at 126, A stands at 127
+    tails = assoc.live_tracks()
+    v, b, c = tail_velocity(tails.tail_states, tails.tail_states, np.zeros(len(tails.ids), int), p)
+    sc = score_edges(tails.tail_states, v, b, c, 13 - tails.tail_frames, det, p)
+    ia, ib = np.searchsorted(tails.ids, [id_a, id_b])
+    assert sc.allowed[ia, 0] and sc.allowed[ib, 0]
+    assert sc.d2[ia, 0] < sc.d2[ib, 0]  # the contest is real
+    r = assoc.step(13, det)
+    assert r.ids.tolist() == [id_b]
+
+
+def test_short_tracks_are_not_reported():
+    p = AssocParams(min_length=5)
+    assoc = GraphAssociator(p)
+    lags, zero_lag = [], []
+    for k in range(1, 13):
+        rows = []
+        if k <= 4:  # A: 4 vertices only
+            rows.append(state(100.0 + k, 100.0))
+        if 3 <= k <= 7:  # B: exactly 5 vertices
+            rows.append(state(400.0, 300.0 + k))
+        r = assoc.step(k, np.array(rows).reshape(-1, 6))
+        zero_lag += [(k, i) for i, cf in zip(r.ids, r.confirmed) if cf]
+        lags += [(f.frame, int(i)) for f in r.finalised for i in f.ids]
+        for f in r.finalised:
+            assert f.frame == k - assoc.lag
+            assert f.boxes.shape == (len(f.ids), 4)
+    lags += [(f.frame, int(i)) for f in assoc.flush() for i in f.ids]
+    assert zero_lag == [(7, 2)]  # only B, from its 5th vertex on
+    assert lags == [(k, 2) for k in range(3, 8)]  # bounded lag: all of B, nothing of A
+    assert assoc.n_buffered_frames == 0
+
+
+def test_ids_start_at_one_increase_and_are_never_reused():
+    assoc = GraphAssociator(AssocParams(depth=5))
+    seen = []
+    for k in range(1, 40):
+        rows = [state(100.0, 100.0)] if (k <= 8 or k >= 20) else []  # same place, gap 12 > K
+        if k % 3 == 0:
+            rows.append(state(500.0 + 60 * k, 50.0))  # one-off vertices, each a new track
+        r = assoc.step(k, np.array(rows).reshape(-1, 6))
+        seen += [int(i) for i in r.ids if int(i) not in seen]
+    assert seen[0] == 1
+    assert seen == sorted(seen) and len(set(seen)) == len(seen)
+    assert seen == list(range(1, len(seen) + 1))
+
+
+def test_same_input_same_output():
+    def run():
+        assoc = GraphAssociator(AssocParams(depth=8))
+        out = []
+        for k, states in _contested_scene(np.random.default_rng(7), 30):
+            # a duplicated vertex: an exact tie that must still be broken the same way
+            states = np.vstack([states, states[:1]]) if len(states) else states
+            r = assoc.step(k, states)
+            out.append((r.ids.copy(), r.edges_src_id.copy(), r.edges_dst_index.copy(),
+                        r.edges_weight.copy(), r.chosen.copy()))
+        return out
+
+    a, b = run(), run()
+    for x, y in zip(a, b):
+        for u, w in zip(x, y):
+            assert np.array_equal(u, w)
+
+
+def test_memory_stays_bounded_over_a_long_run():
+    K, max_m = 20, 6
+    assoc = GraphAssociator(AssocParams(depth=K))
+    rng = np.random.default_rng(5)
+    sizes = []
+    for k in range(1, 401):
+        n = min(rng.poisson(3), max_m)
+        pts = rng.uniform([0, 0], [2000, 2000], size=(n, 2))  # clutter: mostly new tracks
+        r = assoc.step(k, np.array([state(x, y, 20, 40) for x, y in pts]).reshape(-1, 6))
+        tails = assoc.live_tracks()
+        assert np.all(k - tails.tail_frames <= K)  # vertices older than K frames are forgotten
+        assert assoc.n_buffered_frames <= assoc.lag
+        sizes.append(assoc.n_live)
+    assert max(sizes) <= K * max_m
+    assert max(sizes[200:]) <= max(sizes[:200]) + max_m  # no growth with the length of the run
+    assert r.ids.max(initial=0) > 5 * K * max_m / 4  # many tracks were created and ended
+
+
+def test_edges_report_the_tails_before_the_update():
+    assoc = GraphAssociator()
+    s1 = np.array([state(100.0, 100.0), state(300.0, 100.0)])
+    assoc.step(1, s1)
+    s2 = s1 + [1.0, 0, 0, 0, 0, 0]
+    r = assoc.step(3, s2)
+    assert r.chosen.sum() == 2
+    ch = r.chosen
+    assert np.array_equal(r.edges_src[ch], s1[r.edges_dst_index[ch]], equal_nan=True)
+    assert np.all(r.edges_gap == 2)
+    assert np.allclose(boxes_xywh(s1), [[80, 60, 40, 80], [280, 60, 40, 80]])
+
+
+@pytest.mark.parametrize("frame, states, msg", [
+    (1, np.zeros((2, 4)), "shape"),
+    (1, [state(1, 2, w=0.0)], "positive"),
+    (1, [state(NAN, 2)], "non-finite"),
+])
+def test_bad_input_is_rejected(frame, states, msg):
+    with pytest.raises(ValueError, match=msg):
+        GraphAssociator().step(frame, states)
+
+
+def test_frames_must_increase():
+    assoc = GraphAssociator()
+    assoc.step(5, [state(1, 2)])
+    with pytest.raises(ValueError, match="frame 5"):
+        assoc.step(5, [state(1, 2)])
+
+
+def test_lagged_rows_survive_a_frame_jump_that_ends_their_track():
+    """Frames 1-5 then frame 100 (> K later): the track ends at that step, and its buffered rows
+    (frames 2-5) are still finalised as confirmed."""
+    assoc = GraphAssociator()
+    rows = []
+    for k in range(1, 6):
+        rows += [(f.frame, i) for f in assoc.step(k, [state(100.0 + k, 100.0)]).finalised for i in f.ids]
+    r = assoc.step(100, [state(500.0, 500.0)])
+    assert r.ended.tolist() == [1]
+    rows += [(f.frame, int(i)) for f in r.finalised for i in f.ids]
+    assert rows == [(k, 1) for k in range(1, 6)]
+    assert [f.frame for f in assoc.flush()] == [100]

@@ -1,0 +1,501 @@
+"""Graph-matching data association of PHD-MT and MT (maggio2007 §3, after Shafique & Shah 2005).
+
+maggio2007 §3 links the per-frame estimates ``x̂_k`` (PHD-MT: the K-means cluster centres; MT:
+the raw detections) into tracks with a graph ``G``: the vertices of the last ``K`` frames
+``{V_{k-i}}_{i=1..K}`` get edges to the vertices ``V_k`` of the new frame, the gain of an edge is
+``log f(x̂_k | x̂_{k-i})`` -- the single-target transition density of §2 propagated over the ``i``
+frames of the gap -- and the path cover of maximum gain is the set of tracks.  A vertex without a
+backward edge starts a track, one without a forward edge ends it; a track therefore survives a
+gap (a missed detection, an occlusion) of up to ``K`` frames and keeps its identity.  §4: ``K=50``,
+tracks shorter than 5 frames are discarded.
+
+Online, greedy extension (Shafique & Shah 2005, the non-iterative greedy algorithm).  The cover is
+grown one frame at a time and edges once chosen are never revised, so a vertex that already has a
+forward edge can never get another: the only candidate sources are the *tails* -- the last vertex
+of each live track -- whose frame lies within ``K`` frames of the new one.  Per frame, the best
+extension is a maximum-weight bipartite matching between tails and new vertices, solved exactly
+with :func:`scipy.optimize.linear_sum_assignment`.  Only the tails are kept (bounded memory: at
+most the number of vertices of the last ``K`` frames); a tail older than ``K`` frames is forgotten
+and its track reported as ended.
+
+Readings and choices (all constants are :class:`AssocParams` fields):
+
+* **State** ``x = (y1, y2, v1, v2, w, h)``: centre, velocity (px/frame), size.  The observable part
+  ``z = (y1, y2, w, h)`` is what an edge scores: the density is the marginal of ``f`` on the
+  observable components (a detection has no velocity; a cluster centre's velocity is an estimate
+  used to predict, not something to score).
+* **Transition** (§2, parameters of §4): first-order (constant-velocity) Gaussian dynamics on the
+  position, zero-order on the size, noise std proportional to the size at the *earlier* vertex:
+  ``σ_v1 = 0.03 w``, ``σ_v2 = 0.03 h``, ``σ_w = 0.1 w``, ``σ_h = 0.1 h``.  The acceleration noise
+  is read as a piecewise-constant acceleration over each frame, ``x ← F x + G a`` with
+  ``F = [[1, 1], [0, 1]]``, ``G = [c, 1]ᵀ`` per axis, ``c = accel_to_position = ½`` (dt²/2; the
+  same reading as :mod:`trackers.smc.motion`), so that ``σ_v`` is the std of the per-frame
+  velocity change.  Over a gap of ``i`` frames the mean is ``F^i x`` and the covariance
+  ``Σ_{j<i} F^j Q F^jᵀ`` in closed form: position variance ``σ_v² Σ_{j<i} (j+c)²``
+  ``= σ_v² [(i−1)i(2i−1)/6 + c i(i−1) + c² i]`` (``= σ_v² i(4i²−1)/12`` for ``c = ½``);
+  size variance ``i σ_w²`` (random walk, std fixed at the earlier vertex's size).
+* **Estimate noise.**  Both ends of an edge are noisy estimates, not true states.  We add the
+  observation noise ``σ^z`` of §4 (``σ^z_w = max(0.15 w, 1)``, ``σ^z_h = max(0.15 h, 1)``,
+  ``σ^z_y = σ^z_{w,h}/2``, at the earlier vertex's size) *twice* -- once for the tail, once for
+  the new vertex -- to the covariance of the evaluated marginal: the residual ``z_k − F^i x̂`` of two
+  noisy estimates has the variance of both errors.
+* **Unknown velocity (MT).**  A vertex whose velocity is NaN has no velocity estimate.  For a track
+  with at least two vertices the tail velocity is then the finite difference of its last two
+  vertices, ``v̂ = (y_t − y_p)/Δ``; its error is carried exactly into the prediction ``y_t + i v̂``,
+  whose tail-side variance is ``σ_t²(1 + i/Δ)² + σ_p² (i/Δ)²`` (``σ_t``, ``σ_p`` the estimate
+  noise of the last two vertices).  A one-vertex track predicts zero velocity with a prior std
+  ``speed_prior · (w, h)`` per frame (§2's birth intensity is Gaussian on the speed amplitude but
+  §4 gives no number: 0.1 size/frame is ours), adding ``i² (speed_prior·w)²``.  A given (finite)
+  velocity, like a cluster centre's, is used as the mean with no extra variance.
+* **Edge weight.**  A log-density can be negative and the empty extension has weight 0, so the
+  gain needs a floor.  An edge is admissible iff its Mahalanobis distance is inside the
+  ``gate`` (99.9 %) chi-square quantile, 4 degrees of freedom.  Its weight is
+  ``gain − floor(tail)`` where ``floor(tail)`` is the log-density at the gate of the *widest*
+  edge that tail can have -- the one of gap ``K``:
+  ``weight = ½(χ²_gate − d²) + ½ log(det Σ_K / det Σ_i)``.  Every admissible edge then has
+  positive weight (a track can survive any gap up to ``K``), while the log-determinant of
+  ``log f`` is kept, so at equal fit a recently seen track beats one unseen for several frames.
+  (With a per-edge floor the determinant cancels, and a dormant tail with its wide gate steals
+  the detections of a target walking past it -- the very occlusions §4 wants to bridge.)
+* **Matching.**  Maximum-weight matching of the admissible edges, exact.  Tails are kept sorted by
+  track id and new vertices in input order; among matchings of equal total weight the one
+  :func:`scipy.optimize.linear_sum_assignment` returns on that canonical matrix is taken, so the
+  result is a pure function of the input sequence.  A matched new vertex continues its tail's
+  track; an unmatched one starts a new track; ids start at 1, increase and are never reused.
+* **Track length** counts vertices (estimates supporting the track), not the frame span: a track
+  is *confirmed* once it has ``min_length`` (5) vertices; unconfirmed tracks are not reported.
+* **Reporting, two ways.**  (a) zero lag: :attr:`AssocResult.confirmed` marks the new vertices of
+  confirmed tracks -- the first ``min_length − 1`` vertices of every track are then never
+  reported; (b) bounded lag ``L = min_length − 1`` frames: :attr:`AssocResult.finalised` holds the
+  rows of frame ``k − L`` whose track is confirmed by frame ``k`` (a track seen in consecutive
+  frames is reported from its first frame), and :meth:`GraphAssociator.flush` returns the rest at
+  the end of a sequence.  A track confirmed only after more than ``L`` frames (because of gaps)
+  loses its rows older than ``L`` frames.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+from scipy.stats import chi2
+
+STATE_DIM = 6
+#: Observable components of the state (y1, y2, w, h), maggio2007 §2 ``z = (y, w, h)``.
+OBS_INDEX = np.array([0, 1, 4, 5])
+
+
+@dataclass(frozen=True)
+class AssocParams:
+    """Parameters of the graph association (defaults: maggio2007 §4).
+
+    depth: graph depth K in frames (a tail is a candidate while ``k − frame ≤ depth``).
+    min_length: tracks with fewer vertices are not reported (§4: 5).
+    gate: chi-square probability of the edge gate (4 observable dof).
+    sigma_v: per-frame velocity noise std as a fraction of (w, h) of the earlier vertex (§4: 0.03).
+    sigma_size: per-frame size noise std as a fraction of (w, h) (§4: 0.1).
+    sigma_obs, sigma_obs_min: estimate noise ``σ^z_{w,h} = max(sigma_obs·size, sigma_obs_min)``,
+        ``σ^z_y = σ^z_{w,h}/2`` (§4: 0.15, 1.0 px).
+    speed_prior: std of an unknown velocity per axis, fraction of (w, h) per frame (ours).
+    accel_to_position: c in ``y ← y + v + c·a`` (½ = dt²/2; as :mod:`trackers.smc.motion`).
+    """
+
+    depth: int = 50
+    min_length: int = 5
+    gate: float = 0.999
+    sigma_v: float = 0.03
+    sigma_size: float = 0.1
+    sigma_obs: float = 0.15
+    sigma_obs_min: float = 1.0
+    speed_prior: float = 0.1
+    accel_to_position: float = 0.5
+
+    def __post_init__(self):
+        if int(self.depth) != self.depth or self.depth < 1:
+            raise ValueError(f"AssocParams.depth must be an integer >= 1, got {self.depth}")
+        if int(self.min_length) != self.min_length or self.min_length < 1:
+            raise ValueError(f"AssocParams.min_length must be an integer >= 1, got {self.min_length}")
+        if self.min_length - 1 > self.depth:
+            raise ValueError("AssocParams: min_length - 1 (the report lag) must not exceed depth")
+        if not 0.0 < self.gate < 1.0:
+            raise ValueError(f"AssocParams.gate must be in (0, 1), got {self.gate}")
+        for name in ("sigma_v", "sigma_size", "speed_prior", "accel_to_position"):
+            if getattr(self, name) < 0:
+                raise ValueError(f"AssocParams.{name} must be >= 0")
+        if self.sigma_obs < 0 or self.sigma_obs_min <= 0:
+            raise ValueError("AssocParams: sigma_obs must be >= 0 and sigma_obs_min > 0")
+
+    @cached_property
+    def gate_d2(self) -> float:
+        """Squared Mahalanobis radius of the gate (chi-square quantile, 4 dof)."""
+        return float(chi2.ppf(self.gate, df=len(OBS_INDEX)))
+
+
+# --------------------------------------------------------------------------- pure functions
+
+
+def obs_noise_var(states: np.ndarray, params: AssocParams) -> np.ndarray:
+    """(N, 4) variances of the estimate noise ``σ^z`` of (y1, y2, w, h) at each state's size (§4)."""
+    s_wh = np.maximum(params.sigma_obs * states[:, 4:6], params.sigma_obs_min)
+    return np.concatenate([(s_wh / 2.0) ** 2, s_wh ** 2], axis=1)
+
+
+def tail_velocity(tail_states: np.ndarray, prev_states: np.ndarray, prev_gap: np.ndarray,
+                  params: AssocParams) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Velocity estimate of each tail and the growth of its prediction error.
+
+    tail_states, prev_states: (T, 6) last and previous vertex of each track (prev rows unused where
+    ``prev_gap <= 0``, i.e. the track has one vertex); prev_gap: (T,) frames between them.
+    Returns ``v (T, 2)``, ``b (T, 2)``, ``c (T, 2)``: the tail-side position error variance at gap
+    ``i`` is ``σ_t² + b i + c i²`` (see the module docstring, "Unknown velocity").
+    """
+    T = len(tail_states)
+    v = tail_states[:, 2:4].copy()
+    b = np.zeros((T, 2))
+    c = np.zeros((T, 2))
+    unknown = ~np.all(np.isfinite(v), axis=1)
+    if not unknown.any():
+        return v, b, c
+    var_t = obs_noise_var(tail_states, params)[:, :2]
+    two = unknown & (prev_gap > 0)
+    if two.any():
+        d = prev_gap[two, None].astype(np.float64)
+        var_p = obs_noise_var(prev_states[two], params)[:, :2]
+        v[two] = (tail_states[two, 0:2] - prev_states[two, 0:2]) / d
+        # y_t + i v̂ = y_t + i (y_t − y_p)/Δ: error ε_t (1 + i/Δ) − ε_p i/Δ
+        b[two] = 2.0 * var_t[two] / d
+        c[two] = (var_t[two] + var_p) / d ** 2
+    one = unknown & ~(prev_gap > 0)
+    if one.any():
+        v[one] = 0.0
+        c[one] = (params.speed_prior * tail_states[one, 4:6]) ** 2
+    return v, b, c
+
+
+def propagate(tail_states: np.ndarray, v: np.ndarray, b: np.ndarray, c: np.ndarray,
+              gaps: np.ndarray, params: AssocParams) -> tuple[np.ndarray, np.ndarray]:
+    """Mean and (diagonal) covariance of the observable new estimate, ``i = gaps`` frames later.
+
+    tail_states (T, 6); v, b, c (T, 2) from :func:`tail_velocity`; gaps (T,) or (T, G) frames.
+    Returns ``mean (T, [G,] 4)`` and ``var (T, [G,] 4)`` over (y1, y2, w, h): the marginal of
+    ``F^i x`` and ``Σ_{j<i} F^j Q F^jᵀ`` plus the estimate noise of both ends (module docstring).
+    The four components are independent, so the covariance is diagonal.
+    """
+    i = np.asarray(gaps, dtype=np.float64)
+    extra = i.ndim - 1
+    sh = (slice(None),) + (None,) * extra  # broadcast per-tail arrays over the gap axes
+    i = i[..., None]
+    size = tail_states[:, 4:6][sh]
+    r = obs_noise_var(tail_states, params)[sh]
+    r_y, r_wh = r[..., :2], r[..., 2:]
+    # position: mean y + i v; process variance σ_v² Σ_{j<i}(j+c)²: the acceleration of step j
+    # reaches the position through c now and through the velocity on the i−1−j later steps
+    mean_y = tail_states[:, 0:2][sh] + i * v[sh]
+    cc = params.accel_to_position
+    s2 = (i - 1.0) * i * (2.0 * i - 1.0) / 6.0 + cc * i * (i - 1.0) + cc ** 2 * i
+    var_y = ((params.sigma_v * size) ** 2 * s2
+             + r_y + b[sh] * i + c[sh] * i ** 2  # tail-side estimate error (+ velocity error)
+             + r_y)  # new-side estimate error
+    # size: zero-order random walk, std proportional to the earlier vertex's size
+    mean_wh = np.broadcast_to(size, var_y.shape)
+    var_wh = (params.sigma_size * size) ** 2 * i + 2.0 * r_wh
+    mean = np.concatenate([mean_y, mean_wh], axis=-1)
+    var = np.concatenate([var_y, var_wh], axis=-1)
+    return mean, var
+
+
+@dataclass(frozen=True)
+class EdgeScores:
+    """All (tail, new vertex) pairs of one frame. Arrays are (T, M) unless noted.
+
+    gain: ``log f(x̂_k | x̂_{k−i})`` on the observable components; d2: squared Mahalanobis
+    distance; weight: ``gain − floor`` (floor (T,): log-density at the gate of the gap-K edge);
+    allowed: inside the gate.
+    """
+
+    gain: np.ndarray
+    d2: np.ndarray
+    floor: np.ndarray
+    weight: np.ndarray
+    allowed: np.ndarray
+
+
+def score_edges(tail_states: np.ndarray, v: np.ndarray, b: np.ndarray, c: np.ndarray,
+                gaps: np.ndarray, new_states: np.ndarray, params: AssocParams) -> EdgeScores:
+    """Gains and weights of every (tail, new vertex) edge, vectorised over all pairs."""
+    T, M = len(tail_states), len(new_states)
+    gaps = np.asarray(gaps, dtype=np.float64)
+    both = np.stack([gaps, np.full(T, float(params.depth))], axis=1)  # (T, 2): gap i, gap K
+    mean, var = propagate(tail_states, v, b, c, both, params)
+    log_det = np.sum(np.log(2.0 * np.pi * var), axis=-1)  # (T, 2)
+    z = new_states[:, OBS_INDEX]
+    res = z[None, :, :] - mean[:, None, 0, :]
+    d2 = np.sum(res ** 2 / var[:, None, 0, :], axis=-1).reshape(T, M)
+    gain = -0.5 * d2 - 0.5 * log_det[:, 0:1]
+    g2 = params.gate_d2
+    floor = -0.5 * g2 - 0.5 * log_det[:, 1]
+    weight = gain - floor[:, None]
+    return EdgeScores(gain=gain, d2=d2, floor=floor, weight=weight, allowed=d2 <= g2)
+
+
+def max_weight_matching(weights: np.ndarray, allowed: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Exact maximum-weight bipartite matching restricted to ``allowed`` edges.
+
+    weights, allowed: (T, M).  Edges with weight ≤ 0 are never worth taking (leaving both ends
+    unmatched scores 0) and are dropped.  With the others set to 0 the padded assignment problem
+    has the same optimum as the matching problem, and zero-weight pairs of the assignment are
+    discarded.  Returns ``rows (P,)``, ``cols (P,)`` sorted by row.
+    """
+    weights = np.asarray(weights, dtype=np.float64)
+    ok = np.asarray(allowed, dtype=bool) & np.isfinite(weights) & (weights > 0)
+    if not ok.any():
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    w = np.where(ok, weights, 0.0)
+    rows, cols = linear_sum_assignment(w, maximize=True)
+    keep = ok[rows, cols]
+    return rows[keep].astype(np.int64), cols[keep].astype(np.int64)
+
+
+def boxes_xywh(states: np.ndarray) -> np.ndarray:
+    """(N, 6) states -> (N, 4) top-left boxes ``(x, y, w, h)`` (MOT convention)."""
+    s = np.asarray(states, dtype=np.float64).reshape(-1, STATE_DIM)
+    return np.stack([s[:, 0] - s[:, 4] / 2.0, s[:, 1] - s[:, 5] / 2.0, s[:, 4], s[:, 5]], axis=1)
+
+
+# --------------------------------------------------------------------------- results
+
+
+@dataclass(frozen=True)
+class FinalRows:
+    """Finalised output of one past frame (bounded-lag reporting): confirmed tracks only.
+
+    ids (R,) int64; states (R, 6).  ``boxes`` gives (R, 4) ``(x, y, w, h)``.
+    """
+
+    frame: int
+    ids: np.ndarray
+    states: np.ndarray
+
+    @property
+    def boxes(self) -> np.ndarray:
+        return boxes_xywh(self.states)
+
+
+@dataclass(frozen=True)
+class AssocResult:
+    """Association of one frame.
+
+    New vertices (M = number of estimates given): ``states (M, 6)``, ``ids (M,)`` their track ids,
+    ``lengths (M,)`` track lengths in vertices after this frame, ``confirmed (M,)``
+    ``lengths >= min_length``.
+    Edges (E = admissible (tail, new vertex) pairs, gated-out pairs are not listed):
+    ``edges_src (E, 6)`` tail states, ``edges_src_id (E,)`` tail track ids,
+    ``edges_dst_index (E,)`` index into ``states``, ``edges_gain (E,)`` ``log f``,
+    ``edges_weight (E,)`` matching weight, ``edges_gap (E,)`` frames, ``chosen (E,)`` in the cover.
+    ``ended (P,)``: ids of tracks whose tail fell out of the K-frame window this frame.
+    ``finalised``: bounded-lag rows of past frames (usually one, for frame ``k − L``).
+    """
+
+    frame: int
+    states: np.ndarray
+    ids: np.ndarray
+    lengths: np.ndarray
+    confirmed: np.ndarray
+    edges_src: np.ndarray
+    edges_src_id: np.ndarray
+    edges_dst_index: np.ndarray
+    edges_gain: np.ndarray
+    edges_weight: np.ndarray
+    edges_gap: np.ndarray
+    chosen: np.ndarray
+    ended: np.ndarray
+    finalised: tuple[FinalRows, ...]
+
+    @property
+    def boxes(self) -> np.ndarray:
+        """(M, 4) ``(x, y, w, h)`` of the new vertices."""
+        return boxes_xywh(self.states)
+
+
+@dataclass(frozen=True)
+class TrackTails:
+    """Snapshot of the live tracks (copies): ids (T,), tail_frames (T,), tail_states (T, 6),
+    lengths (T,), sorted by id."""
+
+    ids: np.ndarray
+    tail_frames: np.ndarray
+    tail_states: np.ndarray
+    lengths: np.ndarray
+
+
+# --------------------------------------------------------------------------- the associator
+
+
+class GraphAssociator:
+    """Online max-weight path cover over a K-frame window (see the module docstring).
+
+    ``step(frame, states)`` once per frame with the frame's estimates, frames strictly increasing
+    (gaps between frame numbers count as missed frames).  Memory: the tails of the live tracks
+    (at most the number of vertices of the last K frames) and ``min_length − 1`` frames of rows.
+    """
+
+    def __init__(self, params: AssocParams | None = None):
+        self.params = params if params is not None else AssocParams()
+        self._ids = np.zeros(0, dtype=np.int64)  # sorted ascending (new ids are appended)
+        self._tail = np.zeros((0, STATE_DIM))
+        self._tail_frame = np.zeros(0, dtype=np.int64)
+        self._prev = np.zeros((0, STATE_DIM))
+        self._prev_frame = np.zeros(0, dtype=np.int64)  # -1: the track has one vertex
+        self._length = np.zeros(0, dtype=np.int64)
+        self._next_id = 1
+        self._last_frame: int | None = None
+        self._buffer: deque[tuple[int, np.ndarray, np.ndarray]] = deque()
+
+    # ---- introspection
+    @property
+    def lag(self) -> int:
+        """Frames between a step and the frame its ``finalised`` rows belong to."""
+        return self.params.min_length - 1
+
+    @property
+    def n_live(self) -> int:
+        """Number of tails kept (live tracks)."""
+        return len(self._ids)
+
+    @property
+    def n_buffered_frames(self) -> int:
+        return len(self._buffer)
+
+    def live_tracks(self) -> TrackTails:
+        return TrackTails(self._ids.copy(), self._tail_frame.copy(), self._tail.copy(),
+                          self._length.copy())
+
+    # ---- input checking
+    def _check(self, frame, states) -> np.ndarray:
+        if int(frame) != frame:
+            raise ValueError(f"frame {frame!r}: frame numbers must be integers")
+        if self._last_frame is not None and frame <= self._last_frame:
+            raise ValueError(f"frame {frame}: frames must increase (previous was {self._last_frame})")
+        s = np.asarray(states, dtype=np.float64)
+        if s.size == 0:
+            return np.zeros((0, STATE_DIM))
+        if s.ndim != 2 or s.shape[1] != STATE_DIM:
+            raise ValueError(f"frame {frame}: expected states of shape (M, 6), got {s.shape}")
+        if not np.all(np.isfinite(s[:, OBS_INDEX])):
+            raise ValueError(f"frame {frame}: non-finite position or size in the estimates")
+        if np.any(s[:, 4:6] <= 0):
+            raise ValueError(f"frame {frame}: estimates need positive width and height")
+        return s
+
+    # ---- one frame
+    def step(self, frame: int, states) -> AssocResult:
+        """Extend the path cover with the estimates of ``frame``; ``states (M, 6)``, NaN velocity
+        meaning unknown."""
+        new = self._check(frame, states)
+        frame = int(frame)
+        self._last_frame = frame
+        p = self.params
+        M = len(new)
+
+        # 1. forget tails older than K frames: their tracks end (bounded memory)
+        expired = frame - self._tail_frame > p.depth
+        ended_ids, ended_len = self._ids[expired], self._length[expired]
+        if expired.any():
+            keep = ~expired
+            self._ids, self._tail, self._tail_frame = self._ids[keep], self._tail[keep], self._tail_frame[keep]
+            self._prev, self._prev_frame = self._prev[keep], self._prev_frame[keep]
+            self._length = self._length[keep]
+
+        # 2. score every (tail, new vertex) edge and match
+        T = len(self._ids)
+        gaps = frame - self._tail_frame
+        if T and M:
+            v, b, c = tail_velocity(self._tail, self._prev,
+                                    np.where(self._prev_frame >= 0, self._tail_frame - self._prev_frame, 0),
+                                    p)
+            sc = score_edges(self._tail, v, b, c, gaps, new, p)
+            rows, cols = max_weight_matching(sc.weight, sc.allowed)
+        else:
+            sc = None
+            rows = cols = np.zeros(0, dtype=np.int64)
+
+        # 3. matched vertices continue their track; the others start new tracks (input order)
+        ids = np.zeros(M, dtype=np.int64)
+        ids[cols] = self._ids[rows]
+        unmatched = np.ones(M, dtype=bool)
+        unmatched[cols] = False
+        n_new = int(unmatched.sum())
+        new_ids = np.arange(self._next_id, self._next_id + n_new, dtype=np.int64)
+        self._next_id += n_new
+        ids[unmatched] = new_ids
+
+        self._prev[rows] = self._tail[rows]
+        self._prev_frame[rows] = self._tail_frame[rows]
+        self._tail[rows] = new[cols]
+        self._tail_frame[rows] = frame
+        self._length[rows] += 1
+        self._ids = np.concatenate([self._ids, new_ids])  # stays sorted: new ids are the largest
+        self._tail = np.concatenate([self._tail, new[unmatched]])
+        self._tail_frame = np.concatenate([self._tail_frame, np.full(n_new, frame, dtype=np.int64)])
+        self._prev = np.concatenate([self._prev, np.full((n_new, STATE_DIM), np.nan)])
+        self._prev_frame = np.concatenate([self._prev_frame, np.full(n_new, -1, dtype=np.int64)])
+        self._length = np.concatenate([self._length, np.ones(n_new, dtype=np.int64)])
+
+        lengths = self._length[np.searchsorted(self._ids, ids)]
+        confirmed = lengths >= p.min_length
+
+        # 4. edges for the observer: admissible pairs only
+        if sc is not None:
+            er, ec = np.nonzero(sc.allowed)
+            chosen_mask = np.zeros((T, M), dtype=bool)
+            chosen_mask[rows, cols] = True
+            # each edge's source is the tail as it was before this frame: for a matched tail that
+            # vertex has just moved to _prev
+            matched_tail = np.zeros(T, dtype=bool)
+            matched_tail[rows] = True
+            edges = dict(edges_src=np.where(matched_tail[er][:, None], self._prev[er], self._tail[er]),
+                         edges_src_id=self._ids[er], edges_dst_index=ec.astype(np.int64),
+                         edges_gain=sc.gain[er, ec], edges_weight=sc.weight[er, ec],
+                         edges_gap=gaps[er].astype(np.int64), chosen=chosen_mask[er, ec])
+        else:
+            edges = dict(edges_src=np.zeros((0, STATE_DIM)), edges_src_id=np.zeros(0, dtype=np.int64),
+                         edges_dst_index=np.zeros(0, dtype=np.int64), edges_gain=np.zeros(0),
+                         edges_weight=np.zeros(0), edges_gap=np.zeros(0, dtype=np.int64),
+                         chosen=np.zeros(0, dtype=bool))
+
+        # 5. bounded-lag output: rows of frames <= k − L, judged with the lengths known now
+        self._buffer.append((frame, ids.copy(), new.copy()))
+        finalised = []
+        while self._buffer and self._buffer[0][0] <= frame - self.lag:
+            f, bid, bst = self._buffer.popleft()
+            ok = self._confirmed_ids(bid, ended_ids, ended_len)
+            finalised.append(FinalRows(f, bid[ok], bst[ok]))
+
+        return AssocResult(frame=frame, states=new, ids=ids, lengths=lengths, confirmed=confirmed,
+                           ended=ended_ids, finalised=tuple(finalised), **edges)
+
+    def _confirmed_ids(self, ids: np.ndarray, extra_ids=None, extra_len=None) -> np.ndarray:
+        """Mask of ``ids`` whose track has at least ``min_length`` vertices (live or just ended)."""
+        all_ids, all_len = self._ids, self._length
+        if extra_ids is not None and len(extra_ids):
+            all_ids = np.concatenate([all_ids, extra_ids])
+            all_len = np.concatenate([all_len, extra_len])
+            order = np.argsort(all_ids, kind="stable")
+            all_ids, all_len = all_ids[order], all_len[order]
+        if len(ids) == 0 or len(all_ids) == 0:
+            return np.zeros(len(ids), dtype=bool)
+        pos = np.clip(np.searchsorted(all_ids, ids), 0, len(all_ids) - 1)
+        found = all_ids[pos] == ids
+        return found & (all_len[pos] >= self.params.min_length)
+
+    def flush(self) -> tuple[FinalRows, ...]:
+        """End of sequence: the buffered rows (the last ``L`` frames) of confirmed tracks."""
+        out = []
+        while self._buffer:
+            f, bid, bst = self._buffer.popleft()
+            ok = self._confirmed_ids(bid)
+            out.append(FinalRows(f, bid[ok], bst[ok]))
+        return tuple(out)
