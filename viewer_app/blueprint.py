@@ -15,15 +15,17 @@ def default_blueprint(views: Sequence[tuple[str, Sequence[str]]] = (),
                       plots: Sequence[tuple[str, Sequence[str]]] = ()) -> rrb.Blueprint:
     """``views``: (title, engine paths) pairs, each becoming a 2D view over the video that shows
     those paths (``"phd/particles/**"`` ...) on top of the frame; ``plots``: (title, paths)
-    pairs of scalar series.  The first tab shows everything."""
-    tabs = [rrb.Spatial2DView(origin="video", name="All stages")]
+    pairs of scalar series.  The tracker's views come first; the last tab shows everything."""
+    tabs = []
     for title, paths in views:
         contents = BASE_2D + [f"video/{p}" for p in paths]
         tabs.append(rrb.Spatial2DView(origin="video", contents=contents, name=title))
-    series = [rrb.TimeSeriesView(origin="plots", name="Series")]
+    tabs.append(rrb.Spatial2DView(origin="video", name="All stages"))
+    series = []
     for title, paths in plots:
         series.append(rrb.TimeSeriesView(origin="plots", contents=[f"plots/{p}" for p in paths],
                                          name=title))
+    series.append(rrb.TimeSeriesView(origin="plots", name="All series"))
     return rrb.Blueprint(
         rrb.Horizontal(
             rrb.Tabs(*tabs, name="Video"),

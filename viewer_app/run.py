@@ -35,8 +35,29 @@ from trackers.observer import level_rank
 RECORDINGS_DIR = Path("recordings")
 
 
-class Interrupted(Exception):
-    """Raised from the SIGTERM handler so the loop can finish the file."""
+class StopFlag:
+    """SIGINT/SIGTERM set a flag that the frame loop checks, instead of raising at an arbitrary
+    point (possibly inside the recording library, holding its locks).  A second signal raises
+    KeyboardInterrupt for a user who really wants out."""
+
+    def __init__(self):
+        self.requested = False
+        self._old = {}
+
+    def _handler(self, signum, _frame):
+        if self.requested:
+            raise KeyboardInterrupt
+        self.requested = True
+
+    def __enter__(self):
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            self._old[sig] = signal.signal(sig, self._handler)
+        return self
+
+    def __exit__(self, *exc):
+        for sig, old in self._old.items():
+            signal.signal(sig, old)
+        return False
 
 
 @dataclass
@@ -211,17 +232,17 @@ def record(source: Source, out: Path, opts: RecordOptions, *,
     writer = TrackWriter(tracks_out) if tracks_out else None
     trails = TrailBuffer(opts.trails)
     bar = Progress(total, f"{opts.tracker} on {source.name}", enabled=progress)
+    lagged = hasattr(tracker, "pop_final")  # trackers that finalise rows with a bounded lag
     interrupted = False
     failed: Optional[InputError] = None
     done = 0
 
-    def on_term(signum, _frame):
-        raise Interrupted()
-
-    old_term = signal.signal(signal.SIGTERM, on_term)
+    stop = StopFlag().__enter__()
     t0 = time.perf_counter()
     try:
         for frame in source.frames(total):
+            if stop.requested:
+                break
             obs.begin_frame(frame)
             dets = detector(frame)
             obs.boxes("detections", dets.boxes,
@@ -238,22 +259,29 @@ def record(source: Source, out: Path, opts: RecordOptions, *,
             obs.scalar("tracks/count", len(tracks))
             obs.scalar("detections/count", len(dets))
             if writer:
-                writer.write(frame.index, tracks)
+                rows = tracker.pop_final() if lagged else [(frame.index, tracks)]
+                for f_index, ts in rows:
+                    writer.write(f_index, ts)
             obs.end_frame()
             done += 1
             bar.update(done)
             if on_frame:
                 on_frame(done)
-    except (KeyboardInterrupt, Interrupted):
-        interrupted = True
-        obs.text("", f"run interrupted after {done} frames", level="WARN")
+    except KeyboardInterrupt:
+        stop.requested = True
     except InputError as e:
         failed = e
         obs.text("", f"run failed: {e}", level="ERROR")
     finally:
-        signal.signal(signal.SIGTERM, old_term)
+        if stop.requested:
+            interrupted = True
+            obs.text("", f"run interrupted after {done} frames", level="WARN")
+        stop.__exit__()
         bar.close()
         if writer:
+            if lagged and failed is None:
+                for f_index, ts in tracker.finish():
+                    writer.write(f_index, ts)
             writer.close()
         rec.flush()
         rec.disconnect()
