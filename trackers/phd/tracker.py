@@ -48,15 +48,18 @@ STAGE_NAMES = ("predict", "birth", "update", "resample", "cluster", "associate")
 
 
 def _split_options(options: dict, *dataclasses) -> list[dict]:
-    """Route ``name=value`` options to the dataclass that has the field; unknown names fail."""
+    """Route ``name=value`` options to every dataclass that has the field (the motion noise
+    ``sigma_v``/``sigma_size`` is shared by the filter and the association); unknown names fail."""
     out = [dict() for _ in dataclasses]
     for key, value in options.items():
+        hit = False
         for i, dc in enumerate(dataclasses):
             if key in {f.name for f in fields(dc)}:
                 out[i][key] = value
-                break
-        else:
-            raise ValueError(f"unknown tracker option {key!r}")
+                hit = True
+        if not hit:
+            names = sorted({f.name for dc in dataclasses for f in fields(dc)})
+            raise ValueError(f"unknown tracker option {key!r}; known: {', '.join(names)}")
     return out
 
 

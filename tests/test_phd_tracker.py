@@ -1,0 +1,125 @@
+"""PHD-MT and MT end to end on the synthetic scene: determinism, clutter rejection, instrumentation."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from trackers.base import make_tracker
+from trackers.data.synthetic import SceneConfig, SyntheticScene
+from trackers.eval import box_iou
+from trackers.observer import ListObserver
+from trackers.types import Frame
+
+BLANK = np.zeros((8, 8, 3), np.uint8)  # PHD-MT and MT look at detections only
+
+
+def _run(name, scene, seed=0, obs=None, **options):
+    tr = make_tracker(name, seed=seed, **options)
+    live, final = [], []
+    for k in range(1, scene.config.frames + 1):
+        ts = tr.step(Frame(k, 0.0, BLANK), scene.det.detections(k), *(obs and [obs] or []))
+        live.append((k, ts))
+        final += tr.pop_final()
+    final += tr.finish()
+    return live, final
+
+
+def _false_tracks(scene, rows) -> tuple[int, int]:
+    """(tracks, false tracks): a false track overlaps no true target (IoU >= 0.5) in at least
+    half of its rows."""
+    good, total = {}, {}
+    for f, ts in rows:
+        gt = scene.gt.ground_truth(f)
+        hit = (box_iou(ts.boxes, gt.boxes).max(axis=1) >= 0.5) if len(gt) and len(ts) \
+            else np.zeros(len(ts), bool)
+        for i, ok in zip(ts.ids.tolist(), hit.tolist()):
+            total[i] = total.get(i, 0) + 1
+            good[i] = good.get(i, 0) + ok
+    return len(total), sum(1 for i in total if good[i] / total[i] < 0.5)
+
+
+@pytest.fixture(scope="module")
+def cluttered():
+    return SyntheticScene(SceneConfig(frames=120, targets=6, clutter=4.0, persistent_clutter=2,
+                                      width=320, height=240, seed=1))
+
+
+def test_same_seed_same_tracks(cluttered):
+    a_live, a_final = _run("phd", cluttered, seed=5)
+    b_live, b_final = _run("phd", cluttered, seed=5)
+    for (fa, ta), (fb, tb) in zip(a_final, b_final):
+        assert fa == fb and np.array_equal(ta.ids, tb.ids) and np.array_equal(ta.boxes, tb.boxes)
+    assert len(a_final) == len(b_final) == cluttered.config.frames
+    _, c_final = _run("phd", cluttered, seed=6)
+    assert any(not np.array_equal(ta.boxes, tc.boxes) for (_, ta), (_, tc) in zip(a_final, c_final))
+
+
+def test_phd_mt_makes_fewer_false_tracks_than_mt_on_clutter(cluttered):
+    _, phd = _run("phd", cluttered)
+    _, mt = _run("mt", cluttered)
+    n_phd, false_phd = _false_tracks(cluttered, phd)
+    n_mt, false_mt = _false_tracks(cluttered, mt)
+    assert false_phd < false_mt / 3, (false_phd, false_mt)
+    # and PHD-MT still tracks the people: most of its tracks are true
+    assert n_phd - false_phd >= 3
+
+
+def test_phd_mt_tracks_a_clean_scene():
+    scene = SyntheticScene(SceneConfig(frames=80, targets=4, clutter=0.0, persistent_clutter=0,
+                                       p_detect=1.0, box_noise=0.03, width=320, height=240,
+                                       seed=3))
+    _, rows = _run("phd", scene)
+    n, false = _false_tracks(scene, rows)
+    assert false == 0
+    # every true target present for long enough is covered by a track in most of its frames
+    matched = total = 0
+    for f, ts in rows:
+        gt = scene.gt.ground_truth(f)
+        vis = scene.gt.vis[scene.gt.rows_at(f)] >= 0.5
+        if not vis.any():
+            continue
+        total += int(vis.sum())
+        if len(ts):
+            matched += int((box_iou(gt.boxes[vis], ts.boxes).max(axis=1) >= 0.5).sum())
+    assert matched / total > 0.8, matched / total
+
+
+def test_every_stage_reported(cluttered):
+    obs = ListObserver("particles")
+    tr = make_tracker("phd", seed=0)
+    for k in range(1, 30):
+        obs.frame = k
+        tr.step(Frame(k, 0.0, BLANK), cluttered.det.detections(k), obs)
+    stages = {c[0] for c in obs.calls}
+    assert {"predict", "birth", "update", "resample", "cluster", "associate"} <= stages
+    for path in ("phd/particles/predicted", "phd/particles/birth", "phd/particles/updated",
+                 "phd/particles/resampled", "phd/clusters/members"):
+        assert obs.find("points", path), path
+    for path in ("phd/clusters/kept", "assoc/vertices", "phd/birth/detections"):
+        assert obs.find("boxes", path), path
+    masses = obs.find("scalar", "phd/mass")
+    assert len(masses) == 29 and max(masses) > 1
+    chosen = obs.find("segments", "assoc/edges/chosen")
+    assert any(len(c["a"]) for c in chosen)
+    # the particle count follows L_k = rho * mass
+    counts = obs.find("scalar", "phd/particles/count")
+    assert counts[-1] == pytest.approx(1500 * masses[-1], rel=0.01, abs=2)
+
+
+def test_tracks_level_builds_no_particle_payloads(cluttered):
+    obs = ListObserver("tracks")
+    tr = make_tracker("phd", seed=0)
+    for k in range(1, 10):
+        tr.step(Frame(k, 0.0, BLANK), cluttered.det.detections(k), obs)
+    assert not [c for c in obs.calls if c[1] in ("points", "boxes", "segments")]
+
+
+def test_unknown_option_is_refused():
+    with pytest.raises(ValueError, match="unknown tracker option 'rhoo'"):
+        make_tracker("phd", rhoo=3)
+
+
+def test_shared_motion_option_reaches_filter_and_association():
+    tr = make_tracker("phd", sigma_v=0.05)
+    assert tr.params.sigma_v == 0.05 and tr.associator.params.sigma_v == 0.05
