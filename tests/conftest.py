@@ -35,6 +35,7 @@ def pets() -> Path:
 def read_rrd(path, footer: bool = True) -> dict:
     """Entity path -> list of (timeline values dict, columns dict) per row, read with
     ``rr.chunk.RrdReader``. ``footer=False`` streams a file that was never finished."""
+    import pyarrow as pa
     import rerun as rr
 
     reader = rr.chunk.RrdReader(str(path))
@@ -43,7 +44,7 @@ def read_rrd(path, footer: bool = True) -> dict:
     for ch in chunks:
         rb = ch.to_record_batch()
         names = rb.schema.names
-        times = {t: rb.column(t).to_pylist() for t in ch.timeline_names
+        times = {t: rb.column(t).cast(pa.int64()).to_pylist() for t in ch.timeline_names
                  if t in names and t != "log_time"}
         cols = {n: rb.column(n).to_pylist() for n in names
                 if n not in times and n not in ("log_time", "rerun.controls.RowId")}

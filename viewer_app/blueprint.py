@@ -18,6 +18,8 @@ def default_blueprint(views: Sequence[tuple[str, Sequence[str]]] = (),
     pairs of scalar series.  The tracker's views come first; the last tab shows everything."""
     tabs = []
     for title, paths in views:
+        if "tracks/**" in paths:  # wherever tracks are shown, show their errors too
+            paths = list(paths) + ["metrics/**"]
         contents = BASE_2D + [f"video/{p}" for p in paths]
         tabs.append(rrb.Spatial2DView(origin="video", contents=contents, name=title))
     tabs.append(rrb.Spatial2DView(origin="video", name="All stages"))
@@ -25,6 +27,7 @@ def default_blueprint(views: Sequence[tuple[str, Sequence[str]]] = (),
     for title, paths in plots:
         series.append(rrb.TimeSeriesView(origin="plots", contents=[f"plots/{p}" for p in paths],
                                          name=title))
+    series.append(rrb.TimeSeriesView(origin="plots/metrics", name="Metrics"))
     series.append(rrb.TimeSeriesView(origin="plots", name="All series"))
     return rrb.Blueprint(
         rrb.Horizontal(
@@ -33,6 +36,25 @@ def default_blueprint(views: Sequence[tuple[str, Sequence[str]]] = (),
                          row_shares=[3, 1]),
             column_shares=[3, 2],
         ),
+        rrb.TimePanel(state="expanded"),
+        collapse_panels=False,
+    )
+
+
+def compare_blueprint(roots: Sequence[str]) -> rrb.Blueprint:
+    """Several trackers side by side: one 2D view per tracker root over the shared video, and
+    their metrics plotted together."""
+    views = [rrb.Spatial2DView(origin="/", name=root, contents=[
+        "/video", "/video/detections", "/video/gt", f"/{root}/video/tracks/**",
+        f"/{root}/video/metrics/**"]) for root in roots]
+    plots = [rrb.TimeSeriesView(origin="/", name=title, contents=[
+        f"/{root}/plots/metrics/{key}" for root in roots])
+        for title, key in (("OSPA", "ospa"), ("ID switches", "idsw"), ("False positives", "fp"),
+                           ("Misses", "fn"), ("Estimated targets", "cardinality/estimated"))]
+    return rrb.Blueprint(
+        rrb.Vertical(rrb.Horizontal(*views), rrb.Horizontal(rrb.Tabs(*plots),
+                                                            rrb.TextLogView(origin="/", name="Log")),
+                     row_shares=[3, 2]),
         rrb.TimePanel(state="expanded"),
         collapse_panels=False,
     )

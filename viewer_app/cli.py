@@ -4,6 +4,8 @@
                    [--seed S] [--detector file|hog|haar|bgsub] [--level tracks|clusters|particles]
                    [--tracks-out FILE.txt] [--force] [--spawn | --serve]
     pfscope synth --out DIR [--frames N --targets K --clutter R --seed S]
+    pfscope eval TRACKS.txt --gt GT.txt|SEQUENCE_DIR [--json]
+    pfscope compare [SOURCE] --trackers phd,mt [--out FILE.rrd] [--frames N] [--json]
 
 Bad input ends with one line on stderr naming the file/line/frame and exit status 2.
 """
@@ -81,6 +83,37 @@ def build_parser() -> argparse.ArgumentParser:
     live.add_argument("--serve", action="store_true", help="also serve a web viewer")
     r.add_argument("--quiet", action="store_true", help="no progress bar")
 
+    c = sub.add_parser("compare", help="run several trackers into one recording and score them",
+                       description="Run several trackers on the same input into one recording "
+                                   "(side by side) and print maggio2007's Table 1 scores "
+                                   "(MODP, MODA, MOTP, MOTA) plus IDF1, HOTA and OSPA.")
+    c.add_argument("source", nargs="?", default=None, help="as for record (default: synthetic)")
+    c.add_argument("--trackers", default="phd,mt",
+                   help=f"comma-separated, from {', '.join(TRACKERS)} (default phd,mt)")
+    c.add_argument("--out", type=Path, default=None,
+                   help="recording file (default recordings/<source>-compare.rrd)")
+    _add_synth_options(c, frames_help="stop after N frames (default: all)")
+    c.add_argument("--detector", choices=list(DETECTORS), default=None)
+    c.add_argument("--min-score", type=float, default=float("-inf"))
+    c.add_argument("--level", choices=list(LEVELS), default="tracks",
+                   help="how much to record per tracker (default tracks)")
+    c.add_argument("--max-points", type=int, default=3000)
+    c.add_argument("--fps", type=float, default=None)
+    c.add_argument("--force", action="store_true")
+    c.add_argument("--json", action="store_true", help="print the scores as JSON")
+    c.add_argument("--quiet", action="store_true")
+
+    e = sub.add_parser("eval", help="score a MOT tracks file against ground truth",
+                       description="Score TRACKS (MOT text) against ground truth: CLEAR-MOT, "
+                                   "VACE, identity, HOTA, OSPA/GOSPA, mean error.")
+    e.add_argument("tracks", type=Path, help="tracks file (frame,id,x,y,w,h,...)")
+    e.add_argument("--gt", type=Path, required=True,
+                   help="gt.txt, or a MOTChallenge folder (uses gt/gt.txt and seqinfo.ini)")
+    e.add_argument("--iou", type=float, default=0.5, help="IoU needed for a match (MOT15: 0.5)")
+    e.add_argument("--ospa-c", type=float, default=None, help="OSPA cut-off in pixels")
+    e.add_argument("--ospa-p", type=float, default=None, help="OSPA order")
+    e.add_argument("--json", action="store_true", help="print the scores as JSON")
+
     s = sub.add_parser("synth", help="write the synthetic scene as a MOTChallenge folder")
     s.add_argument("--out", type=Path, required=True, help="output folder (must not exist)")
     _add_synth_options(s, frames_help="number of frames (default 150)")
@@ -88,10 +121,8 @@ def build_parser() -> argparse.ArgumentParser:
     return ap
 
 
-def cmd_record(args) -> int:
+def _open(args):
     from trackers.data.sources import open_source
-
-    from .run import RecordOptions, default_out_path, record
 
     if args.max_points <= 0:
         raise InputError("--max-points must be positive")
@@ -100,8 +131,69 @@ def cmd_record(args) -> int:
     synthetic = args.source in (None, "synthetic")
     if not synthetic and (args.targets is not None or args.clutter is not None):
         raise InputError("--targets/--clutter only apply to the synthetic scene")
-    source = open_source(args.source, fps=args.fps,
-                         synthetic_config=_synth_config(args, args.frames) if synthetic else None)
+    return open_source(args.source, fps=args.fps,
+                       synthetic_config=_synth_config(args, args.frames) if synthetic else None)
+
+
+def _print_scores(scores: dict, as_json: bool) -> None:
+    import json
+
+    from trackers.eval import format_table
+
+    if as_json:
+        print(json.dumps(scores, indent=2, sort_keys=True, default=float))
+        return
+    print("maggio2007 Table 1 layout (VACE / CLEAR-MOT):")
+    print(format_table(scores, ("MODP", "MODA", "MOTP", "MOTA")))
+    print()
+    print(format_table(scores, ("IDF1", "HOTA", "IDSW", "FP", "FN", "OSPA", "GOSPA", "ME")))
+
+
+def cmd_compare(args) -> int:
+    from .run import RecordOptions, RECORDINGS_DIR, record
+
+    names = [n.strip() for n in args.trackers.split(",") if n.strip()]
+    if len(names) < 1:
+        raise InputError("--trackers needs at least one tracker name")
+    source = _open(args)
+    out = args.out or RECORDINGS_DIR / f"{source.name}-compare.rrd"
+    opts = RecordOptions(detector=args.detector, min_score=args.min_score, level=args.level,
+                         max_points=args.max_points, frames=args.frames, seed=args.seed,
+                         force=args.force)
+    res = record(source, out, opts, trackers=names, progress=not args.quiet)
+    if res.scores:
+        _print_scores(res.scores, args.json)
+    else:
+        print(f"{source.name} has no ground truth: nothing to score", file=sys.stderr)
+    print(f"{res.frames} frames, {res.bytes / 1e6:.1f} MB -> {res.out}", file=sys.stderr)
+    print(f"open it with:  rerun {res.out}", file=sys.stderr)
+    return EXIT_INTERRUPTED if res.interrupted else 0
+
+
+def cmd_eval(args) -> int:
+    from trackers.data.motio import read_mot
+    from trackers.data.sources import MOTFolderSource
+    from trackers.eval import evaluate
+
+    frames = None
+    if args.gt.is_dir():
+        seq = MOTFolderSource(args.gt)
+        if seq.gt is None:
+            raise InputError(f"{args.gt / 'gt' / 'gt.txt'}: no ground truth in this sequence")
+        gt, frames = seq.gt, range(1, seq.length + 1)
+    else:
+        gt = read_mot(args.gt, "gt")
+    tracks = read_mot(args.tracks, "tracks")
+    kw = {k: v for k, v in (("ospa_c", args.ospa_c), ("ospa_p", args.ospa_p)) if v is not None}
+    scores = evaluate(gt, tracks, iou_threshold=args.iou, frames=frames, **kw)
+    _print_scores({args.tracks.stem: scores}, args.json)
+    return 0
+
+
+def cmd_record(args) -> int:
+    from .run import RecordOptions, default_out_path, record
+
+    source = _open(args)
     out = args.out or default_out_path(source, args.tracker)
     opts = RecordOptions(tracker=args.tracker, detector=args.detector, min_score=args.min_score,
                          level=args.level, max_points=args.max_points, frames=args.frames,
@@ -114,6 +206,10 @@ def cmd_record(args) -> int:
           f"({res.frames / max(res.seconds, 1e-9):.1f} fps), {size:.1f} MB -> {res.out}")
     if res.tracks_out:
         print(f"tracks (MOT format): {res.tracks_out}")
+    for name, sc in res.scores.items():
+        print(f"scores vs ground truth ({name}): MOTA {sc['MOTA']:.3f}  MOTP {sc['MOTP']:.3f}  "
+              f"IDF1 {sc['IDF1']:.3f}  HOTA {sc['HOTA']:.3f}  IDSW {int(sc['IDSW'])}  "
+              f"OSPA {sc['OSPA']:.1f} px")
     print(f"open it with:  rerun {res.out}")
     if args.serve:
         input("web viewer running; press Enter to stop\n") if sys.stdin.isatty() else None
@@ -141,6 +237,10 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             return cmd_record(args)
         if args.command == "synth":
             return cmd_synth(args)
+        if args.command == "eval":
+            return cmd_eval(args)
+        if args.command == "compare":
+            return cmd_compare(args)
     except InputError as e:
         print(f"pfscope: error: {e}", file=sys.stderr)
         return EXIT_BAD_INPUT

@@ -50,9 +50,11 @@ class RerunObserver:
     """Implements :class:`trackers.observer.Observer` on top of a ``rr.RecordingStream``."""
 
     def __init__(self, rec: rr.RecordingStream, *, level: str = "clusters",
-                 max_points: int = 3000, jpeg_quality: int = 75):
+                 max_points: int = 3000, jpeg_quality: int = 75, root: str = ""):
         level_rank(level)  # validate
         self.rec = rec
+        # Several trackers in one recording each get a root: <root>/video/..., <root>/plots/...
+        self.root = f"{root.strip('/')}/" if root else ""
         self.level = level
         self._rank = level_rank(level)
         self.max_points = int(max_points)
@@ -63,11 +65,13 @@ class RerunObserver:
         self._stage_names: dict[str, int] = {s: i for i, s in enumerate(STAGES)}
 
     # -- frame bookkeeping -------------------------------------------------------------
-    def begin_frame(self, frame: Frame) -> None:
+    def begin_frame(self, frame: Frame, image: bool = True) -> None:
         self.frame_index = frame.index
         self.rec.set_time("frame", sequence=frame.index)
         self.rec.set_time("time", duration=float(frame.timestamp))
         self.stage("input")
+        if not image:
+            return
         ok, buf = cv2.imencode(".jpg", frame.image, [cv2.IMWRITE_JPEG_QUALITY, self.jpeg_quality])
         if ok:
             self.rec.log("video", rr.EncodedImage(contents=buf.tobytes(), media_type="image/jpeg"))
@@ -113,7 +117,7 @@ class RerunObserver:
             labels = None if labels is None else [labels[i] for i in keep]
             if radii is not None and np.ndim(radii) > 0:
                 radii = np.asarray(radii)[keep]
-        self._log(f"video/{path}", rr.Points2D(
+        self._log(f"{self.root}video/{path}", rr.Points2D(
             xy, colors=colors, labels=labels,
             radii=DEFAULT_POINT_RADIUS if radii is None else radii))
 
@@ -130,7 +134,7 @@ class RerunObserver:
                 colors = STYLE.get(path.split("/")[0], (255, 255, 255, 255))
         if labels is None and ids is not None:
             labels = [str(int(i)) for i in np.asarray(ids).reshape(-1)]
-        self._log(f"video/{path}", rr.Boxes2D(
+        self._log(f"{self.root}video/{path}", rr.Boxes2D(
             mins=boxes[:, :2], sizes=boxes[:, 2:], colors=colors, labels=labels,
             radii=radii if radii is not None else 1.0))
 
@@ -142,7 +146,7 @@ class RerunObserver:
         strips = np.stack([a, b], axis=1)
         if colors is None and class_ids is not None:
             colors = id_colors(class_ids)
-        self._log(f"video/{path}", rr.LineStrips2D(
+        self._log(f"{self.root}video/{path}", rr.LineStrips2D(
             strips, colors=colors, labels=labels, radii=0.75 if radii is None else radii))
 
     def strips(self, path: str, strips: Iterable[np.ndarray], *, ids: Optional[np.ndarray] = None,
@@ -150,19 +154,20 @@ class RerunObserver:
         strips = [np.asarray(s, dtype=np.float32).reshape(-1, 2) for s in strips]
         if colors is None and ids is not None:
             colors = id_colors(ids)
-        self._log(f"video/{path}", rr.LineStrips2D(
+        self._log(f"{self.root}video/{path}", rr.LineStrips2D(
             strips, colors=colors, radii=1.0 if radii is None else radii))
 
     def scalar(self, path: str, value: float) -> None:
-        self.rec.log(f"plots/{path}", rr.Scalars(float(value)))
+        self.rec.log(f"{self.root}plots/{path}", rr.Scalars(float(value)))
 
     def text(self, path: str, message: str, level: str = "INFO") -> None:
-        self.rec.log(f"log/{path}" if path else "log", rr.TextLog(message, level=level))
+        self.rec.log(f"{self.root}log/{path}" if path else f"{self.root}log",
+                     rr.TextLog(message, level=level))
 
     def image(self, path: str, image_bgr: np.ndarray) -> None:
         img = np.ascontiguousarray(image_bgr[..., ::-1]) if image_bgr.ndim == 3 else image_bgr
         model = "RGB" if img.ndim == 3 else "L"
-        self._log(f"video/{path}", rr.Image(img, color_model=model).compress(
+        self._log(f"{self.root}video/{path}", rr.Image(img, color_model=model).compress(
             jpeg_quality=self.jpeg_quality))
 
 

@@ -85,6 +85,7 @@ class RecordResult:
     interrupted: bool
     tracks_out: Optional[Path]
     bytes: int
+    scores: dict = field(default_factory=dict)  # tracker name -> evaluate() keys, when gt exists
 
 
 def default_out_path(source: Source, tracker: str) -> Path:
@@ -187,34 +188,103 @@ def resolve_detector_name(source: Source, name: Optional[str]) -> str:
     return "file" if source.det is not None else "hog"
 
 
-def record(source: Source, out: Path, opts: RecordOptions, *,
+class _Lane:
+    """One tracker's run inside a recording: its observer (under its own root when several
+    trackers share a recording), trails, online metrics and output rows."""
+
+    def __init__(self, name: str, tracker, obs, gt_available: bool, writer=None):
+        from trackers.eval import OnlineEvaluator
+
+        self.name, self.tracker, self.obs, self.writer = name, tracker, obs, writer
+        self.trails = TrailBuffer()
+        self.lagged = hasattr(tracker, "pop_final")  # rows finalised with a bounded lag
+        self.rows: list = []  # (frame, TrackSet) as written to the tracks file
+        self.evaluator = OnlineEvaluator() if gt_available else None
+
+    def step(self, frame, dets, gt) -> None:
+        obs = self.obs
+        tracks = self.tracker.step(frame, dets, obs)
+        obs.stage("output")
+        obs.boxes("tracks", tracks.boxes, ids=tracks.ids, radii=2.0)
+        live, strips = self.trails.update(frame.index, tracks.ids, tracks.boxes)
+        obs.strips("tracks/trails", strips, ids=live)
+        obs.scalar("tracks/count", len(tracks))
+        if self.evaluator is not None:
+            self._metrics(frame.index, gt, tracks)
+        self._emit(self.tracker.pop_final() if self.lagged else [(frame.index, tracks)])
+
+    def _emit(self, rows) -> None:
+        self.rows.extend(rows)
+        if self.writer:
+            for f_index, ts in rows:
+                self.writer.write(f_index, ts)
+
+    def finish(self, completed: bool) -> None:
+        if self.lagged and completed:
+            self._emit(self.tracker.finish())
+        if self.writer:
+            self.writer.close()
+
+    def _metrics(self, frame: int, gt, tracks) -> None:
+        """Per-frame metrics of what the view shows at this frame, plus marks on the boxes
+        that are misses, false positives and identity switches."""
+        m = self.evaluator.update(frame, gt, tracks)
+        obs = self.obs
+        obs.scalar("metrics/ospa", m.ospa)
+        obs.scalar("metrics/cardinality/true", m.n_true)
+        obs.scalar("metrics/cardinality/estimated", m.n_est)
+        obs.scalar("metrics/fp", m.fp)
+        obs.scalar("metrics/fn", m.fn)
+        obs.scalar("metrics/idsw", m.idsw)
+        obs.boxes("metrics/misses", gt.boxes[m.fn_idx], colors=(255, 40, 40, 255), radii=2.5,
+                  labels=[f"miss gt {i}" for i in gt.ids[m.fn_idx]])
+        obs.boxes("metrics/false_positives", tracks.boxes[m.fp_idx], colors=(255, 0, 255, 255),
+                  radii=2.5, labels=[f"FP {i}" for i in tracks.ids[m.fp_idx]])
+        obs.boxes("metrics/switches", tracks.boxes[m.switch_idx], colors=(255, 255, 255, 255),
+                  radii=3.0, labels=[f"ID switch: {i}" for i in tracks.ids[m.switch_idx]])
+        if m.idsw:
+            obs.text("metrics", f"frame {frame}: {m.idsw} identity switch(es): tracks "
+                                f"{', '.join(str(i) for i in tracks.ids[m.switch_idx])}", "WARN")
+
+
+def record(source: Source, out: Path, opts: RecordOptions, *, trackers: Optional[list] = None,
            progress: bool = True, on_frame: Optional[Callable[[int], None]] = None) -> RecordResult:
-    """Run ``opts.tracker`` on ``source`` and write the recording to ``out``."""
+    """Run ``opts.tracker`` (or each of ``trackers``, each under its own root) on ``source`` and
+    write the recording to ``out``."""
     import rerun as rr
 
-    from .blueprint import default_blueprint
+    from .blueprint import compare_blueprint, default_blueprint
     from .recorder import RerunObserver, recording_id_for
 
     level_rank(opts.level)
+    names = list(trackers or [opts.tracker])
+    if len(set(names)) != len(names):
+        raise InputError(f"tracker listed twice: {','.join(names)}")
     out = check_output(Path(out), opts.force)
-    tracks_out = check_output(Path(opts.tracks_out), opts.force, "tracks file") if opts.tracks_out else None
+    tracks_out = check_output(Path(opts.tracks_out), opts.force, "tracks file") \
+        if opts.tracks_out and len(names) == 1 else None
     det_name = resolve_detector_name(source, opts.detector)
     detector = make_detector(det_name, det_table=source.det,
                              **({"min_score": opts.min_score} if det_name == "file" else {}))
-    tracker = make_tracker(opts.tracker, seed=opts.seed, **opts.tracker_options)
+    try:
+        built = [make_tracker(n, seed=opts.seed, **opts.tracker_options) for n in names]
+    except ValueError as e:
+        raise InputError(str(e)) from None
     total = source.length if opts.frames is None else (
         min(opts.frames, source.length) if source.length else opts.frames)
 
     config = {
-        "tracker": opts.tracker, "detector": det_name, "min_score": opts.min_score,
+        "trackers": ",".join(names), "detector": det_name, "min_score": opts.min_score,
         "level": opts.level, "max_points": opts.max_points, "frames": total, "seed": opts.seed,
         "source": json.dumps(source.describe(), sort_keys=True, default=str),
-        "tracker_config": json.dumps(tracker.config(), sort_keys=True, default=str),
+        "tracker_config": json.dumps([t.config() for t in built], sort_keys=True, default=str),
     }
     rec = rr.RecordingStream("pfscope", recording_id=recording_id_for(config),
                              send_properties=False)
-    views = getattr(tracker, "views", lambda: ([], []))()
-    blueprint = default_blueprint(*views)
+    if len(built) == 1:
+        blueprint = default_blueprint(*getattr(built[0], "views", lambda: ([], []))())
+    else:
+        blueprint = compare_blueprint(names)
     rec.save(str(out), default_blueprint=blueprint)
     if opts.spawn:
         rec.spawn(connect=False)
@@ -224,19 +294,22 @@ def record(source: Source, out: Path, opts: RecordOptions, *,
         rec.set_sinks(rr.FileSink(str(out)), grpc, default_blueprint=blueprint)
         rr.serve_web_viewer(connect_to=grpc.uri, open_browser=False)
         print(f"serving the web viewer for {grpc.uri}", file=sys.stderr)
-    rec.send_recording_name(f"{source.name} · {opts.tracker}")
+    rec.send_recording_name(f"{source.name} · {' vs '.join(names)}")
     rec.send_property("config", rr.AnyValues(**{k: str(v) for k, v in config.items()}))
     rec.send_property("versions", rr.AnyValues(**_versions()))
 
     obs = RerunObserver(rec, level=opts.level, max_points=opts.max_points)
-    writer = TrackWriter(tracks_out) if tracks_out else None
-    trails = TrailBuffer(opts.trails)
-    bar = Progress(total, f"{opts.tracker} on {source.name}", enabled=progress)
-    lagged = hasattr(tracker, "pop_final")  # trackers that finalise rows with a bounded lag
+    has_gt = source.gt is not None
+    lanes = []
+    for name, tracker in zip(names, built):
+        lane_obs = obs if len(built) == 1 else RerunObserver(
+            rec, level=opts.level, max_points=opts.max_points, root=name)
+        lanes.append(_Lane(name, tracker, lane_obs, has_gt,
+                           TrackWriter(tracks_out) if tracks_out else None))
+    bar = Progress(total, f"{' + '.join(names)} on {source.name}", enabled=progress)
     interrupted = False
     failed: Optional[InputError] = None
     done = 0
-
     stop = StopFlag().__enter__()
     t0 = time.perf_counter()
     try:
@@ -247,21 +320,17 @@ def record(source: Source, out: Path, opts: RecordOptions, *,
             dets = detector(frame)
             obs.boxes("detections", dets.boxes,
                       labels=[f"{s:.2f}" for s in dets.scores] if len(dets) < 100 else None)
-            if source.gt is not None:
-                gt = source.gt.ground_truth(frame.index)
+            obs.scalar("detections/count", len(dets))
+            gt = source.gt.ground_truth(frame.index) if has_gt else None
+            if has_gt:
                 obs.boxes("gt", gt.boxes, labels=[f"gt {i}" for i in gt.ids],
                           colors=(60, 255, 60, 255))
-            tracks = tracker.step(frame, dets, obs)
-            obs.stage("output")
-            obs.boxes("tracks", tracks.boxes, ids=tracks.ids, radii=2.0)
-            live, strips = trails.update(frame.index, tracks.ids, tracks.boxes)
-            obs.strips("tracks/trails", strips, ids=live)
-            obs.scalar("tracks/count", len(tracks))
-            obs.scalar("detections/count", len(dets))
-            if writer:
-                rows = tracker.pop_final() if lagged else [(frame.index, tracks)]
-                for f_index, ts in rows:
-                    writer.write(f_index, ts)
+            for lane in lanes:
+                if lane.obs is not obs:
+                    lane.obs.begin_frame(frame, image=False)
+                lane.step(frame, dets, gt)
+                if lane.obs is not obs:
+                    lane.obs.end_frame()
             obs.end_frame()
             done += 1
             bar.update(done)
@@ -278,11 +347,8 @@ def record(source: Source, out: Path, opts: RecordOptions, *,
             obs.text("", f"run interrupted after {done} frames", level="WARN")
         stop.__exit__()
         bar.close()
-        if writer:
-            if lagged and failed is None:
-                for f_index, ts in tracker.finish():
-                    writer.write(f_index, ts)
-            writer.close()
+        for lane in lanes:
+            lane.finish(completed=failed is None)
         rec.flush()
         rec.disconnect()
     seconds = time.perf_counter() - t0
@@ -290,5 +356,16 @@ def record(source: Source, out: Path, opts: RecordOptions, *,
         bad = out.with_name(out.stem + ".incomplete.rrd")
         os.replace(out, bad)
         raise InputError(f"{failed} (partial recording kept as {bad})")
+    scores = {}
+    if has_gt and done:
+        scores = {lane.name: score_rows(source, lane.rows, done) for lane in lanes}
     return RecordResult(out=out, frames=done, seconds=seconds, interrupted=interrupted,
-                        tracks_out=tracks_out, bytes=out.stat().st_size)
+                        tracks_out=tracks_out, bytes=out.stat().st_size, scores=scores)
+
+
+def score_rows(source: Source, rows, frames: int) -> dict:
+    """Sequence scores of a run's tracks (as written to the tracks file) over its frames."""
+    from trackers.data.motio import table_from_tracksets
+    from trackers.eval import evaluate
+
+    return evaluate(source.gt, table_from_tracksets(rows), frames=range(1, frames + 1))

@@ -68,6 +68,18 @@ class MotTable:
         return TrackSet(self.id[r], self.boxes[r])
 
 
+def table_from_tracksets(rows, path: str = "") -> MotTable:
+    """A tracks :class:`MotTable` from ``(frame, TrackSet)`` pairs (in memory, no file)."""
+    rows = [(f, ts) for f, ts in rows if len(ts)]
+    n = sum(len(ts) for _, ts in rows)
+    frame = np.concatenate([np.full(len(ts), f, dtype=np.int64) for f, ts in rows]) if n else \
+        np.zeros(0, dtype=np.int64)
+    ids = np.concatenate([ts.ids for _, ts in rows]) if n else np.zeros(0, dtype=np.int64)
+    boxes = np.concatenate([ts.boxes for _, ts in rows]) if n else np.zeros((0, 4))
+    return MotTable(frame=frame, id=ids, boxes=boxes, score=np.ones(n), cls=np.full(n, -1.0),
+                    vis=np.full(n, -1.0), path=path)
+
+
 def read_mot(path: str | os.PathLike, kind: str = "gt") -> MotTable:
     """Read and validate a MOT text file. Empty files give an empty table."""
     if kind not in KINDS:
