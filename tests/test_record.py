@@ -219,3 +219,23 @@ def test_default_record_writes_under_recordings(tmp_path, capsys, monkeypatch):
     files = list((tmp_path / "recordings").glob("*.rrd"))
     assert len(files) == 1 and "phd" in files[0].name
     assert f"rerun {Path('recordings') / files[0].name}" in stdout
+
+
+def test_stage_timeline_orders_the_stages_inside_a_frame(tmp_path, capsys):
+    out = tmp_path / "s.rrd"
+    rc, _, _ = _run(["record", "--frames", "8", "--level", "particles", "--out", out, "--quiet"],
+                    capsys)
+    assert rc == 0
+    rec = read_rrd(out)
+    order = ["predicted", "birth", "updated", "resampled"]
+    for frame in (5, 8):
+        stages = []
+        for name in order:
+            rows = [t for t, _ in rec[f"/video/phd/particles/{name}"] if t["frame"] == frame]
+            assert rows, (name, frame)
+            stages.append(rows[0]["stage"])
+        clusters = [t["stage"] for t, _ in rec["/video/phd/clusters/members"] if t["frame"] == frame]
+        edges = [t["stage"] for t, _ in rec["/video/assoc/vertices"] if t["frame"] == frame]
+        tracks = [t["stage"] for t, _ in rec["/video/tracks"] if t["frame"] == frame]
+        stages += [clusters[0], edges[0], tracks[0]]
+        assert stages == sorted(stages) and len(set(stages)) == len(stages), stages
