@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 from scipy.stats import multivariate_normal
 
-from trackers.smc import (SCHEMES, ParticleSet, ess, logsumexp, normalise, predict_mean,
-                          propagate, resample, resample_indices, transition_logpdf)
+from trackers.smc import (SCHEMES, ParticleSet, ess, logsumexp, normalise, 
+                          propagate, resample, resample_indices)
 
 # ----------------------------------------------------------------------------- weights
 
@@ -116,7 +116,6 @@ def test_propagate_is_first_order_on_position_zero_order_on_size():
     out = propagate(x, np.random.default_rng(0), sigma_v=0.0, sigma_size=0.0)
     np.testing.assert_allclose(out[:, 0:2], x[:, 0:2] + x[:, 2:4])
     np.testing.assert_allclose(out[:, 2:], x[:, 2:])
-    np.testing.assert_allclose(predict_mean(x, 3)[:, 0:2], x[:, 0:2] + 3 * x[:, 2:4])
 
 
 def test_propagate_noise_is_proportional_to_size():
@@ -141,38 +140,3 @@ def test_propagate_is_seeded():
     b = propagate(x, np.random.default_rng(9))
     np.testing.assert_array_equal(a, b)
     assert not np.array_equal(a, propagate(x, np.random.default_rng(10)))
-
-
-@pytest.mark.parametrize("include_velocity", [False, True])
-def test_transition_logpdf_matches_simulated_motion(include_velocity):
-    # With no size noise the frozen-scale Gaussian is exact: compare with a Gaussian fitted
-    # to many simulated 3-frame trajectories.
-    rng = np.random.default_rng(2)
-    x0 = _state(1)
-    sims = np.repeat(x0, 100000, axis=0)
-    for _ in range(3):
-        sims = propagate(sims, rng, sigma_size=0.0)
-    cols = [0, 1, 2, 3] if include_velocity else [0, 1]
-    fit = multivariate_normal(sims[:, cols].mean(0), np.cov(sims[:, cols].T))
-    probe = sims[:5]
-    # sigma_size = 0 leaves only the min_std floor on the size part: subtract it below.
-    # (The floor also enters position/velocity variances; 1e-6 is negligible there.)
-    got = transition_logpdf(probe, x0, gap=3, sigma_size=0.0, min_std=1e-3,
-                            include_velocity=include_velocity)
-    size_part = 2 * (-0.5 * np.log(2 * np.pi * 1e-6))
-    assert got.shape == (1, 5)
-    np.testing.assert_allclose(got[0] - size_part, fit.logpdf(probe[:, cols]), atol=0.02)
-
-
-def test_transition_logpdf_prefers_the_predicted_state_and_widens_with_gap():
-    x0 = _state(1)
-    near = predict_mean(x0, 2)
-    far = near + [15.0, 0, 0, 0, 0, 0]
-    lp = transition_logpdf(np.vstack([near, far]), np.vstack([x0, x0]), gap=np.array([2, 10]))
-    assert lp.shape == (2, 2)
-    assert lp[0, 0] > lp[0, 1]
-    # a 15 px miss costs less after 10 frames than after 2
-    d2 = transition_logpdf(far, x0, gap=2)[0, 0] - transition_logpdf(near, x0, gap=2)[0, 0]
-    d10 = (transition_logpdf(predict_mean(x0, 10) + [15.0, 0, 0, 0, 0, 0], x0, gap=10)[0, 0]
-           - transition_logpdf(predict_mean(x0, 10), x0, gap=10)[0, 0])
-    assert d10 > d2

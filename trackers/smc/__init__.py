@@ -6,10 +6,10 @@
 - :mod:`.motion` — the size-aware motion model of maggio2007 §2/§4.
 """
 
-from .motion import predict_mean, propagate, transition_logpdf
+from .motion import propagate
 from .resampling import SCHEMES, resample, resample_indices
 from .weights import ParticleSet, ess, logsumexp, normalise, normalised_weights
 
 __all__ = ["ParticleSet", "ess", "logsumexp", "normalise", "normalised_weights",
            "SCHEMES", "resample", "resample_indices",
-           "propagate", "predict_mean", "transition_logpdf"]
+           "propagate"]
