@@ -19,6 +19,7 @@ the viewer never shows a stale cloud from an earlier frame.
 
 from __future__ import annotations
 
+import time
 import uuid
 from pathlib import Path
 from typing import Iterable, Optional, Sequence
@@ -50,9 +51,12 @@ class RerunObserver:
     """Implements :class:`trackers.observer.Observer` on top of a ``rr.RecordingStream``."""
 
     def __init__(self, rec: rr.RecordingStream, *, level: str = "clusters",
-                 max_points: int = 3000, jpeg_quality: int = 75, root: str = ""):
+                 max_points: int = 3000, jpeg_quality: int = 75, root: str = "",
+                 flush_seconds: float = 1.0):
         level_rank(level)  # validate
         self.rec = rec
+        self.flush_seconds = float(flush_seconds)
+        self._last_flush = time.monotonic()
         # Several trackers in one recording each get a root: <root>/video/..., <root>/plots/...
         self.root = f"{root.strip('/')}/" if root else ""
         self.level = level
@@ -82,8 +86,13 @@ class RerunObserver:
             self.rec.log(ent, rr.Clear(recursive=False))
         self._logged_before = self._logged_now
         self._logged_now = set()
-        # Data reaches the file frame by frame, so a killed run loses at most the last frame.
-        self.rec.flush()
+        # Flushing bounds what a killed run (SIGKILL) can lose to `flush_seconds` of frames;
+        # flushing every frame would split every entity into its own chunk per frame (~1.8 KB
+        # of framing each, a third of a tracks-level file).
+        now = time.monotonic()
+        if now - self._last_flush >= self.flush_seconds:
+            self.rec.flush()
+            self._last_flush = now
 
     # -- Observer protocol ----------------------------------------------------------
     def wants(self, level: str) -> bool:
