@@ -33,6 +33,7 @@ from trackers.errors import InputError
 from trackers.observer import level_rank
 
 RECORDINGS_DIR = Path("recordings")
+WEB_PORT = 9090
 
 
 class StopFlag:
@@ -292,8 +293,9 @@ def record(source: Source, out: Path, opts: RecordOptions, *, trackers: Optional
     elif opts.serve:
         grpc = rr.GrpcServerSink()
         rec.set_sinks(rr.FileSink(str(out)), grpc, default_blueprint=blueprint)
-        rr.serve_web_viewer(connect_to=grpc.uri, open_browser=False)
-        print(f"serving the web viewer for {grpc.uri}", file=sys.stderr)
+        rr.serve_web_viewer(web_port=WEB_PORT, connect_to=grpc.uri, open_browser=False)
+        uri = grpc.uri.replace("0.0.0.0", "127.0.0.1")
+        print(f"web viewer: http://127.0.0.1:{WEB_PORT}/?url={uri}", file=sys.stderr)
     rec.send_recording_name(f"{source.name} · {' vs '.join(names)}")
     rec.send_property("config", rr.AnyValues(**{k: str(v) for k, v in config.items()}))
     rec.send_property("versions", rr.AnyValues(**_versions()))
