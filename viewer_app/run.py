@@ -4,7 +4,8 @@ Safety rules the code keeps:
 - an existing recording or tracks file is never overwritten unless ``force``;
 - all input is opened and validated before the output file is created;
 - Ctrl-C (SIGINT) and SIGTERM finish the file so it stays readable (and say so inside it);
-- data is flushed every frame, so even SIGKILL leaves a readable file missing at most a frame;
+- data is flushed about once a second, so even SIGKILL leaves a readable file missing at most
+  about a second of frames;
 - a run that fails on bad input mid-way is closed and renamed ``*.incomplete.rrd`` so it
   never looks like a complete recording.
 """
