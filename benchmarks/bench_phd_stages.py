@@ -208,8 +208,8 @@ def bench_source(spec: str, args) -> dict:
         rows.append((name, f"{1e3 * secs / F:.3f}", f"{1e3 * float(np.median(per)):.3f}",
                      f"{C.fps(secs, F):.0f}", share))
     print(C.table(["stage", "ms/frame", "median ms", "fps", "share"], rows))
-    print(f"(ms/frame = sum over frames of the per-frame median over repeats / frames; "
-          f"fps = frames / that sum; share = of the 6 stages)")
+    print("(ms/frame = sum over frames of the per-frame median over repeats / frames; "
+          "fps = frames / that sum; share = of the 6 stages)")
     pc = counts
     print(f"particles: mean L_k after resampling {pc['resampled'].mean():.0f} "
           f"(max {pc['resampled'].max()}), mean in update L_(k-1)+J_k {pc['updated'].mean():.0f}, "

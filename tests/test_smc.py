@@ -2,7 +2,6 @@
 
 import numpy as np
 import pytest
-from scipy.stats import multivariate_normal
 
 from trackers.smc import (SCHEMES, ParticleSet, ess, logsumexp, normalise, 
                           propagate, resample, resample_indices)

@@ -211,8 +211,8 @@ def cmd_record(args) -> int:
               f"IDF1 {sc['IDF1']:.3f}  HOTA {sc['HOTA']:.3f}  IDSW {int(sc['IDSW'])}  "
               f"OSPA {sc['OSPA']:.1f} px")
     print(f"open it with:  rerun {res.out}")
-    if args.serve:
-        input("web viewer running; press Enter to stop\n") if sys.stdin.isatty() else None
+    if args.serve and sys.stdin.isatty():
+        input("web viewer running; press Enter to stop\n")
     return EXIT_INTERRUPTED if res.interrupted else 0
 
 

@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import time
 import uuid
-from pathlib import Path
 from typing import Iterable, Optional, Sequence
 
 import cv2

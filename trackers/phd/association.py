@@ -83,6 +83,9 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 from scipy.stats import chi2
 
+from ..types import cxcywh_to_xywh
+from .filter import obs_std
+
 STATE_DIM = 6
 #: Observable components of the state (y1, y2, w, h), maggio2007 §2 ``z = (y, w, h)``.
 OBS_INDEX = np.array([0, 1, 4, 5])
@@ -98,7 +101,8 @@ class AssocParams:
     sigma_v: per-frame velocity noise std as a fraction of (w, h) of the earlier vertex (§4: 0.03).
     sigma_size: per-frame size noise std as a fraction of (w, h) (§4: 0.1).
     sigma_obs, sigma_obs_min: estimate noise ``σ^z_{w,h} = max(sigma_obs·size, sigma_obs_min)``,
-        ``σ^z_y = σ^z_{w,h}/2`` (§4: 0.15, 1.0 px).
+        ``σ^z_y = sigma_obs_pos_ratio · σ^z_{w,h}`` (§4: 0.15, 1.0 px, 1/2); the same formula as the
+        filter's likelihood (:func:`trackers.phd.filter.obs_std`).
     speed_prior: std of an unknown velocity per axis, fraction of (w, h) per frame (ours).
     accel_to_position: c in ``y ← y + v + c·a`` (½ = dt²/2; as :mod:`trackers.smc.motion`).
     """
@@ -110,6 +114,7 @@ class AssocParams:
     sigma_size: float = 0.1
     sigma_obs: float = 0.15
     sigma_obs_min: float = 1.0
+    sigma_obs_pos_ratio: float = 0.5
     speed_prior: float = 0.1
     accel_to_position: float = 0.5
 
@@ -138,9 +143,9 @@ class AssocParams:
 
 
 def obs_noise_var(states: np.ndarray, params: AssocParams) -> np.ndarray:
-    """(N, 4) variances of the estimate noise ``σ^z`` of (y1, y2, w, h) at each state's size (§4)."""
-    s_wh = np.maximum(params.sigma_obs * states[:, 4:6], params.sigma_obs_min)
-    return np.concatenate([(s_wh / 2.0) ** 2, s_wh ** 2], axis=1)
+    """(N, 4) variances of the estimate noise ``σ^z`` of (y1, y2, w, h) at each state's size (§4):
+    the filter's observation model (:func:`trackers.phd.filter.obs_std`)."""
+    return obs_std(states[:, 4:6], params) ** 2
 
 
 def tail_velocity(tail_states: np.ndarray, prev_states: np.ndarray, prev_gap: np.ndarray,
@@ -261,8 +266,7 @@ def max_weight_matching(weights: np.ndarray, allowed: np.ndarray) -> tuple[np.nd
 
 def boxes_xywh(states: np.ndarray) -> np.ndarray:
     """(N, 6) states -> (N, 4) top-left boxes ``(x, y, w, h)`` (MOT convention)."""
-    s = np.asarray(states, dtype=np.float64).reshape(-1, STATE_DIM)
-    return np.stack([s[:, 0] - s[:, 4] / 2.0, s[:, 1] - s[:, 5] / 2.0, s[:, 4], s[:, 5]], axis=1)
+    return cxcywh_to_xywh(np.asarray(states, dtype=np.float64).reshape(-1, STATE_DIM)[:, OBS_INDEX])
 
 
 # --------------------------------------------------------------------------- results

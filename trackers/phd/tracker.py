@@ -32,9 +32,7 @@ view shows).  The tracks file uses the association's bounded-lag rows (:meth:`po
 
 from __future__ import annotations
 
-import time
-from collections import defaultdict
-from dataclasses import asdict, fields, replace
+from dataclasses import asdict, fields
 
 import numpy as np
 
@@ -74,22 +72,13 @@ class _AssociatingTracker:
 
     def __init__(self, assoc: AssocParams):
         self.associator = GraphAssociator(assoc)
-        self.timings: dict[str, float] = defaultdict(float)
-        self.frames = 0
         self._final: list[tuple[int, TrackSet]] = []
         self._announced: set[int] = set()
 
-    def _timed(self, stage: str, t0: float) -> float:
-        t1 = time.perf_counter()
-        self.timings[stage] += t1 - t0
-        return t1
-
     def _associate(self, frame: Frame, states: np.ndarray, obs: Observer) -> TrackSet:
-        t0 = time.perf_counter()
         obs.stage("associate")
         res = self.associator.step(frame.index, states)
         self._final.extend((r.frame, _rows_to_trackset(r)) for r in res.finalised)
-        self._timed("associate", t0)
         self._report_association(frame, res, obs)
         keep = res.confirmed
         return TrackSet(res.ids[keep], res.boxes[keep])
@@ -137,9 +126,6 @@ class _AssociatingTracker:
         out.extend((r.frame, _rows_to_trackset(r)) for r in self.associator.flush())
         return out
 
-    def stage_fps(self) -> dict[str, float]:
-        """Frames per second of each stage so far (wall clock inside the tracker)."""
-        return {k: self.frames / v for k, v in self.timings.items() if v > 0}
 
 
 class PHDTracker(_AssociatingTracker):
@@ -177,13 +163,9 @@ class PHDTracker(_AssociatingTracker):
                  ("Particles", ["phd/particles/count", "phd/birth/count"])])
 
     def step(self, frame: Frame, detections: Detections, obs: Observer = NullObserver()) -> TrackSet:
-        self.frames += 1
-        t = time.perf_counter()
         r = self.filter.step(detections)
-        t = self._timed("phd filter", t)
         clusters = kmeans_peaks(r.resampled, r.observations, self.T, params=self.params,
                                 split_rule=self.split_rule)
-        self._timed("cluster", t)
         self._report_filter(detections, r, clusters, obs)
         return self._associate(frame, clusters.kept_centers, obs)
 
@@ -257,7 +239,6 @@ class MTTracker(_AssociatingTracker):
                 [("Counts", ["tracks/count", "detections/count", "assoc/**"])])
 
     def step(self, frame: Frame, detections: Detections, obs: Observer = NullObserver()) -> TrackSet:
-        self.frames += 1
         z = xywh_to_cxcywh(detections.boxes)
         states = np.full((len(z), 6), np.nan)
         states[:, [0, 1, 4, 5]] = z
