@@ -50,8 +50,8 @@ def open_bench_source(spec: str, frames: Optional[int] = None, synthetic_frames:
 
     The synthetic scene is built with ``frames`` frames when given (else ``synthetic_frames``),
     all other :class:`SceneConfig` fields at their defaults (seed 0)."""
-    from trackers.data.sources import open_source
-    from trackers.data.synthetic import SceneConfig
+    from pfscope.trackers.data.sources import open_source
+    from pfscope.trackers.data.synthetic import SceneConfig
 
     if spec == "synthetic":
         return open_source("synthetic",

@@ -41,15 +41,15 @@ import time
 import _common as C  # noqa: E402  (also puts the repository root on sys.path)
 import numpy as np
 
-from trackers.errors import InputError
-from trackers.observer import NullObserver
-from trackers.phd.association import AssocParams, GraphAssociator
-from trackers.phd.clustering import kmeans_peaks
-from trackers.phd.filter import (STATE_DIM, PHDParams, as_observations, birth, predict,
+from pfscope.trackers.errors import InputError
+from pfscope.trackers.observer import NullObserver
+from pfscope.trackers.phd.association import AssocParams, GraphAssociator
+from pfscope.trackers.phd.clustering import kmeans_peaks
+from pfscope.trackers.phd.filter import (STATE_DIM, PHDParams, as_observations, birth, predict,
                                  resample, update)
-from trackers.phd.tracker import MTTracker, PHDTracker
-from trackers.smc.weights import ParticleSet
-from trackers.types import Frame
+from pfscope.trackers.phd.tracker import MTTracker, PHDTracker
+from pfscope.trackers.smc.weights import ParticleSet
+from pfscope.trackers.types import Frame
 
 STAGES = ("predict", "birth", "update", "resample", "cluster", "associate")
 FILTER_STAGES = STAGES[:4]
@@ -118,7 +118,7 @@ def run_tracker(tracker, frames, dets):
 def time_detectors(source, n: int, names=("hog", "bgsub", "file")) -> dict:
     """Median (and mean) seconds per frame of each detector on the first ``n`` frames (images
     read before timing; ``bgsub`` sees the frames in order, as it must)."""
-    from trackers.detect import make_detector
+    from pfscope.trackers.detect import make_detector
 
     frames = list(source.frames(n))
     out = {}

@@ -47,24 +47,24 @@ import _common as C  # noqa: E402  (also puts the repository root on sys.path)
 import cv2
 import numpy as np
 
-from trackers.detect import make_detector
-from trackers.errors import InputError
-from trackers.observer import NullObserver
-from trackers.phd.tracker import PHDTracker
-from trackers.types import Frame
+from pfscope.trackers.detect import make_detector
+from pfscope.trackers.errors import InputError
+from pfscope.trackers.observer import NullObserver
+from pfscope.trackers.phd.tracker import PHDTracker
+from pfscope.trackers.types import Frame
 
 DEFAULT_MAX_POINTS = 3000
 MB = 1e6
 
 
 def recorder_jpeg_quality() -> int:
-    from viewer_app.recorder import RerunObserver
+    from pfscope.viewer_app.recorder import RerunObserver
 
     return int(inspect.signature(RerunObserver.__init__).parameters["jpeg_quality"].default)
 
 
 def record_max_points_default() -> int:
-    from viewer_app.run import RecordOptions
+    from pfscope.viewer_app.run import RecordOptions
 
     return int(RecordOptions().max_points)
 
@@ -73,7 +73,7 @@ def record_max_points_default() -> int:
 
 def run_record(source, out: Path, level: str, max_points: int, frames: int, seed: int):
     """One ``record()``; returns (per-frame seconds (F,), RecordResult)."""
-    from viewer_app.run import RecordOptions, record
+    from pfscope.viewer_app.run import RecordOptions, record
 
     stamps = []
     t0 = time.perf_counter()

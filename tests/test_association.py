@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy.stats import multivariate_normal
 
-from trackers.phd.association import (
+from pfscope.trackers.phd.association import (
     AssocParams,
     GraphAssociator,
     boxes_xywh,

@@ -9,8 +9,8 @@ import pytest
 
 from conftest import read_rrd, rows_at
 from test_record import _toy
-from trackers.data.motio import read_mot
-from viewer_app.cli import main
+from pfscope.trackers.data.motio import read_mot
+from pfscope.viewer_app.cli import main
 
 
 def _run(argv, capsys):

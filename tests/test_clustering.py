@@ -5,9 +5,9 @@ import math
 import numpy as np
 import pytest
 
-from trackers.phd.clustering import ORIGIN_EXTRA, ORIGIN_SPLIT, kmeans_peaks
-from trackers.phd.filter import obs_std
-from trackers.smc import ParticleSet
+from pfscope.trackers.phd.clustering import ORIGIN_EXTRA, ORIGIN_SPLIT, kmeans_peaks
+from pfscope.trackers.phd.filter import obs_std
+from pfscope.trackers.smc import ParticleSet
 
 
 def cloud(rng, center, mass, n=1500):

@@ -10,11 +10,11 @@ import cv2
 import numpy as np
 import pytest
 
-from trackers.data.motio import read_mot
-from trackers.detect import (DETECTORS, BackgroundSubtractionDetector, Detector, FileDetector,
+from pfscope.trackers.data.motio import read_mot
+from pfscope.trackers.detect import (DETECTORS, BackgroundSubtractionDetector, Detector, FileDetector,
                              HaarFaceDetector, HOGPeopleDetector, make_detector)
-from trackers.errors import InputError
-from trackers.types import Detections, Frame
+from pfscope.trackers.errors import InputError
+from pfscope.trackers.types import Detections, Frame
 
 
 def data_dir() -> Path:

@@ -10,10 +10,10 @@ import math
 import numpy as np
 import pytest
 
-from trackers.data.motio import MotTable, read_mot, write_mot
-from trackers.errors import InputError
-from trackers.eval import (OnlineEvaluator, box_iou, evaluate, format_table, gospa, ospa)
-from trackers.types import GroundTruth, TrackSet
+from pfscope.trackers.data.motio import MotTable, read_mot, write_mot
+from pfscope.trackers.errors import InputError
+from pfscope.trackers.eval import (OnlineEvaluator, box_iou, evaluate, format_table, gospa, ospa)
+from pfscope.trackers.types import GroundTruth, TrackSet
 
 C = 100.0  # the default OSPA cut-off, spelled out for the hand computations
 

@@ -5,11 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from trackers.data.motio import TrackWriter, read_mot, write_mot
-from trackers.data.sources import (ImageFolderSource, MOTFolderSource, VideoFileSource,
+from pfscope.trackers.data.motio import TrackWriter, read_mot, write_mot
+from pfscope.trackers.data.sources import (ImageFolderSource, MOTFolderSource, VideoFileSource,
                                    open_source)
-from trackers.errors import InputError
-from trackers.types import TrackSet
+from pfscope.trackers.errors import InputError
+from pfscope.trackers.types import TrackSet
 
 cv2 = pytest.importorskip("cv2")
 

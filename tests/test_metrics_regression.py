@@ -14,11 +14,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from trackers.base import make_tracker
-from trackers.data.motio import table_from_tracksets
-from trackers.data.synthetic import SceneConfig, SyntheticScene
-from trackers.eval import evaluate
-from trackers.types import Frame
+from pfscope.trackers.base import make_tracker
+from pfscope.trackers.data.motio import table_from_tracksets
+from pfscope.trackers.data.synthetic import SceneConfig, SyntheticScene
+from pfscope.trackers.eval import evaluate
+from pfscope.trackers.types import Frame
 
 BASELINE = Path(__file__).parent / "data" / "regression_metrics.json"
 SCENE = SceneConfig(frames=150, targets=8, clutter=3.0, persistent_clutter=2, width=320,

@@ -6,12 +6,12 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from trackers.phd.clustering import kmeans_peaks
-from trackers.phd.filter import (PHDFilter, PHDParams, birth, log_clutter_density,
+from pfscope.trackers.phd.clustering import kmeans_peaks
+from pfscope.trackers.phd.filter import (PHDFilter, PHDParams, birth, log_clutter_density,
                                  log_likelihood, mass_near, n_resample, obs_std, predict,
                                  resample, update)
-from trackers.smc import ParticleSet
-from trackers.types import Detections
+from pfscope.trackers.smc import ParticleSet
+from pfscope.trackers.types import Detections
 
 # Four targets moving with constant velocity, far apart (centre y, velocity, size).
 TARGETS = np.array([

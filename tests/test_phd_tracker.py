@@ -5,11 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from trackers.base import make_tracker
-from trackers.data.synthetic import SceneConfig, SyntheticScene
-from trackers.eval import box_iou
-from trackers.observer import ListObserver
-from trackers.types import Frame
+from pfscope.trackers.base import make_tracker
+from pfscope.trackers.data.synthetic import SceneConfig, SyntheticScene
+from pfscope.trackers.eval import box_iou
+from pfscope.trackers.observer import ListObserver
+from pfscope.trackers.types import Frame
 
 BLANK = np.zeros((8, 8, 3), np.uint8)  # PHD-MT and MT look at detections only
 

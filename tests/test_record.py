@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 
 from conftest import REPO, read_rrd, rows_at
-from trackers.data.motio import read_mot
-from viewer_app.cli import main
+from pfscope.trackers.data.motio import read_mot
+from pfscope.viewer_app.cli import main
 
 cv2 = pytest.importorskip("cv2")
 
@@ -143,7 +143,7 @@ def test_file_detector_without_det_file(tmp_path, capsys):
 
 
 def _spawn_record(out: Path, extra=()) -> subprocess.Popen:
-    cmd = [sys.executable, "-m", "viewer_app.cli", "record", "--tracker", "passthrough",
+    cmd = [sys.executable, "-m", "pfscope.viewer_app.cli", "record", "--tracker", "passthrough",
            "--frames", "100000", "--out", str(out), "--quiet", *extra]
     env = dict(os.environ, RERUN_ANALYTICS="0")
     return subprocess.Popen(cmd, cwd=REPO, env=env, stdout=subprocess.PIPE,

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from trackers.smc import (SCHEMES, ParticleSet, ess, logsumexp, normalise, 
+from pfscope.trackers.smc import (SCHEMES, ParticleSet, ess, logsumexp, normalise, 
                           propagate, resample, resample_indices)
 
 # ----------------------------------------------------------------------------- weights

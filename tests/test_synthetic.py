@@ -10,9 +10,9 @@ import cv2
 import numpy as np
 import pytest
 
-from trackers.data.motio import read_mot
-from trackers.data.synthetic import SceneConfig, SyntheticScene, write_sequence
-from trackers.errors import InputError
+from pfscope.trackers.data.motio import read_mot
+from pfscope.trackers.data.synthetic import SceneConfig, SyntheticScene, write_sequence
+from pfscope.trackers.errors import InputError
 
 SMALL = SceneConfig(frames=60, targets=6, width=320, height=240, seed=3)
 

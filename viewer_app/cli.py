@@ -18,14 +18,14 @@ import sys
 from pathlib import Path
 from typing import Optional, Sequence
 
-from trackers.errors import InputError
+from pfscope.trackers.errors import InputError
 
 EXIT_BAD_INPUT = 2
 EXIT_INTERRUPTED = 130
 
 
 def _synth_config(args, frames: Optional[int]):
-    from trackers.data.synthetic import SceneConfig
+    from pfscope.trackers.data.synthetic import SceneConfig
 
     kw = {"seed": args.seed}
     for name in ("targets", "clutter"):
@@ -47,9 +47,9 @@ def _add_synth_options(p: argparse.ArgumentParser, *, frames_help: str) -> None:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from trackers.base import DEFAULT_TRACKER, TRACKERS
-    from trackers.detect import DETECTORS
-    from trackers.observer import LEVELS
+    from pfscope.trackers.base import DEFAULT_TRACKER, TRACKERS
+    from pfscope.trackers.detect import DETECTORS
+    from pfscope.trackers.observer import LEVELS
 
     ap = argparse.ArgumentParser(prog="pfscope", description=(
         "Particle-filter multi-target tracking that shows its work: run a tracker and "
@@ -122,7 +122,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _open(args):
-    from trackers.data.sources import open_source
+    from pfscope.trackers.data.sources import open_source
 
     if args.max_points <= 0:
         raise InputError("--max-points must be positive")
@@ -138,7 +138,7 @@ def _open(args):
 def _print_scores(scores: dict, as_json: bool) -> None:
     import json
 
-    from trackers.eval import format_table
+    from pfscope.trackers.eval import format_table
 
     if as_json:
         print(json.dumps(scores, indent=2, sort_keys=True, default=float))
@@ -171,9 +171,9 @@ def cmd_compare(args) -> int:
 
 
 def cmd_eval(args) -> int:
-    from trackers.data.motio import read_mot
-    from trackers.data.sources import MOTFolderSource
-    from trackers.eval import evaluate
+    from pfscope.trackers.data.motio import read_mot
+    from pfscope.trackers.data.sources import MOTFolderSource
+    from pfscope.trackers.eval import evaluate
 
     frames = None
     if args.gt.is_dir():
@@ -217,7 +217,7 @@ def cmd_record(args) -> int:
 
 
 def cmd_synth(args) -> int:
-    from trackers.data.synthetic import write_sequence
+    from pfscope.trackers.data.synthetic import write_sequence
 
     def progress(i, n):
         if not args.quiet and (i == n or i % max(1, n // 10) == 0):

@@ -27,8 +27,8 @@ import cv2
 import numpy as np
 import rerun as rr
 
-from trackers.observer import LEVELS, STAGES, level_rank
-from trackers.types import Frame
+from pfscope.trackers.observer import LEVELS, STAGES, level_rank
+from pfscope.trackers.types import Frame
 
 from .colors import id_colors, weight_colors
 

@@ -25,13 +25,13 @@ from typing import Callable, Optional
 
 import numpy as np
 
-from trackers import __version__
-from trackers.base import make_tracker
-from trackers.data.motio import TrackWriter
-from trackers.data.sources import Source
-from trackers.detect import make_detector
-from trackers.errors import InputError
-from trackers.observer import level_rank
+from pfscope.trackers import __version__
+from pfscope.trackers.base import make_tracker
+from pfscope.trackers.data.motio import TrackWriter
+from pfscope.trackers.data.sources import Source
+from pfscope.trackers.detect import make_detector
+from pfscope.trackers.errors import InputError
+from pfscope.trackers.observer import level_rank
 
 RECORDINGS_DIR = Path("recordings")
 WEB_PORT = 9090
@@ -195,7 +195,7 @@ class _Lane:
     trackers share a recording), trails, online metrics and output rows."""
 
     def __init__(self, name: str, tracker, obs, gt_available: bool, writer=None):
-        from trackers.eval import OnlineEvaluator
+        from pfscope.trackers.eval import OnlineEvaluator
 
         self.name, self.tracker, self.obs, self.writer = name, tracker, obs, writer
         self.trails = TrailBuffer()
@@ -368,7 +368,7 @@ def record(source: Source, out: Path, opts: RecordOptions, *, trackers: Optional
 
 def score_rows(source: Source, rows, frames: int) -> dict:
     """Sequence scores of a run's tracks (as written to the tracks file) over its frames."""
-    from trackers.data.motio import table_from_tracksets
-    from trackers.eval import evaluate
+    from pfscope.trackers.data.motio import table_from_tracksets
+    from pfscope.trackers.eval import evaluate
 
     return evaluate(source.gt, table_from_tracksets(rows), frames=range(1, frames + 1))
