@@ -107,7 +107,7 @@ def test_centres_are_mass_weighted_means():
 
 def test_centres_start_on_observations_with_zero_velocity():
     Z = obs(A, B)
-    c = kmeans_peaks(ParticleSet.empty(), Z)
+    c = kmeans_peaks(ParticleSet.empty(6), Z)
     np.testing.assert_allclose(c.centers[:, [0, 1, 4, 5]], Z)
     assert np.all(c.centers[:, 2:4] == 0)
     assert not c.kept.any() and len(c.labels) == 0

@@ -7,7 +7,7 @@ import pytest
 from scipy.stats import chi2
 
 from pfscope.trackers.phd.clustering import kmeans_peaks
-from pfscope.trackers.phd.filter import (PHDFilter, PHDParams, birth, log_clutter_density,
+from pfscope.trackers.phd.filter import (GaussianLikelihood, PHDFilter, PHDParams, birth, log_clutter_density,
                                  log_likelihood, mass_near, n_resample, obs_std, predict,
                                  resample, update)
 from pfscope.trackers.smc import ParticleSet
@@ -52,7 +52,7 @@ def test_mass_counts_targets_on_a_clean_scene():
     # A clean scene: no clutter in the data and none in the model (κ = 0). Each detected
     # target then carries 1/(1 - p_M e) ≈ 1.05 at steady state.
     rng = np.random.default_rng(0)
-    f = PHDFilter(PHDParams(clutter_rate=0.0), np.random.default_rng(1))
+    f = PHDFilter(PHDParams.of(clutter_rate=0.0), np.random.default_rng(1))
     for k in range(15):
         r = f.step(detections_at(k, rng))
     assert abs(r.mass - len(TARGETS)) <= 0.5, r.mass
@@ -144,10 +144,10 @@ def test_step_accepts_detections_and_checks_input():
         f.step(np.array([[1.0, 1.0, 0.0, 5.0]]))
     with pytest.raises(ValueError):
         PHDFilter(PHDParams())                      # no generator
-    with pytest.raises(ValueError):
-        PHDParams(p_miss=1.5)
-    with pytest.raises(ValueError):
-        PHDParams(resampling="bogus")
+    with pytest.raises(ValueError, match="p_miss"):
+        PHDParams.of(p_miss=1.5)
+    with pytest.raises(ValueError, match="resampling"):
+        PHDParams.of(resampling="bogus")
 
 
 def test_no_detections_decays_mass_by_survival_and_miss():
@@ -165,7 +165,7 @@ def test_no_detections_decays_mass_by_survival_and_miss():
 def test_predict_applies_survival_and_motion():
     p = PHDParams()
     ps = cloud(np.random.default_rng(0), [100, 100, 3, 0, 30, 60], 0.8)
-    out = predict(ps, p, np.random.default_rng(1))
+    out = predict(ps, p.motion, np.random.default_rng(1))
     assert out.mass == pytest.approx(0.99 * 0.8)
     assert np.mean(out.states[:, 0] - ps.states[:, 0]) == pytest.approx(3.0, abs=0.2)
 
@@ -194,7 +194,7 @@ def test_birth_allocation_shrinks_where_mass_explains_a_detection():
     np.testing.assert_allclose(born1[:, [0, 1, 4, 5]].std(0), obs_std(Z[1, 2:4]), rtol=0.1)
     assert abs(born1[:, 2].mean()) < 0.5 and abs(born1[:, 3].mean()) < 0.5
     # the "constant" reading allocates J_max everywhere
-    bc = birth(predicted, Z, PHDParams(birth_allocation="constant"), np.random.default_rng(1))
+    bc = birth(predicted, Z, PHDParams.of(birth_allocation="constant"), np.random.default_rng(1))
     np.testing.assert_array_equal(bc.j_per_det, [1000, 1000, 1000])
 
 
@@ -206,7 +206,7 @@ def test_mass_near_counts_only_the_gate():
     states = np.array([[100 + 0.9 * r * std[0], 100, 0, 0, 30, 60],
                        [100 + 1.1 * r * std[0], 100, 0, 0, 30, 60]])
     ps = ParticleSet(states, np.log([0.25, 0.5]))
-    assert mass_near(ps, z, p)[0] == pytest.approx(0.25)
+    assert mass_near(ps, z, p.birth, p.likelihood)[0] == pytest.approx(0.25)
 
 
 def test_update_matches_equation_5_in_linear_space():
@@ -214,12 +214,14 @@ def test_update_matches_equation_5_in_linear_space():
     rng = np.random.default_rng(3)
     ps = cloud(rng, [100, 100, 0, 0, 30, 60], 0.7).concat(cloud(rng, [200, 90, 0, 0, 20, 50], 0.2, n=300))
     Z = np.array([[101.0, 99.0, 31.0, 58.0], [205.0, 92.0, 19.0, 52.0], [400, 300, 25, 25]])
-    u = update(ps, Z, p)
+    log_g = log_likelihood(ps.states, Z, p.likelihood)
+    log_kappa = log_clutter_density(Z, p.clutter, p.likelihood)
+    u = update(ps, log_g, log_kappa, p.likelihood.p_miss)
     # direct evaluation of eq. (5) with the same g and κ
     w = ps.weights
-    psi = 0.95 * np.exp(log_likelihood(ps.states, Z, p))
+    psi = 0.95 * np.exp(log_g)
     C = psi.T @ w
-    kappa = np.exp(log_clutter_density(Z, p))
+    kappa = np.exp(log_kappa)
     expected = (0.05 + (psi / (kappa + C)).sum(1)) * w
     np.testing.assert_allclose(u.particles.weights, expected, rtol=1e-9)
     np.testing.assert_allclose(u.c_z, C, rtol=1e-9)
@@ -231,7 +233,7 @@ def test_update_matches_equation_5_in_linear_space():
 def test_clutter_density_is_rate_over_the_gate_volume():
     p = PHDParams()
     Z = np.array([[50.0, 50.0, 10.0, 20.0], [300.0, 200.0, 60.0, 150.0], [5, 5, 2.0, 3.0]])
-    kappa = np.exp(log_clutter_density(Z, p))
+    kappa = np.exp(log_clutter_density(Z, p.clutter, p.likelihood))
     # Monte-Carlo volume of the 99% ellipsoid around the second detection, times κ, is 1
     rng = np.random.default_rng(0)
     std = obs_std(Z[1, 2:4])
@@ -240,20 +242,21 @@ def test_clutter_density_is_rate_over_the_gate_volume():
     vol = (2 * r) ** 4 * np.mean((u ** 2).sum(1) <= r * r) * np.prod(std)
     assert kappa[1] * vol == pytest.approx(1.0, rel=0.02)
     # the ratio κ / max g is the same for every box size (8 / r^4)
-    peak = np.exp(log_likelihood(np.c_[Z[:, :2], np.zeros((3, 2)), Z[:, 2:]], Z, p).diagonal())
+    peak = np.exp(log_likelihood(np.c_[Z[:, :2], np.zeros((3, 2)), Z[:, 2:]], Z,
+                                 p.likelihood).diagonal())
     np.testing.assert_allclose(kappa / peak, 8 / r ** 4, rtol=1e-9)
-    assert np.all(np.exp(log_clutter_density(Z, PHDParams(clutter_rate=0.0))) == 0)
+    assert np.all(np.exp(log_clutter_density(Z, PHDParams.of(clutter_rate=0.0).clutter)) == 0)
 
 
 def test_likelihood_std_follows_the_paper():
     p = PHDParams()
-    np.testing.assert_allclose(obs_std(np.array([40.0, 100.0]), p), [3.0, 7.5, 6.0, 15.0])
-    np.testing.assert_allclose(obs_std(np.array([4.0, 5.0]), p), [0.5, 0.5, 1.0, 1.0])
+    np.testing.assert_allclose(obs_std(np.array([40.0, 100.0]), p.likelihood), [3.0, 7.5, 6.0, 15.0])
+    np.testing.assert_allclose(obs_std(np.array([4.0, 5.0]), p.likelihood), [0.5, 0.5, 1.0, 1.0])
     # the "particle" reading takes the std from the particle's own size
     z = np.array([[0.0, 0.0, 40.0, 100.0]])
     x = np.array([[3.0, 0, 0, 0, 40.0, 100.0], [3.0, 0, 0, 0, 80.0, 100.0]])
-    lp = log_likelihood(x, z, PHDParams(obs_std_source="particle"))
-    ld = log_likelihood(x, z, p)
+    lp = log_likelihood(x, z, PHDParams.of(obs_std_source="particle").likelihood)
+    ld = log_likelihood(x, z, p.likelihood)
     assert lp[0, 0] == pytest.approx(ld[0, 0])
     assert lp[1, 0] != pytest.approx(ld[1, 0])
 
@@ -262,9 +265,51 @@ def test_resample_keeps_rho_particles_per_unit_mass():
     p = PHDParams()
     ps = cloud(np.random.default_rng(0), [100, 100, 0, 0, 30, 60], 2.345, n=5000)
     for scheme in ("systematic", "stratified", "residual", "multinomial"):
-        out = resample(ps, PHDParams(resampling=scheme), np.random.default_rng(1))
+        out = resample(ps, PHDParams.of(resampling=scheme).resampling, np.random.default_rng(1))
         assert len(out) == round(1500 * 2.345)
         assert out.mass == pytest.approx(ps.mass, rel=1e-12)
-    assert n_resample(0.0, p) == 0
-    assert n_resample(1e-6, p) == 1                       # min_particles keeps the mass
-    assert n_resample(1e6, p) == p.max_particles
+    rp = p.resampling
+    assert n_resample(0.0, rp) == 0
+    assert n_resample(1e-6, rp) == 1                      # min_particles keeps the mass
+    assert n_resample(1e6, rp) == rp.max_particles
+
+
+# ----------------------------------------------------------------------------- pluggable likelihood
+
+
+def test_update_takes_any_likelihood_and_the_filter_hands_it_the_frame():
+    """The filter never knows which g it runs (maggio2007 eq. 5 = feng2015 eqs. 11-12): a
+    likelihood that zeroes g on the left half of the image starves the target there."""
+    from pfscope.trackers.types import Frame
+
+    class RightHalfOnly:
+        def __init__(self):
+            self.frames = []
+            self.gauss = GaussianLikelihood(PHDParams().likelihood)
+
+        def log_g(self, states, Z, frame):
+            self.frames.append(frame.index)
+            lg = self.gauss.log_g(states, Z, frame)
+            return np.where(states[:, [0]] < frame.width / 2, -np.inf, lg)
+
+    Z = np.array([[100.0, 100.0, 30.0, 60.0], [500.0, 100.0, 30.0, 60.0]])
+    image = np.zeros((240, 640, 3), np.uint8)
+    lk = RightHalfOnly()
+    f = PHDFilter(PHDParams(), np.random.default_rng(0), likelihood=lk)
+    g = PHDFilter(PHDParams(), np.random.default_rng(0))
+    for k in range(1, 8):
+        r = f.step(Z, Frame(k, 0.0, image))
+        q = g.step(Z)
+    assert lk.frames == list(range(1, 8))
+    left, right = r.resampled.states[:, 0] < 320, r.resampled.states[:, 0] >= 320
+    w = r.resampled.weights
+    assert w[left].sum() < 0.01 < 0.5 < w[right].sum()
+    # with the Gaussian both targets carry mass
+    wq, xq = q.resampled.weights, q.resampled.states[:, 0]
+    assert wq[xq < 320].sum() > 0.5 and wq[xq >= 320].sum() > 0.5
+
+
+def test_update_checks_the_likelihood_matrix_shape():
+    ps = cloud(np.random.default_rng(0), [100, 100, 0, 0, 30, 60], 1.0, n=10)
+    with pytest.raises(ValueError, match="log_g"):
+        update(ps, np.zeros((9, 2)), np.zeros(2), 0.05)

@@ -5,22 +5,24 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pfscope.trackers.base import make_tracker
+from pfscope.trackers.api import make_tracker
 from pfscope.trackers.data.synthetic import SceneConfig, SyntheticScene
 from pfscope.trackers.eval import box_iou
-from pfscope.trackers.observer import ListObserver
+from pfscope.trackers.report import Boxes, Points, Scalar, Segments, find
 from pfscope.trackers.types import Frame
 
 BLANK = np.zeros((8, 8, 3), np.uint8)  # PHD-MT and MT look at detections only
 
 
-def _run(name, scene, seed=0, obs=None, **options):
+def _run(name, scene, seed=0, **options):
+    """Step the tracker by hand (the pipeline's contract, without a source): live tracks and
+    the tracks-file rows."""
     tr = make_tracker(name, seed=seed, **options)
     live, final = [], []
     for k in range(1, scene.config.frames + 1):
-        ts = tr.step(Frame(k, 0.0, BLANK), scene.det.detections(k), *(obs and [obs] or []))
-        live.append((k, ts))
-        final += tr.pop_final()
+        res = tr.step(Frame(k, 0.0, BLANK), scene.det.detections(k))
+        live.append((k, res.tracks))
+        final += res.rows
     final += tr.finish()
     return live, final
 
@@ -85,41 +87,58 @@ def test_phd_mt_tracks_a_clean_scene():
     assert matched / total > 0.8, matched / total
 
 
-def test_every_stage_reported(cluttered):
-    obs = ListObserver("particles")
+def _stages(cluttered, level, frames=30):
     tr = make_tracker("phd", seed=0)
-    for k in range(1, 30):
-        obs.frame = k
-        tr.step(Frame(k, 0.0, BLANK), cluttered.det.detections(k), obs)
-    stages = {c[0] for c in obs.calls}
-    assert {"predict", "birth", "update", "resample", "cluster", "associate"} <= stages
+    return [tr.step(Frame(k, 0.0, BLANK), cluttered.det.detections(k), level).stages
+            for k in range(1, frames)]
+
+
+def test_every_stage_reported(cluttered):
+    per_frame = _stages(cluttered, "particles")
+    for stages in per_frame:  # each frame's stages follow the declared list, in order
+        assert [s.name for s in stages] == ["predict", "birth", "update", "resample", "cluster",
+                                            "associate"]
+    every = [s for st in per_frame for s in st]
     for path in ("phd/particles/predicted", "phd/particles/birth", "phd/particles/updated",
                  "phd/particles/resampled", "phd/clusters/members"):
-        assert obs.find("points", path), path
+        assert find(every, path, Points), path
     for path in ("phd/clusters/kept", "assoc/vertices", "phd/birth/detections"):
-        assert obs.find("boxes", path), path
-    masses = obs.find("scalar", "phd/mass")
+        assert find(every, path, Boxes), path
+    masses = [i.value for i in find(every, "phd/mass", Scalar)]
     assert len(masses) == 29 and max(masses) > 1
-    chosen = obs.find("segments", "assoc/edges/chosen")
-    assert any(len(c["a"]) for c in chosen)
+    chosen = find(every, "assoc/edges/chosen", Segments)
+    assert any(len(c) for c in chosen)
+    # ids of the chosen edges and vertices are track ids, so the app colours them per track
+    assert all(c.id_kind == "track" for c in chosen)
     # the particle count follows L_k = rho * mass
-    counts = obs.find("scalar", "phd/particles/count")
+    counts = [i.value for i in find(every, "phd/particles/count", Scalar)]
     assert counts[-1] == pytest.approx(1500 * masses[-1], rel=0.01, abs=2)
 
 
-def test_tracks_level_builds_no_particle_payloads(cluttered):
-    obs = ListObserver("tracks")
-    tr = make_tracker("phd", seed=0)
-    for k in range(1, 10):
-        tr.step(Frame(k, 0.0, BLANK), cluttered.det.detections(k), obs)
-    assert not [c for c in obs.calls if c[1] in ("points", "boxes", "segments")]
+@pytest.mark.parametrize("level", [None, "tracks"])
+def test_low_levels_build_no_cloud_payloads(cluttered, level):
+    every = [s for st in _stages(cluttered, level, 10) for s in st]
+    items = [i for s in every for i in s.items]
+    assert items and all(isinstance(i, (Scalar,)) or type(i).__name__ == "Event" for i in items)
 
 
 def test_unknown_option_is_refused():
-    with pytest.raises(ValueError, match="unknown tracker option 'rhoo'"):
+    with pytest.raises(ValueError, match="unknown option 'rhoo'"):
         make_tracker("phd", rhoo=3)
 
 
 def test_shared_motion_option_reaches_filter_and_association():
     tr = make_tracker("phd", sigma_v=0.05)
-    assert tr.params.sigma_v == 0.05 and tr.associator.params.sigma_v == 0.05
+    assert tr.params.filter.motion.sigma_v == 0.05 and tr.associator.params.sigma_v == 0.05
+    # a dotted name sets exactly one
+    tr = make_tracker("phd", **{"assoc.sigma_v": 0.07})
+    assert tr.params.filter.motion.sigma_v == 0.03 and tr.associator.params.sigma_v == 0.07
+
+
+def test_cli_strings_are_converted_and_checked():
+    tr = make_tracker("phd", p_miss="0.2", depth="30")
+    assert tr.params.filter.likelihood.p_miss == 0.2 and tr.associator.params.depth == 30
+    with pytest.raises(ValueError, match="p_miss"):
+        make_tracker("phd", p_miss="lots")
+    with pytest.raises(ValueError, match="p_miss"):
+        make_tracker("phd", p_miss="1.5")

@@ -164,24 +164,29 @@ def _wait_for_frames(out: Path, proc, min_bytes=200_000, timeout=60):
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
 def test_interrupt_finishes_a_readable_file(tmp_path, sig):
     out = tmp_path / "run.rrd"
+    partial = tmp_path / "run.incomplete.rrd"
     proc = _spawn_record(out)
-    _wait_for_frames(out, proc)
+    _wait_for_frames(partial, proc)
     proc.send_signal(sig)
     proc.wait(timeout=60)
     assert proc.returncode == 130, proc.stderr.read().decode()
-    rec = read_rrd(out, footer=True)  # footer written: the full store loads
+    assert not out.exists()  # an interrupted run never takes the final name
+    rec = read_rrd(partial, footer=True)  # footer written: the full store loads
     frames = {t["frame"] for t, _ in rec["/video"]}
     assert len(frames) >= 2
-    assert any("interrupted" in str(c.get("TextLog:text")) for _, c in rec.get("/log", []))
+    last = [c.get("TextLog:text") for _, c in rec.get("/log", [])][-1]
+    assert "interrupted" in str(last)  # the last entry says why the run stopped
 
 
 def test_sigkill_still_leaves_a_readable_file(tmp_path):
     out = tmp_path / "run.rrd"
+    partial = tmp_path / "run.incomplete.rrd"
     proc = _spawn_record(out)
-    _wait_for_frames(out, proc)
+    _wait_for_frames(partial, proc)
     proc.kill()
     proc.wait(timeout=30)
-    rec = read_rrd(out, footer=False)
+    assert not out.exists()
+    rec = read_rrd(partial, footer=False)
     assert len({t["frame"] for t, _ in rec["/video"]}) >= 2
 
 

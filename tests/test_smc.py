@@ -1,10 +1,12 @@
-"""trackers.smc: log-weights, the four resampling schemes, the size-aware motion model."""
+"""trackers.smc: log-weights, the four resampling schemes, labels/extra columns; and
+maggio2007's size-aware motion model (trackers.phd.motion)."""
 
 import numpy as np
 import pytest
 
-from pfscope.trackers.smc import (SCHEMES, ParticleSet, ess, logsumexp, normalise, 
-                          propagate, resample, resample_indices)
+from pfscope.trackers.phd.motion import propagate
+from pfscope.trackers.smc import (SCHEMES, ParticleSet, ess, logsumexp, normalise, resample,
+                                  resample_indices)
 
 # ----------------------------------------------------------------------------- weights
 
@@ -39,7 +41,7 @@ def test_particle_set_checks_and_mass():
     assert ps.mass == pytest.approx(2.0)
     assert len(ps) == 3 and ps.dim == 6
     assert ps.concat(ps).mass == pytest.approx(4.0)
-    assert ParticleSet.empty().mass == 0.0
+    assert ParticleSet.empty(6).mass == 0.0
     with pytest.raises(ValueError):
         ParticleSet(np.zeros((3, 6)), np.zeros(2))
     with pytest.raises(ValueError):
@@ -100,7 +102,7 @@ def test_resampling_is_seeded_and_checks_its_scheme():
         np.testing.assert_array_equal(a, b)
     with pytest.raises(ValueError, match="unknown resampling scheme"):
         resample_indices(lw, 10, np.random.default_rng(0), "bogus")
-    assert len(resample(ParticleSet.empty(), 10, np.random.default_rng(0))) == 0
+    assert len(resample(ParticleSet.empty(6), 10, np.random.default_rng(0))) == 0
 
 
 # ----------------------------------------------------------------------------- motion
@@ -139,3 +141,36 @@ def test_propagate_is_seeded():
     b = propagate(x, np.random.default_rng(9))
     np.testing.assert_array_equal(a, b)
     assert not np.array_equal(a, propagate(x, np.random.default_rng(10)))
+
+
+# ----------------------------------------------------------------------------- any dimension
+
+
+@pytest.mark.parametrize("dim", [1, 4, 9])
+def test_particle_sets_of_any_dimension_carry_labels_and_extra_through_resampling(dim):
+    rng = np.random.default_rng(0)
+    n = 500
+    labels = np.repeat(np.arange(5), n // 5)
+    extra = np.stack([labels * 10.0, -labels * 1.0], axis=1)   # columns tied to the label
+    lw = np.log(np.where(labels == 3, 10.0, 1.0))               # label 3 is heavy
+    ps = ParticleSet(rng.normal(size=(n, dim)), lw, labels, extra)
+    out = resample(ps, 300, rng, "systematic")
+    assert out.dim == dim and len(out) == 300
+    assert out.mass == pytest.approx(ps.mass)
+    # every offspring keeps its parent's label and extra row
+    np.testing.assert_array_equal(out.extra[:, 0], out.labels * 10.0)
+    np.testing.assert_array_equal(out.extra[:, 1], -out.labels * 1.0)
+    # the heavy label gets ~10/14 of the offspring
+    assert abs(np.mean(out.labels == 3) - 10 / 14) < 0.02
+    both = ps.take(labels == 1).concat(ps.take(labels == 2))
+    assert set(both.labels.tolist()) == {1, 2} and both.extra.shape == (200, 2)
+
+
+def test_particle_set_rejects_mismatched_columns():
+    with pytest.raises(ValueError, match="labels"):
+        ParticleSet(np.zeros((3, 2)), np.zeros(3), labels=np.zeros(2))
+    with pytest.raises(ValueError, match="extra"):
+        ParticleSet(np.zeros((3, 2)), np.zeros(3), extra=np.zeros((4, 1)))
+    with pytest.raises(ValueError, match="one side only"):
+        ParticleSet(np.zeros((1, 2)), np.zeros(1), labels=[1]).concat(
+            ParticleSet(np.zeros((1, 2)), np.zeros(1)))

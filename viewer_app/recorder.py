@@ -1,182 +1,252 @@
-"""The Rerun observer: turns the engine's observer calls into a Rerun recording.
+"""The Rerun recorder: a pipeline hook that turns each frame's results into a recording.
 
-Entity layout (all 2D overlays share the image's pixel space under ``video``):
+Entity layout (2D overlays share the image's pixel space under ``video``):
 
 - ``video``                  the frame, JPEG-compressed
-- ``video/<path>``           points / boxes / segments / strips the engine reports
-  (``video/detections``, ``video/gt``, ``video/tracks``, ``video/phd/particles/updated`` ...)
-- ``plots/<path>``           scalars (``plots/phd/mass`` ...) for the time-series view
-- ``log``                    text messages
+- ``video/detections``, ``video/gt``   the frame's detections and ground truth
+- ``[<tracker>/]video/<path>``   a tracker's stage items (``video/phd/particles/updated`` ...),
+  its tracks, trails and metric marks (misses, false positives, ID switches)
+- ``[<tracker>/]plots/<path>``   scalars (``plots/phd/mass``, ``plots/metrics/ospa``,
+  ``plots/timing/step_ms``)
+- ``[<tracker>/]log``            events; the recording's last entry says why the run stopped
 
-Timelines: ``frame`` (MOT frame number), ``time`` (the video's time, a duration) and
-``stage`` (``frame * len(STAGES) + stage index``) to step through the stages inside one frame.
+With one tracker the root is empty; ``compare`` gives each tracker its own root.
 
-Levels (``tracks`` < ``clusters`` < ``particles``) gate what the engine builds, and point
-clouds above ``max_points`` are decimated with a fixed stride (deterministic, no RNG), so
-files stay small.  Entities that a frame did not log are cleared at the end of the frame, so
-the viewer never shows a stale cloud from an earlier frame.
+Timelines: ``frame`` (MOT frame number), ``time`` (the video's clock) and ``stage``.  The
+``stage`` timeline follows each tracker's own stage list: a frame's slots are ``input``, then
+for each tracker its stages and its ``output``; slot = frame × slots-per-frame + index, so a
+frame's stages stay in order and frames never overlap, also with several trackers.
+
+Files: the recording is written as ``<name>.incomplete.rrd`` and renamed to its final name
+only when the run completed; a failed or interrupted run keeps the ``.incomplete`` name (the
+file is finished and readable, its last entry says why it stopped).  A previous file under the
+final name is replaced only by a completed run.
 """
 
 from __future__ import annotations
 
+import json
+import os
+import platform
 import time
 import uuid
-from typing import Iterable, Optional, Sequence
+from collections import deque
+from datetime import timedelta
+from pathlib import Path
+from typing import Optional
 
 import cv2
 import numpy as np
 import rerun as rr
 
-from pfscope.trackers.observer import LEVELS, STAGES, level_rank
-from pfscope.trackers.types import Frame
+from pfscope.trackers import __version__
+from pfscope.trackers.data.motio import incomplete_path
+from pfscope.trackers.pipeline import BaseHook, FrameReport, Outcome, RunInfo
 
-from .colors import id_colors, weight_colors
-
-# Fixed colours for the app's own overlays (RGBA).
-STYLE = {
-    "detections": (255, 220, 0, 255),
-    "gt": (60, 255, 60, 255),
-}
-DEFAULT_POINT_RADIUS = 1.5
+from .blueprint import compare_blueprint, default_blueprint
+from .reporters import Reporter, layout_for
+from .reporters.base import annotation_context
 
 
 def recording_id_for(config: dict) -> str:
     """A recording id derived from the run's configuration, so the same seed and input give a
-    byte-for-byte comparable recording (``rerun rrd compare``)."""
+    comparable recording (``rerun rrd compare``)."""
     return str(uuid.uuid5(uuid.NAMESPACE_URL, "pfscope:" + repr(sorted(config.items()))))
 
 
-class RerunObserver:
-    """Implements :class:`trackers.observer.Observer` on top of a ``rr.RecordingStream``."""
+def versions() -> dict:
+    import scipy
 
-    def __init__(self, rec: rr.RecordingStream, *, level: str = "clusters",
-                 max_points: int = 3000, jpeg_quality: int = 75, root: str = "",
-                 flush_seconds: float = 1.0):
-        level_rank(level)  # validate
+    return {"pfscope": __version__, "rerun-sdk": rr.__version__, "numpy": np.__version__,
+            "scipy": scipy.__version__, "opencv": cv2.__version__,
+            "python": platform.python_version()}
+
+
+class TrailBuffer:
+    """Recent centres of each live track (bounded: ``length`` points per track, tracks unseen
+    for ``forget`` frames are dropped)."""
+
+    def __init__(self, length: int = 30, forget: int = 50):
+        self.length, self.forget = length, forget
+        self.trails: dict[int, deque] = {}
+        self.last_seen: dict[int, int] = {}
+
+    def update(self, frame: int, ids: np.ndarray, boxes: np.ndarray):
+        centres = boxes[:, :2] + boxes[:, 2:] / 2.0
+        for tid, c in zip(ids.tolist(), centres):
+            self.trails.setdefault(tid, deque(maxlen=self.length)).append(c)
+            self.last_seen[tid] = frame
+        for tid in [t for t, f in self.last_seen.items() if frame - f > self.forget]:
+            del self.trails[tid], self.last_seen[tid]
+        live = [t for t in ids.tolist() if len(self.trails[t]) >= 2]
+        return np.asarray(live, dtype=np.int64), [np.asarray(self.trails[t]) for t in live]
+
+
+class RerunRecorder(BaseHook):
+    """Pipeline hook writing a Rerun recording to ``out`` (see the module docstring).
+
+    ``sinks``: ``None`` (the file only), ``"spawn"`` (also a native viewer) or ``"serve"`` (also
+    a web viewer; its URL goes to ``announce``).  ``config`` is stored as the recording's
+    properties and seeds the recording id (same config → comparable recording)."""
+
+    def __init__(self, out: Path, config: dict, *, max_points: int = 3000,
+                 jpeg_quality: int = 75, flush_frames: int = 10, live: Optional[str] = None,
+                 web_port: int = 9090, announce=print, timing: bool = False):
+        self.out = Path(out)
+        self.partial = incomplete_path(self.out)
+        self.config = config
+        self.max_points, self.jpeg_quality = max_points, jpeg_quality
+        # Flushing bounds what a SIGKILLed run loses.  Counted in frames, not seconds, so the
+        # chunks of the file do not depend on the machine's speed (same input → same file).
+        self.flush_frames = int(flush_frames)
+        self.live, self.web_port, self.announce = live, web_port, announce
+        # Wall-clock step times differ run to run: recorded only when asked, so that the same
+        # seed and input give the same recording.
+        self.timing = timing
+        self.rec: Optional[rr.RecordingStream] = None
+        self.kept_as: Optional[Path] = None
+        self._frames = 0
+
+    # -- pipeline hook ---------------------------------------------------------------------
+    def begin(self, info: RunInfo) -> None:
+        names = list(info.trackers)
+        # No time-based batching: chunks are cut by size and by our flush every
+        # `flush_frames` frames only, so the same input gives the same chunks (and a
+        # `rerun rrd compare`-equal file) however fast or loaded the machine is.
+        batcher = rr.ChunkBatcherConfig(flush_tick=timedelta(days=1), flush_num_bytes=2 << 20)
+        rec = rr.RecordingStream("pfscope", recording_id=recording_id_for(self.config),
+                                 send_properties=False, batcher_config=batcher)
         self.rec = rec
-        self.flush_seconds = float(flush_seconds)
-        self._last_flush = time.monotonic()
-        # Several trackers in one recording each get a root: <root>/video/..., <root>/plots/...
-        self.root = f"{root.strip('/')}/" if root else ""
-        self.level = level
-        self._rank = level_rank(level)
-        self.max_points = int(max_points)
-        self.jpeg_quality = int(jpeg_quality)
-        self.frame_index = 0
-        self._logged_now: set[str] = set()
-        self._logged_before: set[str] = set()
-        self._stage_names: dict[str, int] = {s: i for i, s in enumerate(STAGES)}
+        if len(names) == 1:
+            layout = layout_for(info.trackers[names[0]].name)
+            blueprint = default_blueprint(layout.views, layout.plots)
+        else:
+            blueprint = compare_blueprint(names)
+        if self.partial.exists():
+            self.partial.unlink()
+        rec.save(str(self.partial), default_blueprint=blueprint)
+        if self.live == "spawn":
+            rec.spawn(connect=False)
+            rec.set_sinks(rr.FileSink(str(self.partial)), rr.GrpcSink(),
+                          default_blueprint=blueprint)
+        elif self.live == "serve":
+            grpc = rr.GrpcServerSink()
+            rec.set_sinks(rr.FileSink(str(self.partial)), grpc, default_blueprint=blueprint)
+            rr.serve_web_viewer(web_port=self.web_port, connect_to=grpc.uri, open_browser=False)
+            uri = grpc.uri.replace("0.0.0.0", "127.0.0.1")
+            self.announce(f"web viewer: http://127.0.0.1:{self.web_port}/?url={uri}")
+        src = getattr(info.source, "name", "source")
+        rec.send_recording_name(f"{src} · {' vs '.join(names)}")
+        rec.send_property("config", rr.AnyValues(**{k: str(v) for k, v in self.config.items()}))
+        rec.send_property("versions", rr.AnyValues(**versions()))
+        rec.log("/", annotation_context(), static=True)
 
-    # -- frame bookkeeping -------------------------------------------------------------
-    def begin_frame(self, frame: Frame, image: bool = True) -> None:
-        self.frame_index = frame.index
-        self.rec.set_time("frame", sequence=frame.index)
-        self.rec.set_time("time", duration=float(frame.timestamp))
-        self.stage("input")
-        if not image:
-            return
-        ok, buf = cv2.imencode(".jpg", frame.image, [cv2.IMWRITE_JPEG_QUALITY, self.jpeg_quality])
+        # stage slots: input, then each lane's stages and its output
+        self.slots: dict[tuple[str, str], int] = {("", "input"): 0}
+        for name, tracker in info.trackers.items():
+            for st in tuple(tracker.stages) + ("output",):
+                self.slots[(name, st)] = len(self.slots)
+        self.stride = len(self.slots)
+        multi = len(names) > 1
+        self.reporters = {name: Reporter(rec, f"{name}/" if multi else "", self.max_points,
+                                         self.jpeg_quality) for name in names}
+        self.base = Reporter(rec, "", self.max_points, self.jpeg_quality)
+        self.trails = {name: TrailBuffer() for name in names}
+        self._before: set[str] = set()
+
+    def _stage(self, frame: int, lane: str, stage: str) -> None:
+        assert self.rec is not None
+        self.rec.set_time("stage", sequence=frame * self.stride + self.slots[(lane, stage)])
+
+    def on_frame(self, r: FrameReport) -> None:
+        rec = self.rec
+        assert rec is not None
+        k = r.frame.index
+        rec.set_time("frame", sequence=k)
+        rec.set_time("time", duration=float(r.frame.timestamp))
+        self._stage(k, "", "input")
+        ok, buf = cv2.imencode(".jpg", r.frame.image, [cv2.IMWRITE_JPEG_QUALITY, self.jpeg_quality])
         if ok:
-            self.rec.log("video", rr.EncodedImage(contents=buf.tobytes(), media_type="image/jpeg"))
+            rec.log("video", rr.EncodedImage(contents=buf.tobytes(), media_type="image/jpeg"))
+        base = self.base
+        if r.detections is not None:
+            d = r.detections
+            base.role_boxes("detections", d.boxes, "detection",
+                            labels=[f"{s:.2f}" for s in d.scores])
+            base.scalar("detections/count", len(d))
+        if r.gt is not None:
+            base.role_boxes("gt", r.gt.boxes, "gt", labels=[f"gt {i}" for i in r.gt.ids])
+        for name, res in r.results.items():
+            rep = self.reporters[name]
+            for stage in res.stages:
+                self._stage(k, name, stage.name)
+                rep.stage(stage)
+            self._stage(k, name, "output")
+            t = res.tracks
+            rep.track_boxes("tracks", t.ids, t.boxes)
+            live, strips = self.trails[name].update(k, t.ids, t.boxes)
+            rep.track_strips("tracks/trails", live, strips)
+            rep.scalar("tracks/count", len(t))
+            if self.timing:
+                rep.scalar("timing/step_ms", 1000.0 * r.step_seconds.get(name, 0.0))
+            m = r.metrics.get(name)
+            if m is not None and r.gt is not None:
+                self._metrics(rep, k, r.gt, t, m)
+        self._clear_stale()
+        self._frames += 1
+        if self.flush_frames and self._frames % self.flush_frames == 0:
+            rec.flush()
 
-    def end_frame(self) -> None:
-        self.stage("output")
-        for ent in sorted(self._logged_before - self._logged_now):
+    def _metrics(self, rep: Reporter, frame: int, gt, tracks, m) -> None:
+        """Per-frame metrics of what the view shows, and marks on the misses, false positives
+        and identity switches."""
+        for key, v in (("ospa", m.ospa), ("cardinality/true", m.n_true),
+                       ("cardinality/estimated", m.n_est), ("fp", m.fp), ("fn", m.fn),
+                       ("idsw", m.idsw)):
+            rep.scalar(f"metrics/{key}", v)
+        rep.role_boxes("metrics/misses", gt.boxes[m.fn_idx], "miss", radii=2.5,
+                       labels=[f"miss gt {i}" for i in gt.ids[m.fn_idx]])
+        rep.role_boxes("metrics/false_positives", tracks.boxes[m.fp_idx], "false_positive",
+                       radii=2.5, labels=[f"FP {i}" for i in tracks.ids[m.fp_idx]])
+        rep.role_boxes("metrics/switches", tracks.boxes[m.switch_idx], "switch", radii=3.0,
+                       labels=[f"ID switch: {i}" for i in tracks.ids[m.switch_idx]])
+        if m.idsw:
+            rep.text("metrics", f"frame {frame}: {m.idsw} identity switch(es): tracks "
+                                f"{', '.join(str(i) for i in tracks.ids[m.switch_idx])}", "WARN")
+
+    def _clear_stale(self) -> None:
+        """Entities a frame did not log are cleared, so no stale cloud from an earlier frame
+        shows."""
+        now: set[str] = set()
+        for rep in list(self.reporters.values()) + [self.base]:
+            now |= rep.logged
+            rep.logged = set()
+        assert self.rec is not None
+        for ent in sorted(self._before - now):
             self.rec.log(ent, rr.Clear(recursive=False))
-        self._logged_before = self._logged_now
-        self._logged_now = set()
-        # Flushing bounds what a killed run (SIGKILL) can lose to `flush_seconds` of frames;
-        # flushing every frame would split every entity into its own chunk per frame (~1.8 KB
-        # of framing each, a third of a tracks-level file).
-        now = time.monotonic()
-        if now - self._last_flush >= self.flush_seconds:
-            self.rec.flush()
-            self._last_flush = now
+        self._before = now
 
-    # -- Observer protocol ----------------------------------------------------------
-    def wants(self, level: str) -> bool:
-        return level_rank(level) <= self._rank
+    def end(self, outcome: Outcome) -> None:
+        rec = self.rec
+        if rec is None:
+            return
+        level = {"completed": "INFO", "interrupted": "WARN"}.get(outcome.status, "ERROR")
+        rec.log("log", rr.TextLog(f"run {outcome.reason}", level=level))
+        rec.flush()
+        rec.disconnect()
+        if outcome.status == "completed":
+            os.replace(self.partial, self.out)
+        else:
+            self.kept_as = self.partial
 
-    def stage(self, name: str) -> None:
-        idx = self._stage_names.get(name)
-        if idx is None:
-            idx = self._stage_names[name] = len(self._stage_names)
-        stride = max(len(STAGES), len(self._stage_names))
-        self.rec.set_time("stage", sequence=self.frame_index * stride + idx)
-
-    def _log(self, entity: str, archetype) -> None:
-        self._logged_now.add(entity)
-        self.rec.log(entity, archetype)
-
-    def points(self, path: str, xy: np.ndarray, *, weights: Optional[np.ndarray] = None,
-               class_ids: Optional[np.ndarray] = None, labels: Optional[Sequence[str]] = None,
-               radii=None, colors: Optional[np.ndarray] = None) -> None:
-        xy = np.asarray(xy, dtype=np.float32).reshape(-1, 2)
-        n = len(xy)
-        if colors is None:
-            if weights is not None:
-                colors = weight_colors(weights)
-            elif class_ids is not None:
-                colors = id_colors(class_ids)
-        if n > self.max_points:
-            keep = np.linspace(0, n - 1, self.max_points).round().astype(np.int64)
-            xy = xy[keep]
-            colors = None if colors is None else np.asarray(colors)[keep]
-            labels = None if labels is None else [labels[i] for i in keep]
-            if radii is not None and np.ndim(radii) > 0:
-                radii = np.asarray(radii)[keep]
-        self._log(f"{self.root}video/{path}", rr.Points2D(
-            xy, colors=colors, labels=labels,
-            radii=DEFAULT_POINT_RADIUS if radii is None else radii))
-
-    def boxes(self, path: str, boxes: np.ndarray, *, ids: Optional[np.ndarray] = None,
-              labels: Optional[Sequence[str]] = None, class_ids: Optional[np.ndarray] = None,
-              colors: Optional[np.ndarray] = None, radii=None) -> None:
-        boxes = np.asarray(boxes, dtype=np.float32).reshape(-1, 4)
-        if colors is None:
-            if ids is not None:
-                colors = id_colors(ids)
-            elif class_ids is not None:
-                colors = id_colors(class_ids)
-            else:
-                colors = STYLE.get(path.split("/")[0], (255, 255, 255, 255))
-        if labels is None and ids is not None:
-            labels = [str(int(i)) for i in np.asarray(ids).reshape(-1)]
-        self._log(f"{self.root}video/{path}", rr.Boxes2D(
-            mins=boxes[:, :2], sizes=boxes[:, 2:], colors=colors, labels=labels,
-            radii=radii if radii is not None else 1.0))
-
-    def segments(self, path: str, a: np.ndarray, b: np.ndarray, *,
-                 class_ids: Optional[np.ndarray] = None, labels: Optional[Sequence[str]] = None,
-                 radii=None, colors: Optional[np.ndarray] = None) -> None:
-        a = np.asarray(a, dtype=np.float32).reshape(-1, 2)
-        b = np.asarray(b, dtype=np.float32).reshape(-1, 2)
-        strips = np.stack([a, b], axis=1)
-        if colors is None and class_ids is not None:
-            colors = id_colors(class_ids)
-        self._log(f"{self.root}video/{path}", rr.LineStrips2D(
-            strips, colors=colors, labels=labels, radii=0.75 if radii is None else radii))
-
-    def strips(self, path: str, strips: Iterable[np.ndarray], *, ids: Optional[np.ndarray] = None,
-               radii=None, colors: Optional[np.ndarray] = None) -> None:
-        strips = [np.asarray(s, dtype=np.float32).reshape(-1, 2) for s in strips]
-        if colors is None and ids is not None:
-            colors = id_colors(ids)
-        self._log(f"{self.root}video/{path}", rr.LineStrips2D(
-            strips, colors=colors, radii=1.0 if radii is None else radii))
-
-    def scalar(self, path: str, value: float) -> None:
-        self.rec.log(f"{self.root}plots/{path}", rr.Scalars(float(value)))
-
-    def text(self, path: str, message: str, level: str = "INFO") -> None:
-        self.rec.log(f"{self.root}log/{path}" if path else f"{self.root}log",
-                     rr.TextLog(message, level=level))
-
-    def image(self, path: str, image_bgr: np.ndarray) -> None:
-        img = np.ascontiguousarray(image_bgr[..., ::-1]) if image_bgr.ndim == 3 else image_bgr
-        model = "RGB" if img.ndim == 3 else "L"
-        self._log(f"{self.root}video/{path}", rr.Image(img, color_model=model).compress(
-            jpeg_quality=self.jpeg_quality))
+    @property
+    def path(self) -> Path:
+        """Where the recording is now (final name once completed)."""
+        return self.kept_as or self.out
 
 
-__all__ = ["RerunObserver", "recording_id_for", "LEVELS"]
+def config_json(obj) -> str:
+    return json.dumps(obj, sort_keys=True, default=str)
+
+
+__all__ = ["RerunRecorder", "recording_id_for", "versions", "TrailBuffer", "config_json"]

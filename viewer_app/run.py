@@ -1,37 +1,33 @@
-"""``pfscope record``: run a tracker over a source and write tracks and a Rerun recording.
+"""``pfscope record`` / ``compare``: the engine's pipeline with the app's hooks (the Rerun
+recorder, the tracks file, the progress bar) and signal handling.
 
 Safety rules the code keeps:
-- an existing recording or tracks file is never overwritten unless ``force``;
+- an existing recording or tracks file is never overwritten unless ``force``, and then only
+  by a run that completed;
 - all input is opened and validated before the output file is created;
-- Ctrl-C (SIGINT) and SIGTERM finish the file so it stays readable (and say so inside it);
-- data is flushed about once a second, so even SIGKILL leaves a readable file missing at most
-  about a second of frames;
-- a run that fails on bad input mid-way is closed and renamed ``*.incomplete.rrd`` so it
-  never looks like a complete recording.
+- outputs are written as ``*.incomplete.rrd`` / ``*.txt.part`` and take their final names only
+  when the run completed; a run that failed (for any reason) or was interrupted keeps
+  ``*.incomplete.*`` names, and the recording's last entry says why it stopped;
+- Ctrl-C (SIGINT) and SIGTERM stop at the next frame and finish the file so it stays readable;
+- data is flushed every 10 frames, so even SIGKILL leaves a readable file.
 """
 
 from __future__ import annotations
 
-import json
 import os
-import platform
 import signal
 import sys
 import time
-from collections import deque
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Optional
 
 import numpy as np
 
-from pfscope.trackers import __version__
-from pfscope.trackers.base import make_tracker
-from pfscope.trackers.data.motio import TrackWriter
 from pfscope.trackers.data.sources import Source
-from pfscope.trackers.detect import make_detector
-from pfscope.trackers.errors import InputError
-from pfscope.trackers.observer import level_rank
+from pfscope.trackers.errors import InputError, RunFailed
+from pfscope.trackers.pipeline import BaseHook
+from pfscope.trackers.report import level_rank
 
 RECORDINGS_DIR = Path("recordings")
 WEB_PORT = 9090
@@ -75,7 +71,8 @@ class RecordOptions:
     tracks_out: Optional[Path] = None
     spawn: bool = False
     serve: bool = False
-    trails: int = 30
+    preset: Optional[str] = None       # None: the tracker's first preset (its paper settings)
+    timing: bool = False               # record per-step wall time (breaks byte-identical reruns)
     tracker_options: dict = field(default_factory=dict)
 
 
@@ -109,16 +106,6 @@ def check_output(path: Path, force: bool, what: str = "recording") -> Path:
     if not os.access(parent, os.W_OK | os.X_OK):
         raise InputError(f"{parent}: output folder is not writable")
     return path
-
-
-def _versions() -> dict:
-    import cv2
-    import rerun
-    import scipy
-
-    return {"pfscope": __version__, "rerun-sdk": rerun.__version__, "numpy": np.__version__,
-            "scipy": scipy.__version__, "opencv": cv2.__version__,
-            "python": platform.python_version()}
 
 
 class Progress:
@@ -164,211 +151,129 @@ class Progress:
             self.stream.flush()
 
 
-class TrailBuffer:
-    """Recent centres of each live track (bounded: ``length`` points per track, tracks unseen
-    for ``forget`` frames are dropped)."""
+class ProgressHook(BaseHook):
+    """The progress bar as a pipeline hook."""
 
-    def __init__(self, length: int = 30, forget: int = 50):
-        self.length, self.forget = length, forget
-        self.trails: dict[int, deque] = {}
-        self.last_seen: dict[int, int] = {}
+    def __init__(self, bar: Progress):
+        self.bar = bar
+        self.done = 0
 
-    def update(self, frame: int, ids: np.ndarray, boxes: np.ndarray):
-        centres = boxes[:, :2] + boxes[:, 2:] / 2.0
-        for tid, c in zip(ids.tolist(), centres):
-            self.trails.setdefault(tid, deque(maxlen=self.length)).append(c)
-            self.last_seen[tid] = frame
-        for tid in [t for t, f in self.last_seen.items() if frame - f > self.forget]:
-            del self.trails[tid], self.last_seen[tid]
-        live = [t for t in ids.tolist() if len(self.trails[t]) >= 2]
-        return np.asarray(live, dtype=np.int64), [np.asarray(self.trails[t]) for t in live]
+    def on_frame(self, report) -> None:
+        self.done += 1
+        self.bar.update(self.done)
 
-
-def resolve_detector_name(source: Source, name: Optional[str]) -> str:
-    if name:
-        return name
-    return "file" if source.det is not None else "hog"
-
-
-class _Lane:
-    """One tracker's run inside a recording: its observer (under its own root when several
-    trackers share a recording), trails, online metrics and output rows."""
-
-    def __init__(self, name: str, tracker, obs, gt_available: bool, writer=None):
-        from pfscope.trackers.eval import OnlineEvaluator
-
-        self.name, self.tracker, self.obs, self.writer = name, tracker, obs, writer
-        self.trails = TrailBuffer()
-        self.lagged = hasattr(tracker, "pop_final")  # rows finalised with a bounded lag
-        self.rows: list = []  # (frame, TrackSet) as written to the tracks file
-        self.evaluator = OnlineEvaluator() if gt_available else None
-
-    def step(self, frame, dets, gt) -> None:
-        obs = self.obs
-        tracks = self.tracker.step(frame, dets, obs)
-        obs.stage("output")
-        obs.boxes("tracks", tracks.boxes, ids=tracks.ids, radii=2.0)
-        live, strips = self.trails.update(frame.index, tracks.ids, tracks.boxes)
-        obs.strips("tracks/trails", strips, ids=live)
-        obs.scalar("tracks/count", len(tracks))
-        if self.evaluator is not None:
-            self._metrics(frame.index, gt, tracks)
-        self._emit(self.tracker.pop_final() if self.lagged else [(frame.index, tracks)])
-
-    def _emit(self, rows) -> None:
-        self.rows.extend(rows)
-        if self.writer:
-            for f_index, ts in rows:
-                self.writer.write(f_index, ts)
-
-    def finish(self, completed: bool) -> None:
-        if self.lagged and completed:
-            self._emit(self.tracker.finish())
-        if self.writer:
-            self.writer.close()
-
-    def _metrics(self, frame: int, gt, tracks) -> None:
-        """Per-frame metrics of what the view shows at this frame, plus marks on the boxes
-        that are misses, false positives and identity switches."""
-        m = self.evaluator.update(frame, gt, tracks)
-        obs = self.obs
-        obs.scalar("metrics/ospa", m.ospa)
-        obs.scalar("metrics/cardinality/true", m.n_true)
-        obs.scalar("metrics/cardinality/estimated", m.n_est)
-        obs.scalar("metrics/fp", m.fp)
-        obs.scalar("metrics/fn", m.fn)
-        obs.scalar("metrics/idsw", m.idsw)
-        obs.boxes("metrics/misses", gt.boxes[m.fn_idx], colors=(255, 40, 40, 255), radii=2.5,
-                  labels=[f"miss gt {i}" for i in gt.ids[m.fn_idx]])
-        obs.boxes("metrics/false_positives", tracks.boxes[m.fp_idx], colors=(255, 0, 255, 255),
-                  radii=2.5, labels=[f"FP {i}" for i in tracks.ids[m.fp_idx]])
-        obs.boxes("metrics/switches", tracks.boxes[m.switch_idx], colors=(255, 255, 255, 255),
-                  radii=3.0, labels=[f"ID switch: {i}" for i in tracks.ids[m.switch_idx]])
-        if m.idsw:
-            obs.text("metrics", f"frame {frame}: {m.idsw} identity switch(es): tracks "
-                                f"{', '.join(str(i) for i in tracks.ids[m.switch_idx])}", "WARN")
+    def end(self, outcome) -> None:
+        self.bar.close()
 
 
 def record(source: Source, out: Path, opts: RecordOptions, *, trackers: Optional[list] = None,
            progress: bool = True, on_frame: Optional[Callable[[int], None]] = None) -> RecordResult:
-    """Run ``opts.tracker`` (or each of ``trackers``, each under its own root) on ``source`` and
-    write the recording to ``out``."""
-    import rerun as rr
+    """Run ``opts.tracker`` (or each of ``trackers``, each under its own root) on ``source``
+    through the engine's pipeline and write the recording to ``out`` (and the tracks file)."""
+    from pfscope.trackers.api import make_params, tracker_info
+    from pfscope.trackers.pipeline import TracksFileHook, frames_to_read, resolve_detector_name
+    from pfscope.trackers.pipeline import run as run_pipeline
 
-    from .blueprint import compare_blueprint, default_blueprint
-    from .recorder import RerunObserver, recording_id_for
+    from .recorder import RerunRecorder, config_json
 
-    level_rank(opts.level)
+    try:
+        level_rank(opts.level)
+    except ValueError as e:
+        raise InputError(str(e)) from None
     names = list(trackers or [opts.tracker])
     if len(set(names)) != len(names):
         raise InputError(f"tracker listed twice: {','.join(names)}")
+    try:
+        infos = [tracker_info(n) for n in names]
+        params = [make_params(n, opts.preset, _options_for(n, opts.tracker_options, len(names)))
+                  for n in names]
+    except ValueError as e:
+        raise InputError(str(e)) from None
     out = check_output(Path(out), opts.force)
     tracks_out = check_output(Path(opts.tracks_out), opts.force, "tracks file") \
         if opts.tracks_out and len(names) == 1 else None
-    det_name = resolve_detector_name(source, opts.detector)
-    detector = make_detector(det_name, det_table=source.det,
-                             **({"min_score": opts.min_score} if det_name == "file" else {}))
-    try:
-        built = [make_tracker(n, seed=opts.seed, **opts.tracker_options) for n in names]
-    except ValueError as e:
-        raise InputError(str(e)) from None
-    total = source.length if opts.frames is None else (
-        min(opts.frames, source.length) if source.length else opts.frames)
+    if tracks_out is not None and tracks_out.resolve() == out.resolve():
+        raise InputError(f"{tracks_out}: --tracks-out must differ from the recording file")
+    built = {n: info.cls(p, rng=np.random.default_rng(opts.seed))
+             for n, info, p in zip(names, infos, params)}
+    need_det = any(t.needs_detections for t in built.values())
+    det_name = resolve_detector_name(source, opts.detector) if need_det else None
+    det_opts = {"min_score": opts.min_score} if det_name == "file" else {}
+    total = frames_to_read(source, opts.frames)
 
     config = {
-        "trackers": ",".join(names), "detector": det_name, "min_score": opts.min_score,
-        "level": opts.level, "max_points": opts.max_points, "frames": total, "seed": opts.seed,
-        "source": json.dumps(source.describe(), sort_keys=True, default=str),
-        "tracker_config": json.dumps([t.config() for t in built], sort_keys=True, default=str),
+        "trackers": ",".join(names), "detector": det_name or "none",
+        "min_score": opts.min_score, "level": opts.level, "max_points": opts.max_points,
+        "frames": total, "seed": opts.seed, "preset": opts.preset or "default",
+        "source": config_json(source.describe()),
+        "tracker_config": config_json([t.config() for t in built.values()]),
     }
-    rec = rr.RecordingStream("pfscope", recording_id=recording_id_for(config),
-                             send_properties=False)
-    if len(built) == 1:
-        blueprint = default_blueprint(*getattr(built[0], "views", lambda: ([], []))())
-    else:
-        blueprint = compare_blueprint(names)
-    rec.save(str(out), default_blueprint=blueprint)
-    if opts.spawn:
-        rec.spawn(connect=False)
-        rec.set_sinks(rr.FileSink(str(out)), rr.GrpcSink(), default_blueprint=blueprint)
-    elif opts.serve:
-        grpc = rr.GrpcServerSink()
-        rec.set_sinks(rr.FileSink(str(out)), grpc, default_blueprint=blueprint)
-        rr.serve_web_viewer(web_port=WEB_PORT, connect_to=grpc.uri, open_browser=False)
-        uri = grpc.uri.replace("0.0.0.0", "127.0.0.1")
-        print(f"web viewer: http://127.0.0.1:{WEB_PORT}/?url={uri}", file=sys.stderr)
-    rec.send_recording_name(f"{source.name} · {' vs '.join(names)}")
-    rec.send_property("config", rr.AnyValues(**{k: str(v) for k, v in config.items()}))
-    rec.send_property("versions", rr.AnyValues(**_versions()))
-
-    obs = RerunObserver(rec, level=opts.level, max_points=opts.max_points)
-    has_gt = source.gt is not None
-    lanes = []
-    for name, tracker in zip(names, built):
-        lane_obs = obs if len(built) == 1 else RerunObserver(
-            rec, level=opts.level, max_points=opts.max_points, root=name)
-        lanes.append(_Lane(name, tracker, lane_obs, has_gt,
-                           TrackWriter(tracks_out) if tracks_out else None))
-    bar = Progress(total, f"{' + '.join(names)} on {source.name}", enabled=progress)
-    interrupted = False
-    failed: Optional[InputError] = None
-    done = 0
-    stop = StopFlag().__enter__()
-    t0 = time.perf_counter()
-    try:
-        for frame in source.frames(total):
-            if stop.requested:
-                break
-            obs.begin_frame(frame)
-            dets = detector(frame)
-            obs.boxes("detections", dets.boxes,
-                      labels=[f"{s:.2f}" for s in dets.scores] if len(dets) < 100 else None)
-            obs.scalar("detections/count", len(dets))
-            gt = source.gt.ground_truth(frame.index) if has_gt else None
-            if has_gt:
-                obs.boxes("gt", gt.boxes, labels=[f"gt {i}" for i in gt.ids],
-                          colors=(60, 255, 60, 255))
-            for lane in lanes:
-                if lane.obs is not obs:
-                    lane.obs.begin_frame(frame, image=False)
-                lane.step(frame, dets, gt)
-                if lane.obs is not obs:
-                    lane.obs.end_frame()
-            obs.end_frame()
-            done += 1
-            bar.update(done)
-            if on_frame:
-                on_frame(done)
-    except KeyboardInterrupt:
-        stop.requested = True
-    except InputError as e:
-        failed = e
-        obs.text("", f"run failed: {e}", level="ERROR")
-    finally:
-        if stop.requested:
-            interrupted = True
-            obs.text("", f"run interrupted after {done} frames", level="WARN")
-        stop.__exit__()
-        bar.close()
-        for lane in lanes:
-            lane.finish(completed=failed is None)
-        rec.flush()
-        rec.disconnect()
-    seconds = time.perf_counter() - t0
-    if failed is not None:
-        bad = out.with_name(out.stem + ".incomplete.rrd")
-        os.replace(out, bad)
-        raise InputError(f"{failed} (partial recording kept as {bad})")
-    scores = {}
-    if has_gt and done:
-        scores = {lane.name: score_rows(source, lane.rows, done) for lane in lanes}
-    return RecordResult(out=out, frames=done, seconds=seconds, interrupted=interrupted,
-                        tracks_out=tracks_out, bytes=out.stat().st_size, scores=scores)
+    recorder = RerunRecorder(out, config, max_points=opts.max_points,
+                             live="spawn" if opts.spawn else "serve" if opts.serve else None,
+                             web_port=WEB_PORT, timing=opts.timing,
+                             announce=lambda msg: print(msg, file=sys.stderr))
+    hooks: list = [recorder]
+    writer = None
+    if tracks_out is not None:
+        try:
+            writer = TracksFileHook(tracks_out)
+        except InputError:
+            raise
+        hooks.append(writer)
+    hooks.append(ProgressHook(Progress(total, f"{' + '.join(names)} on {source.name}",
+                                       enabled=progress)))
+    if on_frame is not None:
+        hooks.append(_CallbackHook(on_frame))
+    with StopFlag() as stop:
+        try:
+            res = run_pipeline(source, built, frames=opts.frames, level=opts.level,
+                               detector=det_name, detector_options=det_opts, hooks=hooks,
+                               should_stop=lambda: stop.requested)
+        except InputError as e:
+            raise InputError(f"{e} (partial recording kept as {recorder.path})") from None
+        except Exception as e:
+            raise RunFailed(f"{type(e).__name__}: {e} (partial recording kept as "
+                            f"{recorder.path})") from e
+    final = recorder.path
+    return RecordResult(out=final, frames=res.frames, seconds=res.seconds,
+                        interrupted=res.interrupted,
+                        tracks_out=(writer.kept_as or tracks_out) if writer else None,
+                        bytes=final.stat().st_size, scores=res.scores)
 
 
-def score_rows(source: Source, rows, frames: int) -> dict:
-    """Sequence scores of a run's tracks (as written to the tracks file) over its frames."""
-    from pfscope.trackers.data.motio import table_from_tracksets
-    from pfscope.trackers.eval import evaluate
+class _CallbackHook(BaseHook):
+    def __init__(self, fn):
+        self.fn, self.done = fn, 0
 
-    return evaluate(source.gt, table_from_tracksets(rows), frames=range(1, frames + 1))
+    def on_frame(self, report) -> None:
+        self.done += 1
+        self.fn(self.done)
+
+
+def _options_for(name: str, options: dict, n_trackers: int) -> dict:
+    """``--set`` options for tracker ``name``: ``phd.p_miss=0.2`` goes to ``phd`` only; a bare
+    name goes to every tracker that has it (and must exist in at least one)."""
+    from pfscope.trackers.api import tracker_info
+    from pfscope.trackers.params import leaves
+
+    out = {}
+    for key, value in options.items():
+        head, dot, rest = key.partition(".")
+        if dot and head in _tracker_names():
+            if head == name:
+                out[rest] = value
+            continue
+        if n_trackers == 1:
+            out[key] = value
+            continue
+        leaf_names = {n.rsplit(".", 1)[-1] for n, _, _ in leaves(tracker_info(name).params)}
+        full_names = {n for n, _, _ in leaves(tracker_info(name).params)}
+        if key in leaf_names or key in full_names:
+            out[key] = value
+    return out
+
+
+def _tracker_names() -> set:
+    from pfscope.trackers.api import registry
+
+    return set(registry())

@@ -59,9 +59,24 @@ class MotTable:
         r = r[self.score[r] >= min_score]
         return Detections(self.boxes[r], self.score[r])
 
+    @property
+    def has_classes(self) -> bool:
+        """True for a gt in MOT16+ layout: every row has an integer class id in 1..13 (column 8)
+        and a visibility in [0, 1] (column 9). A MOT15 gt has -1 or world coordinates there
+        (or, converted, ``vis = -1``); an empty table has no classes."""
+        if not hasattr(self, "_has_classes"):
+            c, v = self.cls, self.vis
+            ok = bool(len(c)) and bool(np.all((c == np.round(c)) & (c >= 1) & (c <= 13))
+                                      and np.all((v >= 0) & (v <= 1)))
+            object.__setattr__(self, "_has_classes", ok)
+        return self._has_classes  # type: ignore[attr-defined]
+
     def ground_truth(self, frame: int) -> GroundTruth:
+        """The gt boxes of ``frame``: ``ignore`` where conf = 0, and the class ids when the
+        table :attr:`has_classes` (else ``cls`` is None)."""
         r = self.rows_at(frame)
-        return GroundTruth(self.id[r], self.boxes[r], self.score[r] == 0)
+        cls = self.cls[r].astype(np.int64) if self.has_classes else None
+        return GroundTruth(self.id[r], self.boxes[r], self.score[r] == 0, cls)
 
     def tracks(self, frame: int) -> TrackSet:
         r = self.rows_at(frame)
@@ -182,6 +197,26 @@ class TrackWriter:
             self._fh.write("".join(line + "\n" for line in lines))
 
     def close(self) -> None:
+        """The run finished: the file takes its final name."""
         if not self._fh.closed:
             self._fh.close()
             os.replace(self._tmp, self.path)
+
+    @property
+    def incomplete_path(self) -> Path:
+        return incomplete_path(self.path)
+
+    def abort(self) -> Path:
+        """The run failed: keep what was written as ``<name>.incomplete<suffix>``, never under
+        the final name (a previous good file there is left untouched)."""
+        if not self._fh.closed:
+            self._fh.close()
+        if self._tmp.exists():
+            os.replace(self._tmp, self.incomplete_path)
+        return self.incomplete_path
+
+
+def incomplete_path(path: str | os.PathLike) -> Path:
+    """``x.rrd`` → ``x.incomplete.rrd``: where a failed run's partial output goes."""
+    p = Path(path)
+    return p.with_name(f"{p.stem}.incomplete{p.suffix}")

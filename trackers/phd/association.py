@@ -29,7 +29,7 @@ Readings and choices (all constants are :class:`AssocParams` fields):
   ``σ_v1 = 0.03 w``, ``σ_v2 = 0.03 h``, ``σ_w = 0.1 w``, ``σ_h = 0.1 h``.  The acceleration noise
   is read as a piecewise-constant acceleration over each frame, ``x ← F x + G a`` with
   ``F = [[1, 1], [0, 1]]``, ``G = [c, 1]ᵀ`` per axis, ``c = accel_to_position = ½`` (dt²/2; the
-  same reading as :mod:`trackers.smc.motion`), so that ``σ_v`` is the std of the per-frame
+  same reading as :mod:`pfscope.trackers.phd.motion`), so that ``σ_v`` is the std of the per-frame
   velocity change.  Over a gap of ``i`` frames the mean is ``F^i x`` and the covariance
   ``Σ_{j<i} F^j Q F^jᵀ`` in closed form: position variance ``σ_v² Σ_{j<i} (j+c)²``
   ``= σ_v² [(i−1)i(2i−1)/6 + c i(i−1) + c² i]`` (``= σ_v² i(4i²−1)/12`` for ``c = ½``);
@@ -84,9 +84,9 @@ from scipy.optimize import linear_sum_assignment
 from scipy.stats import chi2
 
 from ..types import cxcywh_to_xywh
-from .filter import obs_std
+from ..params import param
+from .filter import STATE_DIM, obs_std
 
-STATE_DIM = 6
 #: Observable components of the state (y1, y2, w, h), maggio2007 §2 ``z = (y, w, h)``.
 OBS_INDEX = np.array([0, 1, 4, 5])
 
@@ -104,19 +104,25 @@ class AssocParams:
         ``σ^z_y = sigma_obs_pos_ratio · σ^z_{w,h}`` (§4: 0.15, 1.0 px, 1/2); the same formula as the
         filter's likelihood (:func:`trackers.phd.filter.obs_std`).
     speed_prior: std of an unknown velocity per axis, fraction of (w, h) per frame (ours).
-    accel_to_position: c in ``y ← y + v + c·a`` (½ = dt²/2; as :mod:`trackers.smc.motion`).
+    accel_to_position: c in ``y ← y + v + c·a`` (½ = dt²/2; as :mod:`pfscope.trackers.phd.motion`).
     """
 
-    depth: int = 50
-    min_length: int = 5
-    gate: float = 0.999
-    sigma_v: float = 0.03
-    sigma_size: float = 0.1
-    sigma_obs: float = 0.15
-    sigma_obs_min: float = 1.0
-    sigma_obs_pos_ratio: float = 0.5
-    speed_prior: float = 0.1
-    accel_to_position: float = 0.5
+    depth: int = param(50, "graph depth K in frames (a track survives gaps up to K)",
+                       paper="maggio2007 §4")
+    min_length: int = param(5, "tracks with fewer vertices are not reported",
+                            paper="maggio2007 §4")
+    gate: float = param(0.999, "chi-square probability of the edge gate (4 dof)")
+    sigma_v: float = param(0.03, "velocity noise std per frame, fraction of (w, h)",
+                           paper="maggio2007 §4")
+    sigma_size: float = param(0.1, "size noise std per frame, fraction of (w, h)",
+                              paper="maggio2007 §4")
+    sigma_obs: float = param(0.15, "estimate noise of w, h, fraction of the size",
+                             paper="maggio2007 §4")
+    sigma_obs_min: float = param(1.0, "floor of the estimate noise, pixels", paper="maggio2007 §4")
+    sigma_obs_pos_ratio: float = param(0.5, "σ^z_y = ratio · σ^z_{w,h}", paper="maggio2007 §4")
+    speed_prior: float = param(0.1, "std of an unknown velocity, fraction of (w, h) per frame "
+                                    "(not in paper)")
+    accel_to_position: float = param(0.5, "c in y ← y + v + c·a (dt²/2, as phd.motion)")
 
     def __post_init__(self):
         if int(self.depth) != self.depth or self.depth < 1:

@@ -85,7 +85,7 @@ def _distances(X: np.ndarray, centers: np.ndarray, params: PHDParams) -> np.ndar
     (``Σ x²/σ² − 2 Σ x c/σ² + Σ c²/σ²``) so one iteration is two (N,4)@(4,K) products; ``X``
     is expected centred near 0 (see :func:`kmeans_peaks`) to keep cancellation negligible."""
     C = centers[:, OBS_COLS]
-    inv = 1.0 / obs_std(centers[:, 4:6], params) ** 2            # (K, 4)
+    inv = 1.0 / obs_std(centers[:, 4:6], params.likelihood) ** 2            # (K, 4)
     d2 = (X * X) @ inv.T - 2.0 * X @ (C * inv).T + np.sum(C * C * inv, axis=1)[None, :]
     return np.maximum(d2, 0.0)
 

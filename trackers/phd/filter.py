@@ -51,14 +51,16 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from functools import lru_cache
+from typing import Optional, Protocol
 
 import numpy as np
-from scipy.stats import chi2
 
-from ..smc import motion
+from ..params import param, part, with_options
+from . import motion
 from ..smc.resampling import SCHEMES
 from ..smc.resampling import resample as _resample_set
 from ..smc.weights import ParticleSet, logsumexp
+from ..types import Frame
 
 #: Columns of the state that the detector observes: (y1, y2, w, h).
 OBS_COLS = (0, 1, 4, 5)
@@ -66,61 +68,125 @@ STATE_DIM = 6
 OBS_DIM = 4
 
 
-@dataclass(frozen=True)
-class PHDParams:
-    """Parameters of the particle PHD filter; defaults are maggio2007 §4 (or §2) unless noted."""
+def _check(obj, name: str, ok: bool, rule: str) -> None:
+    if not ok:
+        raise ValueError(f"{type(obj).__name__}.{name} must be {rule}, got {getattr(obj, name)!r}")
 
-    rho: float = 1500.0                 # particles per target, L_k = ρ M̂ (§2, §4)
-    j_max: int = 1000                   # newborn particles per detection at most (§4)
-    p_survival: float = 0.99            # e_{k|k-1} (§4)
-    p_miss: float = 0.05                # p_M, uniform (§4)
-    birth_intensity: float = 0.01       # targets per frame per detection (§4)
-    clutter_rate: float = 1.0           # clutter points per frame around a detection (§4)
-    clutter_gate: float = 0.99          # confidence of the ellipsoid V(z) in κ = rate / V (reading)
-    sigma_v: float = 0.03               # acceleration std / size (§4)
-    sigma_size: float = 0.1             # size-change std / size (§4)
-    accel_to_position: float = 0.5      # y += v + c·a (reading, see smc.motion)
-    sigma_obs: float = 0.15             # observation std of w, h / size (§4)
-    sigma_obs_min: float = 1.0          # floor of the size std, pixels (§4)
-    sigma_obs_pos_ratio: float = 0.5    # σ_y = σ_size_obs / 2 (§4)
-    obs_std_source: str = "detection"   # "detection" (§2) or "particle" (§4 w_{k-1}) sizes
-    gate: float = 0.99                  # confidence of the birth gate for M(z) (§2)
-    birth_allocation: str = "complement"  # J_z = J_max max(0, 1 - M(z)) (DESIGN) | "constant"
-    birth_spread: float = 1.0           # newborn (y, w, h) std / observation std (not in paper)
-    birth_speed_mean: float = 0.0       # newborn speed mean / sqrt(w h) per frame (not in paper)
-    birth_speed_std: float = 0.1        # newborn speed std / sqrt(w h) per frame (not in paper)
-    min_size: float = 1.0               # boxes are clipped to >= 1 px
-    resampling: str = "systematic"      # scheme, see trackers.smc.resampling.SCHEMES
-    min_particles: int = 1              # L_k lower bound (1: the mass is always preserved)
-    max_particles: int = 100_000        # L_k upper bound (≈ 66 targets at ρ = 1500)
+
+@dataclass(frozen=True)
+class MotionParams:
+    """Prediction: survival and the size-aware motion model (:mod:`.motion`)."""
+
+    p_survival: float = param(0.99, "survival probability e_{k|k-1}", paper="maggio2007 §4")
+    sigma_v: float = param(motion.SIGMA_V, "acceleration std per frame, as a fraction of w / h",
+                           paper="maggio2007 §4")
+    sigma_size: float = param(motion.SIGMA_SIZE, "size-change std per frame, fraction of w / h",
+                              paper="maggio2007 §4")
+    accel_to_position: float = param(motion.ACCEL_TO_POSITION,
+                                     "y += v + c·a: share of the acceleration reaching the "
+                                     "position within the frame (reading: dt²/2)")
+    min_size: float = param(motion.MIN_SIZE, "boxes are clipped to at least this many pixels")
 
     def __post_init__(self):
-        for name in ("p_survival", "p_miss"):
-            v = getattr(self, name)
-            if not 0.0 <= v <= 1.0:
-                raise ValueError(f"PHDParams.{name} must be in [0, 1], got {v}")
-        for name in ("clutter_gate", "gate"):
-            v = getattr(self, name)
-            if not 0.0 < v < 1.0:
-                raise ValueError(f"PHDParams.{name} must be in (0, 1), got {v}")
-        for name in ("rho", "birth_intensity", "sigma_obs", "sigma_obs_min",
-                     "sigma_obs_pos_ratio", "birth_spread", "min_size"):
-            if not getattr(self, name) > 0:
-                raise ValueError(f"PHDParams.{name} must be > 0, got {getattr(self, name)}")
-        for name in ("clutter_rate", "sigma_v", "sigma_size", "birth_speed_std", "j_max"):
-            if getattr(self, name) < 0:
-                raise ValueError(f"PHDParams.{name} must be >= 0, got {getattr(self, name)}")
-        if self.obs_std_source not in ("detection", "particle"):
-            raise ValueError(f"PHDParams.obs_std_source must be 'detection' or 'particle', "
-                             f"got {self.obs_std_source!r}")
-        if self.birth_allocation not in ("complement", "constant"):
-            raise ValueError(f"PHDParams.birth_allocation must be 'complement' or 'constant', "
-                             f"got {self.birth_allocation!r}")
-        if self.resampling not in SCHEMES:
-            raise ValueError(f"PHDParams.resampling must be one of {', '.join(SCHEMES)}, "
-                             f"got {self.resampling!r}")
-        if not 0 <= self.min_particles <= self.max_particles:
-            raise ValueError("PHDParams: need 0 <= min_particles <= max_particles")
+        _check(self, "p_survival", 0.0 <= self.p_survival <= 1.0, "in [0, 1]")
+        for name in ("sigma_v", "sigma_size"):
+            _check(self, name, getattr(self, name) >= 0, ">= 0")
+        _check(self, "min_size", self.min_size > 0, "> 0")
+
+
+@dataclass(frozen=True)
+class LikelihoodParams:
+    """Detection model: p_M and the Gaussian g(z|x) of maggio2007 §2/§4.  Its observation-noise
+    stds also size the birth gate, the clutter volume and the K-means distances."""
+
+    p_miss: float = param(0.05, "probability of missed detection p_M (uniform)",
+                          paper="maggio2007 §4")
+    sigma_obs: float = param(0.15, "observation std of w, h as a fraction of the size",
+                             paper="maggio2007 §4")
+    sigma_obs_min: float = param(1.0, "floor of the size std, pixels", paper="maggio2007 §4")
+    sigma_obs_pos_ratio: float = param(0.5, "σ_y = ratio · σ_size", paper="maggio2007 §4")
+    obs_std_source: str = param("detection", "size the stds by the 'detection' (§2) or by each "
+                                             "'particle' (§4 w_{k-1})")
+
+    def __post_init__(self):
+        _check(self, "p_miss", 0.0 <= self.p_miss <= 1.0, "in [0, 1]")
+        for name in ("sigma_obs", "sigma_obs_min", "sigma_obs_pos_ratio"):
+            _check(self, name, getattr(self, name) > 0, "> 0")
+        _check(self, "obs_std_source", self.obs_std_source in ("detection", "particle"),
+               "'detection' or 'particle'")
+
+
+@dataclass(frozen=True)
+class ClutterParams:
+    """κ(z), a density in observation space (DESIGN.md): rate / volume of a gate around z."""
+
+    clutter_rate: float = param(1.0, "clutter points per frame around a detection",
+                                paper="maggio2007 §4")
+    clutter_gate: float = param(0.99, "confidence of the ellipsoid V(z) in κ = rate / V "
+                                      "(reading)")
+
+    def __post_init__(self):
+        _check(self, "clutter_rate", self.clutter_rate >= 0, ">= 0")
+        _check(self, "clutter_gate", 0.0 < self.clutter_gate < 1.0, "in (0, 1)")
+
+
+@dataclass(frozen=True)
+class BirthParams:
+    """Newborn particles around the detections (maggio2007 §2, readings in the module doc)."""
+
+    j_max: int = param(1000, "newborn particles per detection at most", paper="maggio2007 §4")
+    birth_intensity: float = param(0.01, "targets per frame per detection (newborn mass)",
+                                   paper="maggio2007 §4")
+    gate: float = param(0.99, "confidence of the gate for M(z), the mass near z",
+                        paper="maggio2007 §2")
+    birth_allocation: str = param("complement", "'complement': J_z = J_max max(0, 1 − M(z)) "
+                                                "(DESIGN reading); 'constant': J_max")
+    birth_spread: float = param(1.0, "newborn (y, w, h) std / observation std (not in paper)")
+    birth_speed_mean: float = param(0.0, "newborn speed mean / sqrt(w h) per frame "
+                                         "(not in paper)")
+    birth_speed_std: float = param(0.1, "newborn speed std / sqrt(w h) per frame (not in paper)")
+
+    def __post_init__(self):
+        _check(self, "j_max", self.j_max >= 0, ">= 0")
+        _check(self, "birth_intensity", self.birth_intensity > 0, "> 0")
+        _check(self, "gate", 0.0 < self.gate < 1.0, "in (0, 1)")
+        _check(self, "birth_allocation", self.birth_allocation in ("complement", "constant"),
+               "'complement' or 'constant'")
+        _check(self, "birth_spread", self.birth_spread > 0, "> 0")
+        _check(self, "birth_speed_std", self.birth_speed_std >= 0, ">= 0")
+
+
+@dataclass(frozen=True)
+class ResamplingParams:
+    """L_k = ρ M̂ particles after each update, each weighing M̂ / L_k (maggio2007 §2)."""
+
+    rho: float = param(1500.0, "particles per target, L_k = ρ M̂", paper="maggio2007 §4")
+    resampling: str = param("systematic", f"scheme: {', '.join(SCHEMES)}")
+    min_particles: int = param(1, "L_k lower bound (1: the mass is always preserved)")
+    max_particles: int = param(100_000, "L_k upper bound, for memory (≈ 66 targets at ρ = 1500)")
+
+    def __post_init__(self):
+        _check(self, "rho", self.rho > 0, "> 0")
+        _check(self, "resampling", self.resampling in SCHEMES, f"one of {', '.join(SCHEMES)}")
+        _check(self, "min_particles", 0 <= self.min_particles <= self.max_particles,
+               "in [0, max_particles]")
+
+
+@dataclass(frozen=True)
+class PHDParams:
+    """The particle PHD filter, in parts; defaults are maggio2007 §4 (or §2) unless noted.
+    ``with_options(PHDParams(), {"p_miss": 0.2})`` or :meth:`of` set single fields."""
+
+    motion: MotionParams = part(MotionParams, "prediction: survival and motion model")
+    likelihood: LikelihoodParams = part(LikelihoodParams, "p_M and the Gaussian g(z|x)")
+    clutter: ClutterParams = part(ClutterParams, "clutter intensity κ(z)")
+    birth: BirthParams = part(BirthParams, "newborn particles")
+    resampling: ResamplingParams = part(ResamplingParams, "particle count after the update")
+
+    @classmethod
+    def of(cls, **options) -> "PHDParams":
+        """Defaults with some fields set by leaf name: ``PHDParams.of(p_miss=0.2, rho=500)``."""
+        return with_options(cls(), options)
 
 
 # ----------------------------------------------------------------------------- observation model
@@ -128,12 +194,14 @@ class PHDParams:
 @lru_cache(maxsize=32)
 def gate_threshold(confidence: float, dof: int = OBS_DIM) -> float:
     """Squared Mahalanobis radius of the ``confidence`` ellipsoid in ``dof`` dimensions."""
+    from scipy.stats import chi2  # scipy.stats is slow to import; only needed once per value
+
     return float(chi2.ppf(confidence, dof))
 
 
 def as_observations(Z) -> np.ndarray:
     """Check and return detections as (N_z, 4) float64 ``(y1, y2, w, h)``; accepts a
-    :class:`~trackers.types.Detections` (its ``observations()``) or an array."""
+    :class:`~pfscope.trackers.types.Detections` (its ``observations()``) or an array."""
     if hasattr(Z, "observations"):
         Z = Z.observations()
     z = np.asarray(Z, dtype=np.float64)
@@ -148,11 +216,11 @@ def as_observations(Z) -> np.ndarray:
     return z
 
 
-def obs_std(sizes: np.ndarray, params: PHDParams = PHDParams()) -> np.ndarray:
+def obs_std(sizes: np.ndarray, lk: LikelihoodParams = LikelihoodParams()) -> np.ndarray:
     """Observation-noise std ``(σ_y1, σ_y2, σ_w, σ_h)`` for boxes of ``sizes`` (..., 2) = (w, h):
     ``σ_w = max(0.15 w, 1)``, ``σ_h = max(0.15 h, 1)``, ``σ_y = σ_size / 2`` (maggio2007 §4)."""
-    s = np.maximum(params.sigma_obs * np.asarray(sizes, dtype=np.float64), params.sigma_obs_min)
-    return np.concatenate([params.sigma_obs_pos_ratio * s, s], axis=-1)
+    s = np.maximum(lk.sigma_obs * np.asarray(sizes, dtype=np.float64), lk.sigma_obs_min)
+    return np.concatenate([lk.sigma_obs_pos_ratio * s, s], axis=-1)
 
 
 def _mahalanobis2(states: np.ndarray, Z: np.ndarray, std: np.ndarray) -> np.ndarray:
@@ -163,44 +231,61 @@ def _mahalanobis2(states: np.ndarray, Z: np.ndarray, std: np.ndarray) -> np.ndar
     return np.einsum("ijk,ijk->ij", q, q)
 
 
-def log_likelihood(states: np.ndarray, Z: np.ndarray, params: PHDParams = PHDParams()) -> np.ndarray:
+def log_likelihood(states: np.ndarray, Z: np.ndarray,
+                   lk: LikelihoodParams = LikelihoodParams()) -> np.ndarray:
     """``log g(z | x)`` as an (N, N_z) matrix: Gaussian on (y1, y2, w, h) (maggio2007 §2, §4)."""
-    if params.obs_std_source == "detection":
-        std = obs_std(Z[:, 2:4], params)                        # (N_z, 4)
+    if lk.obs_std_source == "detection":
+        std = obs_std(Z[:, 2:4], lk)                            # (N_z, 4)
         log_norm = np.log(std).sum(-1)[None, :]
     else:
-        std = np.broadcast_to(obs_std(states[:, None, 4:6], params),
+        std = np.broadcast_to(obs_std(states[:, None, 4:6], lk),
                               (len(states), len(Z), OBS_DIM))   # (N, N_z, 4)
         log_norm = np.log(std).sum(-1)
     d2 = _mahalanobis2(states, Z, std)
     return -0.5 * d2 - log_norm - 0.5 * OBS_DIM * math.log(2 * math.pi)
 
 
-def log_clutter_density(Z: np.ndarray, params: PHDParams = PHDParams()) -> np.ndarray:
+class Likelihood(Protocol):
+    """The single-target likelihood g(z|x) the PHD update uses (maggio2007 eq. (5), feng2015
+    eqs. (11)–(12)): ``log_g`` returns the (N particles × N_z) log-likelihood matrix.  ``frame``
+    gives image-based likelihoods (feng2015's DBN score) the pixels; the Gaussian ignores it."""
+
+    def log_g(self, states: np.ndarray, Z: np.ndarray, frame: Optional[Frame]) -> np.ndarray: ...
+
+
+@dataclass(frozen=True)
+class GaussianLikelihood:
+    """maggio2007's g(z|x): a Gaussian on (y1, y2, w, h), stds proportional to the box size."""
+
+    params: LikelihoodParams = LikelihoodParams()
+
+    def log_g(self, states: np.ndarray, Z: np.ndarray, frame: Optional[Frame] = None) -> np.ndarray:
+        return log_likelihood(states, Z, self.params)
+
+
+def log_clutter_density(Z: np.ndarray, cl: ClutterParams = ClutterParams(),
+                        lk: LikelihoodParams = LikelihoodParams()) -> np.ndarray:
     """``log κ(z)`` (N_z,): ``clutter_rate`` points spread over the ``clutter_gate`` confidence
     ellipsoid of the observation noise around z (reading of maggio2007 §4, module docstring)."""
-    std = obs_std(Z[:, 2:4], params)
-    r2 = gate_threshold(params.clutter_gate, OBS_DIM)
+    std = obs_std(Z[:, 2:4], lk)
+    r2 = gate_threshold(cl.clutter_gate, OBS_DIM)
     d = OBS_DIM
     log_unit_ball = 0.5 * d * math.log(math.pi) - math.lgamma(0.5 * d + 1)
     log_volume = log_unit_ball + 0.5 * d * math.log(r2) + np.log(std).sum(-1)
-    with np.errstate(divide="ignore"):
-        return math.log(params.clutter_rate) - log_volume if params.clutter_rate > 0 \
-            else np.full(len(Z), -np.inf)
+    if cl.clutter_rate > 0:
+        return math.log(cl.clutter_rate) - log_volume
+    return np.full(len(Z), -np.inf)
 
 
 # ----------------------------------------------------------------------------- the four stages
 
-def predict(ps: ParticleSet, params: PHDParams, rng: np.random.Generator) -> ParticleSet:
+def predict(ps: ParticleSet, mp: MotionParams, rng: np.random.Generator) -> ParticleSet:
     """Persistent particles at k: ``x ~ f(.|x_{k-1})`` (q = f, so eq. (4) reduces to the
     survival factor, no spawning β), ``ω_{k|k-1} = e · ω_{k-1}`` (eqs. (1), (2), (4))."""
-    states = motion.propagate(ps.states, rng, sigma_v=params.sigma_v,
-                              sigma_size=params.sigma_size,
-                              accel_to_position=params.accel_to_position,
-                              min_size=params.min_size)
-    with np.errstate(divide="ignore"):
-        log_e = math.log(params.p_survival) if params.p_survival > 0 else -np.inf
-    return ParticleSet(states, ps.log_weights + log_e)
+    states = motion.propagate(ps.states, rng, sigma_v=mp.sigma_v, sigma_size=mp.sigma_size,
+                              accel_to_position=mp.accel_to_position, min_size=mp.min_size)
+    log_e = math.log(mp.p_survival) if mp.p_survival > 0 else -np.inf
+    return ParticleSet(states, ps.log_weights + log_e, ps.labels, ps.extra)
 
 
 @dataclass(frozen=True)
@@ -217,14 +302,15 @@ class BirthResult:
     det_index: np.ndarray
 
 
-def mass_near(predicted: ParticleSet, Z: np.ndarray, params: PHDParams = PHDParams()) -> np.ndarray:
+def mass_near(predicted: ParticleSet, Z: np.ndarray, bp: BirthParams = BirthParams(),
+              lk: LikelihoodParams = LikelihoodParams()) -> np.ndarray:
     """M(z) (N_z,): predicted mass inside the ``gate`` confidence ellipsoid of the observation
     noise around each z (maggio2007 §2, "cumulative masses M(z_{k,j}) of the propagated
     particles that are inside the 99% confidence interval")."""
     if len(predicted) == 0 or len(Z) == 0:
         return np.zeros(len(Z))
-    d2 = _mahalanobis2(predicted.states, Z, obs_std(Z[:, 2:4], params))
-    inside = d2 <= gate_threshold(params.gate, OBS_DIM)
+    d2 = _mahalanobis2(predicted.states, Z, obs_std(Z[:, 2:4], lk))
+    inside = d2 <= gate_threshold(bp.gate, OBS_DIM)
     return predicted.weights @ inside
 
 
@@ -233,28 +319,29 @@ def birth(predicted: ParticleSet, Z, params: PHDParams, rng: np.random.Generator
     docstring): ``J_z = J_max max(0, 1 − M(z))``, each detection's newborn carrying total weight
     ``birth_intensity``.  Draw order: (J, 4) normals, J direction uniforms, J speed normals."""
     Z = as_observations(Z)
-    m_near = mass_near(predicted, Z, params)
-    if params.birth_allocation == "complement":
-        j = np.rint(params.j_max * np.maximum(0.0, 1.0 - m_near)).astype(np.int64)
+    bp, lk = params.birth, params.likelihood
+    m_near = mass_near(predicted, Z, bp, lk)
+    if bp.birth_allocation == "complement":
+        j = np.rint(bp.j_max * np.maximum(0.0, 1.0 - m_near)).astype(np.int64)
     else:
-        j = np.full(len(Z), int(params.j_max), dtype=np.int64)
+        j = np.full(len(Z), int(bp.j_max), dtype=np.int64)
     det = np.repeat(np.arange(len(Z), dtype=np.int64), j)
     n = len(det)
     zr = Z[det]
-    std = obs_std(zr[:, 2:4], params)
+    std = obs_std(zr[:, 2:4], lk)
     eps = rng.standard_normal((n, OBS_DIM))
     theta = rng.uniform(0.0, 2.0 * math.pi, n)
     speed_n = rng.standard_normal(n)
-    obs = zr + params.birth_spread * std * eps
+    obs = zr + bp.birth_spread * std * eps
     scale = np.sqrt(zr[:, 2] * zr[:, 3])
-    speed = (params.birth_speed_mean + params.birth_speed_std * speed_n) * scale
+    speed = (bp.birth_speed_mean + bp.birth_speed_std * speed_n) * scale
     states = np.empty((n, STATE_DIM))
     states[:, OBS_COLS] = obs
     states[:, 2] = speed * np.cos(theta)
     states[:, 3] = speed * np.sin(theta)
-    states[:, 4:6] = np.maximum(states[:, 4:6], params.min_size)
+    states[:, 4:6] = np.maximum(states[:, 4:6], params.motion.min_size)
     # eq. (4), newborn branch, with γ_z ∝ p_z: every newborn of z weighs birth_intensity / J_z.
-    log_w = math.log(params.birth_intensity) - np.log(np.maximum(j, 1))[det]
+    log_w = math.log(bp.birth_intensity) - np.log(np.maximum(j, 1))[det]
     return BirthResult(ParticleSet(states, log_w), j, m_near, det)
 
 
@@ -274,45 +361,55 @@ class UpdateResult:
     miss_mass: float
 
 
-def update(particles: ParticleSet, Z, params: PHDParams) -> UpdateResult:
-    """Eq. (5): ``ω_k = [p_M + Σ_z ψ_z(x) / (κ(z) + C(z))] ω_{k|k-1}`` with
-    ``ψ_z = (1 − p_M) g(z|x)`` and ``C(z) = Σ_j ψ_z(x_j) ω_j``, all in log space over an
-    (N, N_z) matrix so that far-away particles underflow gracefully."""
-    Z = as_observations(Z)
+def update(particles: ParticleSet, log_g: np.ndarray, log_kappa: np.ndarray,
+           p_miss: float) -> UpdateResult:
+    """Eq. (5) of maggio2007 (= eqs. (11)–(12) of feng2015 with their g):
+    ``ω_k = [p_M + Σ_z ψ_z(x) / (κ(z) + C(z))] ω_{k|k-1}`` with ``ψ_z = (1 − p_M) g(z|x)`` and
+    ``C(z) = Σ_j ψ_z(x_j) ω_j``, all in log space so far-away particles underflow gracefully.
+
+    ``log_g`` (N, N_z) is ``log g(z|x)`` from a :class:`Likelihood` (``-inf`` where a particle
+    cannot have produced z); ``log_kappa`` (N_z,) is ``log κ(z)``; the filter never knows which
+    likelihood it runs (like nchopin/particles' ``logG``)."""
     lw = particles.log_weights
-    with np.errstate(divide="ignore"):
-        log_pm = math.log(params.p_miss) if params.p_miss > 0 else -np.inf
-        log_pd = math.log1p(-params.p_miss) if params.p_miss < 1 else -np.inf
+    log_g = np.asarray(log_g, dtype=np.float64)
+    log_kappa = np.asarray(log_kappa, dtype=np.float64).reshape(-1)
+    n_z = len(log_kappa)
+    if log_g.shape != (len(particles), n_z):
+        raise ValueError(f"update: log_g must be (N particles, N_z) = ({len(particles)}, {n_z}), "
+                         f"got {log_g.shape}")
+    if not 0.0 <= p_miss <= 1.0:
+        raise ValueError(f"update: p_miss must be in [0, 1], got {p_miss}")
+    log_pm = math.log(p_miss) if p_miss > 0 else -np.inf
+    log_pd = math.log1p(-p_miss) if p_miss < 1 else -np.inf
     m_pred = particles.mass
-    if len(Z) == 0 or len(particles) == 0:
-        out = ParticleSet(particles.states, lw + log_pm)
-        return UpdateResult(out, np.zeros(len(Z)), np.exp(log_clutter_density(Z, params)),
-                            np.zeros(len(Z)), params.p_miss * m_pred)
-    log_psi = log_pd + log_likelihood(particles.states, Z, params)     # (N, N_z)
+    kappa = np.exp(log_kappa)
+    if n_z == 0 or len(particles) == 0:
+        out = ParticleSet(particles.states, lw + log_pm, particles.labels, particles.extra)
+        return UpdateResult(out, np.zeros(n_z), kappa, np.zeros(n_z), p_miss * m_pred)
+    log_psi = log_pd + log_g                                            # (N, N_z)
     log_c = logsumexp(log_psi + lw[:, None], axis=0)                    # (N_z,)
-    log_kappa = log_clutter_density(Z, params)
     log_den = np.logaddexp(log_kappa, log_c)
     # κ = 0 and C = 0 (no clutter model, every particle dead): ψ is 0 for all, so the term is 0.
     log_den = np.where(np.isfinite(log_den), log_den, 0.0)
-    terms = np.empty((len(particles), len(Z) + 1))
+    terms = np.empty((len(particles), n_z + 1))
     terms[:, 0] = log_pm
     terms[:, 1:] = log_psi - log_den[None, :]
     new_lw = lw + logsumexp(terms, axis=1)
-    return UpdateResult(ParticleSet(particles.states, new_lw), np.exp(log_c), np.exp(log_kappa),
-                        np.exp(log_c - log_den), params.p_miss * m_pred)
+    return UpdateResult(ParticleSet(particles.states, new_lw, particles.labels, particles.extra),
+                        np.exp(log_c), kappa, np.exp(log_c - log_den), p_miss * m_pred)
 
 
-def n_resample(mass: float, params: PHDParams) -> int:
+def n_resample(mass: float, rp: ResamplingParams) -> int:
     """``L_k = round(ρ M̂_{k|k})`` clipped to ``[min_particles, max_particles]`` (§2)."""
     if not mass > 0:
         return 0
-    return int(np.clip(round(params.rho * mass), params.min_particles, params.max_particles))
+    return int(np.clip(round(rp.rho * mass), rp.min_particles, rp.max_particles))
 
 
-def resample(ps: ParticleSet, params: PHDParams, rng: np.random.Generator) -> ParticleSet:
+def resample(ps: ParticleSet, rp: ResamplingParams, rng: np.random.Generator) -> ParticleSet:
     """Draw L_k particles from ``ω̃_k / M̂_{k|k}`` and give each weight ``M̂_{k|k} / L_k`` so the
     total mass is preserved (maggio2007 §2)."""
-    return _resample_set(ps, n_resample(ps.mass, params), rng, params.resampling)
+    return _resample_set(ps, n_resample(ps.mass, rp), rng, rp.resampling)
 
 
 # ----------------------------------------------------------------------------- the stateful filter
@@ -336,14 +433,18 @@ class PHDStepResult:
 
 
 class PHDFilter:
-    """Stateful wrapper over :func:`predict`, :func:`birth`, :func:`update`, :func:`resample`.
+    """The particle PHD filter composed from parts: the motion model (``params.motion``), the
+    likelihood (any :class:`Likelihood`, default :class:`GaussianLikelihood`), the clutter
+    model, the birth and the resampler — stateful only in its particles.
 
     ``rng`` is required (same seed, same detections → identical particles)."""
 
-    def __init__(self, params: PHDParams | None = None, rng: np.random.Generator | None = None):
+    def __init__(self, params: PHDParams | None = None, rng: np.random.Generator | None = None,
+                 likelihood: Likelihood | None = None):
         if rng is None:
             raise ValueError("PHDFilter needs an explicit numpy.random.Generator")
         self.params = params if params is not None else PHDParams()
+        self.likelihood: Likelihood = likelihood or GaussianLikelihood(self.params.likelihood)
         self.rng = rng
         self.particles = ParticleSet.empty(STATE_DIM)
 
@@ -354,14 +455,18 @@ class PHDFilter:
     def reset(self) -> None:
         self.particles = ParticleSet.empty(STATE_DIM)
 
-    def step(self, Z) -> PHDStepResult:
+    def step(self, Z, frame: Optional[Frame] = None) -> PHDStepResult:
         """One frame: predict → birth → update (eq. (5)) → resample.  ``Z`` is (N_z, 4)
-        ``(y1, y2, w, h)`` or a :class:`~trackers.types.Detections`."""
+        ``(y1, y2, w, h)`` or a :class:`~pfscope.trackers.types.Detections`; ``frame`` is handed
+        to the likelihood (image-based likelihoods need the pixels)."""
         Z = as_observations(Z)
         p = self.params
-        predicted = predict(self.particles, p, self.rng)
+        predicted = predict(self.particles, p.motion, self.rng)
         born = birth(predicted, Z, p, self.rng)
-        updated = update(predicted.concat(born.particles), Z, p)
-        resampled = resample(updated.particles, p, self.rng)
+        candidates = predicted.concat(born.particles)
+        log_g = self.likelihood.log_g(candidates.states, Z, frame)
+        log_kappa = log_clutter_density(Z, p.clutter, p.likelihood)
+        updated = update(candidates, log_g, log_kappa, p.likelihood.p_miss)
+        resampled = resample(updated.particles, p.resampling, self.rng)
         self.particles = resampled
         return PHDStepResult(Z, predicted, born, updated, resampled, updated.particles.mass)

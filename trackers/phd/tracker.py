@@ -1,245 +1,245 @@
-"""PHD-MT and MT — the two trackers of maggio2007 (§2–§4), wired stage by stage to an observer.
+"""PHD-MT and MT — the two trackers of maggio2007 (§2–§4), with every stage in the result.
 
 ``PHDTracker`` (PHD-MT): detections → particle PHD filter (predict, birth, update eq. (5),
 resample) → modified K-means peaks (§3) → graph-matching association (§3) → tracks.
 ``MTTracker`` (MT, the paper's baseline): the same association run directly on the detections.
 
-Every stage is reported to the observer under ``phd/...`` and ``assoc/...`` paths, after
-``obs.stage(name)`` so a recorder can place it on a ``stage`` timeline:
+Each step returns its stage data (:mod:`pfscope.trackers.report`), paths under ``phd/`` and
+``assoc/``:
 
 ====================  ==========  =========================================================
-stage                 level       what
+stage                 level       items
 ====================  ==========  =========================================================
-predict               particles   ``phd/particles/predicted`` (colour = weight)
-birth                 particles   ``phd/particles/birth`` (colour = detection it came from)
-birth                 clusters    ``phd/birth/detections`` boxes labelled J_z and M(z)
-update                particles   ``phd/particles/updated`` (colour = weight)
-update                clusters    ``phd/update/detections`` labelled C/(κ+C): how much mass
-                                  each detection won (≈0 for isolated clutter)
-resample              particles   ``phd/particles/resampled``
-cluster               particles   ``phd/clusters/members`` (colour = cluster)
-cluster               clusters    ``phd/clusters/kept`` / ``phd/clusters/dropped`` boxes with masses
-associate             clusters    ``assoc/edges/candidates``, ``assoc/edges/chosen``,
-                                  ``assoc/vertices`` (tentative and confirmed ids)
-(all)                 tracks      scalars ``phd/mass``, ``phd/particles/count``,
-                                  ``phd/birth/count``, ``assoc/tracks/live``; text events
+predict               particles   Points ``phd/particles/predicted`` (weights)
+birth                 particles   Points ``phd/particles/birth`` (ids = detection)
+birth                 clusters    Boxes ``phd/birth/detections`` values ``J`` (J_z), ``M``
+                                  (mass near z)
+update                particles   Points ``phd/particles/updated`` (weights)
+update                clusters    Boxes ``phd/update/detections`` value ``won``: C/(κ+C),
+                                  how much mass each detection won (≈0 for isolated clutter)
+resample              particles   Points ``phd/particles/resampled`` (weights)
+cluster               particles   Points ``phd/clusters/members`` (ids = cluster)
+cluster               clusters    Boxes ``phd/clusters/kept`` / ``phd/clusters/dropped``,
+                                  value ``m`` (mass)
+associate             clusters    Segments ``assoc/edges/candidates`` / ``assoc/edges/chosen``
+                                  (values gap, weight, log f), Boxes ``assoc/vertices``
+                                  (ids = track, values length, confirmed)
+(all)                 tracks      Scalars ``phd/mass``, ``phd/particles/count``,
+                                  ``phd/birth/count``, ``phd/clusters/kept``,
+                                  ``assoc/tracks/live``; Events ``assoc`` (confirmed, ended)
 ====================  ==========  =========================================================
 
-Output: :meth:`step` returns the confirmed tracks known at frame k (zero lag, what the live
-view shows).  The tracks file uses the association's bounded-lag rows (:meth:`pop_final`,
-:meth:`finish`), which also report the first ``min_length − 1`` frames of every track.
+Output: :attr:`StepResult.tracks` are the confirmed tracks known at frame k (zero lag, what the
+live view shows).  :attr:`StepResult.rows` are the association's bounded-lag rows for the
+tracks file, which also report the first ``min_length − 1`` frames of every track;
+:meth:`finish` returns the rest at the end of a sequence.
 """
 
 from __future__ import annotations
 
-from dataclasses import asdict, fields
+from dataclasses import dataclass
+from typing import Optional
 
 import numpy as np
 
-from ..observer import NullObserver, Observer
+from ..api import Rows, StepResult, register
+from ..params import param, part, to_dict
+from ..report import Boxes, Points, Segments, StageLog
 from ..types import Detections, Frame, TrackSet, xywh_to_cxcywh
 from .association import AssocParams, AssocResult, FinalRows, GraphAssociator
-from .clustering import kmeans_peaks
-from .filter import PHDFilter, PHDParams
-
-STAGE_NAMES = ("predict", "birth", "update", "resample", "cluster", "associate")
+from .clustering import Clusters, kmeans_peaks
+from .filter import STATE_DIM, PHDFilter, PHDParams, PHDStepResult
 
 
-def _split_options(options: dict, *dataclasses) -> list[dict]:
-    """Route ``name=value`` options to every dataclass that has the field (the motion noise
-    ``sigma_v``/``sigma_size`` is shared by the filter and the association); unknown names fail."""
-    out = [dict() for _ in dataclasses]
-    for key, value in options.items():
-        hit = False
-        for i, dc in enumerate(dataclasses):
-            if key in {f.name for f in fields(dc)}:
-                out[i][key] = value
-                hit = True
-        if not hit:
-            names = sorted({f.name for dc in dataclasses for f in fields(dc)})
-            raise ValueError(f"unknown tracker option {key!r}; known: {', '.join(names)}")
-    return out
+@dataclass(frozen=True)
+class ClusterParams:
+    """Peak extraction (maggio2007 §3)."""
+
+    T: float = param(0.6, "cluster mass threshold: lighter clusters are dropped",
+                     paper="maggio2007 §4")
+    split_rule: str = param("guarded", "'guarded' (a split must leave both halves >= T) or "
+                                       "'literal' (§3 as written); see phd.clustering")
+
+    def __post_init__(self):
+        if not self.T >= 0:
+            raise ValueError(f"ClusterParams.T must be >= 0, got {self.T}")
+        if self.split_rule not in ("guarded", "literal"):
+            raise ValueError(f"ClusterParams.split_rule must be 'guarded' or 'literal', "
+                             f"got {self.split_rule!r}")
 
 
-def _rows_to_trackset(rows: FinalRows) -> TrackSet:
-    return TrackSet(rows.ids, rows.boxes)
+@dataclass(frozen=True)
+class PHDTrackerParams:
+    """PHD-MT: the filter's parts, the peak extraction and the association."""
+
+    filter: PHDParams = part(PHDParams, "particle PHD filter")
+    clusters: ClusterParams = part(ClusterParams, "modified K-means peaks")
+    assoc: AssocParams = part(AssocParams, "graph-matching association")
+
+
+@dataclass(frozen=True)
+class MTParams:
+    """MT: the association alone."""
+
+    assoc: AssocParams = part(AssocParams, "graph-matching association")
+
+
+def _rows(finalised: tuple[FinalRows, ...]) -> Rows:
+    return [(r.frame, TrackSet(r.ids, r.boxes)) for r in finalised]
 
 
 class _AssociatingTracker:
-    """What PHD-MT and MT share: the associator, its instrumentation and the output."""
+    """What PHD-MT and MT share: the associator, its stage data and the output."""
 
-    name = "base"
+    name: str
+    needs_detections = True
+    needs_image = False
 
     def __init__(self, assoc: AssocParams):
         self.associator = GraphAssociator(assoc)
-        self._final: list[tuple[int, TrackSet]] = []
         self._announced: set[int] = set()
 
-    def _associate(self, frame: Frame, states: np.ndarray, obs: Observer) -> TrackSet:
-        obs.stage("associate")
+    def _associate(self, frame: Frame, states: np.ndarray, log: StageLog) -> StepResult:
+        log.stage("associate")
         res = self.associator.step(frame.index, states)
-        self._final.extend((r.frame, _rows_to_trackset(r)) for r in res.finalised)
-        self._report_association(frame, res, obs)
+        self._report_association(frame, res, log)
         keep = res.confirmed
-        return TrackSet(res.ids[keep], res.boxes[keep])
+        return StepResult(TrackSet(res.ids[keep], res.boxes[keep]), _rows(res.finalised),
+                          log.result())
 
-    def _report_association(self, frame: Frame, res: AssocResult, obs: Observer) -> None:
-        obs.scalar("assoc/tracks/live", self.associator.n_live)
+    def _report_association(self, frame: Frame, res: AssocResult, log: StageLog) -> None:
+        log.scalar("assoc/tracks/live", self.associator.n_live)
         for tid in res.ended.tolist():
             if tid in self._announced:
-                obs.text("assoc", f"frame {frame.index}: track {tid} ended "
-                                  f"(unseen for more than K={self.associator.params.depth} frames)")
+                log.event("assoc", f"frame {frame.index}: track {tid} ended "
+                                   f"(unseen for more than K={self.associator.params.depth} frames)")
                 self._announced.discard(tid)
-        new_confirmed = [int(t) for t, c in zip(res.ids, res.confirmed)
-                         if c and int(t) not in self._announced]
-        for tid in new_confirmed:
-            self._announced.add(tid)
-            obs.text("assoc", f"frame {frame.index}: track {tid} confirmed "
-                              f"({self.associator.params.min_length} vertices)")
-        if not obs.wants("clusters"):
+        for tid, confirmed in zip(res.ids.tolist(), res.confirmed.tolist()):
+            if confirmed and tid not in self._announced:
+                self._announced.add(tid)
+                log.event("assoc", f"frame {frame.index}: track {tid} confirmed "
+                                   f"({self.associator.params.min_length} vertices)")
+        if not log.wants("clusters"):
             return
         dst = res.states[res.edges_dst_index, :2] if len(res.edges_dst_index) else np.zeros((0, 2))
         src = res.edges_src[:, :2]
-        cand = ~res.chosen
-        obs.segments("assoc/edges/candidates", src[cand], dst[cand], radii=0.5,
-                     colors=(170, 170, 170, 140),
-                     labels=[f"gap {g} w {w:.1f}" for g, w in zip(res.edges_gap[cand],
-                                                                  res.edges_weight[cand])]
-                     if cand.sum() <= 60 else None)
-        ch = res.chosen
-        obs.segments("assoc/edges/chosen", src[ch], dst[ch], class_ids=res.edges_src_id[ch],
-                     radii=1.5, labels=[f"{i}: gap {g}, log f {lg:.1f}" for i, g, lg in zip(
-                         res.edges_src_id[ch], res.edges_gap[ch], res.edges_gain[ch])])
-        labels = [f"{i}{'' if c else '?'} (len {n})"
-                  for i, c, n in zip(res.ids, res.confirmed, res.lengths)]
-        obs.boxes("assoc/vertices", res.boxes, class_ids=res.ids, labels=labels)
+        cand, ch = ~res.chosen, res.chosen
+        log.add(Segments("assoc/edges/candidates", src[cand], dst[cand], role="candidate",
+                         ids=res.edges_src_id[cand], id_kind="track",
+                         values={"gap": res.edges_gap[cand], "weight": res.edges_weight[cand]}))
+        log.add(Segments("assoc/edges/chosen", src[ch], dst[ch], ids=res.edges_src_id[ch],
+                         id_kind="track", values={"gap": res.edges_gap[ch],
+                                                  "log f": res.edges_gain[ch]}))
+        log.add(Boxes("assoc/vertices", res.boxes, ids=res.ids, id_kind="track",
+                      values={"length": res.lengths, "confirmed": res.confirmed}))
 
-    # -- output for the tracks file -------------------------------------------------------
-    def pop_final(self) -> list[tuple[int, TrackSet]]:
-        """Rows finalised since the last call (bounded lag of ``min_length − 1`` frames)."""
-        out, self._final = self._final, []
-        return out
-
-    def finish(self) -> list[tuple[int, TrackSet]]:
-        """End of sequence: everything not yet finalised."""
-        out = self.pop_final()
-        out.extend((r.frame, _rows_to_trackset(r)) for r in self.associator.flush())
-        return out
+    def finish(self) -> Rows:
+        """End of sequence: every row not yet finalised."""
+        return _rows(self.associator.flush())
 
 
-
+@register(presets={"paper": PHDTrackerParams()})
 class PHDTracker(_AssociatingTracker):
-    """PHD-MT (maggio2007): particle PHD filter + modified K-means + graph matching.
-
-    Options: any field of :class:`~trackers.phd.filter.PHDParams` (``rho``, ``p_miss`` ...) or
-    :class:`~trackers.phd.association.AssocParams` (``depth``, ``min_length`` ...), plus
-    ``T`` (cluster mass threshold, 0.6) and ``split_rule`` (see :func:`kmeans_peaks`)."""
+    """PHD-MT: particle PHD filter + modified K-means peaks + graph-matching association."""
 
     name = "phd"
+    paper = "maggio2007"
+    stages = ("predict", "birth", "update", "resample", "cluster", "associate")
+    Params = PHDTrackerParams
 
-    def __init__(self, rng: np.random.Generator, T: float = 0.6, split_rule: str = "guarded",
-                 **options):
-        phd_kw, assoc_kw = _split_options(options, PHDParams, AssocParams)
-        self.params = PHDParams(**phd_kw)
-        super().__init__(AssocParams(**assoc_kw))
-        self.T = float(T)
-        self.split_rule = split_rule
-        self.filter = PHDFilter(self.params, rng)
+    def __init__(self, params: Optional[PHDTrackerParams] = None, *,
+                 rng: np.random.Generator, likelihood=None):
+        self.params = params if params is not None else PHDTrackerParams()
+        super().__init__(self.params.assoc)
+        self.filter = PHDFilter(self.params.filter, rng, likelihood=likelihood)
 
     def config(self) -> dict:
-        return {"tracker": self.name, "phd": asdict(self.params),
-                "assoc": asdict(self.associator.params), "T": self.T,
-                "split_rule": self.split_rule}
+        return {"tracker": self.name, "params": to_dict(self.params)}
 
-    def views(self):
-        """Viewer layout hint: (2D views, plots) as engine paths (no Rerun here)."""
-        return ([("Tracks", ["tracks/**"]),
-                 ("Particles", ["phd/particles/updated", "tracks/**"]),
-                 ("Birth & update", ["phd/particles/birth", "phd/birth/**", "phd/update/**"]),
-                 ("Clusters", ["phd/clusters/**"]),
-                 ("Association", ["assoc/**", "tracks/**"])],
-                [("PHD mass", ["phd/mass", "phd/clusters/kept", "tracks/count",
-                               "detections/count"]),
-                 ("Particles", ["phd/particles/count", "phd/birth/count"])])
+    def step(self, frame: Frame, detections: Optional[Detections],
+             level: Optional[str] = None) -> StepResult:
+        dets = detections if detections is not None else Detections.empty()
+        log = StageLog(self.stages, level)
+        r = self.filter.step(dets, frame)
+        cp = self.params.clusters
+        clusters = kmeans_peaks(r.resampled, r.observations, cp.T, params=self.params.filter,
+                                split_rule=cp.split_rule)
+        self._report_filter(dets, r, clusters, log)
+        return self._associate(frame, clusters.kept_centers, log)
 
-    def step(self, frame: Frame, detections: Detections, obs: Observer = NullObserver()) -> TrackSet:
-        r = self.filter.step(detections)
-        clusters = kmeans_peaks(r.resampled, r.observations, self.T, params=self.params,
-                                split_rule=self.split_rule)
-        self._report_filter(detections, r, clusters, obs)
-        return self._associate(frame, clusters.kept_centers, obs)
-
-    def _report_filter(self, detections: Detections, r, clusters, obs: Observer) -> None:
-        """Log every stage of the frame, each after ``obs.stage`` (computed first, so the
-        NullObserver path costs nothing but the scalars' function calls)."""
-        want_p, want_c = obs.wants("particles"), obs.wants("clusters")
-        obs.stage("predict")
+    def _report_filter(self, detections: Detections, r: PHDStepResult, clusters: Clusters,
+                       log: StageLog) -> None:
+        """The filter's and K-means' stage data (arrays the step computed anyway)."""
+        want_p, want_c = log.wants("particles"), log.wants("clusters")
+        log.stage("predict")
         if want_p:
-            obs.points("phd/particles/predicted", r.predicted.states[:, :2],
-                       weights=r.predicted.weights)
+            log.add(Points("phd/particles/predicted", r.predicted.states[:, :2],
+                           weights=r.predicted.weights))
 
-        obs.stage("birth")
+        log.stage("birth")
         born = r.birth
-        obs.scalar("phd/birth/count", len(born.particles))
+        log.scalar("phd/birth/count", len(born.particles))
         if want_p:
-            obs.points("phd/particles/birth", born.particles.states[:, :2],
-                       class_ids=born.det_index)
+            log.add(Points("phd/particles/birth", born.particles.states[:, :2],
+                           ids=born.det_index, id_kind="detection"))
         if want_c:
-            obs.boxes("phd/birth/detections", detections.boxes, labels=[
-                f"J={j} M={m:.2f}" for j, m in zip(born.j_per_det, born.mass_near)],
-                colors=(255, 140, 0, 255))
+            log.add(Boxes("phd/birth/detections", detections.boxes, role="detection",
+                          values={"J": born.j_per_det, "M": born.mass_near}))
 
-        obs.stage("update")
+        log.stage("update")
         up = r.updated
-        obs.scalar("phd/mass", up.particles.mass)
+        log.scalar("phd/mass", up.particles.mass)
         if want_p:
-            obs.points("phd/particles/updated", up.particles.states[:, :2],
-                       weights=up.particles.weights)
+            log.add(Points("phd/particles/updated", up.particles.states[:, :2],
+                           weights=up.particles.weights))
         if want_c:
-            obs.boxes("phd/update/detections", detections.boxes, labels=[
-                f"won {m:.2f}" for m in up.per_det_mass], colors=(255, 90, 90, 255))
+            log.add(Boxes("phd/update/detections", detections.boxes, role="detection",
+                          values={"won": up.per_det_mass}))
 
-        obs.stage("resample")
-        obs.scalar("phd/particles/count", len(r.resampled))
+        log.stage("resample")
+        log.scalar("phd/particles/count", len(r.resampled))
         if want_p:
-            obs.points("phd/particles/resampled", r.resampled.states[:, :2],
-                       weights=r.resampled.weights)
+            log.add(Points("phd/particles/resampled", r.resampled.states[:, :2],
+                           weights=r.resampled.weights))
 
-        obs.stage("cluster")
-        obs.scalar("phd/clusters/kept", int(clusters.kept.sum()))
+        log.stage("cluster")
+        log.scalar("phd/clusters/kept", int(clusters.kept.sum()))
         if want_p and len(r.resampled):
-            obs.points("phd/clusters/members", r.resampled.states[:, :2],
-                       class_ids=clusters.labels)
+            log.add(Points("phd/clusters/members", r.resampled.states[:, :2],
+                           ids=clusters.labels, id_kind="cluster"))
         if want_c and len(clusters):
             boxes = clusters.boxes()
             k = clusters.kept
-            obs.boxes("phd/clusters/kept", boxes[k], class_ids=np.flatnonzero(k),
-                      labels=[f"m={m:.2f}" for m in clusters.masses[k]])
-            obs.boxes("phd/clusters/dropped", boxes[~k], colors=(128, 128, 128, 200),
-                      labels=[f"m={m:.2f} < T" for m in clusters.masses[~k]])
+            log.add(Boxes("phd/clusters/kept", boxes[k], ids=np.flatnonzero(k),
+                          id_kind="cluster", values={"m": clusters.masses[k]}))
+            log.add(Boxes("phd/clusters/dropped", boxes[~k], role="dropped",
+                          values={"m": clusters.masses[~k]}))
 
 
+@register(presets={"paper": MTParams()})
 class MTTracker(_AssociatingTracker):
-    """MT (maggio2007 §4 baseline): graph-matching association directly on the detections.
+    """MT: the graph-matching association run directly on the detections (PHD-MT's baseline).
 
     Detections carry no velocity, so vertices get NaN velocity and the associator estimates a
-    track's velocity from its last two vertices.  Options: fields of ``AssocParams``."""
+    track's velocity from its last two vertices."""
 
     name = "mt"
+    paper = "maggio2007 (baseline)"
+    stages = ("associate",)
+    Params = MTParams
 
-    def __init__(self, rng: np.random.Generator | None = None, **options):
-        (assoc_kw,) = _split_options(options, AssocParams)
-        super().__init__(AssocParams(**assoc_kw))
+    def __init__(self, params: Optional[MTParams] = None, *,
+                 rng: Optional[np.random.Generator] = None):
+        self.params = params if params is not None else MTParams()
+        super().__init__(self.params.assoc)
 
     def config(self) -> dict:
-        return {"tracker": self.name, "assoc": asdict(self.associator.params)}
+        return {"tracker": self.name, "params": to_dict(self.params)}
 
-    def views(self):
-        return ([("Association", ["assoc/**", "tracks/**"]), ("Tracks", ["tracks/**"])],
-                [("Counts", ["tracks/count", "detections/count", "assoc/**"])])
-
-    def step(self, frame: Frame, detections: Detections, obs: Observer = NullObserver()) -> TrackSet:
-        z = xywh_to_cxcywh(detections.boxes)
-        states = np.full((len(z), 6), np.nan)
+    def step(self, frame: Frame, detections: Optional[Detections],
+             level: Optional[str] = None) -> StepResult:
+        dets = detections if detections is not None else Detections.empty()
+        z = xywh_to_cxcywh(dets.boxes)
+        states = np.full((len(z), STATE_DIM), np.nan)
         states[:, [0, 1, 4, 5]] = z
-        return self._associate(frame, states, obs)
+        return self._associate(frame, states, StageLog(self.stages, level))

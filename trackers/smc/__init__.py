@@ -3,13 +3,13 @@
 - :mod:`.weights` — log-weight utilities (logsumexp normalisation, ESS) and :class:`ParticleSet`.
 - :mod:`.resampling` — systematic, stratified, residual and multinomial resampling
   (explicit ``numpy.random.Generator``; mass-preserving :func:`resample`).
-- :mod:`.motion` — the size-aware motion model of maggio2007 §2/§4.
+
+State-dimension-agnostic: motion models live next to their paper (``phd/motion.py`` for
+maggio2007's size-aware model).
 """
 
-from .motion import propagate
 from .resampling import SCHEMES, resample, resample_indices
 from .weights import ParticleSet, ess, logsumexp, normalise, normalised_weights
 
 __all__ = ["ParticleSet", "ess", "logsumexp", "normalise", "normalised_weights",
-           "SCHEMES", "resample", "resample_indices",
-           "propagate"]
+           "SCHEMES", "resample", "resample_indices"]

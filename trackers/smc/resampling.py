@@ -100,6 +100,6 @@ def resample(ps: ParticleSet, n: int, rng: np.random.Generator,
     An empty or zero-mass input, or ``n == 0``, gives an empty set."""
     n = int(n)
     if len(ps) == 0 or n == 0 or not np.isfinite(ps.log_mass):
-        return ParticleSet.empty(ps.dim)
+        return ps.take(np.zeros(0, dtype=np.int64))
     idx = resample_indices(ps.log_weights, n, rng, scheme)
-    return ParticleSet(ps.states[idx], np.full(n, ps.log_mass - np.log(n)))
+    return ps.take(idx).with_log_weights(np.full(n, ps.log_mass - np.log(n)))

@@ -11,6 +11,7 @@ mass 1.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Optional
 
 import numpy as np
 
@@ -61,15 +62,23 @@ def ess(log_w: np.ndarray) -> float:
 
 @dataclass(frozen=True)
 class ParticleSet:
-    """Weighted particles, structure-of-arrays.
+    """Weighted particles, structure-of-arrays, of any state dimension D.
 
-    states: (N, D) float64 — for PHD-MT ``D = 6``, ``x = (y1, y2, v1, v2, w, h)``: box centre
-    (pixels), velocity (pixels/frame), box size (pixels) (maggio2007 §2).
+    states: (N, D) float64 — for PHD-MT ``D = 6``, ``x = (y1, y2, v1, v2, w, h)`` (maggio2007
+    §2); for a DLPF parent ``D = 4``, ``(x, y, vx, vy)`` (jung2013 §2).
     log_weights: (N,) float64 natural-log weights, unnormalised (their sum is the mass).
+    labels: optional (N,) int64 — which object a particle belongs to (a DLPF child cloud's
+    track id, the detection a newborn came from ...).
+    extra: optional (N, E) float64 — per-particle values that are not state (a parent's
+    classifier scale, a score ...).
+
+    Every operation (``take``, ``concat``, resampling) carries ``labels`` and ``extra`` along.
     """
 
     states: np.ndarray
     log_weights: np.ndarray
+    labels: Optional[np.ndarray] = None
+    extra: Optional[np.ndarray] = None
 
     def __post_init__(self):
         s = np.asarray(self.states, dtype=np.float64)
@@ -80,10 +89,23 @@ class ParticleSet:
             raise ValueError(f"ParticleSet: {len(s)} states but {len(lw)} log-weights")
         object.__setattr__(self, "states", s)
         object.__setattr__(self, "log_weights", lw)
+        if self.labels is not None:
+            lab = np.asarray(self.labels, dtype=np.int64).reshape(-1)
+            if len(lab) != len(s):
+                raise ValueError(f"ParticleSet: {len(s)} states but {len(lab)} labels")
+            object.__setattr__(self, "labels", lab)
+        if self.extra is not None:
+            ex = np.asarray(self.extra, dtype=np.float64)
+            if ex.ndim != 2 or len(ex) != len(s):
+                raise ValueError(f"ParticleSet.extra: expected shape ({len(s)}, E), got {ex.shape}")
+            object.__setattr__(self, "extra", ex)
 
     @classmethod
-    def empty(cls, dim: int = 6) -> "ParticleSet":
-        return cls(np.zeros((0, dim)), np.zeros(0))
+    def empty(cls, dim: int, *, labels: bool = False, n_extra: int = 0) -> "ParticleSet":
+        """No particles, of state dimension ``dim`` (with empty labels / ``n_extra`` columns)."""
+        return cls(np.zeros((0, dim)), np.zeros(0),
+                   np.zeros(0, dtype=np.int64) if labels else None,
+                   np.zeros((0, n_extra)) if n_extra else None)
 
     def __len__(self) -> int:
         return len(self.log_weights)
@@ -109,13 +131,34 @@ class ParticleSet:
     def ess(self) -> float:
         return ess(self.log_weights)
 
+    def with_log_weights(self, log_weights: np.ndarray) -> "ParticleSet":
+        """The same particles with new log-weights."""
+        return ParticleSet(self.states, log_weights, self.labels, self.extra)
+
     def concat(self, other: "ParticleSet") -> "ParticleSet":
-        """This set followed by ``other`` (same dimension)."""
+        """This set followed by ``other`` (same dimension; labels/extra on both or neither)."""
         if other.dim != self.dim:
             raise ValueError(f"ParticleSet.concat: dimension {self.dim} vs {other.dim}")
+
+        def cat(a, b, what):
+            if a is None and b is None:
+                return None
+            if a is None or b is None:
+                # an empty side without the column adopts the other's
+                if a is None and len(self) == 0:
+                    return b
+                if b is None and len(other) == 0:
+                    return a
+                raise ValueError(f"ParticleSet.concat: {what} on one side only")
+            return np.concatenate([a, b])
+
         return ParticleSet(np.concatenate([self.states, other.states]),
-                           np.concatenate([self.log_weights, other.log_weights]))
+                           np.concatenate([self.log_weights, other.log_weights]),
+                           cat(self.labels, other.labels, "labels"),
+                           cat(self.extra, other.extra, "extra"))
 
     def take(self, index: np.ndarray) -> "ParticleSet":
         """Subset / reordering by an index array or boolean mask (weights unchanged)."""
-        return ParticleSet(self.states[index], self.log_weights[index])
+        return ParticleSet(self.states[index], self.log_weights[index],
+                           None if self.labels is None else self.labels[index],
+                           None if self.extra is None else self.extra[index])

@@ -1,0 +1,167 @@
+"""The tracker API: the :class:`Tracker` protocol, :class:`StepResult` and the registry.
+
+A tracker is a thin stateful class.  It declares
+
+- ``name`` and ``paper`` (for ``pfscope trackers``),
+- ``stages``: its own ordered stage list (the recorder's ``stage`` timeline follows it),
+- ``needs_detections`` / ``needs_image``: what the pipeline must give it (a detector is built
+  only when some tracker needs detections),
+- ``Params``: a frozen dataclass of documented fields (:mod:`pfscope.trackers.params`), and
+  ``presets`` of it (``paper``: the paper's settings, unchanged),
+
+and implements ``step(frame, detections, level)`` → :class:`StepResult`, ``finish()`` (rows
+still held back at the end of a sequence) and ``config()``.  ``@register`` next to the class
+puts it in the registry; the CLI's choices, ``--set NAME=VALUE`` options and help come from
+there.  See the README, "Adding a tracker".
+"""
+
+from __future__ import annotations
+
+import importlib
+from dataclasses import dataclass, field
+from typing import Any, ClassVar, Optional, Protocol, TypeVar, runtime_checkable
+
+import numpy as np
+
+from .params import describe, to_dict, with_options
+from .report import Stage
+from .types import Detections, Frame, TrackSet
+
+#: Rows for the tracks file: ``(frame index, TrackSet)``, final (never revised).
+Rows = list[tuple[int, TrackSet]]
+
+
+@dataclass(frozen=True)
+class StepResult:
+    """What one :meth:`Tracker.step` returns.
+
+    tracks: the targets the tracker reports *at this frame* (what a live view shows).
+    rows: rows final for the tracks file, possibly of earlier frames (a tracker that confirms
+        tracks with a bounded lag reports a track from its first frame once confirmed).
+    stages: the frame's stage data, in the order of the tracker's ``stages``
+        (:mod:`pfscope.trackers.report`).
+    """
+
+    tracks: TrackSet
+    rows: Rows = field(default_factory=list)
+    stages: tuple[Stage, ...] = ()
+
+
+@runtime_checkable
+class Tracker(Protocol):
+    """The protocol every tracker implements (checked by mypy in the tests)."""
+
+    name: ClassVar[str]
+    paper: ClassVar[str]
+    stages: ClassVar[tuple[str, ...]]
+    needs_detections: ClassVar[bool]
+    needs_image: ClassVar[bool]
+
+    def step(self, frame: Frame, detections: Optional[Detections],
+             level: Optional[str] = None) -> StepResult: ...
+
+    def finish(self) -> Rows: ...
+
+    def config(self) -> dict: ...
+
+
+@dataclass(frozen=True)
+class TrackerInfo:
+    """A registry entry: the class, its parameter dataclass and its presets."""
+
+    name: str
+    cls: type
+    params: Any                      # default parameter instance (the first preset)
+    presets: dict[str, Any]
+    summary: str
+
+    @property
+    def paper(self) -> str:
+        return getattr(self.cls, "paper", "")
+
+    @property
+    def stages(self) -> tuple[str, ...]:
+        return tuple(getattr(self.cls, "stages", ()))
+
+    def describe(self) -> list[dict]:
+        return describe(self.params)
+
+
+_REGISTRY: dict[str, TrackerInfo] = {}
+#: Modules holding the built-in trackers; imported on first use of the registry, so that
+#: ``pfscope --help`` does not pay for them and optional dependencies stay optional.
+BUILTIN_MODULES = ("pfscope.trackers.phd.tracker", "pfscope.trackers.passthrough")
+DEFAULT_TRACKER = "phd"
+
+T = TypeVar("T", bound=type)
+
+
+def register(cls: Optional[T] = None, *, presets: Optional[dict[str, Any]] = None,
+             summary: Optional[str] = None) -> Any:
+    """Class decorator putting a tracker in the registry under its ``name``:
+    ``@register`` or ``@register(presets={"paper": PHDTrackerParams()})``.
+
+    The class declares ``name``, ``paper``, ``stages``, ``needs_detections``, ``needs_image``
+    and a ``Params`` dataclass (its defaults are the preset ``default`` when ``presets`` is not
+    given), and its constructor takes ``(params, *, rng)``."""
+
+    def deco(c: T) -> T:
+        for attr in ("name", "paper", "stages", "needs_detections", "needs_image", "Params"):
+            if not hasattr(c, attr):
+                raise TypeError(f"tracker class {c.__name__} has no {attr!r}")
+        name = c.name  # type: ignore[attr-defined]
+        if name in _REGISTRY and _REGISTRY[name].cls is not c:
+            raise ValueError(f"tracker name {name!r} is already registered")
+        if not c.stages or len(set(c.stages)) != len(c.stages):  # type: ignore[attr-defined]
+            raise TypeError(f"tracker {name!r}: stages must be a non-empty list of unique names")
+        pre = dict(presets or {"default": c.Params()})  # type: ignore[attr-defined]
+        doc = (summary or (c.__doc__ or "").strip().split("\n")[0]).strip()
+        _REGISTRY[name] = TrackerInfo(name, c, next(iter(pre.values())), pre, doc)
+        return c
+
+    return deco(cls) if cls is not None else deco
+
+
+def registry() -> dict[str, TrackerInfo]:
+    """Every registered tracker (the built-ins are imported on first call)."""
+    for mod in BUILTIN_MODULES:
+        importlib.import_module(mod)
+    return dict(_REGISTRY)
+
+
+def tracker_info(name: str) -> TrackerInfo:
+    reg = registry()
+    if name not in reg:
+        raise ValueError(f"unknown tracker {name!r}; choose one of {', '.join(reg)}")
+    return reg[name]
+
+
+def make_params(name: str, preset: Optional[str] = None, options: Optional[dict] = None) -> Any:
+    """The parameters of tracker ``name``: ``preset`` (default: its first) with ``options``
+    (``{"p_miss": "0.2"}``, strings converted) applied.  Bad names or values raise ValueError."""
+    info = tracker_info(name)
+    if preset is None:
+        base = info.params
+    elif preset in info.presets:
+        base = info.presets[preset]
+    else:
+        raise ValueError(f"tracker {name!r} has no preset {preset!r}; choose one of "
+                         f"{', '.join(info.presets)}")
+    return with_options(base, dict(options or {}))
+
+
+def make_tracker(name: str, seed: int = 0, *, preset: Optional[str] = None,
+                 **options) -> Tracker:
+    """Build tracker ``name`` with its own ``numpy.random.Generator`` seeded by ``seed``."""
+    info = tracker_info(name)
+    params = make_params(name, preset, options)
+    return info.cls(params, rng=np.random.default_rng(seed))
+
+
+def params_config(params: Any) -> dict:
+    """Parameters as a plain nested dict (for ``config()``)."""
+    return to_dict(params)
+
+
+__all__ = ["Tracker", "StepResult", "Rows", "TrackerInfo", "register", "registry",
+           "tracker_info", "make_params", "make_tracker", "params_config", "DEFAULT_TRACKER"]

@@ -1,0 +1,267 @@
+"""The one frame loop: source → detector (only if a tracker needs it) → trackers → tracks rows
+→ online metrics → hooks.
+
+``pfscope record``, ``pfscope compare``, the benchmarks and the tests all run this loop; none
+keeps a frame loop of its own.  What happens around it (a Rerun recording, a tracks file, a
+progress bar, timing) is a :class:`Hook`.
+
+Outcome rules (DESIGN.md, "nothing is lost"):
+
+- a run ends ``completed`` (all frames), ``interrupted`` (``should_stop()`` became true, or a
+  KeyboardInterrupt) or ``failed`` (any other exception, not only bad input);
+- every hook's :meth:`Hook.end` sees the :class:`Outcome` (the reason and the frame), also when
+  another hook's ``end`` fails, so each output can be finished or marked incomplete;
+- a failure is re-raised after the hooks have ended.
+
+Determinism: trackers carry their own seeded generators; the pipeline adds no randomness.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Callable, Mapping, Optional, Protocol, Sequence
+
+from .api import Rows, StepResult, Tracker
+from .errors import InputError
+from .report import level_rank
+from .types import Detections, Frame, GroundTruth
+
+
+@dataclass(frozen=True)
+class RunInfo:
+    """What hooks learn before the first frame."""
+
+    source: object                    # a pfscope.trackers.data.sources.Source
+    trackers: Mapping[str, Tracker]   # lane name → tracker (insertion order = lane order)
+    detector: Optional[str]           # detector name, None when no tracker needs one
+    total: Optional[int]              # frames that will be read (None: unknown)
+    level: Optional[str]
+    has_gt: bool
+
+
+@dataclass(frozen=True)
+class FrameReport:
+    """One frame, after every tracker stepped.  ``metrics[lane]`` is a
+    :class:`~pfscope.trackers.eval.online.FrameMetrics` of the lane's live tracks (None without
+    ground truth); ``step_seconds[lane]`` the tracker's wall time."""
+
+    frame: Frame
+    detections: Optional[Detections]
+    gt: Optional[GroundTruth]
+    results: Mapping[str, StepResult]
+    metrics: Mapping[str, object]
+    step_seconds: Mapping[str, float]
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """How a run ended: ``status`` is ``completed``, ``interrupted`` or ``failed``; ``frames``
+    the frames fully processed; ``reason`` one line for a person; ``error`` the exception."""
+
+    status: str
+    frames: int
+    reason: str
+    error: Optional[BaseException] = None
+
+    @property
+    def ok(self) -> bool:
+        return self.status != "failed"
+
+
+class Hook(Protocol):
+    """Something that watches a run.  Every method is optional in spirit: subclass
+    :class:`BaseHook` and override what you need."""
+
+    def begin(self, info: RunInfo) -> None: ...
+
+    def on_frame(self, report: FrameReport) -> None: ...
+
+    def on_rows(self, lane: str, rows: Rows) -> None: ...
+
+    def end(self, outcome: Outcome) -> None: ...
+
+
+class BaseHook:
+    def begin(self, info: RunInfo) -> None:
+        pass
+
+    def on_frame(self, report: FrameReport) -> None:
+        pass
+
+    def on_rows(self, lane: str, rows: Rows) -> None:
+        pass
+
+    def end(self, outcome: Outcome) -> None:
+        pass
+
+
+@dataclass
+class RunResult:
+    outcome: Outcome
+    seconds: float
+    rows: dict[str, Rows] = field(default_factory=dict)      # lane → tracks-file rows
+    scores: dict[str, dict] = field(default_factory=dict)    # lane → evaluate() scores
+
+    @property
+    def frames(self) -> int:
+        return self.outcome.frames
+
+    @property
+    def interrupted(self) -> bool:
+        return self.outcome.status == "interrupted"
+
+
+def resolve_detector_name(source, name: Optional[str]) -> str:
+    """``file`` when the source has detections, else HOG people (unless ``name`` is given)."""
+    if name:
+        return name
+    return "file" if getattr(source, "det", None) is not None else "hog"
+
+
+def frames_to_read(source, frames: Optional[int]) -> Optional[int]:
+    length = getattr(source, "length", None)
+    if frames is None:
+        return length
+    return min(frames, length) if length else frames
+
+
+class TracksFileHook(BaseHook):
+    """Writes one lane's rows as MOT text: under ``<name>.part`` while running, renamed to the
+    final name on success, to ``<name>.incomplete<suffix>`` on failure (the final name is
+    never touched then)."""
+
+    def __init__(self, path, lane: Optional[str] = None):
+        from .data.motio import TrackWriter
+
+        self.lane = lane
+        self.writer = TrackWriter(path)
+        self.kept_as = None
+
+    def on_rows(self, lane: str, rows: Rows) -> None:
+        if self.lane is None or lane == self.lane:
+            for f, ts in rows:
+                self.writer.write(f, ts)
+
+    def end(self, outcome: Outcome) -> None:
+        if outcome.ok:
+            self.writer.close()
+        else:
+            self.kept_as = self.writer.abort()
+
+
+def run(source, trackers: Mapping[str, Tracker] | Sequence[Tracker], *,
+        frames: Optional[int] = None, level: Optional[str] = None,
+        detector: Optional[str] = None, detector_options: Optional[dict] = None,
+        hooks: Sequence[Hook] = (), should_stop: Optional[Callable[[], bool]] = None,
+        keep_rows: bool = True, score: bool = True) -> RunResult:
+    """Run ``trackers`` (lane name → tracker, or a list: lanes named by ``tracker.name``) over
+    ``source`` for ``frames`` frames (default all) and hand every frame to ``hooks``.
+
+    ``level``: the report level asked of the trackers (None: no stage items but scalars and
+    events).  ``detector``: name for :func:`~pfscope.trackers.detect.make_detector` (default:
+    the source's own detections, else HOG), built only if some tracker ``needs_detections``.
+    ``keep_rows``: keep each lane's rows in memory (for ``scores``; off for very long runs).
+    """
+    from .detect import make_detector
+
+    if level is not None:
+        level_rank(level)
+    lanes: dict[str, Tracker] = dict(trackers) if isinstance(trackers, Mapping) else {}
+    if not isinstance(trackers, Mapping):
+        for t in trackers:
+            if t.name in lanes:
+                raise InputError(f"tracker listed twice: {t.name}")
+            lanes[t.name] = t
+    if not lanes:
+        raise InputError("no tracker to run")
+    need_det = any(t.needs_detections for t in lanes.values())
+    det_name = resolve_detector_name(source, detector) if need_det else None
+    det_fn = None
+    if det_name is not None:
+        det_fn = make_detector(det_name, det_table=getattr(source, "det", None),
+                               **(detector_options or {}))
+    gt_table = getattr(source, "gt", None)
+    evaluators = {}
+    if gt_table is not None:
+        from .eval import OnlineEvaluator
+
+        evaluators = {name: OnlineEvaluator() for name in lanes}
+    total = frames_to_read(source, frames)
+    info = RunInfo(source, lanes, det_name, total, level, gt_table is not None)
+    kept: dict[str, Rows] = {name: [] for name in lanes}
+
+    def emit(name: str, rows: Rows) -> None:
+        if keep_rows:
+            kept[name].extend(rows)
+        for h in hooks:
+            h.on_rows(name, rows)
+
+    done = 0
+    outcome: Optional[Outcome] = None
+    t0 = time.perf_counter()
+    begun: list[Hook] = []
+    current = None
+    try:
+        for h in hooks:
+            h.begin(info)
+            begun.append(h)
+        for frame in source.frames(total):  # type: ignore[attr-defined]
+            if should_stop is not None and should_stop():
+                break
+            current = frame.index
+            dets = det_fn(frame) if det_fn is not None else None
+            gt = gt_table.ground_truth(frame.index) if gt_table is not None else None
+            results, metrics, secs = {}, {}, {}
+            for name, tracker in lanes.items():
+                ts = time.perf_counter()
+                res = tracker.step(frame, dets if tracker.needs_detections else None, level)
+                secs[name] = time.perf_counter() - ts
+                results[name] = res
+                metrics[name] = (evaluators[name].update(frame.index, gt, res.tracks)
+                                 if gt is not None else None)
+            report = FrameReport(frame, dets, gt, results, metrics, secs)
+            for h in hooks:
+                h.on_frame(report)
+            for name, res in results.items():
+                emit(name, res.rows)
+            done += 1
+        if should_stop is not None and should_stop():
+            outcome = Outcome("interrupted", done, f"interrupted after {done} frames")
+        else:
+            for name, tracker in lanes.items():
+                emit(name, tracker.finish())
+            outcome = Outcome("completed", done, f"completed: {done} frames")
+    except KeyboardInterrupt as e:
+        outcome = Outcome("interrupted", done, f"interrupted after {done} frames", e)
+    except BaseException as e:  # noqa: BLE001 - every failure must mark the outputs incomplete
+        where = f" at frame {current}" if current is not None else ""
+        outcome = Outcome("failed", done, f"failed{where}: {type(e).__name__}: {e}"
+                          if not isinstance(e, InputError) else f"failed{where}: {e}", e)
+    seconds = time.perf_counter() - t0
+    hook_error: Optional[BaseException] = None
+    for h in begun:
+        try:
+            h.end(outcome)
+        except BaseException as e:  # noqa: BLE001 - end every hook, report the first failure
+            hook_error = hook_error or e
+    if outcome.status == "failed" and outcome.error is not None:
+        raise outcome.error
+    if hook_error is not None:
+        raise hook_error
+    result = RunResult(outcome, seconds, kept if keep_rows else {})
+    if score and keep_rows and gt_table is not None and done:
+        result.scores = {name: score_rows(gt_table, rows, done) for name, rows in kept.items()}
+    return result
+
+
+def score_rows(gt_table, rows: Rows, frames: int) -> dict:
+    """Sequence scores of a lane's tracks-file rows over frames ``1..frames``."""
+    from .data.motio import table_from_tracksets
+    from .eval import evaluate
+
+    return evaluate(gt_table, table_from_tracksets(rows), frames=range(1, frames + 1))
+
+
+__all__ = ["run", "RunInfo", "FrameReport", "Outcome", "Hook", "BaseHook", "RunResult",
+           "TracksFileHook", "resolve_detector_name", "frames_to_read", "score_rows"]
