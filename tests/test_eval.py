@@ -138,13 +138,13 @@ def test_conf0_rows_and_the_tracks_covering_them_are_ignored():
     gt = table([(1, 1, *box(50, 50, 20, 40)), (1, 2, *box(200, 50, 20, 40), 0)])
     tr = table([(1, 7, *box(51, 50, 20, 40)), (1, 8, *box(201, 50, 20, 40)),
                 (1, 9, *box(500, 50, 20, 40))])
-    r = evaluate(gt, tr)
+    r = evaluate(gt, tr, convention="mot16")
     assert (r["GT"], r["TP"], r["FP"], r["FN"]) == (1, 1, 1, 0)  # only track 9 is clutter
     assert (r["ignored_gt"], r["ignored_tracks"]) == (1, 1)
     assert r["num_gt_ids"] == 1 and r["num_track_ids"] == 2
-    mot15 = evaluate(gt, tr, drop_tracks_on_ignored=False)  # TrackEval's MOT15 mode
+    mot15 = evaluate(gt, tr, convention="mot15")  # TrackEval's MOT15 mode
     assert (mot15["GT"], mot15["TP"], mot15["FP"]) == (1, 1, 2)
-    m = OnlineEvaluator().update(1, gt.ground_truth(1), tr.tracks(1))
+    m = OnlineEvaluator(convention="mot16").update(1, gt.ground_truth(1), tr.tracks(1))
     assert m.ignored_gt_idx.tolist() == [1] and m.ignored_track_idx.tolist() == [1]
     assert m.fp_idx.tolist() == [2] and m.fn_idx.tolist() == [] and (m.n_true, m.n_est) == (1, 2)
 
@@ -309,7 +309,7 @@ def _perturbed_gt(gt: MotTable, rng: np.random.Generator):
 
 def test_pets_self_and_online_series_sum_to_sequence_scores(pets):
     gt = read_mot(pets / "gt" / "gt.txt", "gt")
-    perfect = evaluate(gt, read_mot(pets / "gt" / "gt.txt", "tracks"))
+    perfect = evaluate(gt, read_mot(pets / "gt" / "gt.txt", "tracks"), convention="mot16")
     assert perfect["MOTA"] == 1.0 and perfect["IDF1"] == 1.0 and perfect["OSPA"] == 0.0
     assert perfect["GT"] == 4476 and perfect["ignored_gt"] == perfect["ignored_tracks"] == 174
     frame, ids, boxes = _perturbed_gt(gt, np.random.default_rng(5))
@@ -336,7 +336,7 @@ def test_agrees_with_trackeval_on_pets(pets, tmp_path, benchmark):
     write_mot(tracks_txt, "tracks", frame, ids, boxes)
     ref = _reference(tmp_path / "ref", gt_txt, tracks_txt, gt.last_frame, benchmark)
     ours = evaluate(gt, read_mot(tracks_txt, "tracks"),
-                    drop_tracks_on_ignored=(benchmark != "MOT15"))
+                    convention="mot15" if benchmark == "MOT15" else "mot16")
     assert ours["IDSW"] > 0 and ours["FP"] > 250 and ours["FN"] > 300  # a non-trivial case
     # the copied conf=0 boxes: left out (MOT16+ rule) or counted as false positives (MOT15)
     assert (ours["ignored_tracks"] > 100) == (benchmark != "MOT15")
@@ -354,7 +354,7 @@ def test_moda_agrees_with_trackeval_when_ids_cannot_matter(pets, tmp_path):
     write_mot(tracks_txt, "tracks", det.frame[sel], np.arange(sel.sum()), det.boxes[sel])
     ref = _reference(tmp_path / "ref", pets / "gt" / "gt.txt", tracks_txt, n_frames, "MOT17")
     ours = evaluate(read_mot(pets / "gt" / "gt.txt", "gt"), read_mot(tracks_txt, "tracks"),
-                    frames=range(1, n_frames + 1))
+                    frames=range(1, n_frames + 1), convention="mot16")
     assert ours["TP"] > 500 and ours["FP"] > 50
     assert ours["MODA"] == pytest.approx(ref["MODA"], abs=1e-12)
     # the same matches: MODA and MOTA differ by the ID switches only

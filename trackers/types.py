@@ -126,22 +126,27 @@ class TrackSet:
 
 @dataclass(frozen=True)
 class GroundTruth:
-    """Ground truth of one frame. ``ignore`` marks MOT15 ``conf=0`` (ambiguous) boxes."""
+    """Ground truth of one frame. ``ignore`` marks ``conf=0`` boxes (MOT15 "ambiguous", MOT16+
+    "not to be scored"); ``cls`` holds the MOT16+ class ids (1 pedestrian, 2 person on vehicle,
+    ... 13 crowd) when the gt file has them, else None (MOT15 layout: no classes)."""
 
     ids: np.ndarray
     boxes: np.ndarray
     ignore: np.ndarray = field(default=None)  # type: ignore[assignment]
+    cls: np.ndarray | None = None
 
     def __post_init__(self):
         boxes = _as_boxes(self.boxes, "GroundTruth.boxes")
         ids = np.asarray(self.ids, dtype=np.int64).reshape(-1)
         ignore = (np.zeros(len(ids), dtype=bool) if self.ignore is None
                   else np.asarray(self.ignore, dtype=bool).reshape(-1))
-        if not (len(ids) == len(boxes) == len(ignore)):
-            raise ValueError("GroundTruth: ids, boxes and ignore differ in length")
+        cls = None if self.cls is None else np.asarray(self.cls, dtype=np.int64).reshape(-1)
+        if not (len(ids) == len(boxes) == len(ignore) == (len(ids) if cls is None else len(cls))):
+            raise ValueError("GroundTruth: ids, boxes, ignore and cls differ in length")
         object.__setattr__(self, "boxes", boxes)
         object.__setattr__(self, "ids", ids)
         object.__setattr__(self, "ignore", ignore)
+        object.__setattr__(self, "cls", cls)
 
     @classmethod
     def empty(cls) -> "GroundTruth":

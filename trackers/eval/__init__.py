@@ -9,11 +9,15 @@
 Everything is computed here with numpy/scipy (TrackEval cannot be a dependency: every release
 requires ``opencv-python``, which would replace pfscope's ``opencv-python-headless``).  CLEAR,
 identity and HOTA follow TrackEval's definitions to the letter and are checked against TrackEval
-in the tests when it is installed.  MOT15 conventions: a match needs IoU >= 0.5, gt rows with
-``conf = 0`` are ignored together with the track boxes that cover them.
+in the tests when it is installed; the MOT15 convention also against py-motmetrics.  A match
+needs IoU >= 0.5; which gt rows are scored and which track boxes are left out follows the
+convention (:mod:`.conventions`): ``"mot15"`` drops the ``conf = 0`` gt rows and keeps every
+track box, ``"mot16"`` removes the track boxes on distractors first (TrackEval's MOT16+
+preprocessing); by default the gt's layout decides (MOT16 classes and visibilities: mot16).
 """
 
 from .clear import ClearMatcher, detection_match
+from .conventions import CONVENTIONS, check_convention, describe_convention, detect_convention
 from .hota import ALPHAS, hota_scores
 from .identity import identity_scores
 from .online import FrameMetrics, OnlineEvaluator
@@ -26,4 +30,5 @@ __all__ = [
     "evaluate", "format_table", "OnlineEvaluator", "FrameMetrics", "DEFAULT_COLUMNS",
     "ospa", "gospa", "DEFAULT_C", "DEFAULT_P", "DEFAULT_ALPHA", "box_iou", "box_centers",
     "ClearMatcher", "detection_match", "identity_scores", "hota_scores", "ALPHAS",
+    "CONVENTIONS", "check_convention", "detect_convention", "describe_convention",
 ]

@@ -8,10 +8,11 @@ tracking in video", PAMI 2009).  We compute:
 - **CLEAR-MOT** (Bernardin & Stiefelhagen 2008) exactly as TrackEval's ``CLEAR`` metric does it:
   in every frame a true box and a track box may match only if their overlap (IoU) is at least
   the threshold (0.5, the MOT15 rule); among those, the Hungarian assignment first keeps the
-  pairs matched in the previous frame, then maximises the summed overlap.  A match whose track id
-  differs from the last track id matched to that true target (any number of frames before) is an
-  ID switch.  MOTA = 1 - (FN + FP + IDSW) / GT; MOTP = summed overlap of the matches / TP (the
-  VACE "overlap ratio averaged over matched pairs", higher is better).
+  pairs matched in the previous frame (the MOTChallenge devkit's rule; py-motmetrics keeps a
+  target's last match from any earlier frame instead), then maximises the summed overlap.  A
+  match whose track id differs from the last track id matched to that true target (any number
+  of frames before) is an ID switch.  MOTA = 1 - (FN + FP + IDSW) / GT; MOTP = summed overlap
+  of the matches / TP (the VACE "overlap ratio averaged over matched pairs", higher is better).
 - **VACE detection scores**: each frame on its own, a Hungarian assignment maximising the summed
   overlap of pairs with IoU >= threshold, ignoring identities.  MODA = 1 - (misses + false
   positives) / GT summed over frames (Kasturi et al. N-MODA, c_m = c_f = 1); MODP = per-frame

@@ -5,11 +5,12 @@ are misses, false positives and switches.
 tracks file) and returns a :class:`FrameMetrics`; :func:`trackers.eval.evaluate` runs the same
 evaluator over a whole sequence, so the time series and the sequence scores always agree.
 
-Ignored targets: true boxes marked ``ignore`` (``conf = 0`` in a MOT15 gt.txt) are never scored.
-With ``drop_tracks_on_ignored=True`` (default) the track boxes matched to them (Hungarian on
-IoU >= threshold over all true boxes, TrackEval's MOT16+ preprocessing) are left out too, so
-covering an ambiguous person is neither a hit nor a false positive; with ``False`` they count as
-false positives, as TrackEval's MOT15 mode does.  OSPA is computed on box centres (:mod:`.ospa`).
+Which true boxes are scored and which track boxes are left out follows the evaluation
+convention (:mod:`.conventions`): ``"mot15"`` drops the ``conf = 0`` true boxes and keeps every
+track box (one covering a dropped box is a false positive); ``"mot16"`` first removes the track
+boxes matched to a distractor, then scores only the pedestrian ``conf != 0`` true boxes.  The
+default (None) decides per frame from the gt: ``"mot16"`` when it carries MOT16 classes, else
+``"mot15"``.  OSPA is computed on box centres (:mod:`.ospa`).
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ from scipy.optimize import linear_sum_assignment
 from ..errors import InputError
 from ..types import GroundTruth, TrackSet
 from .clear import ClearMatcher, detection_match, mota
+from .conventions import DISTRACTOR_IOU, check_convention, frame_convention, gt_masks
 from .ospa import DEFAULT_ALPHA, DEFAULT_C, DEFAULT_P, gospa, ospa
 from .overlap import box_centers, box_iou
 
@@ -34,14 +36,14 @@ class FrameMetrics:
     """Metrics of one frame. Index arrays point into the ``gt`` / ``tracks`` given to
     :meth:`OnlineEvaluator.update`.
 
-    frame: frame number; n_true / n_est: true targets (ignored ones excluded) / track boxes scored
-    (those on ignored targets excluded); tp, fp, fn, idsw: CLEAR-MOT counts of this frame;
+    frame: frame number; n_true / n_est: true targets scored / track boxes scored (those
+    removed for covering a distractor excluded); tp, fp, fn, idsw: CLEAR-MOT counts of this frame;
     ospa, gospa: distances between true and estimated box centres (pixels).
     match_gt_idx, match_track_idx (k,): CLEAR matches; match_iou (k,): their overlap;
     match_dist (k,): their centre distance in pixels.
     fp_idx: unmatched tracks; fn_idx: missed true boxes; switch_idx: tracks whose match is an ID
-    switch; ignored_gt_idx: true boxes marked ignore; ignored_track_idx: tracks dropped because they
-    cover an ignored true box.
+    switch; ignored_gt_idx: true boxes not scored under the convention; ignored_track_idx: tracks
+    removed because they cover a distractor (``"mot16"`` only); convention: the one applied.
     det_tp, det_iou_sum: VACE per-frame detection matches (identities ignored) and their summed IoU.
     """
 
@@ -65,6 +67,7 @@ class FrameMetrics:
     ignored_track_idx: np.ndarray = field(repr=False)
     det_tp: int = 0
     det_iou_sum: float = 0.0
+    convention: str = "mot15"
 
     @property
     def motp(self) -> float:
@@ -88,7 +91,7 @@ class FrameMetrics:
 
 @dataclass(frozen=True)
 class _Scored:
-    """One frame after the ignore rule: the boxes that are scored and their IoU matrix."""
+    """One frame after the convention's preprocessing: the boxes that are scored and their IoU."""
 
     gt_idx: np.ndarray       # into GroundTruth
     track_idx: np.ndarray    # into TrackSet
@@ -97,6 +100,7 @@ class _Scored:
     gt_ids: np.ndarray
     track_ids: np.ndarray
     iou: np.ndarray          # (len(gt_idx), len(track_idx))
+    convention: str = "mot15"
 
 
 def _duplicates(ids: np.ndarray) -> np.ndarray:
@@ -105,46 +109,50 @@ def _duplicates(ids: np.ndarray) -> np.ndarray:
 
 
 def score_frame(frame: int, gt: GroundTruth, tracks: TrackSet, iou_threshold: float,
-                drop_tracks_on_ignored: bool = True, gt_name: str = "ground truth",
+                convention: str | None = None, gt_name: str = "ground truth",
                 tracks_name: str = "tracks") -> _Scored:
-    """Apply the ignore rule to one frame and compute the IoU of the boxes that are scored."""
+    """Apply the convention's preprocessing to one frame (``convention`` already checked; None
+    decides from ``gt``) and compute the IoU of the boxes that are scored."""
     for ids, name in ((gt.ids, gt_name), (tracks.ids, tracks_name)):
         dup = _duplicates(ids)
         if len(dup):
             raise InputError(f"{name}: frame {frame}: id {int(dup[0])} appears "
                              f"{int(np.sum(ids == dup[0]))} times (ids must be unique per frame)")
+    convention = frame_convention(convention, gt)
     iou_all = box_iou(gt.boxes, tracks.boxes)
-    ignore = np.asarray(gt.ignore, dtype=bool)
+    scored, distractor = gt_masks(gt, convention)
     dropped = _NO_INDEX
-    if drop_tracks_on_ignored and ignore.any() and len(tracks):
-        # Match against every true box, ambiguous ones included (TrackEval's preprocessing).
-        score = np.where(iou_all < iou_threshold - _EPS, 0.0, iou_all)
+    if distractor.any() and len(tracks):
+        # Match against every true box, distractors included (TrackEval's preprocessing).
+        score = np.where(iou_all < DISTRACTOR_IOU - _EPS, 0.0, iou_all)
         rows, cols = linear_sum_assignment(-score)
         ok = score[rows, cols] > _EPS
-        dropped = np.sort(cols[ok][ignore[rows[ok]]]).astype(np.int64)
-    keep_gt = np.flatnonzero(~ignore)
+        dropped = np.sort(cols[ok][distractor[rows[ok]]]).astype(np.int64)
+    keep_gt = np.flatnonzero(scored)
     keep_tr = np.setdiff1d(np.arange(len(tracks)), dropped)
-    return _Scored(gt_idx=keep_gt, track_idx=keep_tr, ignored_gt_idx=np.flatnonzero(ignore),
+    return _Scored(gt_idx=keep_gt, track_idx=keep_tr, ignored_gt_idx=np.flatnonzero(~scored),
                    ignored_track_idx=dropped, gt_ids=gt.ids[keep_gt], track_ids=tracks.ids[keep_tr],
-                   iou=iou_all[np.ix_(keep_gt, keep_tr)])
+                   iou=iou_all[np.ix_(keep_gt, keep_tr)], convention=convention)
 
 
 class OnlineEvaluator:
     """Scores a tracker frame by frame (frames must come in increasing order).
 
     Keeps only what CLEAR-MOT needs across frames (one entry per true target id) and running
-    totals; :attr:`totals` gives the scores so far.
+    totals; :attr:`totals` gives the scores so far.  ``convention``: ``"mot15"``, ``"mot16"``, or
+    None / ``"auto"`` to follow each frame's gt (:func:`.conventions.frame_convention`; for a
+    whole table that is :func:`.conventions.detect_convention`, as :func:`.evaluate` uses).
     """
 
     def __init__(self, *, iou_threshold: float = 0.5, ospa_c: float = DEFAULT_C,
                  ospa_p: float = DEFAULT_P, gospa_alpha: float = DEFAULT_ALPHA,
-                 drop_tracks_on_ignored: bool = True):
+                 convention: str | None = None):
         ospa(np.zeros((0, 2)), np.zeros((0, 2)), ospa_c, ospa_p)  # validates c and p early
         gospa(np.zeros((0, 2)), np.zeros((0, 2)), ospa_c, ospa_p, gospa_alpha)
         self.iou_threshold = float(iou_threshold)
         self.ospa_c, self.ospa_p = float(ospa_c), float(ospa_p)
         self.gospa_alpha = float(gospa_alpha)
-        self.drop_tracks_on_ignored = bool(drop_tracks_on_ignored)
+        self.convention = check_convention(convention)
         self._clear = ClearMatcher(iou_threshold)
         self._last_frame: int | None = None
         self._sums = dict(frames=0, tp=0, fp=0, fn=0, idsw=0, iou=0.0, ospa=0.0, gospa=0.0)
@@ -153,7 +161,7 @@ class OnlineEvaluator:
         """Score one frame. Raises InputError on a frame number that does not increase or on an
         id repeated within the frame."""
         return self._update(frame, score_frame(frame, gt, tracks, self.iou_threshold,
-                                               self.drop_tracks_on_ignored), gt, tracks)
+                                               self.convention), gt, tracks)
 
     def _update(self, frame: int, s: _Scored, gt: GroundTruth, tracks: TrackSet) -> FrameMetrics:
         frame = int(frame)
@@ -177,7 +185,8 @@ class OnlineEvaluator:
             fp_idx=np.setdiff1d(s.track_idx, t_idx), fn_idx=np.setdiff1d(s.gt_idx, g_idx),
             switch_idx=t_idx[step.switch],
             ignored_gt_idx=s.ignored_gt_idx, ignored_track_idx=s.ignored_track_idx,
-            det_tp=len(det_rows), det_iou_sum=float(s.iou[det_rows, det_cols].sum()))
+            det_tp=len(det_rows), det_iou_sum=float(s.iou[det_rows, det_cols].sum()),
+            convention=s.convention)
         acc = self._sums
         acc["frames"] += 1
         for k in ("tp", "fp", "fn", "idsw"):

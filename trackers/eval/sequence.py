@@ -14,6 +14,7 @@ import numpy as np
 from ..data.motio import MotTable
 from ..errors import InputError
 from .clear import moda
+from .conventions import check_convention, detect_convention
 from .hota import hota_scores
 from .identity import identity_scores
 from .online import OnlineEvaluator, score_frame
@@ -61,16 +62,30 @@ def _dense(ids_per_frame: list[np.ndarray]) -> tuple[list[np.ndarray], int]:
 def evaluate(gt: MotTable, tracks: MotTable, *, iou_threshold: float = 0.5,
              ospa_c: float = DEFAULT_C, ospa_p: float = DEFAULT_P,
              gospa_alpha: float = DEFAULT_ALPHA, frames: Iterable[int] | None = None,
-             drop_tracks_on_ignored: bool = True) -> dict[str, float]:
+             convention: str | None = None) -> dict[str, float | str]:
     """Score ``tracks`` against ``gt`` over ``frames``.
 
     frames: the frames to score, increasing (e.g. ``range(1, seqLength + 1)``); rows of either
     table outside them are not scored (their count is ``track_rows_outside``). ``None`` scores
     1..last gt frame and raises InputError if the tracks go beyond it, or if gt is empty.
     An empty tracks table is valid (everything missed). Ids repeated within a frame raise
-    InputError. gt rows with conf = 0 (MOT15 "ambiguous") are never scored;
-    ``drop_tracks_on_ignored=True`` also leaves out the track boxes matched to them (TrackEval's
-    MOT16+ preprocessing), ``False`` counts those as false positives (TrackEval's MOT15 mode).
+    InputError.
+
+    convention (:mod:`.conventions`): which gt rows are scored and which track boxes are left out.
+
+    - ``"mot15"``: gt rows with conf = 0 are dropped; every track box is scored (one covering a
+      dropped gt box is a false positive). As py-motmetrics (``min_confidence=1``) and
+      TrackEval's MOT15 mode.
+    - ``"mot16"``: TrackEval's MOT16/17 preprocessing: track boxes matched (IoU >= 0.5) to a
+      distractor are removed, then only pedestrian gt rows with conf != 0 are scored.
+      Distractors: classes 2, 7, 8, 12 in a gt with MOT16 classes; the conf = 0 rows in a gt
+      without classes (MOT15 layout).
+    - ``None`` or ``"auto"`` (default): follow the gt's benchmark, told by its layout:
+      ``"mot16"`` when every gt row has an integer class id in 1..13 and a visibility in [0, 1]
+      (MOT16/17/20 gt), else ``"mot15"`` (MOT15 gt: -1 or world coordinates in columns 8-10, or
+      ``vis = -1``; PETS09-S2L1 here is one).
+
+    Any other value raises ValueError. Matches need IoU >= ``iou_threshold`` either way.
 
     Keys (ratios in [0, 1] except MOTA/MODA, which can be negative; OSPA/GOSPA/ME in pixels):
 
@@ -82,12 +97,14 @@ def evaluate(gt: MotTable, tracks: MotTable, *, iou_threshold: float = 0.5,
     - OSPA, GOSPA: mean over the frames of the per-frame distances on box centres (:mod:`.ospa`)
     - ME: feng2015's mean error: each true target's mean centre distance to its CLEAR match,
       averaged over the targets matched at least once (nan if none)
-    - num_frames, num_gt_ids, num_track_ids, ignored_gt, ignored_tracks, track_rows_outside
+    - num_frames, num_gt_ids, num_track_ids, track_rows_outside; ignored_gt: gt boxes not
+      scored; ignored_tracks: track boxes removed for covering a distractor (``"mot16"``)
+    - convention: ``"mot15"`` or ``"mot16"``, the one applied; iou_threshold: the one used
     """
+    convention = check_convention(convention) or detect_convention(gt)
     frame_list = _frames(gt, tracks, frames)
     ev = OnlineEvaluator(iou_threshold=iou_threshold, ospa_c=ospa_c, ospa_p=ospa_p,
-                         gospa_alpha=gospa_alpha,
-                         drop_tracks_on_ignored=drop_tracks_on_ignored)
+                         gospa_alpha=gospa_alpha, convention=convention)
     gt_name, tr_name = _name(gt, "ground truth"), _name(tracks, "tracks")
     gt_ids, tr_ids, ious, me_ids, me_dist = [], [], [], [], []
     det_tp = det_fp = n_modp = 0
@@ -95,7 +112,7 @@ def evaluate(gt: MotTable, tracks: MotTable, *, iou_threshold: float = 0.5,
     ignored_gt = ignored_tr = 0
     for f in frame_list:
         g, t = gt.ground_truth(f), tracks.tracks(f)
-        s = score_frame(f, g, t, iou_threshold, drop_tracks_on_ignored, gt_name, tr_name)
+        s = score_frame(f, g, t, iou_threshold, convention, gt_name, tr_name)
         m = ev._update(f, s, g, t)
         gt_ids.append(s.gt_ids)
         tr_ids.append(s.track_ids)
@@ -111,7 +128,8 @@ def evaluate(gt: MotTable, tracks: MotTable, *, iou_threshold: float = 0.5,
         ignored_tr += len(m.ignored_track_idx)
 
     tot = ev.totals
-    res: dict[str, float] = {k: tot[k] for k in ("MOTA", "MOTP", "IDSW", "TP", "FP", "FN", "GT")}
+    res: dict[str, float | str] = {k: tot[k]
+                                   for k in ("MOTA", "MOTP", "IDSW", "TP", "FP", "FN", "GT")}
     res.update(ev.track_quality())
     res["Recall"] = tot["TP"] / max(1, tot["GT"])
     res["Precision"] = tot["TP"] / max(1, tot["TP"] + tot["FP"])
@@ -135,5 +153,6 @@ def evaluate(gt: MotTable, tracks: MotTable, *, iou_threshold: float = 0.5,
     in_range = np.isin(tracks.frame, np.asarray(frame_list)) if len(tracks) else np.zeros(0, bool)
     res.update(num_frames=len(frame_list), num_gt_ids=n_gt, num_track_ids=n_tr,
                ignored_gt=ignored_gt, ignored_tracks=ignored_tr,
-               track_rows_outside=int(len(tracks) - in_range.sum()))
+               track_rows_outside=int(len(tracks) - in_range.sum()),
+               convention=convention, iou_threshold=float(iou_threshold))
     return res
