@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import importlib
 from dataclasses import dataclass, field
-from typing import Any, ClassVar, Optional, Protocol, TypeVar, runtime_checkable
+from typing import Any, Optional, Protocol, TypeVar, runtime_checkable
 
 import numpy as np
 
@@ -51,11 +51,21 @@ class StepResult:
 class Tracker(Protocol):
     """The protocol every tracker implements (checked by mypy in the tests)."""
 
-    name: ClassVar[str]
-    paper: ClassVar[str]
-    stages: ClassVar[tuple[str, ...]]
-    needs_detections: ClassVar[bool]
-    needs_image: ClassVar[bool]
+    # Declared as read-only members: class attributes (``stages = ("predict", ...)``) satisfy them.
+    @property
+    def name(self) -> str: ...
+
+    @property
+    def paper(self) -> str: ...
+
+    @property
+    def stages(self) -> tuple[str, ...]: ...
+
+    @property
+    def needs_detections(self) -> bool: ...
+
+    @property
+    def needs_image(self) -> bool: ...
 
     def step(self, frame: Frame, detections: Optional[Detections],
              level: Optional[str] = None) -> StepResult: ...

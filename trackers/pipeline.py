@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Callable, Mapping, Optional, Protocol, Sequence
 
 from .api import Rows, StepResult, Tracker
@@ -136,7 +137,7 @@ class TracksFileHook(BaseHook):
 
         self.lane = lane
         self.writer = TrackWriter(path)
-        self.kept_as = None
+        self.kept_as: Optional[Path] = None
 
     def on_rows(self, lane: str, rows: Rows) -> None:
         if self.lane is None or lane == self.lane:
