@@ -16,8 +16,7 @@ from pfscope.trackers.data.sources import open_source
 from pfscope.trackers.data.synthetic import SceneConfig
 from pfscope.trackers.params import param
 from pfscope.trackers.pipeline import BaseHook, TracksFileHook, run
-from pfscope.trackers.report import (ITEM_TYPES, Boxes, Event, Field, Mask, Points, Scalar,
-                                     Segments, StageLog)
+from pfscope.trackers.report import (ITEM_TYPES, Boxes, Field, Mask, Points, StageLog)
 from pfscope.trackers.types import Detections, Frame, TrackSet
 from pfscope.viewer_app.run import RecordOptions, record
 

@@ -28,7 +28,6 @@ from __future__ import annotations
 import json
 import os
 import platform
-import time
 import uuid
 from collections import deque
 from datetime import timedelta

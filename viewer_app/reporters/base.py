@@ -14,7 +14,7 @@ Styling rules (the engine says *what*, this module says *how it looks*):
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Optional
 
 import numpy as np
@@ -201,4 +201,4 @@ class Reporter:
                      rr.TextLog(message, level=level))
 
 
-__all__ = ["Reporter", "TrackerLayout", "ROLES", "annotation_context", "value_labels", "field"]
+__all__ = ["Reporter", "TrackerLayout", "ROLES", "annotation_context", "value_labels"]
