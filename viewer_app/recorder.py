@@ -118,7 +118,9 @@ class RerunRecorder(BaseHook):
         self.rec = rec
         if len(names) == 1:
             layout = layout_for(info.trackers[names[0]].name)
-            blueprint = default_blueprint(layout.views, layout.plots)
+            plots = [(title, paths) for title, paths in layout.plots
+                     if self.timing or not all(p.startswith("timing/") for p in paths)]
+            blueprint = default_blueprint(layout.views, plots)
         else:
             blueprint = compare_blueprint(names)
         if self.partial.exists():

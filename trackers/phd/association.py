@@ -80,8 +80,6 @@ from dataclasses import dataclass
 from functools import cached_property
 
 import numpy as np
-from scipy.optimize import linear_sum_assignment
-from scipy.stats import chi2
 
 from ..types import cxcywh_to_xywh
 from ..params import param
@@ -142,7 +140,9 @@ class AssocParams:
     @cached_property
     def gate_d2(self) -> float:
         """Squared Mahalanobis radius of the gate (chi-square quantile, 4 dof)."""
-        return float(chi2.ppf(self.gate, df=len(OBS_INDEX)))
+        from .filter import gate_threshold  # scipy.stats, imported on first use
+
+        return gate_threshold(self.gate, len(OBS_INDEX))
 
 
 # --------------------------------------------------------------------------- pure functions
@@ -265,6 +265,8 @@ def max_weight_matching(weights: np.ndarray, allowed: np.ndarray) -> tuple[np.nd
     if not ok.any():
         return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
     w = np.where(ok, weights, 0.0)
+    from scipy.optimize import linear_sum_assignment  # slow to import; not needed for --help
+
     rows, cols = linear_sum_assignment(w, maximize=True)
     keep = ok[rows, cols]
     return rows[keep].astype(np.int64), cols[keep].astype(np.int64)
