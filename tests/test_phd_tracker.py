@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -9,22 +11,27 @@ from pfscope.trackers.api import make_tracker
 from pfscope.trackers.data.synthetic import SceneConfig, SyntheticScene
 from pfscope.trackers.eval import box_iou
 from pfscope.trackers.report import Boxes, Points, Scalar, Segments, find
-from pfscope.trackers.types import Frame
+from pfscope.trackers.data.sources import open_source
+from pfscope.trackers.pipeline import BaseHook, run
 
-BLANK = np.zeros((8, 8, 3), np.uint8)  # PHD-MT and MT look at detections only
+
+class _Keep(BaseHook):
+    def __init__(self, name):
+        self.name, self.live, self.stages = name, [], []
+
+    def on_frame(self, report):
+        res = report.results[self.name]
+        self.live.append((report.frame.index, res.tracks))
+        self.stages.append(res.stages)
 
 
-def _run(name, scene, seed=0, **options):
-    """Step the tracker by hand (the pipeline's contract, without a source): live tracks and
-    the tracks-file rows."""
-    tr = make_tracker(name, seed=seed, **options)
-    live, final = [], []
-    for k in range(1, scene.config.frames + 1):
-        res = tr.step(Frame(k, 0.0, BLANK), scene.det.detections(k))
-        live.append((k, res.tracks))
-        final += res.rows
-    final += tr.finish()
-    return live, final
+def _run(name, scene, seed=0, level=None, **options):
+    """Run the tracker through the pipeline on the scene: (live tracks, tracks-file rows)."""
+    keep = _Keep(name)
+    res = run(open_source("synthetic", synthetic_config=scene.config),
+              [make_tracker(name, seed=seed, **options)], level=level, hooks=[keep], score=False)
+    _run.last_stages = keep.stages
+    return keep.live, res.rows[name]
 
 
 def _false_tracks(scene, rows) -> tuple[int, int]:
@@ -88,9 +95,9 @@ def test_phd_mt_tracks_a_clean_scene():
 
 
 def _stages(cluttered, level, frames=30):
-    tr = make_tracker("phd", seed=0)
-    return [tr.step(Frame(k, 0.0, BLANK), cluttered.det.detections(k), level).stages
-            for k in range(1, frames)]
+    scene = SyntheticScene(replace(cluttered.config, frames=frames - 1))
+    _run("phd", scene, level=level)
+    return _run.last_stages
 
 
 def test_every_stage_reported(cluttered):
