@@ -1,6 +1,10 @@
 """Helpers shared by the benchmark scripts: finding the data, opening a source, timing
 statistics, the machine description, tables and the ``--json`` output.
 
+The benchmarks keep no frame loop of their own: every run goes through the engine's
+:func:`pfscope.trackers.pipeline.run` (or ``viewer_app.run.record``, which uses it), with
+hooks (and, for per-stage timing, a timing subclass of the tracker) doing the measuring.
+
 Benchmarks are scripts run by hand (``.venv/bin/python benchmarks/<name>.py``), not tests.
 Real data is looked up in ``$PFSCOPE_DATA`` and then in ``../shared/data`` relative to the
 repository root, like the tests do; it is never copied into the repository.
@@ -13,7 +17,6 @@ import os
 import platform
 import statistics
 import sys
-import time
 from pathlib import Path
 from typing import Iterable, Optional, Sequence
 
@@ -92,30 +95,6 @@ def median(xs: Iterable[float]) -> float:
 
 def fps(seconds: float, frames: int = 1) -> float:
     return frames / seconds if seconds > 0 else float("inf")
-
-
-class Clock:
-    """``with clock('stage'):`` adds the elapsed wall time to the stage's current-frame slot."""
-
-    def __init__(self):
-        self.now: dict[str, float] = {}
-
-    def __call__(self, name: str):
-        return _Tick(self, name)
-
-
-class _Tick:
-    __slots__ = ("clock", "name", "t0")
-
-    def __init__(self, clock, name):
-        self.clock, self.name = clock, name
-
-    def __enter__(self):
-        self.t0 = time.perf_counter()
-
-    def __exit__(self, *exc):
-        self.clock.now[self.name] = self.clock.now.get(self.name, 0.0) + time.perf_counter() - self.t0
-        return False
 
 
 # ----------------------------------------------------------------------------- machine, output

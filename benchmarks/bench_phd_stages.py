@@ -1,29 +1,38 @@
 """Frames per second of each stage of PHD-MT (maggio2007 §2–§4) at the paper's settings.
 
-Settings: ``PHDParams()`` defaults (maggio2007 §4: ρ = 1500 particles/target, J_max = 1000,
-p_M = 0.05, e = 0.99 ...), ``T = 0.6`` (cluster mass threshold) and ``AssocParams()`` defaults
-(graph depth ``K = 50``, tracks shorter than 5 frames dropped), split rule ``"guarded"``
-(the :class:`~trackers.phd.tracker.PHDTracker` default).
+Settings: the ``phd`` tracker's ``paper`` preset (``PHDTrackerParams()``: the filter's parts at
+maggio2007 §4, ρ = 1500 particles/target, J_max = 1000, p_M = 0.05, e = 0.99 ...; ``T = 0.6``
+cluster mass threshold, split rule ``"guarded"``; graph depth ``K = 50``, tracks shorter than
+5 frames dropped).
 
-What is timed, per frame, on the source's public detections (``.det``):
+Everything runs through the engine's one frame loop, :func:`pfscope.trackers.pipeline.run`, on
+the source's public detections (the pipeline's ``file`` detector, as ``pfscope record`` picks
+for a MOT folder).  One run per repeat has three lanes, stepped one after the other on every
+frame:
 
-- the six stages of PHD-MT, calling the stage functions in the order of
-  :meth:`trackers.phd.filter.PHDFilter.step` and :meth:`trackers.phd.tracker.PHDTracker.step`,
-  each between two ``time.perf_counter()`` calls:
-  ``predict`` → ``birth`` → ``update`` (including the concatenation of persistent and newborn
-  particles, as in ``PHDFilter.step``) → ``resample`` → ``cluster``
-  (:func:`~trackers.phd.clustering.kmeans_peaks`) → ``associate``
-  (:meth:`~trackers.phd.association.GraphAssociator.step` on the kept centres);
-- the MT baseline (:class:`~trackers.phd.tracker.MTTracker`: the same association on the raw
-  detections) and the whole :class:`PHDTracker` with a :class:`NullObserver`;
-- for context, the image detectors (``hog``, ``bgsub``, and the ``file`` replay) on the first
-  ``--det-frames`` frames of the source, so the tracker:detector split can be set beside
-  maggio2007 §4 (PHD filter 34 % of the time, detector 64 %).
+- ``stages``: :class:`StageTimedPHDTracker`, a :class:`~trackers.phd.tracker.PHDTracker`
+  subclass whose ``step`` calls the filter's pure stage functions itself, in the order of
+  :meth:`trackers.phd.filter.PHDFilter.step`, each between two ``time.perf_counter()`` calls:
+  ``predict`` → ``birth`` → ``update`` (the concatenation of persistent and newborn particles,
+  the likelihood matrix ``log g``, ``log κ`` and eq. (5), as in ``PHDFilter.step``) →
+  ``resample`` → ``cluster`` (:func:`~trackers.phd.clustering.kmeans_peaks`) → ``associate``
+  (:meth:`~trackers.phd.association.GraphAssociator.step` on the kept centres); the stage data
+  and the step result are built as ``PHDTracker.step`` builds them, outside the clocks;
+- ``mt``: the MT baseline (:class:`~trackers.phd.tracker.MTTracker`: the same association on
+  the raw detections), timed by the pipeline (``FrameReport.step_seconds``);
+- ``phd``: the plain ``PHDTracker``, timed by the pipeline.  A hook checks every frame that
+  the ``stages`` lane holds exactly the same particles and reports the same tracks as it.
+
+The pipeline runs at ``level=None`` (no stage items, only scalars and events), as an unrecorded
+run does.  For context, the image detectors (``hog``, ``bgsub``, and the ``file`` replay) are
+timed on the first ``--det-frames`` frames of the source, again through the pipeline: each is
+a :class:`DetectorLane` (a stand-in tracker whose step runs the detector on the frame the
+pipeline read), so the tracker:detector split can be set beside maggio2007 §4 (PHD filter 34 %
+of the time, detector 64 %).
 
 The same seed gives identical work in every repeat, so the per-frame time of a stage is the
 median over ``--repeat`` runs (robust to the noise of a shared machine); a stage's time for
-the sequence is the sum of those medians.  The script checks that its stage-by-stage
-replication draws the same particles as ``PHDTracker`` (same particle count every frame).
+the sequence is the sum of those medians.
 
 Usage::
 
@@ -37,108 +46,204 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from typing import Optional
 
 import _common as C  # noqa: E402  (also puts the repository root on sys.path)
 import numpy as np
 
+from pfscope.trackers.api import Rows, StepResult, make_params, make_tracker, params_config
 from pfscope.trackers.errors import InputError
-from pfscope.trackers.observer import NullObserver
-from pfscope.trackers.phd.association import AssocParams, GraphAssociator
 from pfscope.trackers.phd.clustering import kmeans_peaks
-from pfscope.trackers.phd.filter import (STATE_DIM, PHDParams, as_observations, birth, predict,
-                                 resample, update)
-from pfscope.trackers.phd.tracker import MTTracker, PHDTracker
-from pfscope.trackers.smc.weights import ParticleSet
-from pfscope.trackers.types import Frame
+from pfscope.trackers.phd.filter import (PHDStepResult, as_observations, birth,
+                                         log_clutter_density, predict, resample, update)
+from pfscope.trackers.phd.tracker import PHDTracker
+from pfscope.trackers.pipeline import BaseHook, FrameReport, RunInfo
+from pfscope.trackers.pipeline import run as run_pipeline
+from pfscope.trackers.report import StageLog
+from pfscope.trackers.types import Detections, Frame, TrackSet
 
 STAGES = ("predict", "birth", "update", "resample", "cluster", "associate")
 FILTER_STAGES = STAGES[:4]
-T_DEFAULT = 0.6          # maggio2007 §4
-SPLIT_RULE = "guarded"   # PHDTracker default
 WARMUP_FRAMES = 10
+LANE_STAGES, LANE_MT, LANE_PHD = "stages", "mt", "phd"
+
+
+# ----------------------------------------------------------------------------- timing wrappers
+
+class _TimedAssociator:
+    """The tracker's :class:`GraphAssociator` with a clock around ``step`` (everything else is
+    forwarded), so the ``associate`` stage is the association alone, not the stage data built
+    around it."""
+
+    def __init__(self, inner):
+        self._inner = inner
+        self.seconds = 0.0
+
+    def step(self, frame: int, states):
+        t0 = time.perf_counter()
+        res = self._inner.step(frame, states)
+        self.seconds = time.perf_counter() - t0
+        return res
+
+    def __getattr__(self, name):
+        return getattr(self._inner, name)
+
+
+class StageTimedPHDTracker(PHDTracker):
+    """PHD-MT whose ``step`` times each stage.
+
+    It is ``PHDTracker.step`` with the body of ``PHDFilter.step`` written out, so that each of
+    predict / birth / update / resample / K-means / association sits between two
+    ``time.perf_counter()`` calls; the same functions are called in the same order with the
+    same generator, so the particles, tracks and rows are those of ``PHDTracker`` (checked
+    frame by frame by :class:`ReplicationCheck`).  ``times`` holds one row of six seconds per
+    step, ``counts`` the particle counts (after resampling, in the update, newborn) and kept
+    clusters."""
+
+    def __init__(self, params=None, *, rng: np.random.Generator):
+        super().__init__(params, rng=rng)
+        self.associator = _TimedAssociator(self.associator)
+        self.times: list[tuple[float, ...]] = []
+        self.counts: list[tuple[int, int, int, int]] = []
+
+    def step(self, frame: Frame, detections: Optional[Detections],
+             level: Optional[str] = None) -> StepResult:
+        dets = detections if detections is not None else Detections.empty()
+        log = StageLog(self.stages, level)
+        f, p, cp = self.filter, self.filter.params, self.params.clusters
+        pc = time.perf_counter
+        Z = as_observations(dets)  # input conversion, outside the stages (negligible)
+        t0 = pc()
+        predicted = predict(f.particles, p.motion, f.rng)
+        t1 = pc()
+        born = birth(predicted, Z, p, f.rng)
+        t2 = pc()
+        candidates = predicted.concat(born.particles)
+        log_g = f.likelihood.log_g(candidates.states, Z, frame)
+        log_kappa = log_clutter_density(Z, p.clutter, p.likelihood)
+        updated = update(candidates, log_g, log_kappa, p.likelihood.p_miss)
+        t3 = pc()
+        resampled = resample(updated.particles, p.resampling, f.rng)
+        t4 = pc()
+        f.particles = resampled
+        clusters = kmeans_peaks(resampled, Z, cp.T, params=p, split_rule=cp.split_rule)
+        t5 = pc()
+        r = PHDStepResult(Z, predicted, born, updated, resampled, updated.particles.mass)
+        self._report_filter(dets, r, clusters, log)
+        result = self._associate(frame, clusters.kept_centers, log)
+        self.times.append((t1 - t0, t2 - t1, t3 - t2, t4 - t3, t5 - t4,
+                           self.associator.seconds))
+        self.counts.append((len(resampled), len(updated.particles), len(born.particles),
+                            int(clusters.kept.sum())))
+        return result
+
+
+class DetectorLane:
+    """A stand-in tracker whose step runs one image detector on the frame the pipeline read, so
+    the pipeline's ``step_seconds`` of the lane is the detector's time.  Reports no tracks."""
+
+    paper = "-"
+    stages = ("detect",)
+    needs_detections = False
+    needs_image = True
+
+    def __init__(self, name: str, detector):
+        self.name = name
+        self.detector = detector
+        self.boxes = 0
+
+    def step(self, frame: Frame, detections: Optional[Detections],
+             level: Optional[str] = None) -> StepResult:
+        self.boxes += len(self.detector(frame))
+        return StepResult(TrackSet.empty())
+
+    def finish(self) -> Rows:
+        return []
+
+    def config(self) -> dict:
+        return {"tracker": f"detector:{self.name}"}
+
+
+# ----------------------------------------------------------------------------- hooks
+
+class StepTimes(BaseHook):
+    """Per-frame ``step_seconds`` of every lane."""
+
+    def begin(self, info: RunInfo) -> None:
+        self.seconds: dict[str, list[float]] = {lane: [] for lane in info.trackers}
+
+    def on_frame(self, report: FrameReport) -> None:
+        for lane, s in report.step_seconds.items():
+            self.seconds[lane].append(s)
+
+
+class ReplicationCheck(BaseHook):
+    """After every frame: do lanes ``a`` and ``b`` hold identical particles and report identical
+    tracks?  ``mismatch`` is the first frame where they differ (None: never)."""
+
+    def __init__(self, a: str, b: str):
+        self.a, self.b = a, b
+        self.mismatch: Optional[int] = None
+
+    def begin(self, info: RunInfo) -> None:
+        self.ta, self.tb = info.trackers[self.a], info.trackers[self.b]
+
+    def on_frame(self, report: FrameReport) -> None:
+        if self.mismatch is not None:
+            return
+        pa, pb = self.ta.filter.particles, self.tb.filter.particles
+        ra, rb = report.results[self.a].tracks, report.results[self.b].tracks
+        same = (np.array_equal(pa.states, pb.states)
+                and np.array_equal(pa.log_weights, pb.log_weights)
+                and np.array_equal(ra.ids, rb.ids) and np.array_equal(ra.boxes, rb.boxes))
+        if not same:
+            self.mismatch = report.frame.index
 
 
 # ----------------------------------------------------------------------------- one run each
 
-def run_stages(dets, params: PHDParams, T: float, seed: int):
-    """PHDFilter.step + kmeans_peaks + GraphAssociator.step, stage by stage.
-
-    Returns (times (F, 6) seconds, counts dict of (F,) arrays)."""
-    rng = np.random.default_rng(seed)
-    assoc = GraphAssociator(AssocParams())
-    particles = ParticleSet.empty(STATE_DIM)
-    F = len(dets)
-    times = np.zeros((F, len(STAGES)))
-    n_resampled = np.zeros(F, np.int64)
-    n_updated = np.zeros(F, np.int64)
-    n_born = np.zeros(F, np.int64)
-    n_kept = np.zeros(F, np.int64)
-    pc = time.perf_counter
-    for i, d in enumerate(dets):
-        Z = as_observations(d)  # input conversion, outside the stages (negligible)
-        t0 = pc()
-        predicted = predict(particles, params, rng)
-        t1 = pc()
-        born = birth(predicted, Z, params, rng)
-        t2 = pc()
-        updated = update(predicted.concat(born.particles), Z, params)
-        t3 = pc()
-        resampled = resample(updated.particles, params, rng)
-        t4 = pc()
-        clusters = kmeans_peaks(resampled, Z, T, params=params, split_rule=SPLIT_RULE)
-        t5 = pc()
-        assoc.step(i + 1, clusters.kept_centers)
-        t6 = pc()
-        particles = resampled
-        times[i] = (t1 - t0, t2 - t1, t3 - t2, t4 - t3, t5 - t4, t6 - t5)
-        n_resampled[i] = len(resampled)
-        n_updated[i] = len(updated.particles)
-        n_born[i] = len(born.particles)
-        n_kept[i] = int(clusters.kept.sum())
-    return times, dict(resampled=n_resampled, updated=n_updated, born=n_born, kept=n_kept)
-
-
-def run_tracker(tracker, frames, dets):
-    """Per-frame wall time of ``tracker.step(frame, dets, NullObserver())``; also the particle
-    count after each step when the tracker has a PHD filter."""
-    obs = NullObserver()
-    times = np.zeros(len(frames))
-    counts = np.zeros(len(frames), np.int64)
-    filt = getattr(tracker, "filter", None)
-    pc = time.perf_counter
-    for i, (f, d) in enumerate(zip(frames, dets)):
-        t0 = pc()
-        tracker.step(f, d, obs)
-        times[i] = pc() - t0
-        if filt is not None:
-            counts[i] = len(filt.particles)
-    return times, counts
+def run_trackers(source, frames: int, seed: int):
+    """One pipeline run with the three lanes; returns (stage times (F, 6), counts dict of (F,)
+    arrays, per-lane step seconds dict of (F,) arrays, replication mismatch frame or None)."""
+    params = make_params("phd")
+    timed = StageTimedPHDTracker(params, rng=np.random.default_rng(seed))
+    lanes = {LANE_STAGES: timed, LANE_MT: make_tracker("mt", seed),
+             LANE_PHD: make_tracker("phd", seed)}
+    steps, check = StepTimes(), ReplicationCheck(LANE_STAGES, LANE_PHD)
+    res = run_pipeline(source, lanes, frames=frames, level=None, hooks=[steps, check],
+                       keep_rows=False, score=False)
+    if res.frames != frames or res.outcome.status != "completed":
+        raise SystemExit(f"pipeline stopped: {res.outcome.reason}")
+    c = np.array(timed.counts, dtype=np.int64).reshape(-1, 4)
+    counts = dict(resampled=c[:, 0], updated=c[:, 1], born=c[:, 2], kept=c[:, 3])
+    secs = {lane: np.array(v) for lane, v in steps.seconds.items()}
+    return np.array(timed.times).reshape(-1, len(STAGES)), counts, secs, check.mismatch
 
 
 def time_detectors(source, n: int, names=("hog", "bgsub", "file")) -> dict:
-    """Median (and mean) seconds per frame of each detector on the first ``n`` frames (images
-    read before timing; ``bgsub`` sees the frames in order, as it must)."""
+    """Median (and mean) seconds per frame of each detector on the first ``n`` frames, each a
+    :class:`DetectorLane` of one pipeline run (the pipeline reads the image before the lanes
+    step; ``bgsub`` sees the frames in order, as it must)."""
     from pfscope.trackers.detect import make_detector
 
-    frames = list(source.frames(n))
-    out = {}
+    lanes = {}
     for name in names:
         if name == "file" and source.det is None:
             continue
         try:
-            det = make_detector(name, det_table=source.det)
+            lanes[name] = DetectorLane(name, make_detector(name, det_table=source.det))
         except InputError as e:
             print(f"note: detector {name} skipped: {e}", file=sys.stderr)
-            continue
-        t = []
-        n_boxes = 0
-        for f in frames:
-            t0 = time.perf_counter()
-            r = det(f)
-            t.append(time.perf_counter() - t0)
-            n_boxes += len(r)
-        out[name] = {"frames": len(frames), "median_s": C.median(t), "mean_s": float(np.mean(t)),
-                     "boxes_per_frame": n_boxes / max(len(frames), 1)}
+    if not lanes:
+        return {}
+    steps = StepTimes()
+    res = run_pipeline(source, lanes, frames=n, level=None, hooks=[steps], keep_rows=False,
+                       score=False)
+    out = {}
+    for name, lane in lanes.items():
+        t = steps.seconds[name]
+        out[name] = {"frames": res.frames, "median_s": C.median(t), "mean_s": float(np.mean(t)),
+                     "boxes_per_frame": lane.boxes / max(res.frames, 1)}
     return out
 
 
@@ -150,38 +255,32 @@ def bench_source(spec: str, args) -> dict:
         raise SystemExit(f"{source.location}: no public detections (det/det.txt); this benchmark "
                          f"runs PHD-MT on a source's detections")
     F = C.n_frames(source, args.frames)
-    dets = [source.det.detections(k) for k in range(1, F + 1)]
-    dummy = np.zeros((1, 1, 3), np.uint8)  # the trackers never look at the pixels
-    frames = [Frame(k, (k - 1) / source.fps, dummy) for k in range(1, F + 1)]
-    params = PHDParams()
-    T = T_DEFAULT
-    n_det = np.array([len(d) for d in dets])
+    n_det = np.array([len(source.det.detections(k)) for k in range(1, F + 1)])
+    params = make_params("phd")
     print(f"\n=== {source.name}: {F} frames, {n_det.mean():.1f} detections/frame "
           f"(max {n_det.max()}), {args.repeat} repeats, seed {args.seed} ===")
 
     # warm-up (first calls: imports, lru caches, allocator), not measured
-    w = min(WARMUP_FRAMES, F)
-    run_stages(dets[:w], params, T, args.seed)
-    run_tracker(PHDTracker(np.random.default_rng(args.seed), T=T), frames[:w], dets[:w])
-    run_tracker(MTTracker(), frames[:w], dets[:w])
+    run_trackers(source, min(WARMUP_FRAMES, F), args.seed)
 
-    st, mt, phd = [], [], []
-    counts = tracker_counts = None
+    st, mt, phd, timed_step = [], [], [], []
+    counts, mismatch = None, None
     t_start = time.perf_counter()
-    for r in range(args.repeat):  # interleaved so a load change hits all three alike
-        times, counts = run_stages(dets, params, T, args.seed)
+    for r in range(args.repeat):  # the lanes step in turn on every frame: load hits them alike
+        times, counts, secs, mm = run_trackers(source, F, args.seed)
         st.append(times)
-        mt.append(run_tracker(MTTracker(), frames, dets)[0])
-        t_phd, tracker_counts = run_tracker(PHDTracker(np.random.default_rng(args.seed), T=T),
-                                            frames, dets)
-        phd.append(t_phd)
+        mt.append(secs[LANE_MT])
+        phd.append(secs[LANE_PHD])
+        timed_step.append(secs[LANE_STAGES])
+        mismatch = mismatch if mismatch is not None else mm
         print(f"  repeat {r + 1}/{args.repeat} done ({time.perf_counter() - t_start:.1f} s)",
               file=sys.stderr)
-    same = bool(np.array_equal(counts["resampled"], tracker_counts))
+    same = mismatch is None
 
     st_med = np.median(np.stack(st), axis=0)       # (F, 6) per-frame medians over repeats
     mt_med = np.median(np.stack(mt), axis=0)
     phd_med = np.median(np.stack(phd), axis=0)
+    timed_med = np.median(np.stack(timed_step), axis=0)
     stage_total = st_med.sum(axis=0)                # seconds for the sequence, per stage
     all_total = float(stage_total.sum())
 
@@ -191,36 +290,37 @@ def bench_source(spec: str, args) -> dict:
                         "median_ms": 1e3 * float(np.median(st_med[:, j])),
                         "fps": C.fps(stage_total[j], F), "share": stage_total[j] / all_total}
     filt_s = float(stage_total[:4].sum())
-    groups = {
-        "PHD filter (predict..resample)": filt_s,
-        "stages total (6 stages)": all_total,
-        "MT tracker (association on detections)": float(mt_med.sum()),
-        "PHD-MT tracker, NullObserver": float(phd_med.sum()),
+    per_frame = {
+        "PHD filter (predict..resample)": st_med[:, :4].sum(1),
+        "stages total (6 stages)": st_med.sum(1),
+        "MT tracker (association on detections)": mt_med,
+        "PHD-MT tracker (pipeline step)": phd_med,
+        "PHD-MT stage-timed step (pipeline)": timed_med,
     }
+    groups = {name: float(v.sum()) for name, v in per_frame.items()}
     rows = [(name, f"{s['ms_per_frame']:.3f}", f"{s['median_ms']:.3f}", f"{s['fps']:.0f}",
              f"{100 * s['share']:.1f}%") for name, s in stages.items()]
     for name, secs in groups.items():
-        per = {"PHD filter (predict..resample)": st_med[:, :4].sum(1),
-               "stages total (6 stages)": st_med.sum(1),
-               "MT tracker (association on detections)": mt_med,
-               "PHD-MT tracker, NullObserver": phd_med}[name]
         share = f"{100 * secs / all_total:.1f}%" if name.startswith("PHD filter") else ""
-        rows.append((name, f"{1e3 * secs / F:.3f}", f"{1e3 * float(np.median(per)):.3f}",
+        rows.append((name, f"{1e3 * secs / F:.3f}", f"{1e3 * float(np.median(per_frame[name])):.3f}",
                      f"{C.fps(secs, F):.0f}", share))
     print(C.table(["stage", "ms/frame", "median ms", "fps", "share"], rows))
     print("(ms/frame = sum over frames of the per-frame median over repeats / frames; "
-          "fps = frames / that sum; share = of the 6 stages)")
+          "fps = frames / that sum; share = of the 6 stages; tracker rows = the pipeline's "
+          "step_seconds of the lane)")
     pc = counts
     print(f"particles: mean L_k after resampling {pc['resampled'].mean():.0f} "
           f"(max {pc['resampled'].max()}), mean in update L_(k-1)+J_k {pc['updated'].mean():.0f}, "
           f"mean newborn J_k {pc['born'].mean():.0f}; kept clusters/frame {pc['kept'].mean():.2f}")
-    print(f"stage replication draws the same particles as PHDTracker: {'yes' if same else 'NO'}; "
-          f"PHDTracker / sum of stages = {groups['PHD-MT tracker, NullObserver'] / all_total:.3f}; "
-          f"PHD-MT / MT = {groups['PHD-MT tracker, NullObserver'] / groups['MT tracker (association on detections)']:.1f}x")
+    phd_s, mt_s = groups["PHD-MT tracker (pipeline step)"], groups["MT tracker (association on detections)"]
+    print(f"stage-timed lane holds the same particles and tracks as PHDTracker every frame: "
+          f"{'yes' if same else f'NO (first difference at frame {mismatch})'}; "
+          f"PHDTracker / sum of stages = {phd_s / all_total:.3f}; PHD-MT / MT = {phd_s / mt_s:.1f}x")
 
     result = {"source": source.describe(), "frames": F, "repeats": args.repeat, "seed": args.seed,
-              "settings": {"phd": vars_of(params), "assoc": vars_of(AssocParams()), "T": T,
-                           "split_rule": SPLIT_RULE},
+              "settings": {"phd": params_config(params), "preset": "paper",
+                           "T": params.clusters.T, "split_rule": params.clusters.split_rule,
+                           "level": None},
               "detections_per_frame": float(n_det.mean()),
               "stages": stages,
               "groups_seconds": groups,
@@ -230,16 +330,16 @@ def bench_source(spec: str, args) -> dict:
                             "updated_mean": float(pc["updated"].mean()),
                             "born_mean": float(pc["born"].mean()),
                             "kept_clusters_mean": float(pc["kept"].mean())},
-              "replication_matches_tracker": same}
+              "replication_matches_tracker": same, "replication_first_mismatch": mismatch}
 
     if args.det_frames > 0:
         dt = time_detectors(source, min(args.det_frames, F))
         result["detectors"] = dt
-        trk_s = groups["PHD-MT tracker, NullObserver"] / F
+        trk_s = phd_s / F
         filt_pf = filt_s / F
         rest_pf = float(stage_total[4:].sum()) / F
         print(f"\ndetectors on frames 1..{min(args.det_frames, F)} "
-              f"({source.width}x{source.height}; images decoded before timing):")
+              f"({source.width}x{source.height}; each a pipeline lane, image read before it steps):")
         rows = []
         for name, d in dt.items():
             tot = d["median_s"] + filt_pf + rest_pf
@@ -257,12 +357,6 @@ def bench_source(spec: str, args) -> dict:
         print("(shares of detector + PHD-MT per frame; maggio2007 §4 reports detector 64 %, "
               "PHD filter 34 %)")
     return result
-
-
-def vars_of(dc) -> dict:
-    from dataclasses import asdict
-
-    return asdict(dc)
 
 
 def main(argv=None) -> int:
@@ -285,8 +379,12 @@ def main(argv=None) -> int:
 
     info = C.machine()
     C.print_machine(info)
-    print(f"PHD-MT at maggio2007 §4 settings: PHDParams() defaults, T={T_DEFAULT}, "
-          f"K={AssocParams().depth}, split rule {SPLIT_RULE!r}")
+    p = make_params("phd")
+    print(f"PHD-MT at maggio2007 §4 settings (tracker 'phd', preset 'paper'): "
+          f"rho={p.filter.resampling.rho:g}, J_max={p.filter.birth.j_max}, "
+          f"p_M={p.filter.likelihood.p_miss:g}, T={p.clusters.T:g}, K={p.assoc.depth}, "
+          f"split rule {p.clusters.split_rule!r}; run through pfscope.trackers.pipeline.run "
+          f"(level None, file detector)")
     results = {}
     try:
         for spec in C.resolve_sources(args.source):

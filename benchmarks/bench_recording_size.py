@@ -1,9 +1,14 @@
 """Size and cost of a Rerun recording of PHD-MT at each level (tracks, clusters, particles).
 
 Uses the app's own code path, :func:`viewer_app.run.record` with
-``RecordOptions(tracker='phd', level=..., max_points=..., frames=N, force=True)``, writing into
-a temporary folder (deleted afterwards unless ``--keep DIR``), on a source's public
-detections (``file`` detector, as ``pfscope record`` picks for a MOT folder).
+``RecordOptions(tracker='phd', level=..., max_points=..., frames=N, seed=..., force=True)``
+(``preset`` None = the tracker's ``paper`` preset, ``timing`` off so the same seed gives the
+same bytes, no ``tracker_options``), writing into a temporary folder (deleted afterwards unless
+``--keep DIR``), on a source's public detections (``file`` detector, as ``pfscope record``
+picks for a MOT folder).  ``record`` runs the engine's one frame loop,
+:func:`pfscope.trackers.pipeline.run`, with the :class:`~viewer_app.recorder.RerunRecorder`
+hook; it writes ``<name>.incomplete.rrd`` and renames it to ``<name>.rrd`` when the run
+completed, and this script measures the completed file.
 
 For each source it reports:
 
@@ -11,14 +16,16 @@ For each source it reports:
   the last also with several ``--max-points`` caps (points per cloud; the recorder decimates
   bigger clouds with a fixed stride);
 - how much of that is the video frame: every frame is logged as a JPEG
-  (``RerunObserver`` default quality), whose bytes are measured by encoding the same frames with
+  (``RerunRecorder`` default quality), whose bytes are measured by encoding the same frames with
   OpenCV at that quality, and set beside the ``tracks`` level (the smallest recording:
-  image + detections + GT + tracks + scalars);
+  image + detections + GT + tracks + scalars + online metrics);
 - where the rest goes: the recording is read back (``rerun.chunk.RrdReader``) and its Arrow
   payload summed per kind of entity (image, particle clouds, other overlays, plots, log);
-- the recording overhead: fps of ``record()`` against the tracker alone (PHD-MT with a
-  NullObserver on preloaded detections) and against the same loop without recording
-  (frames read or rendered + file detector + tracker).
+- the recording overhead: fps of ``record()`` against the tracker alone and against the same
+  pipeline without the recorder.  Both come from one :func:`~pfscope.trackers.pipeline.run`
+  per repeat with only a :class:`LoopTimer` hook (same source, ``file`` detector, PHD-MT,
+  online metrics; ``level=None``, as an unrecorded run): the tracker alone is the pipeline's
+  ``step_seconds`` of the lane, the loop is the wall time between two frames.
 
 Timing: each configuration runs ``--repeat`` times; a frame's time is the median over the
 repeats (``record`` reports each finished frame through ``on_frame``), and fps is computed over
@@ -42,25 +49,26 @@ import tempfile
 import time
 from collections import Counter
 from pathlib import Path
+from typing import Optional
 
 import _common as C  # noqa: E402  (also puts the repository root on sys.path)
 import cv2
 import numpy as np
 
-from pfscope.trackers.detect import make_detector
+from pfscope.trackers.api import make_params, make_tracker
 from pfscope.trackers.errors import InputError
-from pfscope.trackers.observer import NullObserver
-from pfscope.trackers.phd.tracker import PHDTracker
-from pfscope.trackers.types import Frame
+from pfscope.trackers.pipeline import BaseHook, FrameReport, RunInfo
+from pfscope.trackers.pipeline import run as run_pipeline
 
 DEFAULT_MAX_POINTS = 3000
 MB = 1e6
+LANE = "phd"
 
 
 def recorder_jpeg_quality() -> int:
-    from pfscope.viewer_app.recorder import RerunObserver
+    from pfscope.viewer_app.recorder import RerunRecorder
 
-    return int(inspect.signature(RerunObserver.__init__).parameters["jpeg_quality"].default)
+    return int(inspect.signature(RerunRecorder.__init__).parameters["jpeg_quality"].default)
 
 
 def record_max_points_default() -> int:
@@ -77,50 +85,51 @@ def run_record(source, out: Path, level: str, max_points: int, frames: int, seed
 
     stamps = []
     t0 = time.perf_counter()
-    res = record(source, out, RecordOptions(tracker="phd", level=level, max_points=max_points,
+    res = record(source, out, RecordOptions(tracker=LANE, level=level, max_points=max_points,
                                             frames=frames, seed=seed, force=True),
                  progress=False, on_frame=lambda done: stamps.append(time.perf_counter()))
-    if res.frames != frames or res.interrupted:
-        raise SystemExit(f"record() stopped after {res.frames} of {frames} frames")
+    if res.frames != frames or res.interrupted or Path(res.out) != Path(out):
+        raise SystemExit(f"record() stopped after {res.frames} of {frames} frames "
+                         f"(recording kept as {res.out})")
     return np.diff(np.array([t0] + stamps)), res
 
 
-def run_tracker_only(source, frames: int, seed: int) -> np.ndarray:
-    """PHD-MT alone: preloaded detections, NullObserver (per-frame seconds)."""
-    dets = [source.det.detections(k) for k in range(1, frames + 1)]
-    dummy = np.zeros((1, 1, 3), np.uint8)
-    tr = PHDTracker(np.random.default_rng(seed))
-    obs = NullObserver()
-    out = np.zeros(frames)
-    pc = time.perf_counter
-    for i, d in enumerate(dets):
-        f = Frame(i + 1, i / source.fps, dummy)
-        t0 = pc()
-        tr.step(f, d, obs)
-        out[i] = pc() - t0
-    return out
+class LoopTimer(BaseHook):
+    """Per-frame wall time of the pipeline loop (from the end of this hook's previous
+    ``on_frame`` to the start of this one: frame read or rendered, detector, trackers, online
+    metrics) and of the lane's tracker step (``step_seconds``).  With ``jpeg_quality`` it also
+    encodes every frame as the recorder does, outside the timed part, and keeps the JPEG sizes."""
+
+    def __init__(self, lane: str, jpeg_quality: Optional[int] = None):
+        self.lane, self.jpeg_quality = lane, jpeg_quality
+        self.loop: list[float] = []
+        self.step: list[float] = []
+        self.jpeg: list[int] = []
+
+    def begin(self, info: RunInfo) -> None:
+        self.mark = time.perf_counter()
+
+    def on_frame(self, report: FrameReport) -> None:
+        self.loop.append(time.perf_counter() - self.mark)
+        self.step.append(report.step_seconds[self.lane])
+        if self.jpeg_quality is not None:
+            ok, buf = cv2.imencode(".jpg", report.frame.image,
+                                   [cv2.IMWRITE_JPEG_QUALITY, self.jpeg_quality])
+            self.jpeg.append(len(buf) if ok else 0)
+        self.mark = time.perf_counter()
 
 
-def run_pipeline(source, frames: int, seed: int, jpeg_quality: int | None):
-    """The ``record()`` loop without a recording: frames read (or rendered) + ``file`` detector +
-    PHD-MT with a NullObserver.  When ``jpeg_quality`` is given, also encode every frame as the
-    recorder does (outside the timed part) and return the JPEG sizes."""
-    det = make_detector("file", det_table=source.det)
-    tr = PHDTracker(np.random.default_rng(seed))
-    obs = NullObserver()
-    out = np.zeros(frames)
-    jpeg = np.zeros(frames, np.int64)
-    pc = time.perf_counter
-    it = source.frames(frames)
-    for i in range(frames):
-        t0 = pc()
-        f = next(it)
-        tr.step(f, det(f), obs)
-        out[i] = pc() - t0
-        if jpeg_quality is not None:
-            ok, buf = cv2.imencode(".jpg", f.image, [cv2.IMWRITE_JPEG_QUALITY, jpeg_quality])
-            jpeg[i] = len(buf) if ok else 0
-    return out, jpeg
+def run_without_recording(source, frames: int, seed: int, jpeg_quality: Optional[int]):
+    """The pipeline ``record()`` runs, without the recorder: ``file`` detector + PHD-MT (paper
+    preset, same seed) + online metrics, ``level=None``.  Returns (loop seconds (F,), tracker
+    step seconds (F,), JPEG bytes (F,) or None)."""
+    timer = LoopTimer(LANE, jpeg_quality)
+    res = run_pipeline(source, {LANE: make_tracker(LANE, seed)}, frames=frames, level=None,
+                       hooks=[timer])
+    if res.frames != frames or res.outcome.status != "completed":
+        raise SystemExit(f"pipeline stopped: {res.outcome.reason}")
+    jpeg = np.array(timer.jpeg, np.int64) if jpeg_quality is not None else None
+    return np.array(timer.loop), np.array(timer.step), jpeg
 
 
 def payload_breakdown(path: Path) -> dict | None:
@@ -175,7 +184,7 @@ def bench_source(spec: str, args, tmp: Path) -> dict:
 
     # warm-up: imports, rerun start-up, caches (not measured)
     w = min(5, F)
-    run_tracker_only(source, w, args.seed)
+    run_without_recording(source, w, args.seed, None)
     run_record(source, tmp / "warmup.rrd", "particles", args.default_max_points, w, args.seed)
 
     trk, pipe, rec_t = [], [], {c: [] for c in configs}
@@ -184,9 +193,9 @@ def bench_source(spec: str, args, tmp: Path) -> dict:
     jpeg = None
     t_start = time.perf_counter()
     for r in range(args.repeat):  # interleaved so a load change hits all alike
-        trk.append(run_tracker_only(source, F, args.seed))
-        p, j = run_pipeline(source, F, args.seed, q if jpeg is None else None)
+        p, t, j = run_without_recording(source, F, args.seed, q if jpeg is None else None)
         pipe.append(p)
+        trk.append(t)
         jpeg = j if jpeg is None else jpeg
         for c in configs:
             level, mp = c
@@ -237,15 +246,16 @@ def bench_source(spec: str, args, tmp: Path) -> dict:
                    "non-image KB/fr", "record fps", "/ tracker", "/ no-rec loop"], rows))
     print(f"JPEG image (quality {q}, as the recorder writes it): {jpeg_pf / 1e3:.1f} KB/frame = "
           f"{100 * jpeg_pf / tracks_pf:.0f}% of the tracks-level recording")
-    print(f"tracker only (PHD-MT, NullObserver, preloaded detections): "
-          f"{C.fps(t_trk, n_steady):.1f} fps; same loop without recording (frames read/rendered "
-          f"+ file detector + tracker): {C.fps(t_pipe, n_steady):.1f} fps")
+    print(f"tracker only (PHD-MT step_seconds, pipeline at level None): "
+          f"{C.fps(t_trk, n_steady):.1f} fps; same pipeline without the recorder (frames "
+          f"read/rendered + file detector + tracker + online metrics): "
+          f"{C.fps(t_pipe, n_steady):.1f} fps")
     print(f"fixed cost per file (blueprint, properties, header) ~ {fixed / 1e3:.0f} KB, "
           f"i.e. {fixed / F / 1e3:.1f} KB of the tracks-level KB/frame at {F} frames "
           f"(marginal {marginal / 1e3:.1f} KB/frame)")
     print(f"(fps over frames 2..{F}, per-frame medians over {args.repeat} repeats; "
           f"'/ tracker' = record time / tracker-only time, '/ no-rec loop' = record time / "
-          f"same loop without recording; sizes of the repeats differ by at most {spread} bytes, "
+          f"same pipeline without the recorder; sizes of the repeats differ by at most {spread} bytes, "
           f"median shown)")
 
     if any(breakdown.values()):
@@ -307,8 +317,10 @@ def main(argv=None) -> int:
 
     info = C.machine()
     C.print_machine(info)
-    print(f"PHD-MT (PHDParams() defaults, T=0.6, K=50) recorded with viewer_app.run.record, "
-          f"file detector; record default max_points={default_mp}")
+    p = make_params(LANE)
+    print(f"PHD-MT (tracker 'phd', preset 'paper': T={p.clusters.T:g}, K={p.assoc.depth}) "
+          f"recorded with viewer_app.run.record (pipeline + RerunRecorder hook), file detector; "
+          f"record default max_points={default_mp}")
     if args.keep:
         tmp = Path(args.keep)
         tmp.mkdir(parents=True, exist_ok=True)
