@@ -129,8 +129,8 @@ def frames_to_read(source, frames: Optional[int]) -> Optional[int]:
 
 class TracksFileHook(BaseHook):
     """Writes one lane's rows as MOT text: under ``<name>.part`` while running, renamed to the
-    final name on success, to ``<name>.incomplete<suffix>`` on failure (the final name is
-    never touched then)."""
+    final name when the run completed, to ``<name>.incomplete<suffix>`` when it failed or was
+    interrupted (the final name is never touched then)."""
 
     def __init__(self, path, lane: Optional[str] = None):
         from .data.motio import TrackWriter
@@ -145,7 +145,7 @@ class TracksFileHook(BaseHook):
                 self.writer.write(f, ts)
 
     def end(self, outcome: Outcome) -> None:
-        if outcome.ok:
+        if outcome.status == "completed":
             self.writer.close()
         else:
             self.kept_as = self.writer.abort()
@@ -227,11 +227,13 @@ def run(source, trackers: Mapping[str, Tracker] | Sequence[Tracker], *,
             for name, res in results.items():
                 emit(name, res.rows)
             done += 1
+        # rows a tracker still holds back belong to frames already done: emit them also when
+        # the run was stopped, so an interrupted tracks file has every frame done so far
+        for name, tracker in lanes.items():
+            emit(name, tracker.finish())
         if should_stop is not None and should_stop():
             outcome = Outcome("interrupted", done, f"interrupted after {done} frames")
         else:
-            for name, tracker in lanes.items():
-                emit(name, tracker.finish())
             outcome = Outcome("completed", done, f"completed: {done} frames")
     except KeyboardInterrupt as e:
         outcome = Outcome("interrupted", done, f"interrupted after {done} frames", e)

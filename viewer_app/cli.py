@@ -13,6 +13,7 @@ Bad input ends with one line on stderr naming the file/line/frame and exit statu
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import sys
 from pathlib import Path
@@ -24,6 +25,43 @@ EXIT_RUN_FAILED = 1      # not the user's input: a bug, out of memory, disk full
 EXIT_BAD_INPUT = 2
 EXIT_INTERRUPTED = 130
 
+
+
+def _number(kind, *, low=None, high=None, low_open=False, what="a number"):
+    """An argparse ``type`` that rejects out-of-range values with a one-line usage error."""
+
+    def parse(text: str):
+        try:
+            v = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not {what}") from None
+        if kind is float and not math.isfinite(v):
+            raise argparse.ArgumentTypeError(f"{text!r} is not {what}")
+        if low is not None and (v <= low if low_open else v < low):
+            raise argparse.ArgumentTypeError(f"{text!r}: must be {'>' if low_open else '>='} {low}")
+        if high is not None and v > high:
+            raise argparse.ArgumentTypeError(f"{text!r}: must be <= {high}")
+        return v
+
+    parse.__name__ = what
+    return parse
+
+
+POSITIVE_INT = _number(int, low=1, what="a positive integer")
+NONNEG_INT = _number(int, low=0, what="a non-negative integer")
+POSITIVE = _number(float, low=0, low_open=True, what="a positive number")
+NONNEG = _number(float, low=0, what="a non-negative number")
+
+
+def _frame_range(text: str) -> tuple[int, int]:
+    a, sep, b = text.partition(":")
+    try:
+        lo, hi = int(a), int(b)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected FIRST:LAST, e.g. 401:795") from None
+    if not sep or lo < 1 or hi < lo:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected 1 <= FIRST <= LAST")
+    return lo, hi
 
 
 def _synth_config(args, frames: Optional[int]):
@@ -40,12 +78,13 @@ def _synth_config(args, frames: Optional[int]):
 
 
 def _add_synth_options(p: argparse.ArgumentParser, *, frames_help: str) -> None:
-    p.add_argument("--frames", type=int, default=None, help=frames_help)
-    p.add_argument("--targets", type=int, default=None,
+    p.add_argument("--frames", type=POSITIVE_INT, default=None, help=frames_help)
+    p.add_argument("--targets", type=POSITIVE_INT, default=None,
                    help="synthetic scene: number of people (default 6)")
-    p.add_argument("--clutter", type=float, default=None,
+    p.add_argument("--clutter", type=NONNEG, default=None,
                    help="synthetic scene: mean false detections per frame (default 2)")
-    p.add_argument("--seed", type=int, default=0, help="random seed (scene and tracker)")
+    p.add_argument("--seed", type=NONNEG_INT, default=0,
+                   help="random seed (scene and tracker)")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -79,9 +118,11 @@ def build_parser() -> argparse.ArgumentParser:
                    help="drop file detections scoring below this")
     r.add_argument("--level", choices=list(LEVELS), default="clusters",
                    help="how much to record: tracks < clusters < particles (default clusters)")
-    r.add_argument("--max-points", type=int, default=3000,
+    r.add_argument("--max-points", type=POSITIVE_INT, default=3000,
                    help="decimate each particle cloud to at most this many points per frame")
-    r.add_argument("--fps", type=float, default=None, help="frame rate of an image folder")
+    r.add_argument("--fps", type=POSITIVE, default=None,
+                   help="frame rate of an image folder or a video file (MOT folders have theirs "
+                        "in seqinfo.ini)")
     r.add_argument("--tracks-out", type=Path, default=None, help="also write MOT tracks here")
     r.add_argument("--force", action="store_true", help="overwrite existing output files")
     live = r.add_mutually_exclusive_group()
@@ -107,8 +148,8 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--min-score", type=float, default=float("-inf"))
     c.add_argument("--level", choices=list(LEVELS), default="tracks",
                    help="how much to record per tracker (default tracks)")
-    c.add_argument("--max-points", type=int, default=3000)
-    c.add_argument("--fps", type=float, default=None)
+    c.add_argument("--max-points", type=POSITIVE_INT, default=3000)
+    c.add_argument("--fps", type=POSITIVE, default=None)
     c.add_argument("--force", action="store_true")
     c.add_argument("--json", action="store_true", help="print the scores as JSON")
     c.add_argument("--quiet", action="store_true")
@@ -119,14 +160,19 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("tracks", type=Path, help="tracks file (frame,id,x,y,w,h,...)")
     e.add_argument("--gt", type=Path, required=True,
                    help="gt.txt, or a MOTChallenge folder (uses gt/gt.txt and seqinfo.ini)")
-    e.add_argument("--iou", type=float, default=0.5, help="IoU needed for a match (MOT15: 0.5)")
+    e.add_argument("--iou", type=_number(float, low=0, low_open=True, high=1,
+                                         what="an IoU in (0, 1]"),
+                   default=0.5, help="IoU needed for a match (MOT15: 0.5)")
     e.add_argument("--convention", choices=["auto", "mot15", "mot16"], default="auto",
                    help="mot15: gt conf=0 rows dropped, every track box scored; mot16: track "
                         "boxes on distractors removed first (TrackEval's MOT16+ preprocessing); "
                         "auto (default): mot16 when the gt has MOT16 class/visibility columns, "
                         "else mot15")
-    e.add_argument("--ospa-c", type=float, default=None, help="OSPA cut-off in pixels")
-    e.add_argument("--ospa-p", type=float, default=None, help="OSPA order")
+    e.add_argument("--ospa-c", type=POSITIVE, default=None, help="OSPA cut-off in pixels")
+    e.add_argument("--ospa-p", type=_number(float, low=1, what="an order >= 1"), default=None,
+                   help="OSPA order")
+    e.add_argument("--frames", type=_frame_range, default=None, metavar="FIRST:LAST",
+                   help="score only these frames (e.g. 401:795)")
     e.add_argument("--json", action="store_true", help="print the scores as JSON")
 
     t = sub.add_parser("trackers", help="list the trackers, their papers, stages and parameters",
@@ -136,10 +182,40 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("name", nargs="?", default=None, help="show only this tracker")
     t.add_argument("--json", action="store_true", help="print as JSON")
 
+    rp = sub.add_parser("repair", help="make a recording left without its footer (a killed "
+                                       "run) whole again",
+                        description="Rewrite FILE (e.g. x.incomplete.rrd after SIGKILL) with "
+                                    "Rerun's 'rrd optimize', check it with 'rrd verify', and "
+                                    "write it as OUT (default: FILE with .repaired before the "
+                                    "suffix). FILE itself is never modified.")
+    rp.add_argument("file", type=Path, help="the .rrd to repair")
+    rp.add_argument("--out", type=Path, default=None, help="where to write the repaired file")
+    rp.add_argument("--force", action="store_true", help="overwrite OUT")
+
     s = sub.add_parser("synth", help="write the synthetic scene as a MOTChallenge folder")
     s.add_argument("--out", type=Path, required=True, help="output folder (must not exist)")
     _add_synth_options(s, frames_help="number of frames (default 150)")
     s.add_argument("--quiet", action="store_true")
+
+    td = sub.add_parser("train-dbn", help="train the DBN of dbn-phd (feng2015) on a sequence's "
+                                          "ground truth",
+                        description="Train DBN-PHD's deep belief network: people = the ground-"
+                                    "truth boxes, not people = background-subtraction noise "
+                                    "blobs and random background windows. The last frames of "
+                                    "the range are held out and scored (accuracy, ROC AUC). "
+                                    "Use it with: pfscope record SOURCE --tracker dbn-phd "
+                                    "--set model=MODEL.pt")
+    td.add_argument("source", help="MOTChallenge folder with gt/gt.txt, or 'synthetic'")
+    td.add_argument("--out", type=Path, required=True, help="model file to write (MODEL.pt)")
+    td.add_argument("--frames", default=None, metavar="A-B",
+                    help="frame range to train on, e.g. 1-400 (default: all)")
+    td.add_argument("--holdout", type=float, default=0.2,
+                    help="fraction of the range, at its end, held out for scoring (default 0.2)")
+    td.add_argument("--stride", type=int, default=2, help="sample every N-th frame (default 2)")
+    td.add_argument("--epochs", type=int, default=30, help="fine-tuning epochs (default 30)")
+    td.add_argument("--seed", type=int, default=0, help="random seed (same seed, same model)")
+    td.add_argument("--force", action="store_true", help="overwrite an existing model file")
+    td.add_argument("--quiet", action="store_true")
     return ap
 
 
@@ -165,10 +241,6 @@ def _tracker_options(args) -> dict:
 def _open(args):
     from pfscope.trackers.data.sources import open_source
 
-    if args.max_points <= 0:
-        raise InputError("--max-points must be positive")
-    if args.frames is not None and args.frames <= 0:
-        raise InputError("--frames must be positive")
     synthetic = args.source in (None, "synthetic")
     if not synthetic and (args.targets is not None or args.clutter is not None):
         raise InputError("--targets/--clutter only apply to the synthetic scene")
@@ -235,11 +307,56 @@ def cmd_eval(args) -> int:
     else:
         gt = read_mot(args.gt, "gt")
     tracks = read_mot(args.tracks, "tracks")
+    if args.frames is not None:
+        frames = range(args.frames[0], args.frames[1] + 1)
+    elif len(tracks):
+        # tracks that stop early (a run of --frames 30) against a full gt score every later
+        # frame as all misses: say so, and how to score only the frames the tracks cover
+        gt_last = frames[-1] if frames is not None else gt.last_frame
+        t_first, t_last = int(tracks.frame.min()), tracks.last_frame
+        if t_last < 0.9 * gt_last or t_first > 0.1 * gt_last + 1:
+            print(f"pfscope: warning: {args.tracks} covers frames {t_first}..{t_last} of the "
+                  f"ground truth's 1..{gt_last}; every frame outside counts as misses "
+                  f"(score only the covered frames with --frames 1:{t_last})", file=sys.stderr)
     kw = {k: v for k, v in (("ospa_c", args.ospa_c), ("ospa_p", args.ospa_p)) if v is not None}
     scores = evaluate(gt, tracks, iou_threshold=args.iou, frames=frames,
                       convention=args.convention, **kw)
     _print_scores({args.tracks.stem: scores}, args.json)
     return 0
+
+
+def cmd_repair(args) -> int:
+    import shutil
+    import subprocess
+
+    from pfscope.trackers.outputs import check_output, incomplete_path
+
+    src = args.file
+    if not src.is_file():
+        raise InputError(f"{src}: no such recording")
+    out = args.out or src.with_name(f"{src.stem}.repaired{src.suffix}")
+    check_output(out, args.force)
+    rerun = shutil.which("rerun") or str(Path(sys.executable).with_name("rerun"))
+    tmp = incomplete_path(out)
+    try:
+        r = subprocess.run([rerun, "rrd", "optimize", str(src), "-o", str(tmp)],
+                           capture_output=True, text=True, timeout=600)
+        if r.returncode != 0:
+            raise InputError(f"{src}: cannot be repaired: {_last_line(r.stderr)}")
+        v = subprocess.run([rerun, "rrd", "verify", str(tmp)], capture_output=True, text=True,
+                           timeout=600)
+        if v.returncode != 0:
+            raise InputError(f"{src}: repaired file does not verify: {_last_line(v.stderr)}")
+    except (OSError, subprocess.TimeoutExpired) as e:
+        raise InputError(f"{src}: cannot run '{rerun} rrd optimize' ({e})") from None
+    os.replace(tmp, out)
+    print(f"repaired: {out} (verified)")
+    return 0
+
+
+def _last_line(text: str) -> str:
+    lines = [ln for ln in (text or "").strip().splitlines() if ln.strip()]
+    return lines[-1][:200] if lines else "no message"
 
 
 def cmd_record(args) -> int:
@@ -319,6 +436,66 @@ def cmd_synth(args) -> int:
     return 0
 
 
+def cmd_train_dbn(args) -> int:
+    """``pfscope train-dbn``: DBN-PHD's classifier from a sequence's ground truth."""
+    import time
+
+    import numpy as np
+
+    from pfscope.trackers.data.sources import open_source
+
+    if args.out.exists() and not args.force:
+        raise InputError(f"{args.out}: exists (use --force to overwrite)")
+    if not 0.0 <= args.holdout < 1.0:
+        raise InputError(f"--holdout must be in [0, 1), got {args.holdout}")
+    src = open_source(args.source)
+    length = getattr(src, "length", None)
+    if args.frames:
+        a, sep, b = args.frames.partition("-")
+        try:
+            lo, hi = int(a), int(b)
+        except ValueError:
+            raise InputError(f"--frames {args.frames!r}: expected A-B, e.g. 1-400") from None
+        if not sep or lo < 1 or hi < lo or (length and hi > length):
+            raise InputError(f"--frames {args.frames!r}: need 1 <= A <= B"
+                             + (f" <= {length}" if length else ""))
+    else:
+        if not length:
+            raise InputError(f"{args.source}: length unknown, give --frames A-B")
+        lo, hi = 1, int(length)
+    from pfscope.trackers.dbn.model import collect_samples, train_dbn  # torch, on demand
+
+    t0 = time.perf_counter()
+    last_print = [0.0]
+
+    def progress(phase, i, n):
+        now = time.perf_counter()
+        if not args.quiet and (i == n or now - last_print[0] > 2.0):
+            last_print[0] = now
+            print(f"train-dbn: {phase} {i}/{n} ({now - t0:.0f} s)", file=sys.stderr)
+
+    X, y, f = collect_samples(src, range(lo, hi + 1), stride=args.stride, seed=args.seed,
+                              progress=progress, with_frames=True)
+    cut = hi - int(round(args.holdout * (hi - lo + 1)))
+    hold = f > cut if args.holdout > 0 else None
+    model = train_dbn(X, y, seed=args.seed, fine_epochs=args.epochs, holdout_mask=hold,
+                      progress=progress)
+    model.info["trained_on"] = (f"{src.name} frames {lo}-{cut if hold is not None else hi}"
+                                + (f" (held out {cut + 1}-{hi})" if hold is not None else ""))
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    model.save(args.out)
+    i = model.info
+    people = int(np.sum(y)) - i.get("holdout_positives", 0)
+    print(f"trained on {i['samples'] - i['holdout']} samples ({people} people) from "
+          f"{i['trained_on']} in {time.perf_counter() - t0:.0f} s")
+    if "holdout_auc" in i:
+        print(f"held out {i['holdout']} samples ({i['holdout_positives']} people): accuracy "
+              f"{i['holdout_accuracy']:.3f}  ROC AUC {i['holdout_auc']:.3f}")
+    print(f"wrote {args.out} ({args.out.stat().st_size / 1024:.0f} KB)")
+    print(f"use it with:  pfscope record {args.source} --tracker dbn-phd --set model={args.out}")
+    return 0
+
+
 def main(argv: Optional[Sequence[str]] = None) -> int:
     os.environ.setdefault("RERUN_ANALYTICS", "0")
     args = build_parser().parse_args(argv)
@@ -333,6 +510,10 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             return cmd_compare(args)
         if args.command == "trackers":
             return cmd_trackers(args)
+        if args.command == "repair":
+            return cmd_repair(args)
+        if args.command == "train-dbn":
+            return cmd_train_dbn(args)
     except InputError as e:
         print(f"pfscope: error: {e}", file=sys.stderr)
         return EXIT_BAD_INPUT
@@ -340,6 +521,11 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         print(f"pfscope: run failed: {e}", file=sys.stderr)
         if os.environ.get("PFSCOPE_DEBUG"):
             raise
+        if getattr(e, "stalled", False):
+            # Rerun's exit handler would wait forever on the stuck file writer (full disk)
+            sys.stdout.flush()
+            sys.stderr.flush()
+            os._exit(EXIT_RUN_FAILED)
         return EXIT_RUN_FAILED
     except KeyboardInterrupt:
         print("pfscope: interrupted", file=sys.stderr)

@@ -28,6 +28,7 @@ from __future__ import annotations
 import json
 import os
 import platform
+import threading
 import uuid
 from collections import deque
 from datetime import timedelta
@@ -39,12 +40,20 @@ import numpy as np
 import rerun as rr
 
 from pfscope.trackers import __version__
-from pfscope.trackers.data.motio import incomplete_path
+from pfscope.trackers.outputs import incomplete_path
 from pfscope.trackers.pipeline import BaseHook, FrameReport, Outcome, RunInfo
 
 from .blueprint import compare_blueprint, default_blueprint
 from .reporters import Reporter, layout_for
 from .reporters.base import annotation_context
+
+
+#: Longest wait for a flush or close of the recording, seconds ($PFSCOPE_FLUSH_TIMEOUT).
+FLUSH_TIMEOUT = float(os.environ.get("PFSCOPE_FLUSH_TIMEOUT", "30"))
+
+
+class RecordingStalled(RuntimeError):
+    """Writing the recording did not finish within :data:`FLUSH_TIMEOUT`."""
 
 
 def recording_id_for(config: dict) -> str:
@@ -104,6 +113,7 @@ class RerunRecorder(BaseHook):
         self.timing = timing
         self.rec: Optional[rr.RecordingStream] = None
         self.kept_as: Optional[Path] = None
+        self._broken: Optional[str] = None
         self._frames = 0
 
     # -- pipeline hook ---------------------------------------------------------------------
@@ -196,7 +206,7 @@ class RerunRecorder(BaseHook):
         self._clear_stale()
         self._frames += 1
         if self.flush_frames and self._frames % self.flush_frames == 0:
-            rec.flush()
+            self._flush("writing stalled")
 
     def _metrics(self, rep: Reporter, frame: int, gt, tracks, m) -> None:
         """Per-frame metrics of what the view shows, and marks on the misses, false positives
@@ -233,12 +243,58 @@ class RerunRecorder(BaseHook):
             return
         level = {"completed": "INFO", "interrupted": "WARN"}.get(outcome.status, "ERROR")
         rec.log("log", rr.TextLog(f"run {outcome.reason}", level=level))
-        rec.flush()
-        rec.disconnect()
+        self.kept_as = self.partial
+        try:
+            self._flush("could not finish the file")
+        finally:
+            if self._broken is None:
+                self._bounded(rec.disconnect, "could not close the file")
+            else:  # the file is already broken: try to close it, but do not wait long
+                t = threading.Thread(target=rec.disconnect, daemon=True)
+                t.start()
+                t.join(5)
         if outcome.status == "completed":
             os.replace(self.partial, self.out)
-        else:
-            self.kept_as = self.partial
+            self.kept_as = None
+
+    def _flush(self, what: str) -> None:
+        assert self.rec is not None
+        rec = self.rec
+        self._bounded(lambda: rec.flush(timeout_sec=FLUSH_TIMEOUT), what)
+
+    def _bounded(self, fn, what: str, timeout: float = FLUSH_TIMEOUT) -> None:
+        """Run ``fn`` (a flush or close) with a bounded wait: a full disk or a viewer that
+        never answers must not hang the run (DESIGN.md: no wait is unbounded).  A failure or a
+        timeout becomes one :class:`RecordingStalled`; later flushes are then skipped, so a
+        broken file costs one wait, not one per flush."""
+        if self._broken is not None:
+            raise RecordingStalled(self._broken)
+        errors: list = []
+
+        def target():
+            try:
+                fn()
+            except Exception as e:  # noqa: BLE001 - reported below as one line
+                errors.append(e)
+
+        t = threading.Thread(target=target, daemon=True)
+        t.start()
+        t.join(timeout + 5)
+        if t.is_alive() or errors:
+            why = f": {errors[0]}" if errors else f" within {timeout:.0f} s"
+            self._broken = f"{self.partial}: {what}{why} (disk full or unwritable?)"
+            raise RecordingStalled(self._broken)
+
+    @property
+    def broken(self) -> bool:
+        """Writing the file failed or stalled."""
+        return self._broken is not None
+
+    def describe_kept(self) -> str:
+        """Where the partial output is, for an error message."""
+        if self.rec is None:
+            return "no recording was written"
+        return f"partial recording kept as {self.kept_as or self.partial}"
 
     @property
     def path(self) -> Path:

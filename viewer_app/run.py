@@ -17,6 +17,7 @@ from __future__ import annotations
 import os
 import signal
 import sys
+import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -27,6 +28,8 @@ import numpy as np
 from pfscope.trackers.data.sources import Source
 from pfscope.trackers.errors import InputError, RunFailed
 from pfscope.trackers.pipeline import BaseHook
+from pfscope.trackers.outputs import OutputLock
+from pfscope.trackers.outputs import check_output as _check_output
 from pfscope.trackers.report import level_rank
 
 RECORDINGS_DIR = Path("recordings")
@@ -36,20 +39,30 @@ WEB_PORT = 9090
 class StopFlag:
     """SIGINT/SIGTERM set a flag that the frame loop checks, instead of raising at an arbitrary
     point (possibly inside the recording library, holding its locks).  A second signal raises
-    KeyboardInterrupt for a user who really wants out."""
+    KeyboardInterrupt for a user who really wants out.
 
-    def __init__(self):
-        self.requested = False
-        self._old = {}
+    Signal handlers can only be installed from the main thread: from another thread (a server,
+    a notebook's worker) none are, and the run stops when ``event`` (a ``threading.Event``
+    the caller holds) is set."""
+
+    def __init__(self, event: Optional[threading.Event] = None):
+        self._requested = False
+        self.event = event
+        self._old: dict = {}
+
+    @property
+    def requested(self) -> bool:
+        return self._requested or (self.event is not None and self.event.is_set())
 
     def _handler(self, signum, _frame):
-        if self.requested:
+        if self._requested:
             raise KeyboardInterrupt
-        self.requested = True
+        self._requested = True
 
     def __enter__(self):
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            self._old[sig] = signal.signal(sig, self._handler)
+        if threading.current_thread() is threading.main_thread():
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                self._old[sig] = signal.signal(sig, self._handler)
         return self
 
     def __exit__(self, *exc):
@@ -92,20 +105,18 @@ def default_out_path(source: Source, tracker: str) -> Path:
 
 
 def check_output(path: Path, force: bool, what: str = "recording") -> Path:
-    """Refuse to overwrite without ``force``; make sure the folder exists and is writable."""
-    path = Path(path)
-    if path.exists() and not force:
-        raise InputError(f"{path}: {what} exists; pass --force to overwrite it")
-    if path.exists() and path.is_dir():
-        raise InputError(f"{path}: is a folder, not a {what} file")
-    parent = path.parent if str(path.parent) else Path(".")
-    try:
-        parent.mkdir(parents=True, exist_ok=True)
-    except OSError as e:
-        raise InputError(f"{parent}: cannot create output folder ({e.strerror or e})") from None
-    if not os.access(parent, os.W_OK | os.X_OK):
-        raise InputError(f"{parent}: output folder is not writable")
-    return path
+    """See :func:`pfscope.trackers.outputs.check_output`."""
+    return _check_output(path, force, what)
+
+
+def display_available() -> bool:
+    """A native viewer needs a display (and the ``rerun`` binary)."""
+    import shutil
+
+    has_display = sys.platform in ("darwin", "win32") or bool(
+        os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
+    viewer = shutil.which("rerun") or Path(sys.executable).with_name("rerun").exists()
+    return has_display and bool(viewer)
 
 
 class Progress:
@@ -167,14 +178,14 @@ class ProgressHook(BaseHook):
 
 
 def record(source: Source, out: Path, opts: RecordOptions, *, trackers: Optional[list] = None,
-           progress: bool = True, on_frame: Optional[Callable[[int], None]] = None) -> RecordResult:
+           progress: bool = True, on_frame: Optional[Callable[[int], None]] = None,
+           stop: Optional[threading.Event] = None) -> RecordResult:
     """Run ``opts.tracker`` (or each of ``trackers``, each under its own root) on ``source``
-    through the engine's pipeline and write the recording to ``out`` (and the tracks file)."""
-    from pfscope.trackers.api import make_params, tracker_info
-    from pfscope.trackers.pipeline import TracksFileHook, frames_to_read, resolve_detector_name
-    from pfscope.trackers.pipeline import run as run_pipeline
+    through the engine's pipeline and write the recording to ``out`` (and the tracks file).
 
-    from .recorder import RerunRecorder, config_json
+    Safe to call from any thread: signals are handled only on the main thread; elsewhere set
+    ``stop`` to end the run after the current frame (the outputs then stay ``.incomplete``)."""
+    from pfscope.trackers.api import make_params, tracker_info
 
     try:
         level_rank(opts.level)
@@ -194,6 +205,30 @@ def record(source: Source, out: Path, opts: RecordOptions, *, trackers: Optional
         if opts.tracks_out and len(names) == 1 else None
     if tracks_out is not None and tracks_out.resolve() == out.resolve():
         raise InputError(f"{tracks_out}: --tracks-out must differ from the recording file")
+    live = "spawn" if opts.spawn else "serve" if opts.serve else None
+    if live == "spawn" and not display_available():
+        print("pfscope: --spawn: no display or no 'rerun' viewer here; writing the file only "
+              "(use --serve for a web viewer)", file=sys.stderr)
+        live = None
+    locks = [OutputLock(p) for p in ([out] + ([tracks_out] if tracks_out else []))]
+    held: list = []
+    try:
+        for lock in locks:
+            held.append(lock.acquire())
+        return _record_locked(source, out, opts, names, infos, params, tracks_out, live,
+                              progress, on_frame, stop)
+    finally:
+        for lock in held:
+            lock.release()
+
+
+def _record_locked(source, out, opts, names, infos, params, tracks_out, live, progress,
+                   on_frame, stop) -> RecordResult:
+    from pfscope.trackers.pipeline import TracksFileHook, frames_to_read, resolve_detector_name
+    from pfscope.trackers.pipeline import run as run_pipeline
+
+    from .recorder import RerunRecorder, config_json
+
     built = {n: info.cls(p, rng=np.random.default_rng(opts.seed))
              for n, info, p in zip(names, infos, params)}
     need_det = any(t.needs_detections for t in built.values())
@@ -208,8 +243,7 @@ def record(source: Source, out: Path, opts: RecordOptions, *, trackers: Optional
         "source": config_json(source.describe()),
         "tracker_config": config_json([t.config() for t in built.values()]),
     }
-    recorder = RerunRecorder(out, config, max_points=opts.max_points,
-                             live="spawn" if opts.spawn else "serve" if opts.serve else None,
+    recorder = RerunRecorder(out, config, max_points=opts.max_points, live=live,
                              web_port=WEB_PORT, timing=opts.timing,
                              announce=lambda msg: print(msg, file=sys.stderr))
     hooks: list = [recorder]
@@ -224,16 +258,19 @@ def record(source: Source, out: Path, opts: RecordOptions, *, trackers: Optional
                                        enabled=progress)))
     if on_frame is not None:
         hooks.append(_CallbackHook(on_frame))
-    with StopFlag() as stop:
+    with StopFlag(stop) as flag:
         try:
             res = run_pipeline(source, built, frames=opts.frames, level=opts.level,
                                detector=det_name, detector_options=det_opts, hooks=hooks,
-                               should_stop=lambda: stop.requested)
+                               should_stop=lambda: flag.requested)
         except InputError as e:
-            raise InputError(f"{e} (partial recording kept as {recorder.path})") from None
+            raise InputError(f"{e} ({recorder.describe_kept()})") from None
         except Exception as e:
-            raise RunFailed(f"{type(e).__name__}: {e} (partial recording kept as "
-                            f"{recorder.path})") from e
+            failed = RunFailed(f"{type(e).__name__}: {e} ({recorder.describe_kept()})")
+            # a recording whose writer is stuck (full disk) would also hang Rerun's exit
+            # handler: the CLI must leave without it
+            failed.stalled = recorder.broken  # type: ignore[attr-defined]
+            raise failed from e
     final = recorder.path
     return RecordResult(out=final, frames=res.frames, seconds=res.seconds,
                         interrupted=res.interrupted,

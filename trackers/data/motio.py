@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
+from ..outputs import incomplete_path
 from ..types import Detections, GroundTruth, TrackSet
 
 KINDS = ("gt", "det", "tracks")
@@ -195,6 +196,7 @@ class TrackWriter:
         if len(tracks):
             lines = format_rows("tracks", np.full(len(tracks), frame), tracks.ids, tracks.boxes)
             self._fh.write("".join(line + "\n" for line in lines))
+            self._fh.flush()  # a killed run leaves the rows written so far in the .part file
 
     def close(self) -> None:
         """The run finished: the file takes its final name."""
@@ -207,16 +209,12 @@ class TrackWriter:
         return incomplete_path(self.path)
 
     def abort(self) -> Path:
-        """The run failed: keep what was written as ``<name>.incomplete<suffix>``, never under
-        the final name (a previous good file there is left untouched)."""
+        """The run failed or was interrupted: keep what was written as
+        ``<name>.incomplete<suffix>``, never under the final name (a previous good file there is
+        left untouched)."""
         if not self._fh.closed:
             self._fh.close()
         if self._tmp.exists():
             os.replace(self._tmp, self.incomplete_path)
         return self.incomplete_path
 
-
-def incomplete_path(path: str | os.PathLike) -> Path:
-    """``x.rrd`` → ``x.incomplete.rrd``: where a failed run's partial output goes."""
-    p = Path(path)
-    return p.with_name(f"{p.stem}.incomplete{p.suffix}")

@@ -51,13 +51,44 @@ class Source:
         return d
 
 
-def _read_image(path: Path, index: int) -> np.ndarray:
+def _read_image(path: Path, index: int, size: Optional[tuple[int, int]] = None) -> np.ndarray:
+    """Read and check one frame: a missing, truncated or undecodable file, or one whose size
+    differs from ``size`` (width, height), is an :class:`InputError` naming file and frame.
+    (OpenCV decodes a JPEG cut mid-file into a partly grey image with only a warning on
+    stderr, so the end-of-image marker is checked first.)"""
     if not path.is_file():
         raise InputError(f"{path}: frame {index}: image file missing")
-    img = cv2.imread(str(path), cv2.IMREAD_COLOR)
+    try:
+        data = path.read_bytes()
+    except OSError as e:
+        raise InputError(f"{path}: frame {index}: cannot read ({e.strerror or e})") from None
+    if data[:2] == b"\xff\xd8" and b"\xff\xd9" not in data[-64:]:
+        raise InputError(f"{path}: frame {index}: truncated JPEG (no end-of-image marker)")
+    img = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR) if data else None
     if img is None:
         raise InputError(f"{path}: frame {index}: cannot decode image")
+    if size is not None and (img.shape[1], img.shape[0]) != tuple(size):
+        raise InputError(f"{path}: frame {index}: image is {img.shape[1]}x{img.shape[0]}, "
+                         f"expected {size[0]}x{size[1]}")
     return img
+
+
+def _check_rows_within(table: Optional[MotTable], length: int) -> None:
+    """det/gt rows must name frames 1..seqLength; the first offending line is reported."""
+    if table is None or not len(table) or (table.frame.min() >= 1 and table.last_frame <= length):
+        return
+    bad = int(table.frame[(table.frame < 1) | (table.frame > length)][0])
+    lineno = "?"
+    try:
+        for i, line in enumerate(Path(table.path).read_text().splitlines(), start=1):
+            head = line.split(",", 1)[0].strip()
+            if head and int(float(head)) == bad:
+                lineno = str(i)
+                break
+    except (OSError, ValueError):
+        pass
+    raise InputError(f"{table.path}:{lineno}: frame {bad} is outside the sequence's frames "
+                     f"1..{length} (seqLength in seqinfo.ini)")
 
 
 class MOTFolderSource(Source):
@@ -89,6 +120,8 @@ class MOTFolderSource(Source):
         gt_path, det_path = root / "gt" / "gt.txt", root / "det" / "det.txt"
         gt = read_mot(gt_path, "gt") if gt_path.is_file() else None
         det = read_mot(det_path, "det") if det_path.is_file() else None
+        _check_rows_within(gt, length)
+        _check_rows_within(det, length)
         if width <= 0 or height <= 0:
             first = _read_image(self._path(1), 1)
             height, width = first.shape[:2]
@@ -101,7 +134,8 @@ class MOTFolderSource(Source):
     def frames(self, limit: Optional[int] = None) -> Iterator[Frame]:
         n = self.length if limit is None else min(limit, self.length)
         for k in range(1, n + 1):
-            yield Frame(k, (k - 1) / self.fps, _read_image(self._path(k), k))
+            yield Frame(k, (k - 1) / self.fps,
+                        _read_image(self._path(k), k, (self.width, self.height)))
 
 
 class VideoFileSource(Source):
@@ -135,6 +169,10 @@ class VideoFileSource(Source):
                 if not ok or img is None:
                     if k == 0:
                         raise InputError(f"{self.path}: frame 1: cannot decode")
+                    if self.length is not None and k < self.length:
+                        raise InputError(f"{self.path}: frame {k + 1}: the video ends after "
+                                         f"{k} of the {self.length} frames its header "
+                                         f"announces (truncated file?)")
                     return
                 k += 1
                 yield Frame(k, (k - 1) / self.fps, img)
@@ -158,7 +196,7 @@ class ImageFolderSource(Source):
     def frames(self, limit: Optional[int] = None) -> Iterator[Frame]:
         files = self.files if limit is None else self.files[:limit]
         for k, p in enumerate(files, start=1):
-            yield Frame(k, (k - 1) / self.fps, _read_image(p, k))
+            yield Frame(k, (k - 1) / self.fps, _read_image(p, k, (self.width, self.height)))
 
 
 class SyntheticSource(Source):
@@ -191,11 +229,19 @@ def open_source(spec: str | os.PathLike | None, *, fps: Optional[float] = None,
                 synthetic_config=None) -> Source:
     """Open ``spec``: None or ``"synthetic"`` -> the synthetic scene; a folder with
     ``seqinfo.ini`` or ``img1/`` -> MOT sequence; another folder -> images; a file -> video."""
+    if fps is not None and not (np.isfinite(fps) and fps > 0):
+        raise InputError(f"--fps must be a positive number of frames per second, got {fps}")
     if spec is None or str(spec) == "synthetic":
+        if fps is not None:
+            raise InputError("--fps does not apply to the synthetic scene (its frame rate is "
+                             "part of the scene)")
         return SyntheticSource(synthetic_config)
     path = Path(spec)
     if path.is_dir():
         if (path / "seqinfo.ini").exists() or (path / "img1").is_dir():
+            if fps is not None:
+                raise InputError(f"{path}: --fps does not apply to a MOTChallenge folder "
+                                 f"(its frameRate is in seqinfo.ini)")
             return MOTFolderSource(path)
         return ImageFolderSource(path, fps=fps or 25.0)
     if path.exists():

@@ -204,11 +204,11 @@ class PHDTracker(_AssociatingTracker):
 
         log.stage("cluster")
         log.scalar("phd/clusters/kept", int(clusters.kept.sum()))
-        if want_p and len(r.resampled):
+        if want_p:
             log.add(Points("phd/clusters/members", r.resampled.states[:, :2],
                            ids=clusters.labels, id_kind="cluster"))
-        if want_c and len(clusters):
-            boxes = clusters.boxes()
+        if want_c:
+            boxes = clusters.boxes().reshape(-1, 4)
             k = clusters.kept
             log.add(Boxes("phd/clusters/kept", boxes[k], ids=np.flatnonzero(k),
                           id_kind="cluster", values={"m": clusters.masses[k]}))

@@ -61,9 +61,14 @@ def _fmt(v: float) -> str:
 
 
 def value_labels(values: dict, n: int, ids: Optional[np.ndarray] = None) -> Optional[list[str]]:
-    """``"5: gap=2 log f=-3.10"`` per item, or None when there are too many to read."""
-    if n == 0 or n > MAX_LABELS or (not values and ids is None):
+    """``"5: gap=2 log f=-3.10"`` per item; ``[]`` when there are too many to read; None for
+    items that never carry labels.  (An entity keeps the same components from frame to frame:
+    a component that comes and goes splits its chunks in an order Rerun does not fix, and two
+    same-seed recordings would no longer compare equal.)"""
+    if not values and ids is None:
         return None
+    if n == 0 or n > MAX_LABELS:
+        return []
     out = []
     for i in range(n):
         parts = [f"{k}={_fmt(v[i])}" for k, v in values.items()]
@@ -190,7 +195,7 @@ class Reporter:
         boxes = np.asarray(boxes, dtype=np.float32).reshape(-1, 4)
         self._log(self.video(path), rr.Boxes2D(
             mins=boxes[:, :2], sizes=boxes[:, 2:], class_ids=np.full(len(boxes), ROLES[role][0]),
-            labels=labels if labels is not None and len(boxes) <= MAX_LABELS else None,
+            labels=(labels if len(boxes) <= MAX_LABELS else []) if labels is not None else None,
             radii=radii))
 
     def scalar(self, path: str, value: float) -> None:
