@@ -100,7 +100,8 @@ class TrackerInfo:
 _REGISTRY: dict[str, TrackerInfo] = {}
 #: Modules holding the built-in trackers; imported on first use of the registry, so that
 #: ``pfscope --help`` does not pay for them and optional dependencies stay optional.
-BUILTIN_MODULES = ("pfscope.trackers.phd.tracker", "pfscope.trackers.passthrough")
+BUILTIN_MODULES = ("pfscope.trackers.phd.tracker", "pfscope.trackers.passthrough",
+                   "pfscope.trackers.dlpf.tracker")
 DEFAULT_TRACKER = "phd"
 
 T = TypeVar("T", bound=type)

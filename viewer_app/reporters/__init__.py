@@ -12,7 +12,7 @@ import importlib
 
 from .base import Reporter, TrackerLayout
 
-_MODULES = {"phd": "phd", "mt": "mt"}
+_MODULES = {"phd": "phd", "mt": "mt", "dlpf": "dlpf"}
 
 
 def layout_for(tracker_name: str) -> TrackerLayout:

@@ -1,0 +1,237 @@
+"""DLPF (jung2013): histogram and Bhattacharyya invariants, confirmation after exactly 4
+detections, motion masking inside tracked regions, parents reset on track loss, determinism,
+and runs through the pipeline on the synthetic scene and a few PETS09 frames."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from conftest import sequence
+from pfscope.trackers.api import make_tracker, registry
+from pfscope.trackers.data.sources import open_source
+from pfscope.trackers.data.synthetic import SceneConfig
+from pfscope.trackers.dlpf import children as ch
+from pfscope.trackers.dlpf import motion as mo
+from pfscope.trackers.dlpf import parents as pa
+from pfscope.trackers.dlpf.classifier import (HOGWindowClassifier, person_boxes,
+                                              sliding_window_count, window_boxes)
+from pfscope.trackers.dlpf.confirm import Confirmer
+from pfscope.trackers.pipeline import run
+from pfscope.trackers.report import Boxes, Event, Field, Points, find
+from pfscope.trackers.types import Frame
+
+
+def _scene(frames=10):
+    return open_source("synthetic", synthetic_config=SceneConfig(
+        frames=frames, targets=4, width=320, height=240, seed=3))
+
+
+# ------------------------------------------------------------------ histograms, eqs. (12)-(14)
+
+def test_histograms_are_distributions_and_bhattacharyya_is_a_distance():
+    rng = np.random.default_rng(0)
+    img = rng.integers(0, 256, (60, 80, 3), dtype=np.uint8)
+    boxes = np.array([[0, 0, 20, 40], [30, 10, 25, 45], [-10, -10, 30, 30]], float)
+    q = ch.histograms(img, boxes, (8, 16), 10, 10, 10, 0.1, 0.2)
+    assert q.shape == (3, 10 * 10 + 10)                       # M = Mh·Ms + Mv
+    assert np.allclose(q.sum(1), 1.0) and (q >= 0).all()
+    B = ch.bhattacharyya(q[0], q)
+    assert B[0] == pytest.approx(0.0, abs=1e-7)               # identical → 0
+    assert ((B >= 0) & (B <= 1)).all()
+    assert ch.bhattacharyya(q[1], q[:1])[0] == pytest.approx(B[1])  # symmetric
+    disjoint = np.zeros((2, 4))
+    disjoint[0, 0] = disjoint[1, 3] = 1
+    assert ch.bhattacharyya(disjoint[0], disjoint[1:])[0] == pytest.approx(1.0)
+    lw = ch.log_weights(np.array([0.0, 0.5, 1.0]), 20.0)      # eq. (14): exp(−λB²)
+    assert np.allclose(np.exp(lw), [1.0, np.exp(-5.0), np.exp(-20.0)])
+
+
+def test_hsv_binning_sends_grey_pixels_to_value_bins():
+    grey = np.array([[[0, 0, 0], [128, 128, 128], [255, 255, 255]]], np.uint8)
+    red = np.array([[[0, 0, 255]]], np.uint8)
+    assert (ch.hsv_bins(grey, 10, 10, 10, 0.1, 0.2) >= 100).all()
+    assert ch.hsv_bins(red, 10, 10, 10, 0.1, 0.2)[0, 0] == 0 * 10 + 9  # hue 0, full saturation
+
+
+# ------------------------------------------------------------------ confirmation, §2.2
+
+def test_confirmation_after_exactly_four_sequential_detections():
+    c = Confirmer(count=4, max_gap=0)
+    box = np.array([[100, 100, 30, 90]], float)
+    for frame in range(1, 4):
+        assert c.step(frame, box + frame, [1.0], [7]) == []
+    done = c.step(4, box + 4, [1.0], [9])
+    assert len(done) == 1 and done[0].count == 4 and done[0].parent == 9
+    assert [f for f, _ in done[0].history] == [1, 2, 3, 4]
+    # a missed frame restarts the count when no gap is allowed
+    c = Confirmer(count=4, max_gap=0)
+    for frame in (1, 2, 3, 5, 6, 7):
+        assert c.step(frame, box, [1.0], [0]) == []
+    assert len(c.step(8, box, [1.0], [0])) == 1
+    # and is tolerated with max_gap=1
+    c = Confirmer(count=4, max_gap=1)
+    got = [len(c.step(f, box, [1.0], [0])) for f in (1, 2, 4, 5)]
+    assert got == [0, 0, 0, 1]
+
+
+# ------------------------------------------------------------------ motion, eqs. (6)-(8)
+
+def test_motion_is_capped_masked_in_tracked_regions_and_weights_are_valid():
+    flow = np.array([[3.0, 4.0], [30.0, 0.0], [0.0, 0.0], [6.0, 8.0]])
+    m = mo.magnitude(flow, 5.0)                                  # eq. (6)
+    assert np.allclose(m, [5, 5, 0, 5])
+    pts = np.array([[10, 10], [50, 50], [90, 90], [52, 60]], float)
+    tracked = np.array([[40, 40, 20, 30]], float)
+    mm = mo.mask_tracked(m, pts, tracked)
+    assert np.allclose(mm, [5, 0, 0, 0])                        # inside the track: zero motion
+    for reading in mo.READINGS[:2]:
+        lw = mo.resampling_log_weights(mo.log_likelihood(mm, 5.0, 1.0), reading)
+        w = np.exp(lw)
+        assert w.sum() == pytest.approx(1.0) and (w >= 0).all()
+        assert w[0] > w[1]                                     # moving beats masked
+    # the literal reading inverts the preference when every L is negative (why it is not used)
+    w = np.exp(mo.resampling_log_weights(mo.log_likelihood(mm, 5.0, 1.0), "literal"))
+    assert w[0] < w[1]
+
+
+def test_lk_measures_a_translation():
+    rng = np.random.default_rng(1)
+    a = (rng.random((120, 160)) * 255).astype(np.uint8)
+    import cv2
+    a = cv2.GaussianBlur(a, (7, 7), 2)
+    b = np.roll(a, (2, 3), axis=(0, 1))                         # dx = 3, dy = 2
+    flow, ok = mo.lk_flow(a, b, np.array([[80.0, 60.0], [40.0, 50.0]]))
+    assert ok.all() and np.allclose(flow, [[3, 2], [3, 2]], atol=0.3)
+
+
+def test_tracker_masks_motion_inside_tracked_regions():
+    tr = make_tracker("dlpf", seed=0)
+    frames = list(_scene(4).frames())
+    tr.step(frames[0], None, "particles")
+    # pretend a track covers the whole left half: parents there must measure zero motion
+    tr.predicted_track_boxes = lambda: np.array([[0.0, 0.0, 160.0, 240.0]])  # type: ignore
+    res = tr.step(frames[1], None, "particles")
+    pred = find(res.stages, "dlpf/parents/predicted", Points)[0]
+    inside = mo.inside_boxes(pred.xy, np.array([[0.0, 0.0, 160.0, 240.0]]),
+                             tr.params.motion.mask_margin)
+    assert inside.any() and np.all(pred.values["m"][inside] == 0.0)
+    field = find(res.stages, "dlpf/motion/magnitude", Field)[0]
+    assert np.all(field.values[:, : 160 // tr.params.motion.field_step - 1] == 0.0)
+
+
+# ------------------------------------------------------------------ parents, eqs. (2)-(5), reset
+
+def test_parent_prediction_is_constant_velocity():
+    s = np.array([[10.0, 20.0, 2.0, -1.0]])
+    out = pa.predict(s, 0.0, 0.0, np.random.default_rng(0), 100, 100)
+    assert np.allclose(out, [[12.0, 19.0, 2.0, -1.0]])
+
+
+def test_parents_reset_on_track_loss():
+    tr = make_tracker("dlpf", seed=0)
+    frames = list(_scene(3).frames())
+    tr.step(frames[0], None, None)
+    box = np.array([100.0, 60.0, 30.0, 90.0])
+    track = tr._spawn(frames[0].image, box, parent=5)
+    tr.tracks.append(track)
+    assert tr.parents.labels[5] == track.tid
+    old = tr.parents.states[5].copy()
+    tr.parents.states[5, :2] = [115.0, 105.0]
+    # the colour model no longer matches anything: the track ends after lost_frames
+    track.ref = np.zeros_like(track.ref)
+    track.ref[0] = 1.0
+    ended = None
+    for k in range(tr.params.children.lost_frames + 2):
+        res = tr.step(frames[1 + k % 2], None, None)
+        if not any(t.tid == track.tid for t in tr.tracks):
+            ended = res
+            break
+    assert ended is not None
+    msgs = [e.message for s in ended.stages for e in s.items if isinstance(e, Event)]
+    assert any(f"track {track.tid} ended" in m and "parent 5 reset" in m for m in msgs)
+    assert tr.parents.labels[5] == 0                            # back in the search
+    assert not np.allclose(tr.parents.states[5, :2], old[:2])
+
+
+# ------------------------------------------------------------------ classifier
+
+def test_classifier_windows_hold_small_people_and_score_in_batch():
+    c = np.array([[100.0, 100.0], [200.0, 150.0]])
+    w = window_boxes(c, np.array([60.0, 150.0]))               # 60 px: below the 64x128 window
+    assert np.allclose(w[:, 3], [80.0, 200.0]) and np.allclose(w[:, 2], w[:, 3] / 2)
+    assert np.allclose(person_boxes(w)[:, 3], [60.0, 150.0])
+    img = np.random.default_rng(0).integers(0, 256, (240, 320), dtype=np.uint8)
+    clf = HOGWindowClassifier()
+    s = clf.score(img, np.r_[w, [[-30.0, -40.0, 50.0, 100.0]]])  # also off the image
+    single = clf.score(img, w[1:])
+    assert s.shape == (3,) and np.isfinite(s).all() and s[1] == pytest.approx(single[0], abs=1e-4)
+    assert sliding_window_count(768, 576) > 30 * 300
+
+
+# ------------------------------------------------------------------ the tracker
+
+def test_registered_with_documented_parameters():
+    info = registry()["dlpf"]
+    assert info.paper == "jung2013" and "paper" in info.presets
+    rows = {r["name"]: r for r in info.describe()}
+    assert rows["confirm.count"]["default"] == 4 and rows["confirm.count"]["paper"]
+    assert rows["motion.y0"]["default"] == 5 and rows["motion.cap"]["default"] == 5
+    tr = make_tracker("dlpf", **{"parents.n": "50"})
+    assert tr.params.parents.n == 50 and not tr.needs_detections and tr.needs_image
+
+
+def _signature(seed):
+    tr = make_tracker("dlpf", seed=seed, **{"parents.n": "120"})
+    res = run(_scene(10), [tr], level="particles")
+    parents = tr.parents.states.copy()
+    return res.rows["dlpf"], parents
+
+
+def test_same_seed_same_tracks():
+    rows_a, p_a = _signature(4)
+    rows_b, p_b = _signature(4)
+    assert np.array_equal(p_a, p_b)
+    assert len(rows_a) == len(rows_b)
+    for (fa, ta), (fb, tb) in zip(rows_a, rows_b):
+        assert fa == fb and np.array_equal(ta.ids, tb.ids) and np.array_equal(ta.boxes, tb.boxes)
+    _, p_c = _signature(5)
+    assert not np.array_equal(p_a, p_c)
+
+
+def test_runs_on_the_synthetic_scene_with_both_layers_reported():
+    tr = make_tracker("dlpf", seed=0)
+    res = run(_scene(12), [tr], level="particles")
+    assert res.outcome.status == "completed" and res.frames == 12
+    assert 0 < tr.windows_evaluated / tr.frames_seen <= tr.params.parents.n + 50
+
+
+def test_runs_on_pets09_frames():
+    src = open_source(sequence("PETS09-S2L1"))
+    tr = make_tracker("dlpf", seed=0)
+    seen = {}
+
+    from pfscope.trackers.pipeline import BaseHook
+
+    class Keep(BaseHook):
+        def on_frame(self, r):
+            seen[r.frame.index] = r.results["dlpf"]
+
+    res = run(src, [tr], frames=25, level="particles", hooks=[Keep()])
+    assert res.outcome.status == "completed"
+    last = seen[25]
+    assert find(last.stages, "dlpf/motion/magnitude", Field)
+    assert find(last.stages, "dlpf/classify/windows", Boxes)
+    free = find(last.stages, "dlpf/parents/free", Points)[0]
+    assert "scale" in free.values and len(free) <= tr.params.parents.n
+    # people move in PETS09: after a few frames the parents' motion is not all zero
+    pred = find(last.stages, "dlpf/parents/predicted", Points)[0]
+    assert (pred.values["m"] > 1.0).any()
+    assert sum(len(ts) for _, ts in res.rows["dlpf"]) > 0   # somebody was confirmed
+
+
+def test_wrong_frame_size_is_a_clear_error():
+    tr = make_tracker("dlpf", seed=0)
+    tr.step(Frame(1, 0.0, np.zeros((240, 320, 3), np.uint8)), None)
+    with pytest.raises(ValueError, match="frame 2: dlpf: frame size changed"):
+        tr.step(Frame(2, 0.1, np.zeros((100, 100, 3), np.uint8)), None)

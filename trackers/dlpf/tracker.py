@@ -1,0 +1,572 @@
+"""DLPF — the dual-layer particle filter of jung2013 (§2): detect and track in one loop, with
+no detector scanning the frame.
+
+One frame (stages in order):
+
+``motion``    free parents are predicted (eqs. (2)–(5)); Lucas–Kanade motion is measured at
+              them (eq. (1), :mod:`.motion`), capped (eq. (6)), zeroed inside tracked regions,
+              scored (eq. (7)).
+``parents``   free parents are resampled on those weights (eq. (8)), a fraction ``explore`` is
+              re-drawn uniformly (ours: without it a person who starts walking where no parent
+              is would never be found), each draws a random scale (§2.1).
+``classify``  each free parent evaluates the HOG+SVM classifier on its one window
+              (:mod:`.classifier`); hits above ``hit_threshold`` are merged by NMS; hits on an
+              already tracked person are ignored.
+``confirm``   hits extend candidate objects; 4 sequential detections confirm one (§2.2,
+              :mod:`.confirm`); its parent leaves the search, spawns children and takes the HSV
+              reference histogram (eq. (12)).
+``children``  every track's children: AR(2) prediction, histograms, Bhattacharyya distance
+              (eq. (13)), weights (eq. (14)), MAP estimate (eq. (15)), resampling
+              (:mod:`.children`).  A track whose MAP likelihood ``exp(−λB²)`` stays below
+              ``lost_likelihood`` for ``lost_frames`` frames ends and its parent is reset (§2.2).
+``tracks``    the frame's tracks.
+
+**Overlapping tracks** (two colour trackers collapse onto the more distinctive person when
+people cross): tracks are processed from the strongest (lowest MAP distance) to the weakest; the
+children of a weaker track whose box overlaps a stronger track's MAP box by IoU ≥
+``overlap_iou`` get zero weight (unless that would remove them all), so it cannot take the MAP
+there; a track that nevertheless overlaps a stronger one for ``merge_frames`` frames is a
+duplicate and ends (its parent is reset).
+
+Stage data (paths under ``dlpf/``):
+
+=========  ==========  ==================================================================
+stage      level       items
+=========  ==========  ==================================================================
+motion     particles   Field ``dlpf/motion/magnitude`` (capped LK magnitude on a grid, masked),
+                       Points ``dlpf/parents/predicted`` (weights: eq. (8), values ``m``)
+parents    particles   Points ``dlpf/parents/free`` (values ``scale``: person height px),
+                       Points ``dlpf/parents/owned`` (ids = track)
+classify   particles   Boxes ``dlpf/classify/windows`` (values ``score``)
+classify   clusters    Boxes ``dlpf/classify/hits`` (role detection, values ``score``)
+confirm    clusters    Boxes ``dlpf/confirm/candidates`` (values ``count``)
+children   particles   Points ``dlpf/children`` (ids = track, values ``weight``)
+children   clusters    Boxes ``dlpf/children/map`` (ids = track, values ``B``)
+(all)      tracks      Scalars ``dlpf/classify/windows``, ``dlpf/classify/hits``,
+                       ``dlpf/parents/free``, ``dlpf/children/count``, ``dlpf/tracks``,
+                       ``dlpf/confirm/candidates``, ``dlpf/motion/mean``,
+                       ``dlpf/bhattacharyya/<id>``; Events ``dlpf`` (confirmed, ended)
+=========  ==========  ==================================================================
+
+Output: the tracks at each frame (zero lag); with ``backfill`` a newly confirmed track also
+reports the boxes of its 3 earlier detections as rows of their frames.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Optional
+
+import cv2
+import numpy as np
+
+from ..api import Rows, StepResult, register
+from ..detect._common import check_image, to_bgr, to_gray
+from ..eval.overlap import box_iou
+from ..params import param, part, to_dict
+from ..report import Boxes, Field, Points, StageLog
+from ..smc import ParticleSet, logsumexp, resample_indices
+from ..types import Detections, Frame, TrackSet
+from . import children as ch
+from . import motion as mo
+from . import parents as pa
+from .classifier import HOGWindowClassifier, person_boxes, window_boxes
+from .confirm import Confirmer
+
+
+@dataclass(frozen=True)
+class MotionParams:
+    """LK motion measurement and its likelihood (jung2013 §2.1)."""
+
+    y0: float = param(5.0, "target motion magnitude y0 (px/frame) of eq. (7)", paper="jung2013 §2.1")
+    cap: float = param(5.0, "maximum of the motion magnitude M(x, y), eq. (6)", paper="jung2013 §2.1")
+    R: float = param(1.0, "standard deviation R of the motion noise in eq. (7) (only its "
+                          "constant term; cancels in the 'exp' reading)")
+    likelihood: str = param("exp", "reading of eqs. (7)-(8): 'exp' (weights exp(L)), 'shift' "
+                                   "(L - min L), 'literal' (L / sum L); see dlpf.motion")
+    lk_window: int = param(15, "Lucas-Kanade window side (px), the region Omega of eq. (1)")
+    lk_levels: int = param(3, "pyramid levels of the LK solver (for motions beyond the window)")
+    mask_margin: float = param(0.1, "tracked regions grown by this fraction of their size per "
+                                    "side before their motion is zeroed (§2.2)")
+    field_step: int = param(16, "grid spacing (px) of the motion-magnitude image in recordings")
+
+    def __post_init__(self):
+        if self.likelihood not in mo.READINGS:
+            raise ValueError(f"likelihood must be one of {', '.join(mo.READINGS)}, "
+                             f"got {self.likelihood!r}")
+        if not (self.cap > 0 and self.R > 0 and self.lk_window >= 3 and self.field_step >= 2):
+            raise ValueError("need cap > 0, R > 0, lk_window >= 3, field_step >= 2")
+
+
+@dataclass(frozen=True)
+class ParentParams:
+    """The first layer (jung2013 §2.1)."""
+
+    n: int = param(300, "number of parent particles (the paper gives no number; 300 keeps the "
+                        "classifier cost near 300 windows/frame, ~10% of an exhaustive scan)")
+    q_pos: float = param(6.0, "std of the position process noise Q_pos (px), eq. (5)")
+    q_vel: float = param(1.0, "std of the velocity process noise Q_vel (px/frame), eq. (5)")
+    velocity_from_flow: bool = param(True, "set a parent's velocity to the LK flow it measured "
+                                           "(ours: the paper does not say how v is updated)")
+    explore: float = param(0.2, "fraction of free parents re-drawn uniformly each frame (ours)")
+    scheme: str = param("multinomial", "resampling scheme of eq. (8) (i.i.d. uniforms u_i = "
+                                       "multinomial)", paper="jung2013 §2.1")
+    score_weight: float = param(1.0, "beta: a parent's resampling log-weight also gets beta x its "
+                                     "last SVM margin (clipped to [-3, 3]) so that descendants of "
+                                     "near-misses search around them (ours; 0 = the paper: motion "
+                                     "only)")
+    scale_jitter: float = param(0.1, "std of the log-scale random walk of a resampled parent "
+                                     "(ours; 0 = the paper: a fresh random scale every frame)")
+    scale_min: float = param(0.1, "smallest person height a parent looks for, fraction of the "
+                                  "image height (PETS09 768x576: 58 px)")
+    scale_max: float = param(0.3, "largest person height, fraction of the image height")
+
+    def __post_init__(self):
+        if self.n < 1 or not 0 <= self.explore <= 1 or not 0 < self.scale_min <= self.scale_max:
+            raise ValueError("need n >= 1, 0 <= explore <= 1, 0 < scale_min <= scale_max")
+
+
+@dataclass(frozen=True)
+class ClassifierParams:
+    """HOG + linear SVM on each parent's window (jung2013 §2.1; OpenCV's Dalal-Triggs SVM)."""
+
+    hit_threshold: float = param(0.0, "SVM margin above which a window is a detection")
+    nms_iou: float = param(0.3, "hits overlapping a stronger hit by this IoU are merged into it")
+    verify_windows: int = param(5, "windows each track's own parent classifies around the "
+                                   "track per frame; the best hit supports it and re-seeds part "
+                                   "of its children (ours; 0 = the paper: colour only)")
+    tracked_iou: float = param(0.3, "hits overlapping a live track by this IoU are ignored "
+                                    "(the person is already tracked)")
+
+
+@dataclass(frozen=True)
+class ConfirmParams:
+    """Confirmation (jung2013 §2.2)."""
+
+    count: int = param(4, "sequential detections that confirm an object", paper="jung2013 §2.2")
+    max_gap: int = param(1, "frames without a hit allowed between two detections of a candidate "
+                            "(0: strictly consecutive; ours: 1, since a random parent may miss)")
+    match_iou: float = param(0.3, "IoU for a hit to extend a candidate")
+    backfill: bool = param(True, "a confirmed track also reports its earlier detections")
+
+
+@dataclass(frozen=True)
+class ChildParams:
+    """The second layer: colour particle filter per track (jung2013 §2.2; Pérez et al. 2002)."""
+
+    n: int = param(100, "child particles per track")
+    Mh: int = param(10, "hue bins (M = Mh*Ms + Mv, eq. (12))", paper="Pérez et al. 2002")
+    Ms: int = param(10, "saturation bins", paper="Pérez et al. 2002")
+    Mv: int = param(10, "value-only bins", paper="Pérez et al. 2002")
+    s_min: float = param(0.1, "pixels with saturation below this go to the value bins")
+    v_min: float = param(0.2, "pixels with value below this go to the value bins")
+    grid_x: int = param(8, "sample columns of the object region R(x), eq. (12)")
+    grid_y: int = param(16, "sample rows of the object region R(x)")
+    lam: float = param(20.0, "lambda of eq. (14), w ~ exp(-lambda B^2)", paper="Pérez et al. 2002")
+    damping: float = param(0.7, "AR(2) velocity factor d: x_k = x_k-1 + d (x_k-1 - x_k-2) + w")
+    pos_sigma: float = param(0.04, "position noise std, fraction of the box height")
+    scale_sigma: float = param(0.02, "log-height noise std")
+    estimate: str = param("map", "state estimate: 'map' (eq. (15)) or 'mean' (weighted mean)",
+                          paper="jung2013 §2.2")
+    inject: float = param(0.2, "fraction of a track's children re-seeded at its parent's best "
+                               "classifier hit (ours; see classifier.verify_windows)")
+    support_sigma: float = param(0.15, "children also weighted by N(centre; parent's best hit, "
+                                       "(sigma h)^2) when the track's parent has a hit (ours; 0: "
+                                       "colour only, the paper)")
+    unsupported_frames: int = param(8, "a track whose parent finds no hit for this many frames "
+                                       "ends (ours; 0: never, the paper)")
+    lost_likelihood: float = param(0.15, "a frame is 'low' when exp(-lambda B_MAP^2) < this")
+    lost_frames: int = param(5, "consecutive low frames that end a track (its parent is reset)")
+    overlap_iou: float = param(0.4, "children of a weaker track overlapping a stronger track's "
+                                    "box by this IoU get zero weight")
+    merge_frames: int = param(3, "frames a weaker track may overlap a stronger one before it ends")
+
+    def __post_init__(self):
+        if self.estimate not in ("map", "mean"):
+            raise ValueError(f"estimate must be 'map' or 'mean', got {self.estimate!r}")
+        if min(self.n, self.Mh, self.Ms, self.Mv, self.grid_x, self.grid_y, self.lost_frames) < 1:
+            raise ValueError("child counts, bins, grid and lost_frames must be >= 1")
+
+
+@dataclass(frozen=True)
+class DLPFParams:
+    """DLPF: motion, parents, classifier, confirmation, children."""
+
+    motion: MotionParams = part(MotionParams, "LK motion measurement (§2.1)")
+    parents: ParentParams = part(ParentParams, "parent particles (§2.1)")
+    classifier: ClassifierParams = part(ClassifierParams, "HOG + SVM per window (§2.1)")
+    confirm: ConfirmParams = part(ConfirmParams, "confirmation (§2.2)")
+    children: ChildParams = part(ChildParams, "child particles (§2.2)")
+
+
+@dataclass
+class _Track:
+    tid: int
+    parent: int                  # index of its parent particle
+    ref: np.ndarray              # reference histogram q* (M,), taken at confirmation
+    aspect: float                # box width / height, from the confirmed box
+    kids: ParticleSet            # states (cx, cy, h, cx', cy', h'), labels = tid
+    box: np.ndarray              # current estimate (x, y, w, h)
+    velocity: np.ndarray         # (2,) px/frame of the estimate
+    B: float = 0.0               # Bhattacharyya distance of the estimate
+    low: int = 0                 # consecutive low-likelihood frames
+    unsupported: int = 0         # consecutive frames without a parent hit
+    support: Optional[np.ndarray] = None  # this frame's best classifier hit of its parent
+    overlap: int = 0             # consecutive frames overlapping a stronger track
+
+
+@register(presets={"paper": DLPFParams()})
+class DLPFTracker:
+    """DLPF (jung2013): parents on LK motion classify one HOG window each; confirmed people are
+    tracked by HSV child particles."""
+
+    name = "dlpf"
+    paper = "jung2013"
+    stages = ("motion", "parents", "classify", "confirm", "children", "tracks")
+    needs_detections = False
+    needs_image = True
+    Params = DLPFParams
+
+    def __init__(self, params: Optional[DLPFParams] = None, *,
+                 rng: Optional[np.random.Generator] = None,
+                 classifier: Optional[HOGWindowClassifier] = None):
+        self.params = params or DLPFParams()
+        self.rng = rng if rng is not None else np.random.default_rng(0)
+        self.classifier = classifier or HOGWindowClassifier()
+        c = self.params.confirm
+        self.confirmer = Confirmer(c.count, c.max_gap, c.match_iou)
+        self.parents: Optional[ParticleSet] = None
+        self.tracks: list[_Track] = []
+        self._prev_grey: Optional[np.ndarray] = None
+        self._size: Optional[tuple[int, int]] = None
+        self._next_id = 1
+        self.windows_evaluated = 0   # running total, for efficiency figures
+        self.frames_seen = 0
+
+    # ------------------------------------------------------------------ helpers
+    def _heights(self, H: int) -> tuple[float, float]:
+        p = self.params.parents
+        return p.scale_min * H, p.scale_max * H
+
+    def predicted_track_boxes(self) -> np.ndarray:
+        """Live tracks' boxes moved one frame along their velocity (the regions whose motion is
+        masked and whose hits are ignored this frame)."""
+        if not self.tracks:
+            return np.zeros((0, 4))
+        b = np.array([t.box for t in self.tracks])
+        v = np.array([t.velocity for t in self.tracks])
+        b[:, :2] += v
+        return b
+
+    def _end(self, track: _Track, why: str, frame: int, log: StageLog) -> None:
+        assert self.parents is not None and self._size is not None
+        W, H = self._size
+        lo, hi = self._heights(H)
+        self.parents = pa.reset(self.parents, np.array([track.parent]), W, H, lo, hi, self.rng)
+        log.event("dlpf", f"frame {frame}: track {track.tid} ended ({why}); parent "
+                          f"{track.parent} reset")
+
+    # ------------------------------------------------------------------ the step
+    def step(self, frame: Frame, detections: Optional[Detections],
+             level: Optional[str] = None) -> StepResult:
+        P = self.params
+        img = to_bgr(check_image(frame, "dlpf"))
+        grey = to_gray(img)
+        H, W = grey.shape
+        if self._size is not None and self._size != (W, H):
+            raise ValueError(f"frame {frame.index}: dlpf: frame size changed from "
+                             f"{self._size[0]}x{self._size[1]} to {W}x{H}")
+        self._size = (W, H)
+        lo, hi = self._heights(H)
+        rng = self.rng
+        if self.parents is None:
+            self.parents = pa.init_parents(P.parents.n, W, H, lo, hi, rng)
+        log = StageLog(self.stages, level)
+        rows: Rows = []
+        tboxes = self.predicted_track_boxes()
+
+        # ---------------------------------------------------------------- motion (eqs. 1-7)
+        log.stage("motion")
+        labels = self.parents.labels
+        assert labels is not None
+        free = np.flatnonzero(labels == 0)
+        pred = pa.predict(self.parents.states[free], P.parents.q_pos, P.parents.q_vel, rng, W, H)
+        if self._prev_grey is not None and len(free):
+            flow, ok = mo.lk_flow(self._prev_grey, grey, pred[:, :2], win=P.motion.lk_window,
+                                  levels=P.motion.lk_levels)
+        else:
+            flow, ok = np.zeros((len(free), 2)), np.zeros(len(free), dtype=bool)
+        tracked = mo.inside_boxes(pred[:, :2], tboxes, P.motion.mask_margin)
+        m = mo.magnitude(flow, P.motion.cap)
+        m[tracked] = 0.0                                          # §2.2: masked motion
+        L = mo.log_likelihood(m, P.motion.y0, P.motion.R)         # eq. (7)
+        lw = mo.resampling_log_weights(L, P.motion.likelihood)    # eq. (8) normalisation
+        assert self.parents.extra is not None
+        if P.parents.score_weight:
+            lw = lw + P.parents.score_weight * np.clip(self.parents.extra[free, 1], -3.0, 3.0)
+            lw = lw - logsumexp(lw)
+        if P.parents.velocity_from_flow:
+            use = ok & ~tracked
+            pred[use, 2:] = flow[use]
+            pred[tracked, 2:] = 0.0
+        log.scalar("dlpf/motion/mean", float(m.mean()) if len(m) else 0.0)
+        if log.wants("particles"):
+            log.add(Field("dlpf/motion/magnitude", mo.motion_field(
+                self._prev_grey, grey, P.motion.field_step, P.motion.cap,
+                win=P.motion.lk_window, levels=P.motion.lk_levels, track_boxes=tboxes,
+                margin=P.motion.mask_margin), unit="px/frame", vmin=0.0, vmax=P.motion.cap))
+            log.add(Points("dlpf/parents/predicted", pred[:, :2], weights=np.exp(lw),
+                           values={"m": m}))
+
+        # ---------------------------------------------------------------- parents (eq. 8)
+        log.stage("parents")
+        anc = resample_indices(lw, len(free), rng, P.parents.scheme) if len(free) else \
+            np.zeros(0, dtype=np.int64)
+        new = pred[anc]
+        n_explore = int(round(P.parents.explore * len(free)))
+        if n_explore:
+            pick = rng.choice(len(free), n_explore, replace=False)
+            new[pick] = pa.uniform_states(n_explore, W, H, rng)
+        heights = pa.draw_heights(len(free), lo, hi, rng)
+        if P.parents.scale_jitter > 0:  # inherited scale, random walk (ours; §2.1 redraws)
+            inherited = self.parents.extra[free[anc], 0] * np.exp(
+                rng.normal(0.0, P.parents.scale_jitter, len(free)))
+            fresh = np.zeros(len(free), dtype=bool)
+            if n_explore:
+                fresh[pick] = True
+            heights = np.where(fresh, heights, np.clip(inherited, lo, hi))
+        states = self.parents.states.copy()
+        extra = self.parents.extra.copy()
+        states[free] = new
+        extra[free, 0] = heights
+        self.parents = ParticleSet(states, np.full(len(states), -np.log(len(states))),
+                                   labels.copy(), extra)
+        log.scalar("dlpf/parents/free", len(free))
+        if log.wants("particles"):
+            log.add(Points("dlpf/parents/free", new[:, :2], values={"scale": heights}))
+            owned = np.flatnonzero(labels != 0)
+            log.add(Points("dlpf/parents/owned", states[owned, :2], ids=labels[owned],
+                           id_kind="track"))
+
+        # ---------------------------------------------------------------- classify (one window each)
+        log.stage("classify")
+        windows = window_boxes(new[:, :2], heights)
+        vwin, vtrack = self._verify_windows()
+        all_scores = self.classifier.score(grey, np.concatenate([windows, vwin]))
+        scores, vscores = all_scores[:len(windows)], all_scores[len(windows):]
+        self.parents.extra[free, 1] = scores
+        self._support(vwin, vscores, vtrack)
+        self.windows_evaluated += len(all_scores)
+        self.frames_seen += 1
+        hit = np.flatnonzero(scores > P.classifier.hit_threshold)
+        hboxes = person_boxes(windows[hit])
+        hscores = scores[hit]
+        hparents = free[hit]
+        if len(hit) > 1 and P.classifier.nms_iou < 1.0:
+            shifted = hscores - hscores.min() + 1.0
+            keep = np.asarray(cv2.dnn.NMSBoxes(hboxes.tolist(), shifted.tolist(), 0.0,
+                                               P.classifier.nms_iou), dtype=np.int64).reshape(-1)
+            hboxes, hscores, hparents = hboxes[keep], hscores[keep], hparents[keep]
+        if len(hboxes) and len(tboxes):
+            fresh = box_iou(hboxes, tboxes).max(axis=1) < P.classifier.tracked_iou
+            hboxes, hscores, hparents = hboxes[fresh], hscores[fresh], hparents[fresh]
+        log.scalar("dlpf/classify/windows", len(all_scores))
+        log.scalar("dlpf/classify/hits", len(hboxes))
+        if log.wants("particles"):
+            log.add(Boxes("dlpf/classify/windows", windows, values={"score": scores}))
+            log.add(Boxes("dlpf/classify/verify", vwin, ids=vtrack, id_kind="track",
+                          values={"score": vscores}))
+        if log.wants("clusters"):
+            log.add(Boxes("dlpf/classify/hits", hboxes, role="detection",
+                          values={"score": hscores}))
+
+        # ---------------------------------------------------------------- confirm (§2.2)
+        log.stage("confirm")
+        self.confirmer.forget_inside(tboxes, P.classifier.tracked_iou)
+        born = []
+        for cand in self.confirmer.step(frame.index, hboxes, hscores, hparents):
+            tr = self._spawn(img, cand.box, cand.parent)
+            born.append(tr)
+            log.event("dlpf", f"frame {frame.index}: track {tr.tid} confirmed after "
+                              f"{cand.count} detections (parent {cand.parent})")
+            if P.confirm.backfill:
+                rows.extend((f, TrackSet([tr.tid], [b])) for f, b in cand.history[:-1])
+        log.scalar("dlpf/confirm/candidates", len(self.confirmer.candidates))
+        if log.wants("clusters"):
+            cs = self.confirmer.candidates
+            log.add(Boxes("dlpf/confirm/candidates", np.array([c.box for c in cs]).reshape(-1, 4),
+                          values={"count": [c.count for c in cs]}))
+
+        # ---------------------------------------------------------------- children (eqs. 12-15)
+        log.stage("children")
+        self._update_children(img, frame.index, log)
+        self.tracks.extend(born)
+        # an owned parent follows its track (it "generates" the children, §2.2)
+        if self.tracks:
+            st = self.parents.states.copy()
+            for t in self.tracks:
+                st[t.parent, :2] = t.box[:2] + t.box[2:] / 2
+                st[t.parent, 2:] = t.velocity
+            self.parents = ParticleSet(st, self.parents.log_weights, self.parents.labels,
+                                       self.parents.extra)
+        n_kids = sum(len(t.kids) for t in self.tracks)
+        log.scalar("dlpf/children/count", n_kids)
+        for t in self.tracks:
+            log.scalar(f"dlpf/bhattacharyya/{t.tid}", t.B)
+        if self.tracks and log.wants("particles"):
+            kid_states = np.concatenate([t.kids.states for t in self.tracks])
+            kid_ids = np.concatenate([t.kids.labels for t in self.tracks])
+            kid_w = np.concatenate([np.exp(t.kids.log_weights) for t in self.tracks])
+            log.add(Points("dlpf/children", kid_states[:, :2], ids=kid_ids, id_kind="track",
+                           values={"weight": kid_w}))
+        if log.wants("clusters"):
+            log.add(Boxes("dlpf/children/map", np.array([t.box for t in self.tracks]).reshape(-1, 4),
+                          ids=[t.tid for t in self.tracks], id_kind="track",
+                          values={"B": [t.B for t in self.tracks]}))
+
+        # ---------------------------------------------------------------- tracks
+        log.stage("tracks")
+        ts = TrackSet([t.tid for t in self.tracks],
+                      np.array([t.box for t in self.tracks]).reshape(-1, 4))
+        log.scalar("dlpf/tracks", len(ts))
+        rows.append((frame.index, ts))
+        self._prev_grey = grey
+        return StepResult(ts, rows, log.result())
+
+    def _verify_windows(self) -> tuple[np.ndarray, np.ndarray]:
+        """Windows each track's parent classifies around its predicted box: the box itself and
+        ``verify_windows − 1`` jittered copies (position 10% of the height, scale 10%)."""
+        k = self.params.classifier.verify_windows
+        tboxes = np.array([t.box for t in self.tracks]).reshape(-1, 4)
+        tboxes[:, :2] += np.array([t.velocity for t in self.tracks]).reshape(-1, 2)
+        if k <= 0 or len(tboxes) == 0:
+            return np.zeros((0, 4)), np.zeros(0, dtype=np.int64)
+        n = len(tboxes)
+        c = np.repeat(tboxes[:, :2] + tboxes[:, 2:] / 2, k, axis=0)
+        h = np.repeat(tboxes[:, 3], k)
+        jit = np.ones((n, k), dtype=bool)
+        jit[:, 0] = False
+        jit = jit.ravel()
+        m = int(jit.sum())
+        c[jit] += self.rng.normal(0.0, 0.1, (m, 2)) * h[jit, None]
+        h[jit] *= np.exp(self.rng.normal(0.0, 0.1, m))
+        ids = np.repeat([t.tid for t in self.tracks], k)
+        return window_boxes(c, h), ids
+
+    def _support(self, windows: np.ndarray, scores: np.ndarray, ids: np.ndarray) -> None:
+        """Each track's best verification hit (person box) or None."""
+        thr = self.params.classifier.hit_threshold
+        for t in self.tracks:
+            t.support = None
+            sel = np.flatnonzero(ids == t.tid)
+            if len(sel):
+                j = sel[int(np.argmax(scores[sel]))]
+                if scores[j] > thr:
+                    t.support = person_boxes(windows[j:j + 1])[0]
+
+    def _spawn(self, img: np.ndarray, box: np.ndarray, parent: int) -> _Track:
+        C = self.params.children
+        tid = self._next_id
+        self._next_id += 1
+        assert self.parents is not None and self.parents.labels is not None
+        labels = self.parents.labels.copy()
+        labels[parent] = tid
+        self.parents = ParticleSet(self.parents.states, self.parents.log_weights, labels,
+                                   self.parents.extra)
+        ref = ch.histograms(img, box[None], (C.grid_x, C.grid_y), C.Mh, C.Ms, C.Mv,
+                            C.s_min, C.v_min)[0]
+        kids = ParticleSet(ch.spawn(box, C.n, C.pos_sigma, self.rng),
+                           np.full(C.n, -np.log(C.n)), np.full(C.n, tid, dtype=np.int64))
+        return _Track(tid, parent, ref, float(box[2] / box[3]), kids, np.array(box, float),
+                      np.zeros(2))
+
+    def _update_children(self, img: np.ndarray, frame: int, log: StageLog) -> None:
+        """Eqs. (12)-(15) for every live track, overlap suppression, track ends (§2.2)."""
+        C = self.params.children
+        if not self.tracks:
+            return
+        rng = self.rng
+        H, W = img.shape[:2]
+        preds = [ch.predict(t.kids.states, C.damping, C.pos_sigma, C.scale_sigma, rng)
+                 for t in self.tracks]
+        for t, p in zip(self.tracks, preds):  # re-seed part of the children at the parent's hit
+            k = int(round(C.inject * len(p)))
+            if t.support is not None and k:
+                pick = rng.choice(len(p), k, replace=False)
+                seeds = ch.spawn(t.support, k, C.pos_sigma, rng)
+                seeds[:, 2] = t.support[3]
+                seeds[:, 3:5] = seeds[:, :2] - t.velocity
+                p[pick] = seeds
+        sizes = [len(p) for p in preds]
+        allb = np.concatenate([ch.boxes_of(p, t.aspect) for p, t in zip(preds, self.tracks)])
+        hist = ch.histograms(img, allb, (C.grid_x, C.grid_y), C.Mh, C.Ms, C.Mv, C.s_min, C.v_min)
+        starts = np.cumsum([0] + sizes)
+        Bs, lws, boxes = [], [], []
+        for k, t in enumerate(self.tracks):
+            sl = slice(starts[k], starts[k + 1])
+            B = ch.bhattacharyya(t.ref, hist[sl])                 # eq. (13)
+            Bs.append(B)
+            lw = ch.log_weights(B, C.lam)                         # eq. (14)
+            if t.support is not None and C.support_sigma > 0:
+                sc = t.support[:2] + t.support[2:] / 2
+                d2 = ((preds[k][:, :2] - sc) ** 2).sum(1)
+                lw = lw - d2 / (2.0 * (C.support_sigma * t.support[3]) ** 2)
+            lws.append(lw)
+            boxes.append(allb[sl])
+        # strongest first: the weaker track may not take its MAP inside a stronger one's box
+        order = sorted(range(len(self.tracks)), key=lambda k: float(Bs[k].min()))
+        accepted: list[np.ndarray] = []
+        ended: list[tuple[_Track, str]] = []
+        for k in order:
+            t, lw, B, bx = self.tracks[k], lws[k], Bs[k], boxes[k]
+            overlapping = False
+            if accepted:
+                ov = box_iou(bx, np.array(accepted)).max(axis=1) >= C.overlap_iou
+                if ov.all():
+                    overlapping = True
+                else:
+                    lw = np.where(ov, -np.inf, lw)
+            if C.estimate == "map":
+                j = ch.map_index(lw)                              # eq. (15)
+                est = preds[k][j, :3]
+            else:
+                w = np.exp(lw - lw.max())
+                est = (w[:, None] * preds[k][:, :3]).sum(0) / w.sum()
+            box = ch.boxes_of(np.r_[est, est][None], t.aspect)[0]
+            Best = float(ch.bhattacharyya(t.ref, ch.histograms(
+                img, box[None], (C.grid_x, C.grid_y), C.Mh, C.Ms, C.Mv, C.s_min, C.v_min))[0]) \
+                if C.estimate == "mean" else float(B[j])
+            t.velocity = box[:2] + box[2:] / 2 - (t.box[:2] + t.box[2:] / 2)
+            t.box, t.B = box, Best
+            idx = resample_indices(lw, C.n, rng, "systematic")
+            t.kids = ParticleSet(preds[k][idx], np.full(C.n, -np.log(C.n)),
+                                 np.full(C.n, t.tid, dtype=np.int64))
+            low = np.exp(-C.lam * Best ** 2) < C.lost_likelihood and t.support is None
+            t.low = t.low + 1 if low else 0
+            t.overlap = t.overlap + 1 if overlapping else 0
+            t.unsupported = 0 if t.support is not None else t.unsupported + 1
+            cx, cy = box[0] + box[2] / 2, box[1] + box[3] / 2
+            if t.low >= C.lost_frames:
+                ended.append((t, f"likelihood below {C.lost_likelihood} for {t.low} frames"))
+            elif C.unsupported_frames and t.unsupported >= C.unsupported_frames:
+                ended.append((t, f"no classifier hit for {t.unsupported} frames"))
+            elif t.overlap >= C.merge_frames:
+                ended.append((t, f"inside a stronger track for {t.overlap} frames"))
+            elif not (0 <= cx < W and 0 <= cy < H):
+                ended.append((t, "left the image"))
+            else:
+                accepted.append(box)
+        for t, why in ended:
+            self.tracks.remove(t)
+            self._end(t, why, frame, log)
+
+    def finish(self) -> Rows:
+        return []
+
+    def config(self) -> dict:
+        return {"tracker": self.name, "paper": self.paper, "params": to_dict(self.params),
+                "classifier": "opencv-default-people-svm"}
+
+
+__all__ = ["DLPFTracker", "DLPFParams", "MotionParams", "ParentParams", "ClassifierParams",
+           "ConfirmParams", "ChildParams"]

@@ -1,0 +1,18 @@
+"""DLPF's views (jung2013): the motion field and the parents (first layer), the classifier
+windows and confirmation, the child clouds and MAP boxes (second layer)."""
+
+from .base import TrackerLayout
+
+LAYOUT = TrackerLayout(
+    views=(("Tracks", ("tracks/**", "dlpf/children/map")),
+           ("Motion", ("dlpf/motion/**", "dlpf/parents/predicted")),
+           ("Parents", ("dlpf/parents/free", "dlpf/parents/owned", "dlpf/classify/hits")),
+           ("Classifier", ("dlpf/classify/**", "dlpf/confirm/**")),
+           ("Children", ("dlpf/children", "dlpf/children/map", "tracks/**"))),
+    plots=(("Windows / frame", ("dlpf/classify/windows", "dlpf/classify/hits")),
+           ("Particles", ("dlpf/parents/free", "dlpf/children/count")),
+           ("Tracks", ("dlpf/tracks", "tracks/count", "dlpf/confirm/candidates")),
+           ("Bhattacharyya", ("dlpf/bhattacharyya/**",)),
+           ("Motion", ("dlpf/motion/mean", "dlpf/motion/magnitude/**")),
+           ("Step ms", ("timing/**",))),
+)
