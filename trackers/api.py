@@ -101,7 +101,7 @@ _REGISTRY: dict[str, TrackerInfo] = {}
 #: Modules holding the built-in trackers; imported on first use of the registry, so that
 #: ``pfscope --help`` does not pay for them and optional dependencies stay optional.
 BUILTIN_MODULES = ("pfscope.trackers.phd.tracker", "pfscope.trackers.passthrough",
-                   "pfscope.trackers.dlpf.tracker")
+                   "pfscope.trackers.dlpf.tracker", "pfscope.trackers.dbn.tracker")
 DEFAULT_TRACKER = "phd"
 
 T = TypeVar("T", bound=type)

@@ -12,7 +12,8 @@ import importlib
 
 from .base import Reporter, TrackerLayout
 
-_MODULES = {"phd": "phd", "mt": "mt", "dlpf": "dlpf"}
+_MODULES = {"phd": "phd", "mt": "mt", "dlpf": "dlpf", "dbn-phd": "dbn",
+            "phd-bgsub": "dbn"}
 
 
 def layout_for(tracker_name: str) -> TrackerLayout:

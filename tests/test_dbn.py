@@ -1,0 +1,269 @@
+"""DBN-PHD (feng2015): codebook background, integral-histogram features, the torch RBM/DBN,
+the likelihood's two routes, Algorithm 3, and the tracker through the one pipeline."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from pfscope.trackers.api import make_tracker, registry
+from pfscope.trackers.data.sources import open_source
+from pfscope.trackers.data.synthetic import SceneConfig
+from pfscope.trackers.dbn.codebook import BackgroundParams, Codebook, blobs_from_mask
+from pfscope.trackers.dbn.features import FeatureConfig, FrameFeatures, describe_brute_force
+from pfscope.trackers.dbn.tracker import resample_alg3
+from pfscope.trackers.errors import InputError
+from pfscope.trackers.pipeline import run
+from pfscope.trackers.report import Boxes, Mask, Points, Scalar, find
+from pfscope.trackers.smc.resampling import resample
+from pfscope.trackers.smc.weights import ParticleSet
+
+torch = pytest.importorskip("torch")
+from pfscope.trackers.dbn import model as dbn_model  # noqa: E402  (needs torch)
+
+
+def _image(seed=0, h=120, w=160):
+    rng = np.random.default_rng(seed)
+    img = rng.integers(0, 256, (h, w, 3), dtype=np.uint8)
+    img[40:90, 50:80] = (30, 160, 220)          # a saturated patch
+    return img
+
+
+BOXES = np.array([[10, 10, 30, 60],             # inside
+                  [-15, 20, 30, 60],            # crosses the left border
+                  [140, 100, 40, 50],           # crosses right and bottom
+                  [60.3, 44.7, 1.0, 1.0],       # tiny
+                  [0, 0, 0.2, 0.4],             # sub-pixel at the corner
+                  [55, 45, 20, 40]])            # inside the uniform patch
+
+
+# ----------------------------------------------------------------------------- features
+
+def test_integral_histogram_features_equal_brute_force():
+    img = _image()
+    cfg = FeatureConfig()
+    for scale in (1.0, 0.5):
+        fast = FrameFeatures(img, cfg, scale).describe(BOXES)
+        slow = describe_brute_force(img, BOXES, cfg, scale)
+        np.testing.assert_allclose(fast, slow, rtol=1e-9, atol=1e-9)
+
+
+def test_histograms_are_normalised_and_invariant_including_at_the_border():
+    img = _image()
+    cfg = FeatureConfig()
+    f = FrameFeatures(img, cfg).describe(BOXES)
+    assert f.shape == (len(BOXES), cfg.dim) and np.all((f >= 0) & (f <= 1))
+    hog = f[:, :cfg.hog_dim]
+    np.testing.assert_allclose(np.linalg.norm(hog[[0, 1, 2]], axis=1), 1.0, atol=1e-6)
+    assert np.all(hog[5] == 0)                    # a flat patch has no gradient: HOG 0, not NaN
+    bands = f[:, cfg.hog_dim:].reshape(len(BOXES), cfg.colour_rows, cfg.colour_bins)
+    sq = (bands ** 2).sum(axis=2)                 # Hellinger map: unit norm per band
+    # every band with a pixel in the image has unit norm, even for tiny boxes; box 2's lower
+    # band (rows 125-150) lies wholly below the 120-row image: empty, all zeros
+    expect = np.ones_like(sq)
+    expect[2, 1] = 0.0
+    np.testing.assert_allclose(sq, expect, atol=1e-9)
+    # a box entirely outside the image has empty (all-zero) features, not NaN
+    out = FrameFeatures(img, cfg).describe(np.array([[500.0, 500.0, 20.0, 40.0]]))
+    assert np.all(out == 0)
+    # colour is translation-invariant inside a uniform region
+    a = FrameFeatures(img, cfg).describe(np.array([[52, 42, 20, 40], [56, 46, 20, 40]]))
+    np.testing.assert_allclose(a[0, cfg.hog_dim:], a[1, cfg.hog_dim:])
+    # HOG is invariant to a contrast gain (block normalisation)
+    dark = np.repeat(img[:, :, :1] // 2, 3, axis=2)   # grey, so grey(2x) == 2 grey(x) exactly
+    gain = dark * 2
+    h1 = FrameFeatures(dark, cfg).describe(BOXES[:3])[:, :cfg.hog_dim]
+    h2 = FrameFeatures(gain, cfg).describe(BOXES[:3])[:, :cfg.hog_dim]
+    np.testing.assert_allclose(h1, h2, atol=1e-6)
+
+
+def test_feature_cost_does_not_depend_on_box_area():
+    ff = FrameFeatures(_image(h=240, w=320), FeatureConfig())
+    small = ff.describe(np.tile([[10, 10, 4, 8]], (2000, 1)))
+    big = ff.describe(np.tile([[0, 0, 320, 240]], (2000, 1)))
+    assert small.shape == big.shape   # one gather per cell corner: same work for both
+
+
+# ----------------------------------------------------------------------------- background
+
+def test_codebook_finds_a_moving_object_and_tolerates_a_brightness_change():
+    rng = np.random.default_rng(0)
+    bg = rng.integers(60, 200, (60, 80, 3)).astype(np.float64)
+    cb = Codebook(BackgroundParams(train_frames=10, scale=1.0))
+    for t in range(10):                              # train on the background only
+        cb.apply(np.clip(bg + rng.normal(0, 2, bg.shape), 0, 255).astype(np.uint8))
+    frame = bg.copy()
+    frame[20:40, 30:45] = (255, 0, 0)
+    fg = cb.apply(frame.astype(np.uint8))
+    assert fg[20:40, 30:45].mean() > 0.95 and fg.mean() < 0.1
+    brighter = cb.apply(np.clip(bg * 1.1, 0, 255).astype(np.uint8))
+    assert brighter.mean() < 0.02                    # within [α, β]: still background
+    boxes, fill = blobs_from_mask(fg.astype(np.uint8), 1.0, 20)
+    assert len(boxes) == 1 and np.allclose(boxes[0], [30, 20, 15, 20])
+
+
+# ----------------------------------------------------------------------------- the DBN
+
+def _toy(seed=0, n=400, d=20):
+    rng = np.random.default_rng(seed)
+    protos = rng.random((3, d)) < 0.5
+    x = protos[rng.integers(0, 3, n)]
+    flip = rng.random((n, d)) < 0.05
+    return torch.from_numpy((x ^ flip).astype(np.float64))
+
+
+def test_cd1_lowers_the_reconstruction_error_on_a_toy_set():
+    V = _toy()
+    gen = torch.Generator().manual_seed(0)
+    rbm = dbn_model.RBM(V.shape[1], 8, gen)
+    before = rbm.reconstruction_error(V)
+    with dbn_model.single_thread():
+        errs = dbn_model.pretrain_rbm(rbm, V, epochs=20, lr=0.1, batch=20, gen=gen)
+    assert errs[-1] < 0.5 * before and errs[-1] < errs[0]
+
+
+def _toy_features(seed=0, n=300):
+    rng = np.random.default_rng(seed)
+    d = FeatureConfig().dim
+    y = (rng.random(n) < 0.4).astype(np.float64)
+    X = np.clip(rng.random((n, d)) * 0.5 + 0.4 * y[:, None] * (np.arange(d) % 3 == 0), 0, 1)
+    return X, y
+
+
+def _small_model(seed):
+    X, y = _toy_features()
+    return dbn_model.train_dbn(X, y, seed=seed, pre_epochs=2, fine_epochs=5)
+
+
+def test_same_seed_same_model_and_a_useful_classifier():
+    a, b, c = _small_model(3), _small_model(3), _small_model(4)
+    for k, v in a.net.state_dict().items():
+        assert torch.equal(v, b.net.state_dict()[k])
+    assert any(not torch.equal(v, c.net.state_dict()[k]) for k, v in a.net.state_dict().items())
+    assert a.info["holdout_auc"] > 0.9 and 0 <= a.info["holdout_accuracy"] <= 1
+
+
+def test_model_save_load_round_trip(tmp_path):
+    m = _small_model(0)
+    path = m.save(tmp_path / "m.pt")
+    assert path.stat().st_size < 2_000_000
+    back = dbn_model.load_model(path)
+    X, _ = _toy_features(1, 50)
+    np.testing.assert_array_equal(m.logits(X), back.logits(X))
+    assert back.features == m.features and back.info["seed"] == 0
+
+
+def test_a_bad_model_file_gives_one_clear_line(tmp_path):
+    junk = tmp_path / "junk.pt"
+    junk.write_bytes(b"not a model at all")
+    wrong = tmp_path / "wrong.pt"
+    torch.save({"format": "something-else"}, wrong)
+    old = tmp_path / "old.pt"
+    st = _small_model(0).state()
+    st["version"] = 999
+    torch.save(st, old)
+    broken = tmp_path / "broken.pt"
+    st = _small_model(0).state()
+    st["hidden"] = [7, 5]
+    torch.save(st, broken)
+    for path, words in ((junk, "not a pfscope DBN model"), (wrong, "format tag"),
+                        (old, "version 999"), (broken, "does not match"),
+                        (tmp_path / "missing.pt", "no such")):
+        with pytest.raises(InputError) as e:
+            dbn_model.load_model(path)
+        msg = str(e.value)
+        assert str(path) in msg and words in msg and "\n" not in msg
+    with pytest.raises(InputError, match="no such DBN model"):
+        make_tracker("dbn-phd", model=str(tmp_path / "missing.pt"))
+
+
+def test_roc_auc():
+    assert dbn_model.roc_auc(np.array([0.1, 0.4, 0.35, 0.8]), np.array([0, 0, 1, 1])) == 0.75
+
+
+# ----------------------------------------------------------------------------- likelihood, Alg. 3
+
+def test_dense_and_pair_likelihoods_agree():
+    from pfscope.trackers.dbn.likelihood import DBNLikelihood, DBNParams
+    from pfscope.trackers.types import Frame
+
+    frame = Frame(1, 0.0, _image(h=240, w=320))
+    lik = DBNLikelihood(dbn_model.default_model(0), DBNParams())
+    rng = np.random.default_rng(0)
+    states = np.column_stack([rng.uniform(0, 320, 50), rng.uniform(0, 240, 50),
+                              np.zeros((50, 2)), rng.uniform(10, 40, 50), rng.uniform(30, 90, 50)])
+    Z = np.array([[100.0, 120.0, 30.0, 70.0], [200.0, 100.0, 25.0, 60.0]])
+    dense = lik.log_g(states, Z, frame)
+    rows = np.repeat(np.arange(50), 2)
+    cols = np.tile([0, 1], 50)
+    np.testing.assert_allclose(lik.log_g_pairs(states, Z, rows, cols, frame),
+                               dense[rows, cols], rtol=1e-12)
+
+
+def test_algorithm3_is_systematic_resampling_to_n_with_weights_n_hat_over_n():
+    rng = np.random.default_rng(0)
+    ps = ParticleSet(rng.normal(size=(300, 6)), np.log(rng.random(300) * 0.02))
+    a = resample_alg3(ps, 1000, np.random.default_rng(5))
+    b = resample(ps, 1000, np.random.default_rng(5), "systematic")
+    assert len(a) == 1000 and np.isclose(a.mass, ps.mass)
+    np.testing.assert_allclose(a.weights, ps.mass / 1000)
+    assert np.mean(np.all(a.states == b.states, axis=1)) > 0.99  # boundary ties aside
+
+
+# ----------------------------------------------------------------------------- the tracker
+
+def _scene(frames=30, seed=2):
+    return open_source("synthetic", synthetic_config=SceneConfig(
+        frames=frames, targets=4, width=320, height=240, seed=seed))
+
+
+def test_registry_has_dbn_phd_and_its_baseline_without_importing_torch():
+    reg = registry()
+    assert reg["dbn-phd"].paper == "feng2015" and "paper" in reg["dbn-phd"].presets
+    assert reg["phd-bgsub"].params.dbn.use_dbn is False
+    code = ("import sys; from pfscope.trackers.api import registry; registry(); "
+            "import pfscope.viewer_app.cli as c; c.build_parser(); print('torch' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert out.stdout.strip() == "False", out.stderr
+
+
+def test_the_tracker_runs_through_the_pipeline_and_reports_every_stage():
+    tr = make_tracker("dbn-phd", seed=0)
+    seen = {}
+
+    class Keep:
+        def begin(self, info): pass
+        def on_rows(self, lane, rows): pass
+        def end(self, outcome): pass
+
+        def on_frame(self, report):
+            seen[report.frame.index] = report.results["dbn-phd"].stages
+
+    res = run(_scene(), [tr], level="particles", hooks=[Keep()])
+    assert res.outcome.status == "completed" and res.frames == 30
+    last = seen[30]
+    assert [s.name for s in last] == list(tr.stages)
+    assert find(last, "dbn/foreground", Mask)[0].mask.shape == (240, 320)
+    acc = find(last, "dbn/blobs/accepted", Boxes)[0]
+    assert "dbn" in acc.values and len(acc) >= 1
+    score = find(last, "dbn/particles/score", Points)[0]
+    assert len(score) and np.all((score.weights >= 0) & (score.weights <= 1))
+    n_hat = find(last, "dbn/n_hat", Scalar)[0].value
+    assert 0.5 < n_hat < 10
+    assert sum(len(ts) for _, ts in res.rows["dbn-phd"]) > 0     # it tracked someone
+    assert res.scores["dbn-phd"]["MOTA"] > 0
+
+
+def test_same_seed_same_tracks():
+    def rows(seed):
+        res = run(_scene(frames=20), [make_tracker("dbn-phd", seed=seed)])
+        return [(f, ts.ids.tolist(), ts.boxes.tolist()) for f, ts in res.rows["dbn-phd"]]
+    assert rows(1) == rows(1)
+
+
+def test_baseline_runs_without_the_dbn():
+    res = run(_scene(frames=20), [make_tracker("phd-bgsub", seed=0)], level="particles")
+    assert res.outcome.status == "completed"

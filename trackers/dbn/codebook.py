@@ -1,0 +1,306 @@
+"""Codebook background subtraction (Kim, Chalidabhongse, Harwood & Davis 2005), vectorised over
+pixels, and the foreground blobs that feed DBN-PHD — feng2015 §II-B ("we used a codebook method
+for background subtraction [11]") and §II-D.1.
+
+Model (Kim et al. 2005, §2): every pixel keeps up to ``L`` *codewords*, each an RGB vector ``v``
+and ``aux = (Ǐ, Î, f, λ, p, q)``: min/max brightness seen, frequency, maximum negative
+run-length (MNRL: the longest stretch of frames the codeword was *not* seen), first and last
+access.  A pixel ``x`` (brightness ``I = ‖x‖``) matches a codeword when
+
+- ``colordist(x, v) = sqrt(‖x‖² − (x·v)²/‖v‖²) <= ε`` (colour distortion, eq. (2)), and
+- ``brightness(I, Ǐ, Î)``: ``α Î <= I <= min(β Î, Ǐ / α)`` (eq. (3)), so the model tolerates
+  illumination changes (shadows, flicker) within ``[α, β]``.
+
+Training (Alg. 1) runs for the first ``train_frames`` frames: a matched codeword is updated
+(running mean of ``v``, brightness bounds, ``f + 1``, ``λ = max(λ, t − q)``, ``q = t``); an
+unmatched pixel gets a new codeword (or replaces its stalest one when all ``L`` are used).
+At the end ``λ = max(λ, N − q + p − 1)`` (wrap-around) and codewords with ``λ > N/2`` are
+dropped: a moving person seen for less than half the training period is not background, which
+is why the model can be trained on frames that contain people (Kim §2.1, "temporal filtering").
+
+Detection during training (our addition, so the tracker does not stay blind for N frames): at
+frame ``t <= N`` a codeword counts as background if its wrap-around MNRL at ``t`` is ``<= t/2``
+(the same temporal filter applied to the frames seen so far).
+
+After training (Kim §3, layered modelling): a pixel is background if it matches a codeword
+with the looser ``ε_detect``; that codeword keeps learning.  Unmatched pixels are foreground and
+are modelled in a *cache* codebook ``H``; a cache codeword seen for more than ``cache_add``
+frames is promoted into the background (a parked car, a moved chair), cache codewords unseen
+for ``cache_forget`` frames are dropped, and background codewords unseen for ``stale_delete``
+frames are dropped.
+
+Everything is numpy over ``(pixels, L)`` arrays — no Python loop over pixels.  ``scale < 1``
+runs the model on a down-sampled image (area averaging also removes sensor noise); blobs are
+reported in full-resolution pixels.
+
+Blobs (:func:`blobs_from_mask`): morphological opening (removes salt-and-pepper specks) then
+closing (fills holes inside a person), 8-connected components, components of at least
+``min_area`` full-resolution pixels.  :class:`ForegroundModel` wraps the codebook or OpenCV's
+MOG2/KNN (:mod:`pfscope.trackers.detect.bgsub`) behind one ``mask(frame)``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from ..errors import InputError
+from ..params import param
+from ..types import Frame
+
+METHODS = ("codebook", "mog2", "knn")
+
+
+@dataclass(frozen=True)
+class BackgroundParams:
+    """Background subtraction and blob extraction (feng2015 §II-B, Kim et al. 2005)."""
+
+    method: str = param("codebook", "background model: 'codebook' (feng2015 [11], Kim 2005), "
+                                    "'mog2' or 'knn' (OpenCV)", paper="feng2015 §II-B")
+    scale: float = param(0.5, "image scale the background model runs at (speed; blobs are "
+                              "reported in full-resolution pixels)")
+    train_frames: int = param(40, "codebook training period N (frames); codewords with MNRL "
+                                  "> N/2 are dropped at its end (Kim §2.1)")
+    max_codewords: int = param(5, "codewords per pixel L")
+    eps_train: float = param(12.0, "colour distortion threshold while training (RGB units)")
+    eps_detect: float = param(18.0, "colour distortion threshold when detecting (RGB units)")
+    alpha: float = param(0.6, "brightness lower factor α (Kim: 0.4–0.7)")
+    beta: float = param(1.25, "brightness upper factor β (Kim: 1.1–1.5)")
+    cache_add: int = param(80, "frames a cache codeword must be seen to join the background")
+    cache_forget: int = param(20, "cache codewords unseen this many frames are dropped")
+    stale_delete: int = param(400, "background codewords unseen this many frames are dropped")
+    morph_kernel: int = param(5, "opening/closing ellipse diameter, full-resolution px "
+                                 "(0: no morphology)")
+    min_area: int = param(150, "smallest blob, full-resolution foreground pixels")
+    max_foreground: float = param(0.5, "a frame whose foreground exceeds this fraction has no "
+                                       "blobs (lighting change, camera moved)")
+
+    def __post_init__(self):
+        def check(name, ok, rule):
+            if not ok:
+                raise ValueError(f"BackgroundParams.{name} must be {rule}, "
+                                 f"got {getattr(self, name)!r}")
+        check("method", self.method in METHODS, f"one of {', '.join(METHODS)}")
+        check("scale", 0 < self.scale <= 1, "in (0, 1]")
+        check("train_frames", self.train_frames >= 1, ">= 1")
+        check("max_codewords", self.max_codewords >= 1, ">= 1")
+        check("eps_train", self.eps_train > 0, "> 0")
+        check("eps_detect", self.eps_detect > 0, "> 0")
+        check("alpha", 0 < self.alpha < 1, "in (0, 1)")
+        check("beta", self.beta > 1, "> 1")
+        check("min_area", self.min_area >= 1, ">= 1")
+        check("max_foreground", 0 < self.max_foreground <= 1, "in (0, 1]")
+
+
+class _Book:
+    """Codewords of every pixel: structure of arrays over (P pixels, L slots)."""
+
+    def __init__(self, n_pix: int, L: int):
+        self.v = np.zeros((n_pix, L, 3), np.float32)
+        self.vv = np.zeros((n_pix, L), np.float32)        # ‖v‖², cached
+        self.imin = np.zeros((n_pix, L), np.float32)
+        self.imax = np.zeros((n_pix, L), np.float32)
+        self.f = np.zeros((n_pix, L), np.int32)           # 0: empty slot
+        self.lam = np.zeros((n_pix, L), np.int32)
+        self.p = np.zeros((n_pix, L), np.int32)
+        self.q = np.zeros((n_pix, L), np.int32)
+
+    def match(self, x, xx, inten, eps, alpha, beta, usable=None):
+        """(P, L) bool: codeword matches the pixel (Kim eqs. (2), (3))."""
+        xv = np.einsum("pc,plc->pl", x, self.v)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            cd2 = xx[:, None] - xv * xv / np.maximum(self.vv, 1e-6)
+        lo = alpha * self.imax
+        hi = np.minimum(beta * self.imax, self.imin / alpha)
+        ok = (self.f > 0) & (cd2 <= eps * eps) & (inten[:, None] >= lo) & (inten[:, None] <= hi)
+        return ok if usable is None else ok & usable
+
+    def update(self, pix, slot, x, inten, t):
+        """Kim Alg. 1 step II(v): running mean and aux update of codeword ``slot`` of ``pix``."""
+        k = pix * self.f.shape[1] + slot               # flat (pixel, slot) index: 1-D takes
+        fk = self.f.reshape(-1)[k]
+        f = fk.astype(np.float32)[:, None]
+        xp = x[pix]
+        v = (f * self.v.reshape(-1, 3)[k] + xp) / (f + 1)
+        self.v.reshape(-1, 3)[k] = v
+        self.vv.reshape(-1)[k] = np.einsum("pc,pc->p", v, v)
+        ip = inten[pix]
+        self.imin.reshape(-1)[k] = np.minimum(self.imin.reshape(-1)[k], ip)
+        self.imax.reshape(-1)[k] = np.maximum(self.imax.reshape(-1)[k], ip)
+        self.f.reshape(-1)[k] = fk + 1
+        q = self.q.reshape(-1)
+        self.lam.reshape(-1)[k] = np.maximum(self.lam.reshape(-1)[k], t - q[k])
+        q[k] = t
+
+    def add(self, pix, slot, x, inten, t):
+        """Kim Alg. 1 step II(iv): a new codeword ``v = x``, ``aux = (I, I, 1, t − 1, t, t)``."""
+        self.v[pix, slot] = x[pix]
+        self.vv[pix, slot] = np.einsum("pc,pc->p", x[pix], x[pix])
+        self.imin[pix, slot] = inten[pix]
+        self.imax[pix, slot] = inten[pix]
+        self.f[pix, slot] = 1
+        self.lam[pix, slot] = t - 1
+        self.p[pix, slot] = t
+        self.q[pix, slot] = t
+
+    def clear(self, where):
+        self.f[where] = 0
+        self.lam[where] = 0
+
+    def wrap_lambda(self, t):
+        """MNRL with the wrap-around of Kim §2.1 after ``t`` frames."""
+        return np.maximum(self.lam, t - self.q + self.p - 1)
+
+    def free_or_stalest(self, pix, key):
+        """A slot per pixel: the first empty one, else the one with the largest ``key``."""
+        empty = self.f[pix] == 0
+        k = np.where(empty, np.int64(1) << 40, key[pix].astype(np.int64))
+        return np.argmax(k, axis=1)
+
+
+class Codebook:
+    """The codebook background model of Kim et al. (2005) over a whole image, vectorised.
+
+    ``apply(image)`` (H, W, 3) uint8 BGR → (H, W) bool raw foreground at the model's scale."""
+
+    def __init__(self, params: BackgroundParams = BackgroundParams()):
+        self.params = params
+        self.t = 0
+        self._shape: tuple[int, int] | None = None
+
+    def _init(self, shape):
+        L = self.params.max_codewords
+        n = shape[0] * shape[1]
+        self._shape = shape
+        self.book = _Book(n, L)
+        self.cache = _Book(n, 2)
+
+    def apply(self, image: np.ndarray) -> np.ndarray:
+        p = self.params
+        img = np.asarray(image)
+        if self._shape is None:
+            self._init(img.shape[:2])
+        elif img.shape[:2] != self._shape:
+            raise InputError(f"codebook: image is {img.shape[1]}x{img.shape[0]} but the model "
+                             f"is {self._shape[1]}x{self._shape[0]}")
+        self.t += 1
+        t = self.t
+        x = img.reshape(-1, 3).astype(np.float32)
+        xx = np.einsum("pc,pc->p", x, x)
+        inten = np.sqrt(xx)
+        b = self.book
+        if t <= p.train_frames:
+            m = b.match(x, xx, inten, p.eps_train, p.alpha, p.beta)
+            hit = m.any(axis=1)
+            slot = np.argmax(m, axis=1)
+            pix = np.flatnonzero(hit)
+            b.update(pix, slot[pix], x, inten, t)
+            miss = np.flatnonzero(~hit)
+            if len(miss):
+                b.add(miss, b.free_or_stalest(miss, b.wrap_lambda(t)), x, inten, t)
+            # provisional detection: temporal filter over the t frames seen so far
+            usable = b.wrap_lambda(t) <= t / 2.0
+            fg = ~b.match(x, xx, inten, p.eps_detect, p.alpha, p.beta, usable).any(axis=1)
+            if t == p.train_frames:
+                b.clear(b.wrap_lambda(t) > p.train_frames / 2.0)   # Kim §2.1 temporal filter
+            return fg.reshape(self._shape)
+        # detection with layered modelling (Kim §3)
+        m = b.match(x, xx, inten, p.eps_detect, p.alpha, p.beta)
+        hit = m.any(axis=1)
+        slot = np.argmax(m, axis=1)
+        pix = np.flatnonzero(hit)
+        b.update(pix, slot[pix], x, inten, t)
+        fg = ~hit
+        miss = np.flatnonzero(fg)
+        c = self.cache
+        if len(miss):
+            # match the cache only on the foreground pixels (the cache is per pixel too)
+            sub = _take(c, miss)
+            mc = sub.match(x[miss], xx[miss], inten[miss], p.eps_train, p.alpha, p.beta)
+            chit = mc.any(axis=1)
+            cslot = np.argmax(mc, axis=1)
+            c.update(miss[chit], cslot[chit], x, inten, t)
+            new = miss[~chit]
+            if len(new):
+                c.add(new, c.free_or_stalest(new, t - c.q), x, inten, t)
+        # cache housekeeping: forget what vanished, promote what stayed
+        c.clear((c.f > 0) & (t - c.q > p.cache_forget))
+        promote = np.argwhere((c.f > 0) & (c.f > p.cache_add))
+        if len(promote):
+            pp, cs = promote[:, 0], promote[:, 1]
+            bs = b.free_or_stalest(pp, t - b.q)
+            for arr in ("v", "vv", "imin", "imax", "f", "lam", "p", "q"):
+                getattr(b, arr)[pp, bs] = getattr(c, arr)[pp, cs]
+            b.lam[pp, bs] = 0
+            c.clear((pp, cs))
+        b.clear((b.f > 0) & (t - b.q > p.stale_delete))
+        return fg.reshape(self._shape)
+
+
+def _take(book: _Book, pix: np.ndarray) -> _Book:
+    """A view-like copy of ``book`` restricted to pixels ``pix`` (for matching only)."""
+    sub = _Book.__new__(_Book)
+    for arr in ("v", "vv", "imin", "imax", "f", "lam", "p", "q"):
+        setattr(sub, arr, getattr(book, arr)[pix])
+    return sub
+
+
+class ForegroundModel:
+    """One ``mask(frame)`` over the codebook or OpenCV's MOG2/KNN: the cleaned (H', W') uint8
+    foreground mask at ``params.scale`` (1 = foreground), after opening and closing."""
+
+    def __init__(self, params: BackgroundParams = BackgroundParams()):
+        self.params = params
+        k = int(round(params.morph_kernel * params.scale))
+        self._kernel = (cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (k, k)) if k > 1 else None)
+        if params.method == "codebook":
+            self._model = Codebook(params)
+        else:
+            from ..detect.bgsub import BackgroundSubtractionDetector
+
+            self._model = BackgroundSubtractionDetector(method=params.method, morph_kernel=0)
+
+    def _small(self, image: np.ndarray) -> np.ndarray:
+        s = self.params.scale
+        if image.ndim == 2:
+            image = cv2.cvtColor(image, cv2.COLOR_GRAY2BGR)
+        if s == 1.0:
+            return image
+        h, w = image.shape[:2]
+        return cv2.resize(image, (max(1, round(w * s)), max(1, round(h * s))),
+                          interpolation=cv2.INTER_AREA)
+
+    def mask(self, frame: Frame) -> np.ndarray:
+        small = self._small(frame.image)
+        if isinstance(self._model, Codebook):
+            raw = self._model.apply(small).astype(np.uint8)
+        else:
+            raw = (self._model.foreground(Frame(frame.index, frame.timestamp, small)) > 0
+                   ).astype(np.uint8)
+        if self._kernel is not None:
+            raw = cv2.morphologyEx(raw, cv2.MORPH_OPEN, self._kernel)
+            raw = cv2.morphologyEx(raw, cv2.MORPH_CLOSE, self._kernel)
+        return raw
+
+
+def blobs_from_mask(mask: np.ndarray, scale: float, min_area: int,
+                    max_foreground: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """Connected components of a cleaned mask (at ``scale``) → ``(boxes (N, 4) xywh in
+    full-resolution px, fill (N,) foreground fraction of the box)``, biggest first."""
+    if mask.size == 0 or np.count_nonzero(mask) > max_foreground * mask.size:
+        return np.zeros((0, 4)), np.zeros(0)
+    n, _lab, stats, _c = cv2.connectedComponentsWithStats(mask.astype(np.uint8), connectivity=8,
+                                                          ltype=cv2.CV_32S)
+    st = stats[1:n].astype(np.float64)
+    area = st[:, cv2.CC_STAT_AREA]
+    keep = area >= min_area * scale * scale
+    boxes = st[keep][:, [cv2.CC_STAT_LEFT, cv2.CC_STAT_TOP, cv2.CC_STAT_WIDTH,
+                         cv2.CC_STAT_HEIGHT]]
+    fill = area[keep] / (boxes[:, 2] * boxes[:, 3])
+    order = np.argsort(-area[keep], kind="stable")
+    return boxes[order] / scale, fill[order]
+
+
+__all__ = ["BackgroundParams", "Codebook", "ForegroundModel", "blobs_from_mask", "METHODS"]

@@ -1,0 +1,333 @@
+"""DBN-PHD (feng2015) and its no-DBN baseline: a particle PHD filter on background-subtraction
+blobs whose particle likelihood includes a deep belief network score.
+
+One frame (stages, in order):
+
+==========  ===================================================================================
+background  codebook background subtraction (:mod:`.codebook`; MOG2/KNN by parameter) →
+            Mask ``dbn/foreground`` (full resolution)
+blobs       morphology + connected components → blobs = the measurements Z_k; each blob's box
+            scored by the DBN: Boxes ``dbn/blobs/accepted`` (role detection) and
+            ``dbn/blobs/rejected`` (role dropped), values ``dbn`` = σ(a), ``fill``; an Event
+            per rejected blob says why (its score against ``accept``)
+predict     persistent particles moved by maggio2007's motion model, × survival (eqs. (1), (7))
+            → Points ``dbn/particles/predicted`` (weights)
+birth       newborn particles around the *accepted* blobs only (DBN new-born selection),
+            J_z = J_max·max(0, 1 − M(z)), each weighing 1/J_k (eq. (10)) → Points
+            ``dbn/particles/birth`` (ids = blob)
+features    colour + HOG integral-histogram features and DBN score of every particle inside
+            some blob's gate → Points ``dbn/particles/score`` (weights = σ(a), values
+            ``score`` = a); Scalar ``dbn/particles/scored``
+update      eqs. (11)–(12) with ``log g = log N(z; Hx, R) + s(x)`` (:mod:`.likelihood`),
+            evaluated on gated pairs only → Points ``dbn/particles/before`` (prior weights) and
+            ``dbn/particles/after`` (updated weights); Boxes ``dbn/update/blobs`` value ``won``
+            = C/(κ + C); Scalar ``dbn/mass``
+resample    Algorithm 3 (:func:`resample_alg3`) → Points ``dbn/particles/resampled``; Scalars
+            ``dbn/n_hat`` (N̂_k = Σ w̃), ``dbn/particles/count``
+cluster     maggio2007's modified K-means peaks (reused) → Boxes ``dbn/clusters/kept`` /
+            ``dropped`` (value m)
+associate   maggio2007's graph-matching association (reused, ``GraphAssociator``) → tracks
+==========  ===================================================================================
+
+The baseline ``phd-bgsub`` is this class with ``use_dbn = false``: every blob gives births and
+g is the plain Gaussian (the ``features`` stage is empty).  ``--tracker dbn-phd --set
+use_dbn=false`` is the same tracker.
+
+Why the step calls the filter's stage functions instead of ``PHDFilter.step``: feng2015 changes
+three of its parts — births only from DBN-accepted blobs with weight 1/J_k (eq. (10)), a fixed
+particle budget N (Algorithm 3), and a likelihood evaluated only on gated pairs — so the
+tracker keeps a :class:`~pfscope.trackers.phd.filter.PHDFilter` (its parameters, generator,
+particles and likelihood) and runs :func:`predict`, :func:`birth` and :func:`update` of
+``phd.filter`` itself.
+
+Algorithm 3 versus the existing resampler (:mod:`pfscope.trackers.smc.resampling`): the draw is
+the same systematic scheme (one offset μ₁ ~ U[0, 1/N], μ_j = μ₁ + (j − 1)/N, inverse CDF of
+w̃/N̂_k) and both give every offspring weight N̂_k/N; the difference is the count — Algorithm 3
+keeps a fixed N particles whatever N̂_k, maggio2007's resampler draws L_k = ρ·M̂_k.
+:func:`resample_alg3` implements the pseudo-code (reading ``c_1 = 0`` as ``c_1 = w̃_1/N̂_k``: as
+printed, the first particle could never be drawn); ``count = "per_target"`` gives the ρ·N̂
+rule instead.
+
+torch is loaded only when the tracker is built with the DBN on (never by the registry).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+from typing import Optional
+
+import cv2
+import numpy as np
+
+from ..api import StepResult, register
+from ..params import param, part, to_dict
+from ..phd.association import AssocParams
+from ..phd.clustering import kmeans_peaks
+from ..phd.filter import (OBS_COLS, BirthParams, PHDFilter, PHDParams, birth, gate_threshold,
+                          log_clutter_density, obs_std, predict, update)
+from ..phd.tracker import ClusterParams, _AssociatingTracker
+from ..report import Boxes, Mask, Points, StageLog
+from ..smc.weights import ParticleSet
+from ..types import Detections, Frame, xywh_to_cxcywh
+from .codebook import BackgroundParams, ForegroundModel, blobs_from_mask
+from .likelihood import DBNLikelihood, DBNParams, gaussian_pairs, state_boxes
+
+COUNTS = ("fixed", "per_target")
+BIRTH_WEIGHTS = ("eq10", "intensity")
+
+
+@dataclass(frozen=True)
+class ResampleParams:
+    """Algorithm 3 of feng2015 (module docstring)."""
+
+    n_particles: int = param(2000, "particle budget N kept after resampling (Algorithm 3; "
+                                   "the paper gives no value)", paper="feng2015 Alg. 3")
+    count: str = param("fixed", "'fixed': N particles (Algorithm 3); 'per_target': "
+                                "ρ·N̂_k particles clipped to [1, 4N] (maggio2007's rule)")
+    per_target_rho: float = param(500.0, "particles per target for count='per_target'")
+
+    def __post_init__(self):
+        if self.n_particles < 1:
+            raise ValueError(f"ResampleParams.n_particles must be >= 1, got {self.n_particles}")
+        if self.count not in COUNTS:
+            raise ValueError(f"ResampleParams.count must be one of {', '.join(COUNTS)}, "
+                             f"got {self.count!r}")
+        if not self.per_target_rho > 0:
+            raise ValueError(f"ResampleParams.per_target_rho must be > 0, "
+                             f"got {self.per_target_rho}")
+
+
+@dataclass(frozen=True)
+class BirthSelection:
+    """New-born targets from foreground blobs (feng2015 §II-D.3)."""
+
+    birth_weight: str = param("eq10", "'eq10': every newborn weighs 1/J_k (feng2015 eq. (10)); "
+                                      "'intensity': birth_intensity/J_z per blob (maggio2007)",
+                              paper="feng2015 eq. (10)")
+
+    def __post_init__(self):
+        if self.birth_weight not in BIRTH_WEIGHTS:
+            raise ValueError(f"BirthSelection.birth_weight must be one of "
+                             f"{', '.join(BIRTH_WEIGHTS)}, got {self.birth_weight!r}")
+
+
+def _filter_defaults() -> PHDParams:
+    # J_max 500 per blob (maggio2007 §4: 1000): with eq. (10) the newborn mass is 1 per frame
+    # whatever J, and half the newborn halve the feature cost.
+    return PHDParams(birth=BirthParams(j_max=500))
+
+
+@dataclass(frozen=True)
+class DBNPHDParams:
+    """DBN-PHD: background model, DBN, the PHD filter's parts, births, Algorithm 3, peaks and
+    association."""
+
+    background: BackgroundParams = part(BackgroundParams, "background subtraction and blobs")
+    dbn: DBNParams = part(DBNParams, "the DBN score in the likelihood")
+    filter: PHDParams = field(default_factory=_filter_defaults,
+                              metadata={"doc": "particle PHD filter (motion, likelihood, "
+                                               "clutter, birth)", "paper": None})
+    births: BirthSelection = part(BirthSelection, "newborn weights")
+    resample: ResampleParams = part(ResampleParams, "Algorithm 3 resampling")
+    clusters: ClusterParams = part(ClusterParams, "modified K-means peaks (maggio2007 §3)")
+    assoc: AssocParams = part(AssocParams, "graph-matching association (maggio2007 §3)")
+
+
+def resample_alg3(ps: ParticleSet, n: int, rng: np.random.Generator) -> ParticleSet:
+    """feng2015 Algorithm 3: ``n`` particles by systematic resampling of ``w̃ / N̂_k``, each
+    weighing ``N̂_k / n`` with ``N̂_k = Σ w̃`` (draw: one uniform)."""
+    if len(ps) == 0 or n <= 0 or not np.isfinite(ps.log_mass):
+        return ps.take(np.zeros(0, dtype=np.int64))
+    log_n_hat = ps.log_mass
+    c = np.cumsum(np.exp(ps.log_weights - log_n_hat))       # c_i = c_{i-1} + w̃_i / N̂_k
+    c[-1] = 1.0
+    mu = rng.uniform(0.0, 1.0 / n) + np.arange(n) / n        # μ_j = μ_1 + (j − 1)/N
+    idx = np.minimum(np.searchsorted(c, mu, side="left"), len(c) - 1)  # while μ_j > c_i: i++
+    return ps.take(idx).with_log_weights(np.full(n, log_n_hat - math.log(n)))
+
+
+def _gated_pairs(states: np.ndarray, Z: np.ndarray, params: PHDParams, confidence: float):
+    """Candidate pairs (rows, cols): particle inside the ``confidence`` gate of blob z under
+    the observation noise R(z)."""
+    if len(states) == 0 or len(Z) == 0:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    std = obs_std(Z[:, 2:4], params.likelihood)                        # (N_z, 4)
+    q = (states[:, None, OBS_COLS] - Z[None]) / std[None]
+    d2 = np.einsum("ijk,ijk->ij", q, q)
+    rows, cols = np.nonzero(d2 <= gate_threshold(confidence))
+    return rows.astype(np.int64), cols.astype(np.int64)
+
+
+@register(presets={"default": DBNPHDParams(), "paper": DBNPHDParams(
+    filter=PHDParams(), dbn=DBNParams(score="logit"))})
+class DBNPHDTracker(_AssociatingTracker):
+    """DBN-PHD: codebook blobs → particle PHD with a DBN colour+HOG likelihood → K-means →
+    graph association."""
+
+    name = "dbn-phd"
+    paper = "feng2015"
+    stages = ("background", "blobs", "predict", "birth", "features", "update", "resample",
+              "cluster", "associate")
+    needs_detections = False
+    needs_image = True
+    Params = DBNPHDParams
+
+    def __init__(self, params: Optional[DBNPHDParams] = None, *, rng: np.random.Generator,
+                 model=None):
+        self.params = params if params is not None else self.Params()
+        super().__init__(self.params.assoc)
+        self.background = ForegroundModel(self.params.background)
+        dp = self.params.dbn
+        self.dbn: Optional[DBNLikelihood] = None
+        if dp.use_dbn:
+            if model is None:
+                from .model import default_model, load_model  # torch, on demand
+
+                model = load_model(dp.model) if dp.model else default_model(dp.model_seed)
+            self.dbn = DBNLikelihood(model, dp, self.params.filter.likelihood)
+        # the filter's parts; its likelihood is the DBN one (or maggio2007's Gaussian)
+        self.filter = PHDFilter(self.params.filter, rng, likelihood=self.dbn)
+
+    def config(self) -> dict:
+        cfg = {"tracker": self.name, "params": to_dict(self.params)}
+        if self.dbn is not None:
+            cfg["model"] = {"features": self.dbn.model.features.to_dict(),
+                            "hidden": list(self.dbn.model.hidden),
+                            "info": dict(self.dbn.model.info)}
+        return cfg
+
+    # ------------------------------------------------------------------------------- step
+
+    def step(self, frame: Frame, detections: Optional[Detections],
+             level: Optional[str] = None) -> StepResult:
+        p = self.params
+        fp = p.filter
+        rng = self.filter.rng
+        log = StageLog(self.stages, level)
+        want_p, want_c = log.wants("particles"), log.wants("clusters")
+
+        log.stage("background")
+        mask = self.background.mask(frame)
+        log.scalar("dbn/foreground/fraction", float(mask.mean()) if mask.size else 0.0)
+        if want_c:
+            H, W = frame.image.shape[:2]
+            full = cv2.resize(mask, (W, H), interpolation=cv2.INTER_NEAREST)
+            log.add(Mask("dbn/foreground", full, ("background", "foreground")))
+
+        log.stage("blobs")
+        bp = p.background
+        boxes, fill = blobs_from_mask(mask, bp.scale, bp.min_area, bp.max_foreground)
+        Z = xywh_to_cxcywh(boxes)
+        if self.dbn is not None and len(boxes):
+            blob_prob = 1.0 / (1.0 + np.exp(-self.dbn.logits(boxes, frame)))
+            accepted = blob_prob >= p.dbn.accept
+        else:
+            blob_prob = np.full(len(boxes), np.nan)
+            accepted = np.ones(len(boxes), dtype=bool)
+        log.scalar("dbn/blobs/count", len(boxes))
+        log.scalar("dbn/blobs/rejected", int((~accepted).sum()))
+        for i in np.flatnonzero(~accepted):
+            x, y, w, h = boxes[i]
+            log.event("dbn/blobs", f"frame {frame.index}: blob at ({x:.0f}, {y:.0f}, {w:.0f}x"
+                                   f"{h:.0f}) rejected as noise: DBN P(person) = "
+                                   f"{blob_prob[i]:.2f} < accept {p.dbn.accept:g} (no births)",
+                      "DEBUG")
+        if want_c:
+            log.add(Boxes("dbn/blobs/accepted", boxes[accepted], role="detection",
+                          ids=np.flatnonzero(accepted), id_kind="detection",
+                          values={"dbn": blob_prob[accepted], "fill": fill[accepted]}))
+            log.add(Boxes("dbn/blobs/rejected", boxes[~accepted], role="dropped",
+                          ids=np.flatnonzero(~accepted), id_kind="detection",
+                          values={"dbn": blob_prob[~accepted], "fill": fill[~accepted]}))
+
+        log.stage("predict")
+        predicted = predict(self.filter.particles, fp.motion, rng)
+        if want_p:
+            log.add(Points("dbn/particles/predicted", predicted.states[:, :2],
+                           weights=predicted.weights))
+
+        log.stage("birth")
+        acc_idx = np.flatnonzero(accepted)
+        born = birth(predicted, Z[acc_idx], fp, rng)
+        newborn = born.particles
+        J = len(newborn)
+        if J and p.births.birth_weight == "eq10":
+            newborn = newborn.with_log_weights(np.full(J, -math.log(J)))   # eq. (10): 1/J_k
+        log.scalar("dbn/birth/count", J)
+        if want_p:
+            log.add(Points("dbn/particles/birth", newborn.states[:, :2],
+                           ids=acc_idx[born.det_index], id_kind="detection"))
+
+        log.stage("features")
+        cand = predicted.concat(newborn)
+        rows, cols = _gated_pairs(cand.states, Z, fp, p.dbn.score_gate)
+        log_g_pairs = gaussian_pairs(cand.states, Z, rows, cols, fp.likelihood)
+        uniq, inv = np.unique(rows, return_inverse=True)
+        log.scalar("dbn/particles/scored", len(uniq) if self.dbn is not None else 0)
+        if self.dbn is not None and len(uniq):
+            logits = self.dbn.logits(state_boxes(cand.states[uniq]), frame)
+            log_g_pairs = log_g_pairs + self.dbn.log_score(logits)[inv]
+            if want_p:
+                log.add(Points("dbn/particles/score", cand.states[uniq, :2],
+                               weights=1.0 / (1.0 + np.exp(-logits)), values={"score": logits}))
+
+        log.stage("update")
+        log_g = np.full((len(cand), len(Z)), -np.inf)
+        log_g[rows, cols] = log_g_pairs
+        log_kappa = (log_clutter_density(Z, fp.clutter, fp.likelihood) if len(Z)
+                     else np.zeros(0))
+        up = update(cand, log_g, log_kappa, fp.likelihood.p_miss)
+        updated = up.particles
+        log.scalar("dbn/mass", updated.mass)
+        if want_p:
+            log.add(Points("dbn/particles/before", cand.states[:, :2], weights=cand.weights))
+            log.add(Points("dbn/particles/after", updated.states[:, :2],
+                           weights=updated.weights))
+        if want_c:
+            log.add(Boxes("dbn/update/blobs", boxes, role="detection",
+                          values={"won": up.per_det_mass, "dbn": blob_prob}))
+
+        log.stage("resample")
+        n_hat = updated.mass
+        rp = p.resample
+        n = rp.n_particles
+        if rp.count == "per_target":
+            n = (int(np.clip(round(rp.per_target_rho * n_hat), 1, 4 * rp.n_particles))
+                 if n_hat > 0 else 0)
+        resampled = resample_alg3(updated, n, rng)
+        self.filter.particles = resampled
+        log.scalar("dbn/n_hat", n_hat)
+        log.scalar("dbn/particles/count", len(resampled))
+        if want_p:
+            log.add(Points("dbn/particles/resampled", resampled.states[:, :2],
+                           weights=resampled.weights))
+
+        log.stage("cluster")
+        cp = p.clusters
+        clusters = kmeans_peaks(resampled, Z, cp.T, params=fp, split_rule=cp.split_rule)
+        log.scalar("dbn/clusters/kept", int(clusters.kept.sum()))
+        if want_p and len(resampled):
+            log.add(Points("dbn/clusters/members", resampled.states[:, :2],
+                           ids=clusters.labels, id_kind="cluster"))
+        if want_c and len(clusters):
+            cb = clusters.boxes()
+            k = clusters.kept
+            log.add(Boxes("dbn/clusters/kept", cb[k], ids=np.flatnonzero(k), id_kind="cluster",
+                          values={"m": clusters.masses[k]}))
+            log.add(Boxes("dbn/clusters/dropped", cb[~k], role="dropped",
+                          values={"m": clusters.masses[~k]}))
+        return self._associate(frame, clusters.kept_centers, log)
+
+
+def _baseline_params() -> DBNPHDParams:
+    return DBNPHDParams(dbn=DBNParams(use_dbn=False))
+
+
+@register(presets={"default": _baseline_params(),
+                   "paper": replace(_baseline_params(), filter=PHDParams())})
+class PHDBgsubTracker(DBNPHDTracker):
+    """PHD on background-subtraction blobs without the DBN (DBN-PHD's baseline, feng2015 "PHD")."""
+
+    name = "phd-bgsub"
+    paper = "feng2015 (baseline)"

@@ -1,0 +1,27 @@
+"""DBN-PHD's views (feng2015), also used by its no-DBN baseline ``phd-bgsub``: the foreground
+mask and the blobs the DBN accepted or rejected (with their scores), the per-particle DBN score,
+the clouds before and after the update, Algorithm 3's N̂_k against the true count, K-means
+clusters and the association.  To see why a noise blob was suppressed: the "Blobs" tab shows it
+as a grey "rejected" box labelled with its DBN probability, the "DBN score" tab shows the dark
+particles around it, "Update" shows how little mass it won (``won``), and the text log has one
+line per rejected blob."""
+
+from .base import TrackerLayout
+
+LAYOUT = TrackerLayout(
+    views=(("Tracks", ("tracks/**",)),
+           ("Foreground", ("dbn/foreground",)),
+           ("Blobs", ("dbn/blobs/**", "tracks/**")),
+           ("DBN score", ("dbn/particles/score", "dbn/blobs/**")),
+           ("Update", ("dbn/particles/before", "dbn/particles/after", "dbn/update/**")),
+           ("Birth", ("dbn/particles/birth", "dbn/blobs/accepted")),
+           ("Resampled", ("dbn/particles/resampled", "tracks/**")),
+           ("Clusters", ("dbn/clusters/**",)),
+           ("Association", ("assoc/**", "tracks/**"))),
+    plots=(("N̂_k vs true count", ("dbn/n_hat", "metrics/cardinality/true", "tracks/count")),
+           ("Blobs", ("dbn/blobs/count", "dbn/blobs/rejected", "dbn/clusters/kept")),
+           ("Particles", ("dbn/particles/count", "dbn/birth/count", "dbn/particles/scored")),
+           ("Foreground", ("dbn/foreground/fraction",)),
+           ("Metrics", ("metrics/ospa",)),
+           ("Step ms", ("timing/**",))),
+)
