@@ -64,6 +64,9 @@ class Outcome:
     frames: int
     reason: str
     error: Optional[BaseException] = None
+    #: lane → sequence scores of its tracks file rows (computed before the hooks end, so a
+    #: recorder can store them; empty without ground truth or when the run failed)
+    scores: Mapping[str, dict] = field(default_factory=dict)
 
     @property
     def ok(self) -> bool:
@@ -120,11 +123,32 @@ def resolve_detector_name(source, name: Optional[str]) -> str:
     return "file" if getattr(source, "det", None) is not None else "hog"
 
 
-def frames_to_read(source, frames: Optional[int]) -> Optional[int]:
+def frames_to_read(source, frames: Optional[int], start: int = 1) -> Optional[int]:
+    """How many frames a run of ``frames`` frames from frame ``start`` reads (None: unknown)."""
     length = getattr(source, "length", None)
+    if length is not None:
+        length = max(0, length - (start - 1))
     if frames is None:
         return length
-    return min(frames, length) if length else frames
+    return min(frames, length) if length is not None else frames
+
+
+def iter_frames(source, total: Optional[int], start: int = 1):
+    """Frames ``start .. start + total - 1`` (indices stay those of the video).  A source whose
+    ``frames()`` takes ``start`` seeks; any other is read from frame 1 and the first frames are
+    skipped."""
+    import inspect
+
+    if start <= 1:
+        yield from source.frames(total)
+        return
+    if "start" in inspect.signature(source.frames).parameters:
+        yield from source.frames(total, start=start)
+        return
+    end = None if total is None else start - 1 + total
+    for frame in source.frames(end):
+        if frame.index >= start:
+            yield frame
 
 
 class TracksFileHook(BaseHook):
@@ -155,7 +179,7 @@ def run(source, trackers: Mapping[str, Tracker] | Sequence[Tracker], *,
         frames: Optional[int] = None, level: Optional[str] = None,
         detector: Optional[str] = None, detector_options: Optional[dict] = None,
         hooks: Sequence[Hook] = (), should_stop: Optional[Callable[[], bool]] = None,
-        keep_rows: bool = True, score: bool = True) -> RunResult:
+        keep_rows: bool = True, score: bool = True, start: int = 1) -> RunResult:
     """Run ``trackers`` (lane name → tracker, or a list: lanes named by ``tracker.name``) over
     ``source`` for ``frames`` frames (default all) and hand every frame to ``hooks``.
 
@@ -163,6 +187,8 @@ def run(source, trackers: Mapping[str, Tracker] | Sequence[Tracker], *,
     events).  ``detector``: name for :func:`~pfscope.trackers.detect.make_detector` (default:
     the source's own detections, else HOG), built only if some tracker ``needs_detections``.
     ``keep_rows``: keep each lane's rows in memory (for ``scores``; off for very long runs).
+    ``start``: the first frame (1-based; frame indices stay the video's, and the scores cover
+    frames ``start .. start + frames - 1``).
     """
     from .detect import make_detector
 
@@ -188,7 +214,14 @@ def run(source, trackers: Mapping[str, Tracker] | Sequence[Tracker], *,
         from .eval import OnlineEvaluator
 
         evaluators = {name: OnlineEvaluator() for name in lanes}
-    total = frames_to_read(source, frames)
+    start = int(start)
+    if start < 1:
+        raise InputError(f"first frame must be >= 1, got {start}")
+    length = getattr(source, "length", None)
+    if length is not None and start > length:
+        raise InputError(f"first frame {start} is past the end of "
+                         f"{getattr(source, 'name', 'the source')} ({length} frames)")
+    total = frames_to_read(source, frames, start)
     info = RunInfo(source, lanes, det_name, total, level, gt_table is not None)
     kept: dict[str, Rows] = {name: [] for name in lanes}
 
@@ -207,7 +240,7 @@ def run(source, trackers: Mapping[str, Tracker] | Sequence[Tracker], *,
         for h in hooks:
             h.begin(info)
             begun.append(h)
-        for frame in source.frames(total):  # type: ignore[attr-defined]
+        for frame in iter_frames(source, total, start):
             if should_stop is not None and should_stop():
                 break
             current = frame.index
@@ -231,10 +264,13 @@ def run(source, trackers: Mapping[str, Tracker] | Sequence[Tracker], *,
         # the run was stopped, so an interrupted tracks file has every frame done so far
         for name, tracker in lanes.items():
             emit(name, tracker.finish())
+        scores = ({name: score_rows(gt_table, rows, done, start) for name, rows in kept.items()}
+                  if score and keep_rows and gt_table is not None and done else {})
         if should_stop is not None and should_stop():
-            outcome = Outcome("interrupted", done, f"interrupted after {done} frames")
+            outcome = Outcome("interrupted", done, f"interrupted after {done} frames",
+                              scores=scores)
         else:
-            outcome = Outcome("completed", done, f"completed: {done} frames")
+            outcome = Outcome("completed", done, f"completed: {done} frames", scores=scores)
     except KeyboardInterrupt as e:
         outcome = Outcome("interrupted", done, f"interrupted after {done} frames", e)
     except BaseException as e:  # noqa: BLE001 - every failure must mark the outputs incomplete
@@ -253,18 +289,18 @@ def run(source, trackers: Mapping[str, Tracker] | Sequence[Tracker], *,
     if hook_error is not None:
         raise hook_error
     result = RunResult(outcome, seconds, kept if keep_rows else {})
-    if score and keep_rows and gt_table is not None and done:
-        result.scores = {name: score_rows(gt_table, rows, done) for name, rows in kept.items()}
+    result.scores = dict(outcome.scores)
     return result
 
 
-def score_rows(gt_table, rows: Rows, frames: int) -> dict:
-    """Sequence scores of a lane's tracks-file rows over frames ``1..frames``."""
+def score_rows(gt_table, rows: Rows, frames: int, start: int = 1) -> dict:
+    """Sequence scores of a lane's tracks-file rows over frames ``start..start + frames - 1``."""
     from .data.motio import table_from_tracksets
     from .eval import evaluate
 
-    return evaluate(gt_table, table_from_tracksets(rows), frames=range(1, frames + 1))
+    return evaluate(gt_table, table_from_tracksets(rows), frames=range(start, start + frames))
 
 
 __all__ = ["run", "RunInfo", "FrameReport", "Outcome", "Hook", "BaseHook", "RunResult",
-           "TracksFileHook", "resolve_detector_name", "frames_to_read", "score_rows"]
+           "TracksFileHook", "resolve_detector_name", "frames_to_read", "iter_frames",
+           "score_rows"]

@@ -11,6 +11,14 @@ import rerun.blueprint as rrb
 BASE_2D = ["video", "video/detections", "video/gt"]
 
 
+def _panels() -> tuple:
+    """The time panel open (the timelines are how one navigates); the blueprint tree and the
+    selection panel collapsed so the views get the width (a click on the top-right icons opens
+    them; the recording's properties show in the selection panel)."""
+    return (rrb.TimePanel(state="expanded"), rrb.BlueprintPanel(state="collapsed"),
+            rrb.SelectionPanel(state="collapsed"))
+
+
 def default_blueprint(views: Sequence[tuple[str, Sequence[str]]] = (),
                       plots: Sequence[tuple[str, Sequence[str]]] = ()) -> rrb.Blueprint:
     """``views``: (title, engine paths) pairs, each becoming a 2D view over the video that shows
@@ -32,12 +40,22 @@ def default_blueprint(views: Sequence[tuple[str, Sequence[str]]] = (),
     return rrb.Blueprint(
         rrb.Horizontal(
             rrb.Tabs(*tabs, name="Video"),
-            rrb.Vertical(rrb.Tabs(*series), rrb.TextLogView(origin="log", name="Log"),
-                         row_shares=[3, 1]),
-            column_shares=[3, 2],
+            rrb.Vertical(rrb.Tabs(*series), _logs("log", "events", "about"),
+                         row_shares=[3, 2]),
+            column_shares=[7, 3],  # the video dominates
         ),
-        rrb.TimePanel(state="expanded"),
-        collapse_panels=False,
+        *_panels(),
+    )
+
+
+def _logs(log: str, events: str, about: str, event_contents=None) -> rrb.Tabs:
+    """The text panes: the failure index (Events: click a row to jump to its frame), the run's
+    log, and the "About" note."""
+    kw = {"contents": event_contents} if event_contents else {}
+    return rrb.Tabs(
+        rrb.TextLogView(origin=events, name="Events", **kw),
+        rrb.TextLogView(origin=log, name="Log"),
+        rrb.TextDocumentView(origin=about, name="About"),
     )
 
 
@@ -53,8 +71,8 @@ def compare_blueprint(roots: Sequence[str]) -> rrb.Blueprint:
                            ("Misses", "fn"), ("Estimated targets", "cardinality/estimated"))]
     return rrb.Blueprint(
         rrb.Vertical(rrb.Horizontal(*views), rrb.Horizontal(rrb.Tabs(*plots),
-                                                            rrb.TextLogView(origin="/", name="Log")),
+                                                            _logs("/", "/", "about", [
+                                                                f"/{r}/events/**" for r in roots])),
                      row_shares=[3, 2]),
-        rrb.TimePanel(state="expanded"),
-        collapse_panels=False,
+        *_panels(),
     )

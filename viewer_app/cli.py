@@ -5,7 +5,10 @@
                    [--tracks-out FILE.txt] [--force] [--spawn | --serve]
     pfscope synth --out DIR [--frames N --targets K --clutter R --seed S]
     pfscope eval TRACKS.txt --gt GT.txt|SEQUENCE_DIR [--json]
-    pfscope compare [SOURCE] --trackers phd,mt [--out FILE.rrd] [--frames N] [--json]
+    pfscope compare [SOURCE] --trackers "phd,phd[p_miss=0.2],mt" [--frames N|FIRST:LAST]
+    pfscope info FILE.rrd [--json]      pfscope view FILE.rrd
+    pfscope snapshot FILE.rrd --frame N [--tab NAME] --out shot.png
+    pfscope batch --sources A,B --trackers phd,mt [--seeds 0,1] --out DIR   (or SPEC.toml)
 
 Bad input ends with one line on stderr naming the file/line/frame and exit status 2.
 """
@@ -77,8 +80,15 @@ def _synth_config(args, frames: Optional[int]):
     return SceneConfig(**kw)
 
 
-def _add_synth_options(p: argparse.ArgumentParser, *, frames_help: str) -> None:
-    p.add_argument("--frames", type=POSITIVE_INT, default=None, help=frames_help)
+def _frames_or_range(text: str):
+    """``N`` (the first N frames) or ``FIRST:LAST`` (frame indices stay the video's)."""
+    return _frame_range(text) if ":" in text else POSITIVE_INT(text)
+
+
+def _add_synth_options(p: argparse.ArgumentParser, *, frames_help: str,
+                       ranges: bool = False) -> None:
+    p.add_argument("--frames", type=_frames_or_range if ranges else POSITIVE_INT, default=None,
+                   help=frames_help + (" or FIRST:LAST (e.g. 380:450)" if ranges else ""))
     p.add_argument("--targets", type=POSITIVE_INT, default=None,
                    help="synthetic scene: number of people (default 6)")
     p.add_argument("--clutter", type=NONNEG, default=None,
@@ -110,7 +120,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_tracker_options(r)
     r.add_argument("--out", type=Path, default=None,
                    help="recording file (default recordings/<source>-<tracker>.rrd)")
-    _add_synth_options(r, frames_help="stop after N frames (default: all)")
+    _add_synth_options(r, frames_help="stop after N frames (default: all)", ranges=True)
     r.add_argument("--detector", choices=list(DETECTORS), default=None,
                    help="detections: 'file' = the sequence's det/det.txt (default when present), "
                         "otherwise HOG people")
@@ -139,11 +149,13 @@ def build_parser() -> argparse.ArgumentParser:
                                    "(MODP, MODA, MOTP, MOTA) plus IDF1, HOTA and OSPA.")
     c.add_argument("source", nargs="?", default=None, help="as for record (default: synthetic)")
     c.add_argument("--trackers", default="phd,mt",
-                   help=f"comma-separated, from {', '.join(TRACKERS)} (default phd,mt)")
+                   help=f"comma-separated, from {', '.join(TRACKERS)} (default phd,mt); a "
+                        "parameter variant is NAME[key=value;...], e.g. \"phd,phd[p_miss=0.2],mt\" "
+                        "(its lane is named phd-p_miss-0.2)")
     _add_tracker_options(c)
     c.add_argument("--out", type=Path, default=None,
                    help="recording file (default recordings/<source>-compare.rrd)")
-    _add_synth_options(c, frames_help="stop after N frames (default: all)")
+    _add_synth_options(c, frames_help="stop after N frames (default: all)", ranges=True)
     c.add_argument("--detector", choices=list(DETECTORS), default=None)
     c.add_argument("--min-score", type=float, default=float("-inf"))
     c.add_argument("--level", choices=list(LEVELS), default="tracks",
@@ -192,6 +204,34 @@ def build_parser() -> argparse.ArgumentParser:
     rp.add_argument("--out", type=Path, default=None, help="where to write the repaired file")
     rp.add_argument("--force", action="store_true", help="overwrite OUT")
 
+    inf = sub.add_parser("info", help="what a recording is: source, trackers, parameters, "
+                                      "versions, frames, size, scores, failure index",
+                         description="Print what FILE.rrd holds, read from the file alone.")
+    inf.add_argument("file", type=Path, help="a .rrd recording")
+    inf.add_argument("--json", action="store_true", help="print as JSON")
+    inf.add_argument("--top", type=POSITIVE_INT, default=10,
+                     help="events and worst frames listed per lane (default 10)")
+    inf.add_argument("--no-params", action="store_true", help="do not list every parameter")
+
+    vw = sub.add_parser("view", help="open a recording in the Rerun viewer",
+                        description="Open FILE.rrd in the native Rerun viewer; without a display "
+                                    "say in one line how to see it.")
+    vw.add_argument("file", type=Path)
+
+    sn = sub.add_parser("snapshot", help="a PNG of a recording at one frame (headless viewer)",
+                        description="Render FILE.rrd at --frame with Rerun's headless viewer "
+                                    "(needs Vulkan: mesa-vulkan-drivers libvulkan1 without a GPU).")
+    sn.add_argument("file", type=Path)
+    sn.add_argument("--frame", type=POSITIVE_INT, default=None, help="frame (default: the last)")
+    sn.add_argument("--tab", default=None,
+                    help="video tab to show, by title (e.g. Particles, Association)")
+    sn.add_argument("--out", type=Path, required=True, help="PNG to write")
+    sn.add_argument("--keep-panels", action="store_true",
+                    help="keep the viewer's side and time panels in the picture")
+
+    from .batch import add_batch_parser
+    add_batch_parser(sub, _add_tracker_options)
+
     s = sub.add_parser("synth", help="write the synthetic scene as a MOTChallenge folder")
     s.add_argument("--out", type=Path, required=True, help="output folder (must not exist)")
     _add_synth_options(s, frames_help="number of frames (default 150)")
@@ -238,6 +278,16 @@ def _tracker_options(args) -> dict:
         raise InputError(str(e)) from None
 
 
+def _start_count(args) -> tuple[int, Optional[int]]:
+    """``--frames N`` → (1, N); ``--frames FIRST:LAST`` → (FIRST, LAST - FIRST + 1); and
+    ``args.frames`` becomes the synthetic scene's length (LAST)."""
+    if isinstance(args.frames, tuple):
+        first, last = args.frames
+        args.frames = last
+        return first, last - first + 1
+    return 1, args.frames
+
+
 def _open(args):
     from pfscope.trackers.data.sources import open_source
 
@@ -274,13 +324,16 @@ def _print_scores(scores: dict, as_json: bool) -> None:
 def cmd_compare(args) -> int:
     from .run import RecordOptions, RECORDINGS_DIR, record
 
-    names = [n.strip() for n in args.trackers.split(",") if n.strip()]
+    from .lanes import split_specs
+
+    names = split_specs(args.trackers)
     if len(names) < 1:
         raise InputError("--trackers needs at least one tracker name")
+    start, count = _start_count(args)
     source = _open(args)
     out = args.out or RECORDINGS_DIR / f"{source.name}-compare.rrd"
     opts = RecordOptions(detector=args.detector, min_score=args.min_score, level=args.level,
-                         max_points=args.max_points, frames=args.frames, seed=args.seed,
+                         max_points=args.max_points, frames=count, start=start, seed=args.seed,
                          force=args.force, preset=args.preset,
                          tracker_options=_tracker_options(args))
     res = record(source, out, opts, trackers=names, progress=not args.quiet)
@@ -362,10 +415,11 @@ def _last_line(text: str) -> str:
 def cmd_record(args) -> int:
     from .run import RecordOptions, default_out_path, record
 
+    start, count = _start_count(args)
     source = _open(args)
     out = args.out or default_out_path(source, args.tracker)
     opts = RecordOptions(tracker=args.tracker, detector=args.detector, min_score=args.min_score,
-                         level=args.level, max_points=args.max_points, frames=args.frames,
+                         level=args.level, max_points=args.max_points, frames=count, start=start,
                          seed=args.seed, force=args.force, tracks_out=args.tracks_out,
                          spawn=args.spawn, serve=args.serve, preset=args.preset,
                          timing=args.timing, tracker_options=_tracker_options(args))
@@ -514,6 +568,18 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             return cmd_repair(args)
         if args.command == "train-dbn":
             return cmd_train_dbn(args)
+        if args.command == "info":
+            from .info import cmd_info
+            return cmd_info(args)
+        if args.command == "view":
+            from .info import cmd_view
+            return cmd_view(args)
+        if args.command == "snapshot":
+            from .snapshot import cmd_snapshot
+            return cmd_snapshot(args)
+        if args.command == "batch":
+            from .batch import cmd_batch
+            return cmd_batch(args)
     except InputError as e:
         print(f"pfscope: error: {e}", file=sys.stderr)
         return EXIT_BAD_INPUT

@@ -9,6 +9,12 @@ Entity layout (2D overlays share the image's pixel space under ``video``):
 - ``[<tracker>/]plots/<path>``   scalars (``plots/phd/mass``, ``plots/metrics/ospa``,
   ``plots/timing/step_ms``)
 - ``[<tracker>/]log``            events; the recording's last entry says why the run stopped
+- ``[<tracker>/]events``         with ground truth, the failure index (:mod:`pfscope.trackers.eval.
+  events`): ID switches, false tracks, lost tracks, long misses as text-log rows at their
+  frame (clicking one jumps there), and ``events/worst_ospa`` the worst frames by OSPA
+- ``about``                      a static markdown note on what each tab shows
+
+Properties (``pfscope info`` reads them back): :mod:`.properties`.
 
 With one tracker the root is empty; ``compare`` gives each tracker its own root.
 
@@ -44,6 +50,7 @@ from pfscope.trackers.outputs import incomplete_path
 from pfscope.trackers.pipeline import BaseHook, FrameReport, Outcome, RunInfo
 
 from .blueprint import compare_blueprint, default_blueprint
+from .properties import about_markdown, any_values
 from .reporters import Reporter, layout_for
 from .reporters.base import annotation_context
 
@@ -99,7 +106,8 @@ class RerunRecorder(BaseHook):
 
     def __init__(self, out: Path, config: dict, *, max_points: int = 3000,
                  jpeg_quality: int = 75, flush_frames: int = 10, live: Optional[str] = None,
-                 web_port: int = 9090, announce=print, timing: bool = False):
+                 web_port: int = 9090, announce=print, timing: bool = False,
+                 properties: Optional[dict] = None, long_miss: int = 10, worst: int = 10):
         self.out = Path(out)
         self.partial = incomplete_path(self.out)
         self.config = config
@@ -111,6 +119,11 @@ class RerunRecorder(BaseHook):
         # Wall-clock step times differ run to run: recorded only when asked, so that the same
         # seed and input give the same recording.
         self.timing = timing
+        # typed property groups ({"run": {...}, "source": {...}, "tracker.phd": {...}}); without
+        # them the flat config is stored as the "config" group
+        self.properties = properties
+        self.long_miss, self.worst = int(long_miss), int(worst)
+        self.events: dict = {}
         self.rec: Optional[rr.RecordingStream] = None
         self.kept_as: Optional[Path] = None
         self._broken: Optional[str] = None
@@ -131,8 +144,17 @@ class RerunRecorder(BaseHook):
             plots = [(title, paths) for title, paths in layout.plots
                      if self.timing or not all(p.startswith("timing/") for p in paths)]
             blueprint = default_blueprint(layout.views, plots)
+            about = about_markdown(f"{names[0]} on {getattr(info.source, 'name', 'source')}",
+                                   layout.views, plots, has_gt=info.has_gt)
         else:
             blueprint = compare_blueprint(names)
+            about = about_markdown(f"{' vs '.join(names)} on "
+                                   f"{getattr(info.source, 'name', 'source')}",
+                                   [(n, [f"{n}/video/tracks/**", f"{n}/video/metrics/**"])
+                                    for n in names],
+                                   [("OSPA, ID switches, FP, misses, estimated targets",
+                                     [f"{n}/plots/metrics/**" for n in names])],
+                                   lanes=names, has_gt=info.has_gt)
         if self.partial.exists():
             self.partial.unlink()
         rec.save(str(self.partial), default_blueprint=blueprint)
@@ -148,9 +170,19 @@ class RerunRecorder(BaseHook):
             self.announce(f"web viewer: http://127.0.0.1:{self.web_port}/?url={uri}")
         src = getattr(info.source, "name", "source")
         rec.send_recording_name(f"{src} · {' vs '.join(names)}")
-        rec.send_property("config", rr.AnyValues(**{k: str(v) for k, v in self.config.items()}))
+        if self.properties:
+            for group, values in self.properties.items():
+                rec.send_property(group, any_values(values))
+        else:
+            rec.send_property("config", any_values(self.config))
         rec.send_property("versions", rr.AnyValues(**versions()))
         rec.log("/", annotation_context(), static=True)
+        rec.log("about", rr.TextDocument(about, media_type=rr.MediaType.MARKDOWN), static=True)
+        if info.has_gt:
+            from pfscope.trackers.eval.events import EventIndex
+
+            self.events = {name: EventIndex(long_miss=self.long_miss, worst=self.worst)
+                           for name in names}
 
         # stage slots: input, then each lane's stages and its output
         self.slots: dict[tuple[str, str], int] = {("", "input"): 0}
@@ -204,6 +236,10 @@ class RerunRecorder(BaseHook):
             if m is not None and r.gt is not None:
                 self._metrics(rep, k, r.gt, t, m)
         self._clear_stale()
+        for name, res in r.results.items():
+            m = r.metrics.get(name)
+            if m is not None and r.gt is not None and name in self.events:
+                self._log_events(name, self.events[name].update(k, r.gt, res.tracks, m), k)
         self._frames += 1
         if self.flush_frames and self._frames % self.flush_frames == 0:
             self._flush("writing stalled")
@@ -243,6 +279,7 @@ class RerunRecorder(BaseHook):
             return
         level = {"completed": "INFO", "interrupted": "WARN"}.get(outcome.status, "ERROR")
         rec.log("log", rr.TextLog(f"run {outcome.reason}", level=level))
+        self._finish_index(outcome)
         self.kept_as = self.partial
         try:
             self._flush("could not finish the file")
@@ -256,6 +293,43 @@ class RerunRecorder(BaseHook):
         if outcome.status == "completed":
             os.replace(self.partial, self.out)
             self.kept_as = None
+
+    def _root(self, lane: str) -> str:
+        return f"{lane}/" if len(self.reporters) > 1 else ""
+
+    def _log_events(self, lane: str, events: list, now: int) -> None:
+        """Failure-index rows, each at its own frame (a false track or a long miss is known only
+        when it ends: its row goes back to where it began, so clicking it jumps there)."""
+        rec = self.rec
+        assert rec is not None
+        if not events:
+            return
+        for ev in events:
+            rec.set_time("frame", sequence=ev.frame)
+            rec.set_time("stage", sequence=ev.frame * self.stride + self.slots[(lane, "output")])
+            rec.log(f"{self._root(lane)}events", rr.TextLog(
+                ev.message, level="WARN" if ev.kind in ("id_switch", "lost_track") else "INFO"))
+        rec.set_time("frame", sequence=now)
+        rec.set_time("stage", sequence=now * self.stride + self.slots[(lane, "output")])
+
+    def _finish_index(self, outcome: Outcome) -> None:
+        """The end of the run: open events, the worst frames by OSPA, and the final scores and
+        event counts as properties."""
+        rec = self.rec
+        assert rec is not None
+        for lane, index in self.events.items():
+            last = index.last_frame
+            self._log_events(lane, index.finish(), last)
+            for rank, (frame, value) in enumerate(index.worst_frames(), start=1):
+                rec.set_time("frame", sequence=frame)
+                rec.set_time("stage",
+                             sequence=frame * self.stride + self.slots[(lane, "output")])
+                rec.log(f"{self._root(lane)}events/worst_ospa", rr.TextLog(
+                    f"worst OSPA #{rank}: frame {frame}, OSPA {value:.1f} px", level="DEBUG"))
+            rec.send_property(f"events.{lane}", any_values(dict(index.counts)))
+        for lane, sc in (outcome.scores or {}).items():
+            rec.send_property(f"scores.{lane}", any_values(
+                {k: v for k, v in sc.items() if isinstance(v, (int, float, str))}))
 
     def _flush(self, what: str) -> None:
         assert self.rec is not None

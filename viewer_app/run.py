@@ -79,6 +79,7 @@ class RecordOptions:
     level: str = "clusters"
     max_points: int = 3000
     frames: Optional[int] = None
+    start: int = 1                     # first frame (frame indices stay the video's)
     seed: int = 0
     force: bool = False
     tracks_out: Optional[Path] = None
@@ -87,6 +88,7 @@ class RecordOptions:
     preset: Optional[str] = None       # None: the tracker's first preset (its paper settings)
     timing: bool = False               # record per-step wall time (breaks byte-identical reruns)
     tracker_options: dict = field(default_factory=dict)
+    long_miss: int = 10                # failure index: a gt unmatched this many frames in a row
 
 
 @dataclass
@@ -97,7 +99,9 @@ class RecordResult:
     interrupted: bool
     tracks_out: Optional[Path]
     bytes: int
-    scores: dict = field(default_factory=dict)  # tracker name -> evaluate() keys, when gt exists
+    scores: dict = field(default_factory=dict)  # lane name -> evaluate() keys, when gt exists
+    start: int = 1                              # first frame of the run
+    lanes: list = field(default_factory=list)   # lane names, in order
 
 
 def default_out_path(source: Source, tracker: str) -> Path:
@@ -191,13 +195,18 @@ def record(source: Source, out: Path, opts: RecordOptions, *, trackers: Optional
         level_rank(opts.level)
     except ValueError as e:
         raise InputError(str(e)) from None
-    names = list(trackers or [opts.tracker])
-    if len(set(names)) != len(names):
-        raise InputError(f"tracker listed twice: {','.join(names)}")
+    from .lanes import parse_lanes
+
+    lanes = parse_lanes(list(trackers or [opts.tracker]))
+    names = [ln.name for ln in lanes]
+    if opts.start < 1:
+        raise InputError(f"first frame must be >= 1, got {opts.start}")
     try:
-        infos = [tracker_info(n) for n in names]
-        params = [make_params(n, opts.preset, _options_for(n, opts.tracker_options, len(names)))
-                  for n in names]
+        infos = [tracker_info(ln.tracker) for ln in lanes]
+        params = [make_params(ln.tracker, opts.preset,
+                              {**_options_for(ln.tracker, opts.tracker_options, len(names)),
+                               **ln.options})
+                  for ln in lanes]
     except ValueError as e:
         raise InputError(str(e)) from None
     out = check_output(Path(out), opts.force)
@@ -215,26 +224,27 @@ def record(source: Source, out: Path, opts: RecordOptions, *, trackers: Optional
     try:
         for lock in locks:
             held.append(lock.acquire())
-        return _record_locked(source, out, opts, names, infos, params, tracks_out, live,
+        return _record_locked(source, out, opts, lanes, infos, params, tracks_out, live,
                               progress, on_frame, stop)
     finally:
         for lock in held:
             lock.release()
 
 
-def _record_locked(source, out, opts, names, infos, params, tracks_out, live, progress,
+def _record_locked(source, out, opts, lanes, infos, params, tracks_out, live, progress,
                    on_frame, stop) -> RecordResult:
     from pfscope.trackers.pipeline import TracksFileHook, frames_to_read, resolve_detector_name
     from pfscope.trackers.pipeline import run as run_pipeline
 
     from .recorder import RerunRecorder, config_json
 
+    names = [ln.name for ln in lanes]
     built = {n: info.cls(p, rng=np.random.default_rng(opts.seed))
              for n, info, p in zip(names, infos, params)}
     need_det = any(t.needs_detections for t in built.values())
     det_name = resolve_detector_name(source, opts.detector) if need_det else None
     det_opts = {"min_score": opts.min_score} if det_name == "file" else {}
-    total = frames_to_read(source, opts.frames)
+    total = frames_to_read(source, opts.frames, opts.start)
 
     config = {
         "trackers": ",".join(names), "detector": det_name or "none",
@@ -243,9 +253,25 @@ def _record_locked(source, out, opts, names, infos, params, tracks_out, live, pr
         "source": config_json(source.describe()),
         "tracker_config": config_json([t.config() for t in built.values()]),
     }
+    if opts.start > 1:
+        config["start"] = opts.start
+    properties = {
+        "run": {"lanes": names, "trackers": [ln.tracker for ln in lanes],
+                "detector": det_name or "none", "min_score": opts.min_score,
+                "level": opts.level, "max_points": opts.max_points, "first_frame": opts.start,
+                "frames": total, "seed": opts.seed, "preset": opts.preset or "default"},
+        "source": source.describe(),
+    }
+    for ln, t in zip(lanes, built.values()):
+        cfg = t.config()
+        properties[f"tracker.{ln.name}"] = {
+            "tracker": ln.tracker, "spec": ln.spec,
+            "params": cfg.get("params", {}),
+            **{k: v for k, v in cfg.items() if k not in ("params", "tracker")}}
     recorder = RerunRecorder(out, config, max_points=opts.max_points, live=live,
                              web_port=WEB_PORT, timing=opts.timing,
-                             announce=lambda msg: print(msg, file=sys.stderr))
+                             announce=lambda msg: print(msg, file=sys.stderr),
+                             properties=properties, long_miss=opts.long_miss)
     hooks: list = [recorder]
     writer = None
     if tracks_out is not None:
@@ -260,7 +286,8 @@ def _record_locked(source, out, opts, names, infos, params, tracks_out, live, pr
         hooks.append(_CallbackHook(on_frame))
     with StopFlag(stop) as flag:
         try:
-            res = run_pipeline(source, built, frames=opts.frames, level=opts.level,
+            res = run_pipeline(source, built, frames=opts.frames, start=opts.start,
+                               level=opts.level,
                                detector=det_name, detector_options=det_opts, hooks=hooks,
                                should_stop=lambda: flag.requested)
         except InputError as e:
@@ -275,7 +302,8 @@ def _record_locked(source, out, opts, names, infos, params, tracks_out, live, pr
     return RecordResult(out=final, frames=res.frames, seconds=res.seconds,
                         interrupted=res.interrupted,
                         tracks_out=(writer.kept_as or tracks_out) if writer else None,
-                        bytes=final.stat().st_size, scores=res.scores)
+                        bytes=final.stat().st_size, scores=res.scores, start=opts.start,
+                        lanes=names)
 
 
 class _CallbackHook(BaseHook):

@@ -131,9 +131,10 @@ class MOTFolderSource(Source):
     def _path(self, index: int) -> Path:
         return self.im_dir / f"{index:06d}{self.im_ext}"
 
-    def frames(self, limit: Optional[int] = None) -> Iterator[Frame]:
-        n = self.length if limit is None else min(limit, self.length)
-        for k in range(1, n + 1):
+    def frames(self, limit: Optional[int] = None, start: int = 1) -> Iterator[Frame]:
+        """Frames ``start .. start + limit - 1`` (all from ``start`` when ``limit`` is None)."""
+        n = self.length if limit is None else min(start - 1 + limit, self.length)
+        for k in range(max(1, start), n + 1):
             yield Frame(k, (k - 1) / self.fps,
                         _read_image(self._path(k), k, (self.width, self.height)))
 
@@ -193,9 +194,10 @@ class ImageFolderSource(Source):
                          height=first.shape[0], kind="images", location=str(root))
         self.files = files
 
-    def frames(self, limit: Optional[int] = None) -> Iterator[Frame]:
-        files = self.files if limit is None else self.files[:limit]
-        for k, p in enumerate(files, start=1):
+    def frames(self, limit: Optional[int] = None, start: int = 1) -> Iterator[Frame]:
+        start = max(1, start)
+        files = self.files[start - 1:] if limit is None else self.files[start - 1:start - 1 + limit]
+        for k, p in enumerate(files, start=start):
             yield Frame(k, (k - 1) / self.fps, _read_image(p, k, (self.width, self.height)))
 
 

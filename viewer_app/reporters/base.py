@@ -6,7 +6,12 @@ Styling rules (the engine says *what*, this module says *how it looks*):
   candidate edge) are class ids of one static ``AnnotationContext`` logged at the root;
 - items whose ids are track ids get the track colour of that id (``id_colors``), the same for
   a box, a trail, a vertex, an edge or a per-track child cloud;
-- particle weights go through a colormap scaled per cloud;
+- particle weights go through viridis on a per-cloud log scale (yellow = the cloud's
+  95th-percentile weight or more, 2 decades down to dark purple), and the scale (that largest weight) is plotted under
+  ``plots/weights/<path>``;
+- labels are shown only on items whose ids are track ids and carry no values (a track's id);
+  every other label (detection scores, gt ids, edge gains, cluster values) is logged but hidden
+  (``show_labels=False``: select the entity in the viewer and turn labels on);
 - masks are ``SegmentationImage`` with their own class names; dense fields are colormapped
   images;
 - labels are built from an item's named ``values`` only for small item counts.
@@ -22,17 +27,19 @@ import rerun as rr
 
 from pfscope.trackers.report import (Boxes, Event, Field, Mask, Points, Scalar, Segments, Stage)
 
-from ..colors import id_colors, weight_colors
+from ..colors import id_colors, ramp, weight_colors
 
 #: Semantic class ids of the static AnnotationContext (ids >= 1; 0 is "no class").
+#: Disjoint from the track palette (colors.TRACK_HUE_MIN..MAX): greys, white, black, red,
+#: magenta (tests/test_viewer_app.py checks it).
 ROLES: dict[str, tuple[int, tuple[int, int, int, int]]] = {
-    "detection": (1, (255, 220, 0, 255)),
-    "gt": (2, (60, 255, 60, 255)),
-    "miss": (3, (255, 40, 40, 255)),
-    "false_positive": (4, (255, 0, 255, 255)),
-    "switch": (5, (255, 255, 255, 255)),
-    "dropped": (6, (128, 128, 128, 200)),
-    "candidate": (7, (170, 170, 170, 140)),
+    "detection": (1, (175, 175, 175, 220)),
+    "gt": (2, (250, 250, 250, 230)),
+    "miss": (3, (255, 30, 30, 255)),
+    "false_positive": (4, (255, 0, 190, 255)),
+    "switch": (5, (0, 0, 0, 255)),
+    "dropped": (6, (110, 110, 110, 200)),
+    "candidate": (7, (150, 150, 150, 140)),
 }
 MAX_LABELS = 60
 DEFAULT_POINT_RADIUS = 1.5
@@ -138,15 +145,19 @@ class Reporter:
         class_ids = ROLES[p.role][0] if p.role in ROLES and colors is None else None
         self._log(self.video(p.path), rr.Points2D(xy, colors=colors, class_ids=class_ids,
                                                   radii=DEFAULT_POINT_RADIUS))
+        if p.weights is not None:
+            top = float(np.max(p.weights)) if len(p.weights) else 0.0
+            self.rec.log(f"{self.root}plots/weights/{p.path}", rr.Scalars(top))
 
     def boxes(self, b: Boxes, radii: float = 1.0) -> None:
         boxes = b.boxes.astype(np.float32)
         colors = _colors(b.ids, b.id_kind) if b.id_kind in ("track", "cluster") else None
         class_ids = ROLES[b.role][0] if b.role in ROLES and colors is None else None
         labels = value_labels(b.values, len(b), b.ids if b.id_kind == "track" else None)
+        show = labels is not None and b.id_kind == "track" and not b.values
         self._log(self.video(b.path), rr.Boxes2D(
             mins=boxes[:, :2], sizes=boxes[:, 2:], colors=colors, class_ids=class_ids,
-            labels=labels, radii=radii))
+            labels=labels, show_labels=show if labels is not None else None, radii=radii))
 
     def segments(self, s: Segments) -> None:
         strips = np.stack([s.a, s.b], axis=1).astype(np.float32)
@@ -157,6 +168,7 @@ class Reporter:
             if chosen else None
         self._log(self.video(s.path), rr.LineStrips2D(
             strips, colors=colors, class_ids=class_ids, labels=labels,
+            show_labels=False if labels is not None else None,
             radii=1.5 if chosen else 0.5))
 
     def mask(self, m: Mask) -> None:
@@ -175,7 +187,7 @@ class Reporter:
         lo = float(np.nanmin(v)) if f.vmin is None and v.size else (f.vmin or 0.0)
         hi = float(np.nanmax(v)) if f.vmax is None and v.size else (f.vmax or 1.0)
         t = np.clip((v - lo) / (hi - lo), 0, 1) if hi > lo else np.zeros_like(v)
-        rgb = weight_colors(t.reshape(-1) ** 2 + 1e-12, alpha=255)[:, :3].reshape(v.shape + (3,))
+        rgb = ramp(t.reshape(-1), alpha=255)[:, :3].reshape(v.shape + (3,))
         self._log(self.video(f.path), rr.Image(rgb, color_model="RGB").compress(
             jpeg_quality=self.jpeg_quality))
         self.rec.log(f"{self.root}plots/{f.path}/max", rr.Scalars(hi))
@@ -196,7 +208,7 @@ class Reporter:
         self._log(self.video(path), rr.Boxes2D(
             mins=boxes[:, :2], sizes=boxes[:, 2:], class_ids=np.full(len(boxes), ROLES[role][0]),
             labels=(labels if len(boxes) <= MAX_LABELS else []) if labels is not None else None,
-            radii=radii))
+            show_labels=False if labels is not None else None, radii=radii))
 
     def scalar(self, path: str, value: float) -> None:
         self.rec.log(f"{self.root}plots/{path}", rr.Scalars(float(value)))

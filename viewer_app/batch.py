@@ -1,0 +1,346 @@
+"""``pfscope batch``: many recordings headlessly — every source × tracker (or parameter
+variant) × seed — in parallel over the local cores.
+
+    pfscope batch --sources A,B --trackers "phd,phd[p_miss=0.2],mt" --seeds 0,1 --out DIR
+    pfscope batch SPEC.toml [--out DIR] [--workers N]
+
+A TOML spec holds the same keys (command-line flags override it)::
+
+    sources = ["../shared/data/PETS09-S2L1", "synthetic"]
+    trackers = ["phd", "phd[p_miss=0.2]", "mt"]
+    seeds = [0, 1]
+    frames = "1:200"          # or 200
+    level = "tracks"
+    out = "runs/study1"
+    workers = 2
+    [set]
+    depth = 30
+
+Per run ``DIR/<source>-<lane>-seed<S>``: ``.rrd`` (the recording), ``.txt`` (MOT tracks) and
+``.json`` (the result: scores, timings, paths).  The ``.json`` is written last, only for a run
+that completed: re-running the same command skips runs that have one (resume) and retries the
+others; ``--force`` re-runs everything.  A failing run is reported (one line) and does not stop
+the others; the exit status is 1 when any run failed.  At the end ``DIR/summary.csv`` and
+``DIR/summary.json`` hold every run of the batch (finished earlier or now) and a table is
+printed.
+
+Runs go to a pool of ``--workers`` processes (default: the number of cores), each run in its
+own process with single-threaded BLAS/OpenCV so runs do not fight over cores.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import sys
+import time
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Optional
+
+from pfscope.trackers.errors import InputError
+
+SUMMARY_KEYS = ("MOTA", "MOTP", "IDF1", "HOTA", "IDSW", "FP", "FN", "OSPA")
+
+
+@dataclass
+class Job:
+    source: str                 # as given ("synthetic" or a path)
+    lane: str                   # tracker spec, e.g. "phd[p_miss=0.2]"
+    seed: int
+    out_dir: str
+    frames: Optional[int] = None
+    start: int = 1
+    level: str = "tracks"
+    detector: Optional[str] = None
+    preset: Optional[str] = None
+    options: dict = field(default_factory=dict)
+    force: bool = False
+    max_points: int = 3000
+
+    @property
+    def source_name(self) -> str:
+        if self.source in ("", "synthetic"):
+            return f"synthetic-seed{self.seed}"
+        return Path(self.source).stem if Path(self.source).is_file() else Path(self.source).name
+
+    @property
+    def run_id(self) -> str:
+        from .lanes import lane_name
+
+        return f"{self.source_name}-{lane_name(self.lane)}-seed{self.seed}"
+
+    def path(self, suffix: str) -> Path:
+        return Path(self.out_dir) / f"{self.run_id}{suffix}"
+
+
+def _init_worker() -> None:
+    for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ[var] = "1"
+    os.environ.setdefault("RERUN_ANALYTICS", "0")
+    try:
+        import cv2
+
+        cv2.setNumThreads(1)
+    except Exception:  # noqa: BLE001
+        pass
+    try:
+        import torch
+
+        torch.set_num_threads(1)
+    except Exception:  # noqa: BLE001
+        pass
+
+
+def run_job(job: Job) -> dict:
+    """One run (in a worker process): never raises, returns its result row."""
+    from .api import record
+
+    t0 = time.perf_counter()
+    row = {"run": job.run_id, "source": job.source, "lane": job.lane, "seed": job.seed,
+           "rrd": str(job.path(".rrd")), "tracks": str(job.path(".txt"))}
+    try:
+        synthetic = {}
+        if job.source in ("", "synthetic"):
+            synthetic = {"synthetic_seed": job.seed}
+        res = record(job.source, tracker=job.lane, out=job.path(".rrd"),
+                     tracks_out=job.path(".txt"), frames=job.frames, start=job.start,
+                     level=job.level, seed=job.seed, detector=job.detector, preset=job.preset,
+                     force=job.force, progress=False, max_points=job.max_points,
+                     **synthetic, **job.options)
+        scores = next(iter(res.scores.values()), {}) if res.scores else {}
+        row.update(status="interrupted" if res.interrupted else "ok", frames=res.frames,
+                   seconds=round(res.seconds, 3), fps=round(res.fps, 2), bytes=res.bytes,
+                   rrd=str(res.out), tracks=str(res.tracks_out) if res.tracks_out else "",
+                   **{k: scores[k] for k in SUMMARY_KEYS if k in scores})
+        if row["status"] == "ok":
+            tmp = job.path(".json.part")
+            tmp.write_text(json.dumps({**row, "scores": scores}, indent=2, sort_keys=True,
+                                      default=str))
+            os.replace(tmp, job.path(".json"))
+    except BaseException as e:  # noqa: BLE001 - one failing run must not stop the batch
+        msg = str(e).splitlines()[0] if str(e) else type(e).__name__
+        row.update(status="failed", error=f"{type(e).__name__}: {msg}"[:300],
+                   seconds=round(time.perf_counter() - t0, 3))
+    return row
+
+
+def _csv_list(text) -> list[str]:
+    from .lanes import split_specs
+
+    if text is None:
+        return []
+    if isinstance(text, (list, tuple)):
+        return [str(x) for x in text]
+    return split_specs(str(text))
+
+
+def _parse_frames(v) -> tuple[int, Optional[int]]:
+    if v is None:
+        return 1, None
+    if isinstance(v, tuple):
+        return v[0], v[1] - v[0] + 1
+    text = str(v)
+    if ":" in text:
+        a, _, b = text.partition(":")
+        lo, hi = int(a), int(b)
+        if lo < 1 or hi < lo:
+            raise InputError(f"frames {text!r}: expected 1 <= FIRST <= LAST")
+        return lo, hi - lo + 1
+    n = int(text)
+    if n < 1:
+        raise InputError(f"frames {text!r}: must be >= 1")
+    return 1, n
+
+
+def plan(args) -> tuple[list[Job], Path, int]:
+    """The jobs of a batch (spec file, then the flags given on the command line)."""
+    spec: dict = {}
+    if args.spec is not None:
+        import tomllib
+
+        try:
+            spec = tomllib.loads(Path(args.spec).read_text())
+        except FileNotFoundError:
+            raise InputError(f"{args.spec}: no such batch spec") from None
+        except tomllib.TOMLDecodeError as e:
+            raise InputError(f"{args.spec}: not valid TOML ({e})") from None
+        unknown = set(spec) - {"sources", "trackers", "seeds", "frames", "level", "out",
+                               "workers", "set", "detector", "preset", "force", "max_points"}
+        if unknown:
+            raise InputError(f"{args.spec}: unknown key(s) {', '.join(sorted(unknown))}")
+
+    def pick(flag, key, default=None):
+        v = getattr(args, flag, None)
+        return v if v not in (None, [], "") else spec.get(key, default)
+
+    sources = _csv_list(pick("sources", "sources")) or ["synthetic"]
+    lanes = _csv_list(pick("trackers", "trackers")) or ["phd"]
+    seeds_raw = pick("seeds", "seeds", [0])
+    try:
+        seeds = [int(s) for s in (_csv_list(seeds_raw) if isinstance(seeds_raw, str)
+                                   else seeds_raw)]
+    except (TypeError, ValueError):
+        raise InputError(f"--seeds {seeds_raw!r}: expected integers like 0,1,2") from None
+    start, count = _parse_frames(pick("frames", "frames"))
+    out = pick("out", "out")
+    if not out:
+        raise InputError("batch needs --out DIR (or 'out' in the spec)")
+    options = {str(k): str(v) for k, v in (spec.get("set") or {}).items()}
+    if args.set_options:
+        from pfscope.trackers.params import parse_set
+
+        try:
+            options.update(parse_set(args.set_options))
+        except ValueError as e:
+            raise InputError(str(e)) from None
+    from .lanes import parse_lanes
+
+    parse_lanes(lanes)  # bad specs and duplicates fail before anything runs
+    workers = int(pick("workers", "workers", 0) or 0) or (os.cpu_count() or 1)
+    force = bool(args.force or spec.get("force", False))
+    jobs = [Job(source=s, lane=ln, seed=seed, out_dir=str(out), frames=count, start=start,
+                level=pick("level", "level", "tracks"), detector=pick("detector", "detector"),
+                preset=pick("preset", "preset"), options=dict(options), force=force,
+                max_points=int(spec.get("max_points", 3000)))
+            for s in sources for ln in lanes for seed in seeds]
+    ids = [j.run_id for j in jobs]
+    dup = sorted({i for i in ids if ids.count(i) > 1})
+    if dup:
+        raise InputError(f"two runs would write the same files: {', '.join(dup)}")
+    return jobs, Path(out), workers
+
+
+def run_batch(jobs: list[Job], out: Path, workers: int, *, quiet: bool = False,
+              stream=None) -> list[dict]:
+    """Run ``jobs`` (skipping finished ones unless forced), write the summary, return rows."""
+    stream = stream or sys.stderr
+    out.mkdir(parents=True, exist_ok=True)
+    rows: dict[str, dict] = {}
+    todo = []
+    for j in jobs:
+        done = j.path(".json")
+        if done.is_file() and not j.force:
+            try:
+                rows[j.run_id] = {**json.loads(done.read_text()), "status": "skipped"}
+                continue
+            except (OSError, ValueError):
+                pass
+        todo.append(j)
+    total, t0 = len(todo), time.perf_counter()
+    if not quiet:
+        skipped = len(jobs) - total
+        print(f"batch: {len(jobs)} runs, {skipped} already finished, {total} to run on "
+              f"{min(workers, max(total, 1))} worker(s)", file=stream)
+
+    def report(i, row):
+        if quiet:
+            return
+        el = time.perf_counter() - t0
+        eta = el / i * (total - i)
+        what = (f"failed: {row.get('error')}" if row["status"] == "failed" else
+                f"{row['status']} in {row.get('seconds', 0):.1f} s"
+                + (f", MOTA {row['MOTA']:.3f}" if "MOTA" in row else ""))
+        print(f"batch [{i}/{total}] {row['run']}: {what}  (elapsed {el:.0f} s, ETA {eta:.0f} s)",
+              file=stream)
+
+    if workers <= 1 or total <= 1:
+        for i, j in enumerate(todo, start=1):
+            rows[j.run_id] = run_job(j)
+            report(i, rows[j.run_id])
+    else:
+        import multiprocessing as mp
+
+        with ProcessPoolExecutor(max_workers=min(workers, total),
+                                 mp_context=mp.get_context("spawn"),
+                                 initializer=_init_worker) as pool:
+            futs = {pool.submit(run_job, j): j for j in todo}
+            for i, fut in enumerate(as_completed(futs), start=1):
+                j = futs[fut]
+                try:
+                    row = fut.result()
+                except BaseException as e:  # noqa: BLE001 - a worker died (killed, OOM)
+                    row = {"run": j.run_id, "source": j.source, "lane": j.lane,
+                           "seed": j.seed, "status": "failed",
+                           "error": f"worker died: {type(e).__name__}: {e}"[:300]}
+                rows[j.run_id] = row
+                report(i, row)
+    ordered = [rows[j.run_id] for j in jobs]
+    write_summary(ordered, out, wall=time.perf_counter() - t0)
+    return ordered
+
+
+def write_summary(rows: list[dict], out: Path, wall: float = 0.0) -> None:
+    cols = ["run", "source", "lane", "seed", "status", "frames", "seconds", "fps",
+            *SUMMARY_KEYS, "bytes", "rrd", "tracks", "error"]
+    tmp = out / "summary.csv.part"
+    with tmp.open("w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=cols, extrasaction="ignore")
+        w.writeheader()
+        for r in rows:
+            w.writerow({k: r.get(k, "") for k in cols})
+    os.replace(tmp, out / "summary.csv")
+    tmp = out / "summary.json.part"
+    tmp.write_text(json.dumps({"wall_seconds": round(wall, 3), "runs": [
+        {k: v for k, v in r.items() if k != "scores"} for r in rows]}, indent=2,
+        sort_keys=True, default=str))
+    os.replace(tmp, out / "summary.json")
+
+
+def format_table(rows: list[dict]) -> str:
+    width = max([len("run")] + [len(r["run"]) for r in rows])
+    head = f"{'run':<{width}}  {'status':<11} {'frames':>6} {'s':>7} " + " ".join(
+        f"{k:>6}" for k in SUMMARY_KEYS)
+    lines = [head]
+    for r in rows:
+        vals = []
+        for k in SUMMARY_KEYS:
+            v = r.get(k)
+            vals.append(f"{'':>6}" if v is None else f"{int(v):>6d}" if k in ("IDSW", "FP", "FN")
+                        else f"{v:>6.3f}" if k != "OSPA" else f"{v:>6.1f}")
+        lines.append(f"{r['run']:<{width}}  {r['status']:<11} {r.get('frames', ''):>6} "
+                     f"{r.get('seconds', 0) or 0:>7.1f} " + " ".join(vals))
+    return "\n".join(lines)
+
+
+def add_batch_parser(sub, add_tracker_options) -> None:
+    b = sub.add_parser("batch", help="many recordings: sources × trackers × seeds, in parallel",
+                       description="Record every source × tracker (or variant NAME[k=v]) × seed "
+                                   "into DIR, in parallel over the local cores; resume skips "
+                                   "finished runs; a summary CSV/JSON and a table at the end.")
+    b.add_argument("spec", nargs="?", type=Path, default=None,
+                   help="a TOML batch spec (flags given here override it)")
+    b.add_argument("--sources", default=None, help="comma-separated sources (default synthetic)")
+    b.add_argument("--trackers", default=None,
+                   help="comma-separated trackers or variants, e.g. \"phd,phd[p_miss=0.2],mt\"")
+    b.add_argument("--seeds", default=None, help="comma-separated seeds (default 0)")
+    b.add_argument("--frames", default=None, help="N or FIRST:LAST (default: all)")
+    b.add_argument("--level", default=None, choices=["tracks", "clusters", "particles"],
+                   help="recording level (default tracks)")
+    b.add_argument("--detector", default=None)
+    b.add_argument("--out", type=Path, default=None, help="output folder")
+    b.add_argument("--workers", type=int, default=None,
+                   help="parallel processes (default: the number of cores)")
+    b.add_argument("--force", action="store_true", help="re-run finished runs, overwrite outputs")
+    b.add_argument("--json", action="store_true", help="print the summary as JSON")
+    b.add_argument("--quiet", action="store_true", help="no per-run progress lines")
+    add_tracker_options(b)
+
+
+def cmd_batch(args) -> int:
+    jobs, out, workers = plan(args)
+    rows = run_batch(jobs, out, workers, quiet=args.quiet)
+    if args.json:
+        print(json.dumps(rows, indent=2, sort_keys=True, default=str))
+    else:
+        print(format_table(rows))
+        print(f"summary: {out / 'summary.csv'}  {out / 'summary.json'}")
+    failed = [r for r in rows if r["status"] == "failed"]
+    for r in failed:
+        print(f"pfscope batch: {r['run']} failed: {r.get('error')}", file=sys.stderr)
+    return 1 if failed else 0
+
+
+__all__ = ["Job", "plan", "run_batch", "run_job", "cmd_batch", "add_batch_parser"]
