@@ -214,6 +214,9 @@ def test_sigkill_leaves_readable_partial_files_and_repair_makes_them_whole(tmp_p
     assert subprocess.run([str(RERUN), "rrd", "verify", str(fixed)],
                           capture_output=True).returncode == 0
     assert {t["frame"] for t, _ in read_rrd(fixed)["/video"]} >= frames - {max(frames)}
+    # the next run on the same output says what was left behind instead of deleting it
+    again = cli("record", "--frames", "2", "--out", out, "--quiet")
+    assert "pfscope repair" in one_line_error(again) and partial.exists()
 
 
 def _burn(stop):

@@ -28,7 +28,7 @@ import numpy as np
 from pfscope.trackers.data.sources import Source
 from pfscope.trackers.errors import InputError, RunFailed
 from pfscope.trackers.pipeline import BaseHook
-from pfscope.trackers.outputs import OutputLock
+from pfscope.trackers.outputs import OutputLock, incomplete_path
 from pfscope.trackers.outputs import check_output as _check_output
 from pfscope.trackers.report import level_rank
 
@@ -210,6 +210,10 @@ def record(source: Source, out: Path, opts: RecordOptions, *, trackers: Optional
     except ValueError as e:
         raise InputError(str(e)) from None
     out = check_output(Path(out), opts.force)
+    partial = incomplete_path(out)
+    if partial.exists() and not opts.force:
+        raise InputError(f"{partial}: left by an earlier run that did not complete (make it "
+                         f"whole with `pfscope repair {partial}`); pass --force to replace it")
     tracks_out = check_output(Path(opts.tracks_out), opts.force, "tracks file") \
         if opts.tracks_out and len(names) == 1 else None
     if tracks_out is not None and tracks_out.resolve() == out.resolve():
