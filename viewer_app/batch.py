@@ -26,11 +26,19 @@ printed.
 
 Runs go to a pool of ``--workers`` processes (default: the number of cores), each run in its
 own process with single-threaded BLAS/OpenCV so runs do not fight over cores.
+
+With ``--cluster tcp://HOST:PORT`` (or ``--backend dask --cluster ...``; spec keys ``cluster``
+and ``backend``) the same runs go to an existing Dask distributed cluster instead
+(``pip install "pfscope[distributed]"``); everything else is unchanged: the same files, resume,
+summary, and a failing run (or a dying worker) does not stop the others.  The workers write
+straight into ``--out``, so it must be a folder every worker sees at the same path (a shared
+file system), and so must the sources; relative paths are made absolute here first.
 """
 
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
 import os
 import sys
@@ -74,6 +82,9 @@ class Job:
 
     def path(self, suffix: str) -> Path:
         return Path(self.out_dir) / f"{self.run_id}{suffix}"
+
+
+BACKENDS = ("local", "dask")
 
 
 def _init_worker() -> None:
@@ -168,7 +179,8 @@ def plan(args) -> tuple[list[Job], Path, int]:
         except tomllib.TOMLDecodeError as e:
             raise InputError(f"{args.spec}: not valid TOML ({e})") from None
         unknown = set(spec) - {"sources", "trackers", "seeds", "frames", "level", "out",
-                               "workers", "set", "detector", "preset", "force", "max_points"}
+                               "workers", "set", "detector", "preset", "force", "max_points",
+                               "backend", "cluster"}
         if unknown:
             raise InputError(f"{args.spec}: unknown key(s) {', '.join(sorted(unknown))}")
 
@@ -210,12 +222,98 @@ def plan(args) -> tuple[list[Job], Path, int]:
     dup = sorted({i for i in ids if ids.count(i) > 1})
     if dup:
         raise InputError(f"two runs would write the same files: {', '.join(dup)}")
+    args.cluster, args.backend = _pick_backend(pick("backend", "backend"),
+                                               pick("cluster", "cluster"))
     return jobs, Path(out), workers
 
 
+def _pick_backend(backend, cluster) -> tuple[Optional[str], str]:
+    """(cluster address or None, backend name): a cluster address means Dask."""
+    backend = str(backend or ("dask" if cluster else "local")).lower()
+    if backend not in BACKENDS:
+        raise InputError(f"--backend {backend!r}: expected one of {', '.join(BACKENDS)}")
+    if backend == "dask" and not cluster:
+        raise InputError("--backend dask needs --cluster ADDRESS (e.g. tcp://scheduler:8786)")
+    if backend == "local" and cluster:
+        raise InputError("--cluster is for --backend dask (leave --backend out)")
+    return (str(cluster) if cluster else None), backend
+
+
+def _import_dask():
+    try:
+        from dask.distributed import Client, as_completed as dask_as_completed
+    except ImportError:
+        raise InputError('--cluster needs Dask distributed: pip install "pfscope[distributed]" '
+                         '(or "dask[distributed]")') from None
+    return Client, dask_as_completed
+
+
+def _for_cluster(job: Job) -> Job:
+    """The job with absolute paths, so a worker with another working folder finds them."""
+    src = job.source  # abspath, not resolve: a symlink keeps its name, so the run id too
+    if src not in ("", "synthetic") and Path(src).exists():
+        src = os.path.abspath(src)
+    return dataclasses.replace(job, source=src, out_dir=os.path.abspath(job.out_dir))
+
+
+def run_job_on_worker(job: Job) -> dict:
+    """``run_job`` on a Dask worker: single-threaded BLAS/torch first, like the local pool."""
+    _init_worker()
+    return run_job(job)
+
+
+def _died(j: Job, e: BaseException) -> dict:
+    return {"run": j.run_id, "source": j.source, "lane": j.lane, "seed": j.seed,
+            "status": "failed", "error": f"worker died: {type(e).__name__}: {e}"[:300]}
+
+
+def _run_on_cluster(todo: list[Job], address: str, header, report) -> dict[str, dict]:
+    """Submit every job to the Dask cluster at ``address``; rows by run id as they finish."""
+    Client, dask_as_completed = _import_dask()
+    try:
+        client = Client(address, timeout="20s")
+    except (OSError, TimeoutError) as e:
+        msg = str(e).splitlines()[0] if str(e) else type(e).__name__
+        raise InputError(f"--cluster {address}: cannot reach the Dask scheduler ({msg})") from None
+    rows: dict[str, dict] = {}
+    futs: dict = {}
+    try:
+        header(f"Dask cluster {address} ({sum(client.nthreads().values())} worker thread(s))")
+        token = f"{os.getpid()}-{time.time_ns()}"
+        for j in todo:
+            fut = client.submit(run_job_on_worker, _for_cluster(j), pure=False, retries=0,
+                                key=f"pfscope-batch-{j.run_id}-{token}")
+            futs[fut] = j
+        unseen = True
+        for i, fut in enumerate(dask_as_completed(list(futs)), start=1):
+            j = futs[fut]
+            try:
+                row = {**fut.result(), "source": j.source}
+            except BaseException as e:  # noqa: BLE001 - a worker died (KilledWorker) or was lost
+                if isinstance(e, KeyboardInterrupt):
+                    raise
+                row = _died(j, e)
+            if row["status"] == "ok" and unseen and not j.path(".json").is_file():
+                unseen = False  # said once: resume needs the workers' files to be seen here
+                print(f"batch: warning: {j.path('.json')} was written by a worker but is not "
+                      "visible here: --out must be a folder every worker shares, or resume "
+                      "will not see finished runs", file=sys.stderr)
+            rows[j.run_id] = row
+            report(i, row)
+    finally:
+        pending = [f for f in futs if not f.done()]
+        if pending:
+            client.cancel(pending)
+        client.close()
+    return rows
+
+
 def run_batch(jobs: list[Job], out: Path, workers: int, *, quiet: bool = False,
-              stream=None) -> list[dict]:
-    """Run ``jobs`` (skipping finished ones unless forced), write the summary, return rows."""
+              stream=None, cluster: Optional[str] = None) -> list[dict]:
+    """Run ``jobs`` (skipping finished ones unless forced), write the summary, return rows.
+
+    ``cluster``: the address of a Dask distributed scheduler to run them on instead of the
+    local process pool (``workers`` is then unused)."""
     stream = stream or sys.stderr
     out.mkdir(parents=True, exist_ok=True)
     rows: dict[str, dict] = {}
@@ -230,10 +328,11 @@ def run_batch(jobs: list[Job], out: Path, workers: int, *, quiet: bool = False,
                 pass
         todo.append(j)
     total, t0 = len(todo), time.perf_counter()
-    if not quiet:
-        skipped = len(jobs) - total
-        print(f"batch: {len(jobs)} runs, {skipped} already finished, {total} to run on "
-              f"{min(workers, max(total, 1))} worker(s)", file=stream)
+
+    def header(where: str) -> None:
+        if not quiet:
+            print(f"batch: {len(jobs)} runs, {len(jobs) - total} already finished, {total} to "
+                  f"run on {where}", file=stream)
 
     def report(i, row):
         if quiet:
@@ -246,13 +345,19 @@ def run_batch(jobs: list[Job], out: Path, workers: int, *, quiet: bool = False,
         print(f"batch [{i}/{total}] {row['run']}: {what}  (elapsed {el:.0f} s, ETA {eta:.0f} s)",
               file=stream)
 
-    if workers <= 1 or total <= 1:
+    if cluster and todo:
+        rows.update(_run_on_cluster(todo, cluster, header, report))
+    elif cluster:
+        header(f"Dask cluster {cluster}")  # nothing to run: no need to connect
+    elif workers <= 1 or total <= 1:
+        header(f"{min(workers, max(total, 1))} worker(s)")
         for i, j in enumerate(todo, start=1):
             rows[j.run_id] = run_job(j)
             report(i, rows[j.run_id])
     else:
         import multiprocessing as mp
 
+        header(f"{min(workers, max(total, 1))} worker(s)")
         with ProcessPoolExecutor(max_workers=min(workers, total),
                                  mp_context=mp.get_context("spawn"),
                                  initializer=_init_worker) as pool:
@@ -262,9 +367,7 @@ def run_batch(jobs: list[Job], out: Path, workers: int, *, quiet: bool = False,
                 try:
                     row = fut.result()
                 except BaseException as e:  # noqa: BLE001 - a worker died (killed, OOM)
-                    row = {"run": j.run_id, "source": j.source, "lane": j.lane,
-                           "seed": j.seed, "status": "failed",
-                           "error": f"worker died: {type(e).__name__}: {e}"[:300]}
+                    row = _died(j, e)
                 rows[j.run_id] = row
                 report(i, row)
     ordered = [rows[j.run_id] for j in jobs]
@@ -323,6 +426,11 @@ def add_batch_parser(sub, add_tracker_options) -> None:
     b.add_argument("--out", type=Path, default=None, help="output folder")
     b.add_argument("--workers", type=int, default=None,
                    help="parallel processes (default: the number of cores)")
+    b.add_argument("--cluster", default=None, metavar="ADDRESS",
+                   help="run on an existing Dask distributed cluster, e.g. tcp://host:8786 "
+                        "(pip install \"pfscope[distributed]\"); --out must be shared")
+    b.add_argument("--backend", default=None, choices=list(BACKENDS),
+                   help="local process pool (default) or dask (implied by --cluster)")
     b.add_argument("--force", action="store_true", help="re-run finished runs, overwrite outputs")
     b.add_argument("--json", action="store_true", help="print the summary as JSON")
     b.add_argument("--quiet", action="store_true", help="no per-run progress lines")
@@ -331,7 +439,7 @@ def add_batch_parser(sub, add_tracker_options) -> None:
 
 def cmd_batch(args) -> int:
     jobs, out, workers = plan(args)
-    rows = run_batch(jobs, out, workers, quiet=args.quiet)
+    rows = run_batch(jobs, out, workers, quiet=args.quiet, cluster=args.cluster)
     if args.json:
         print(json.dumps(rows, indent=2, sort_keys=True, default=str))
     else:

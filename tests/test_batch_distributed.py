@@ -1,0 +1,69 @@
+"""``pfscope batch --cluster ADDRESS`` (issue 10, item 7): the same batch on an existing Dask
+distributed cluster, here a ``LocalCluster`` of two worker processes started by the test —
+the same files and summary, a failing run does not stop the others, resume skips."""
+
+from __future__ import annotations
+
+import json
+import sys
+
+import pytest
+
+from pfscope.viewer_app.cli import main
+
+
+def test_batch_on_a_local_dask_cluster_writes_the_summary_and_resumes(tmp_path, capsys):
+    try:
+        from dask.distributed import LocalCluster
+    except ImportError as e:
+        pytest.skip(f"Dask distributed is not installed ({e}): pip install \"pfscope[distributed]\"")
+    out = tmp_path / "runs"
+    missing = tmp_path / "missing"
+    argv = ["batch", "--sources", f"synthetic,{missing}", "--trackers", "phd,mt",
+            "--seeds", "0,1", "--frames", "10", "--out", str(out)]
+    with LocalCluster(n_workers=2, processes=True, threads_per_worker=1,
+                      dashboard_address=None) as cluster:
+        address = cluster.scheduler_address
+        assert main(argv + ["--cluster", address]) == 1  # the missing source fails, alone
+        cap = capsys.readouterr()
+        assert f"Dask cluster {address}" in cap.err and "(2 worker thread(s))" in cap.err
+        runs = json.loads((out / "summary.json").read_text())["runs"]
+        status = {r["run"]: r["status"] for r in runs}
+        ok = [f"synthetic-seed{s}-{t}-seed{s}" for t in ("phd", "mt") for s in (0, 1)]
+        assert status == {**{r: "ok" for r in ok},
+                          **{f"missing-{t}-seed{s}": "failed"
+                             for t in ("phd", "mt") for s in (0, 1)}}
+        for r in runs:
+            if r["status"] == "ok":
+                assert r["frames"] == 10 and r["source"] == "synthetic"
+                for suffix in (".rrd", ".txt", ".json"):
+                    assert (out / f"{r['run']}{suffix}").is_file(), (r["run"], suffix)
+            else:
+                assert "missing" in r["error"]
+        assert all(r in (out / "summary.csv").read_text() for r in ok)
+        assert "missing-phd-seed0 failed" in cap.err
+
+        # resume: same command, the finished runs are skipped; only the ok ones this time
+        mtimes = {r: (out / f"{r}.rrd").stat().st_mtime_ns for r in ok}
+        assert main(["batch", "--sources", "synthetic", "--trackers", "phd,mt", "--seeds", "0,1",
+                     "--frames", "10", "--out", str(out), "--backend", "dask",
+                     "--cluster", address, "--json"]) == 0
+        cap = capsys.readouterr()
+        assert f"4 runs, 4 already finished, 0 to run on Dask cluster {address}" in cap.err
+        assert {r["status"] for r in json.loads(cap.out)} == {"skipped"}
+        assert mtimes == {r: (out / f"{r}.rrd").stat().st_mtime_ns for r in ok}
+
+
+def test_cluster_without_dask_says_how_to_install_in_one_line(tmp_path, capsys, monkeypatch):
+    monkeypatch.setitem(sys.modules, "dask.distributed", None)  # import fails like when absent
+    argv = ["batch", "--trackers", "passthrough", "--frames", "3", "--out", str(tmp_path / "o"),
+            "--cluster", "tcp://127.0.0.1:1"]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and 'pip install "pfscope[distributed]"' in err[0]
+    assert not list((tmp_path / "o").glob("*.rrd"))
+
+
+def test_backend_dask_needs_a_cluster_address(tmp_path, capsys):
+    assert main(["batch", "--backend", "dask", "--out", str(tmp_path / "o")]) == 2
+    assert "--backend dask needs --cluster" in capsys.readouterr().err
