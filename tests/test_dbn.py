@@ -267,3 +267,38 @@ def test_same_seed_same_tracks():
 def test_baseline_runs_without_the_dbn():
     res = run(_scene(frames=20), [make_tracker("phd-bgsub", seed=0)], level="particles")
     assert res.outcome.status == "completed"
+
+
+
+def test_synth_bg_noise_is_off_by_default_and_changes_pixels_only():
+    base = SceneConfig(frames=5, targets=2, width=160, height=120, seed=4)
+    noisy = SceneConfig(frames=5, targets=2, width=160, height=120, seed=4, bg_noise=3.0,
+                        flicker=0.05)
+    from pfscope.trackers.data.synthetic import SyntheticScene
+    a, b = SyntheticScene(base), SyntheticScene(noisy)
+    assert len(a.noise_patches) == 0 and len(b.noise_patches) > 0
+    np.testing.assert_array_equal(a.gt.boxes, b.gt.boxes)
+    np.testing.assert_array_equal(a.det.boxes, b.det.boxes)
+    assert not np.array_equal(a.render(3), b.render(3))
+    np.testing.assert_array_equal(SyntheticScene(noisy).render(3), b.render(3))  # seeded
+
+
+def test_dbn_cuts_false_positives_and_raises_mota_on_a_noisy_synthetic_scene():
+    """Issue 8 asks for "DBN-PHD beats its no-DBN baseline on OSPA" on a noisy synthetic
+    scene.  Measured over 10 seeds (100 frames, README "DBN-PHD (feng2015): Table I on our
+    data") that is NOT true: the mean OSPA is about the same and goes either way per seed, so
+    it is not asserted.  What holds on every seed is what the DBN is for — fewer noise tracks
+    and a better MOTA — and that is what this checks, over 3 seeds with a tolerance."""
+    fp = {"dbn-phd": [], "phd-bgsub": []}
+    mota = {"dbn-phd": [], "phd-bgsub": []}
+    for seed in (1, 2, 3):
+        cfg = SceneConfig(frames=40, targets=4, width=320, height=240, seed=seed,
+                          bg_noise=0.6, flicker=0.04)
+        res = run(open_source("synthetic", synthetic_config=cfg),
+                  [make_tracker("dbn-phd", seed=seed), make_tracker("phd-bgsub", seed=seed)])
+        for name, fps in fp.items():
+            fps.append(res.scores[name]["FP"])
+            mota[name].append(res.scores[name]["MOTA"])
+    assert np.mean(fp["dbn-phd"]) < 0.8 * np.mean(fp["phd-bgsub"]), fp
+    assert np.mean(mota["dbn-phd"]) > np.mean(mota["phd-bgsub"]) + 0.05, mota
+    assert np.all(np.array(mota["dbn-phd"]) > np.array(mota["phd-bgsub"]) - 0.05), mota

@@ -235,6 +235,13 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("synth", help="write the synthetic scene as a MOTChallenge folder")
     s.add_argument("--out", type=Path, required=True, help="output folder (must not exist)")
     _add_synth_options(s, frames_help="number of frames (default 150)")
+    s.add_argument("--bg-noise", type=NONNEG, default=0.0, metavar="R",
+                   help="background-subtraction noise: mean noise patches (random colour "
+                        "blotches lasting up to 8 frames, plus salt-and-pepper specks) "
+                        "starting per frame (default 0: off, the scene is unchanged)")
+    s.add_argument("--flicker", type=NONNEG, default=0.0, metavar="S",
+                   help="illumination flicker: std of a per-frame global gain jump, e.g. "
+                        "0.05 (default 0: off)")
     s.add_argument("--quiet", action="store_true")
 
     td = sub.add_parser("train-dbn", help="train the DBN of dbn-phd (feng2015) on a sequence's "
@@ -484,7 +491,10 @@ def cmd_synth(args) -> int:
         if not args.quiet and (i == n or i % max(1, n // 10) == 0):
             print(f"synth: {i}/{n} frames", file=sys.stderr)
 
-    path = write_sequence(args.out, _synth_config(args, args.frames), progress=progress)
+    from dataclasses import replace
+
+    cfg = replace(_synth_config(args, args.frames), bg_noise=args.bg_noise, flicker=args.flicker)
+    path = write_sequence(args.out, cfg, progress=progress)
     print(f"wrote synthetic MOT sequence to {path}")
     print(f"record it with:  pfscope record {path}")
     return 0

@@ -35,6 +35,17 @@ Scene (all sizes are fractions of the image, so a reduced-resolution scene is th
   ``persistent_prob`` per frame with jitter ``persistent_jitter`` (fraction of the spot size).
   Scores are Beta-distributed: higher for true detections than for clutter.
 
+Background-subtraction noise (off by default; ``bg_noise = flicker = 0`` leaves every pixel of a
+scene unchanged and draws nothing from any random stream): ``bg_noise`` is the mean number of
+*noise patches* starting per frame (Poisson), each an axis-aligned blotch of random colour,
+texture and shape (ellipse or rectangle, 0.02–0.25 of the image height, some person-sized),
+lasting 1–``bg_noise_duration`` frames at a fixed place, plus salt-and-pepper specks; this is
+what feng2015 §II-B/Fig. 2 calls noise patches and salt and pepper.  ``flicker`` is the std of a
+per-frame global gain jump ``1 + flicker·N(0, 1)`` (illumination flicker) on top of the slow
+drift.  They come from their own streams, so turning them on changes no trajectory, detection
+or other pixel noise; they are not in ``det``/``gt`` (pixels only: a background-subtraction
+tracker sees them, a detections-file tracker does not).
+
 Everything derives from ``SceneConfig.seed`` through named :class:`numpy.random.SeedSequence`
 streams: the same config gives identical ground truth, detections and pixels.
 """
@@ -60,6 +71,7 @@ from .motio import MotTable, write_mot
 
 # Independent random streams (spawn keys of SeedSequence(seed)); frames use (_FRAME, index).
 _TRAJ, _LOOK, _BACKGROUND, _DETECT, _FRAME = 0, 1, 2, 3, 1000
+_BGNOISE, _FLICKER = 2000, 2001  # background-subtraction noise (off by default)
 _SUBPIX = 4  # OpenCV fixed-point shift: coordinates in 1/16 px, so motion is smooth
 _AA_INSET = 1.0  # px: OpenCV's anti-aliased edges spread about one pixel past the geometry
 _NOISE_LEVELS = 65536  # size of the Gaussian quantile table used for sensor noise
@@ -105,6 +117,10 @@ class SceneConfig:
     illumination: float = 0.12      # amplitude of the brightness drift (fraction)
     illumination_period: float = 20.0  # seconds per brightness cycle
     jpeg_quality: int = 95
+    # background-subtraction noise (module docstring); 0 = off, the scene is unchanged
+    bg_noise: float = 0.0           # mean noise patches starting per frame (Poisson)
+    bg_noise_duration: int = 8      # a patch lasts 1..this many frames
+    flicker: float = 0.0            # std of the per-frame global gain jump
 
     def __post_init__(self):
         def bad(msg):
@@ -130,6 +146,14 @@ class SceneConfig:
         for name in ("p_detect", "persistent_prob", "min_vis_detect"):
             if not 0.0 <= getattr(self, name) <= 1.0:
                 bad(f"{name} must be in [0, 1], got {getattr(self, name)}")
+        if not (self.bg_noise >= 0 and math.isfinite(self.bg_noise)):
+            bad(f"bg_noise must be >= 0, got {self.bg_noise}")
+        if not (0 <= self.flicker < 1):
+            bad(f"flicker must be in [0, 1), got {self.flicker}")
+        if isinstance(self.bg_noise_duration, bool) or \
+                not isinstance(self.bg_noise_duration, (int, np.integer)) or \
+                self.bg_noise_duration < 1:
+            bad(f"bg_noise_duration must be an integer >= 1, got {self.bg_noise_duration!r}")
         if self.box_noise < 0 or self.persistent_jitter < 0 or self.noise_std < 0:
             bad("box_noise, persistent_jitter and noise_std must be >= 0")
         if not 0 <= self.horizon < self.feet_near <= 1:
@@ -515,12 +539,73 @@ class SyntheticScene:
             if self.present[f, k]:
                 _draw_figure(img, self.boxes[f, k], float(self.phase[f, k]), self._looks[k])
         gain = self.illumination_gain(index)
+        if cfg.bg_noise > 0:
+            self._draw_noise_patches(img, index)
+        if cfg.flicker > 0:
+            gain *= 1.0 + cfg.flicker * float(_rng(cfg.seed, _FLICKER, index).standard_normal())
         if cfg.noise_std == 0:
             return cv2.convertScaleAbs(img, alpha=gain)
         u = _rng(cfg.seed, _FRAME, f + 1).integers(0, _NOISE_LEVELS, img.size, dtype=np.uint16)
         noise = np.take(self._noise_table, u).reshape(img.shape)
         # gain * img + noise_std * N(0, 1), rounded and saturated to uint8 in one pass
         return cv2.addWeighted(img, gain, noise, cfg.noise_std, 0.0, dtype=cv2.CV_8U)
+
+    @cached_property
+    def noise_patches(self) -> np.ndarray:
+        """(P, 12) background-subtraction noise patches (``bg_noise > 0``): first frame,
+        last frame, x, y, w, h, shape (0 ellipse, 1 rectangle), B, G, R, texture amplitude,
+        texture seed.  Empty when off."""
+        cfg = self.config
+        if cfg.bg_noise <= 0:
+            return np.zeros((0, 12))
+        rng = _rng(cfg.seed, _BGNOISE)
+        n = rng.poisson(cfg.bg_noise, size=cfg.frames)
+        first = np.repeat(np.arange(1, cfg.frames + 1), n).astype(np.float64)
+        P = len(first)
+        last = first + rng.integers(0, cfg.bg_noise_duration, P)
+        H, W = cfg.height, cfg.width
+        h = np.exp(rng.uniform(np.log(0.02), np.log(0.25), P)) * H
+        w = h * np.exp(rng.uniform(np.log(0.3), np.log(3.0), P))
+        x = rng.random(P) * np.maximum(W - w, 1.0)
+        y = rng.random(P) * np.maximum(H - h, 1.0)
+        shape = (rng.random(P) < 0.5).astype(np.float64)
+        col = rng.uniform(0, 255, (P, 3))
+        tex = rng.uniform(0, 60, P)
+        tseed = rng.integers(0, 2 ** 31, P).astype(np.float64)
+        return np.column_stack([first, last, x, y, w, h, shape, col, tex, tseed])
+
+    def _draw_noise_patches(self, img: np.ndarray, index: int) -> None:
+        """Paint the noise patches alive at frame ``index`` and salt-and-pepper specks."""
+        cfg = self.config
+        pt = self.noise_patches
+        H, W = img.shape[:2]
+        for r in pt[(pt[:, 0] <= index) & (index <= pt[:, 1])]:
+            x, y, w, h = r[2:6]
+            x0, y0 = int(max(x, 0)), int(max(y, 0))
+            x1, y1 = int(min(x + w, W)), int(min(y + h, H))
+            if x1 <= x0 or y1 <= y0:
+                continue
+            trng = np.random.default_rng(int(r[11]))
+            patch = np.empty((y1 - y0, x1 - x0, 3), np.float32)
+            patch[:] = r[7:10]
+            patch += trng.standard_normal(patch.shape[:2] + (1,)).astype(np.float32) * r[10]
+            if r[6] == 0:                      # ellipse: blend only inside it
+                yy, xx = np.mgrid[0:y1 - y0, 0:x1 - x0]
+                m = (((xx + x0 + 0.5 - (x + w / 2)) / (w / 2)) ** 2
+                     + ((yy + y0 + 0.5 - (y + h / 2)) / (h / 2)) ** 2) <= 1.0
+            else:
+                m = np.ones(patch.shape[:2], bool)
+            region = img[y0:y1, x0:x1]
+            region[m] = np.clip(patch[m], 0, 255).astype(np.uint8)
+        # salt and pepper: ~bg_noise·20 specks of 2-5 px
+        rng = _rng(cfg.seed, _BGNOISE, index)
+        k = rng.poisson(cfg.bg_noise * 20)
+        if k:
+            xs, ys = rng.integers(0, W, k), rng.integers(0, H, k)
+            rs = rng.integers(1, 3, k)
+            vs = rng.choice([0, 255], k)
+            for xi, yi, ri, vi in zip(xs, ys, rs, vs):
+                img[max(yi - ri, 0):yi + ri + 1, max(xi - ri, 0):xi + ri + 1] = vi
 
     def frames(self) -> Iterator[Frame]:
         fps = self.config.fps

@@ -16,6 +16,11 @@ person), with ``s`` one of (parameter ``score``):
 - ``"logit"``: ``s = c · a(x)``, eq. (9) literally (``1 · W⁽³⁾`` read as the output unit's
   activation a); unbounded, so it also moves g against κ for people.
 
+This is the ``apply = "particle"`` reading (the ``paper`` preset).  The tracker's default,
+``apply = "blob"``, uses the DBN on the measurement instead (κ(z) scaled by the blob's noise
+odds, see :mod:`.tracker`, "Where the score goes"); :class:`DBNLikelihood` is then used only
+for the blobs' (and, for display, the particles') scores.
+
 Cost: the Gaussian is cheap; the score needs the particle's features (integral-histogram
 look-ups, :mod:`.features`) and a DBN forward pass.  :meth:`DBNLikelihood.log_g_pairs` scores
 only the particles that appear in the candidate pairs (those inside some blob's gate), once
@@ -39,6 +44,7 @@ from ..types import Frame, cxcywh_to_xywh
 from .features import FrameFeatures
 
 SCORES = ("logsigmoid", "logit")
+APPLY = ("particle", "blob", "blob_particle")
 
 
 @dataclass(frozen=True)
@@ -58,6 +64,14 @@ class DBNParams:
     accept: float = param(0.5, "a blob is accepted as a person when its DBN probability σ(a) "
                                ">= this; only accepted blobs give births (new-born target "
                                "selection, feng2015 §II)")
+    apply: str = param("blob", "where the DBN score enters eq. (11) (tracker module docstring, "
+                               "'Where the score goes'): 'particle' g(z|x)·exp(s(x)) (the "
+                               "literal reading, preset 'paper'); 'blob' (default, measured "
+                               "better) the blob's clutter intensity κ(z)·exp(−c·a(z)); "
+                               "'blob_particle' both, the particle score normalised per blob "
+                               "(best gated particle of each blob gets factor 1)")
+    kappa_clip: float = param(5.0, "|c·a(z)| is clipped to this in the blob reading (κ(z) moves "
+                                   "by at most a factor e^clip either way)")
     score_gate: float = param(0.99, "particles are scored only inside this confidence gate "
                                     "of some blob (elsewhere g is 0 for every blob)")
 
@@ -65,6 +79,11 @@ class DBNParams:
         if self.score not in SCORES:
             raise ValueError(f"DBNParams.score must be one of {', '.join(SCORES)}, "
                              f"got {self.score!r}")
+        if self.apply not in APPLY:
+            raise ValueError(f"DBNParams.apply must be one of {', '.join(APPLY)}, "
+                             f"got {self.apply!r}")
+        if not self.kappa_clip > 0:
+            raise ValueError(f"DBNParams.kappa_clip must be > 0, got {self.kappa_clip!r}")
         if not 0 < self.feature_scale <= 1:
             raise ValueError(f"DBNParams.feature_scale must be in (0, 1], "
                              f"got {self.feature_scale!r}")
@@ -148,4 +167,4 @@ class DBNLikelihood:
         return g + self.particle_log_score(states[uniq], frame)[inv]
 
 
-__all__ = ["DBNParams", "DBNLikelihood", "gaussian_pairs", "state_boxes", "SCORES"]
+__all__ = ["DBNParams", "DBNLikelihood", "gaussian_pairs", "state_boxes", "SCORES", "APPLY"]

@@ -48,6 +48,30 @@ keeps a fixed N particles whatever N̂_k, maggio2007's resampler draws L_k = ρ�
 printed, the first particle could never be drawn); ``count = "per_target"`` gives the ρ·N̂
 rule instead.
 
+Where the score goes (parameter ``dbn.apply``).  feng2015 says the DBN score of eq. (9) is
+"the weight for each particle" and feeds eq. (11), whose clutter term ``κ_{k,z}(z)`` is written
+per measurement.  Two readings:
+
+- ``"particle"`` (literal; preset ``paper``): ``ψ_{k,z}(x) = (1 − p_M) N(z; Hx, R) e^{s(x)}``
+  (:mod:`.likelihood`).  Measured on PETS09-S2L1 this lowers the weight of *real* people's
+  particles too (a DBN score < 1 for a good but not perfectly centred box), so in eq. (11)
+  ``ψ/(κ + C)`` the clutter κ wins more of each person's blob, their clusters fall under the
+  K-means threshold T and misses rise (README, "DBN-PHD (feng2015): Table I on our data").
+- ``"blob"`` (default): the score classifies the *measurement* (person vs noise, which is
+  what the paper trains it for, §II-B/D.2) and enters eq. (11) through ``κ_{k,z}(z)``.
+  Treat the blob's features f as part of the measurement: a target generates (z, f) with
+  ``g(z|x) p(f|person)``, clutter with ``κ(z) p(f|noise)``; dividing eq. (11)'s numerator and
+  denominator by ``p(f|person)`` leaves ``ψ_{k,z}(x) / (κ(z)·p(f|noise)/p(f|person) + C_k(z))``
+  with C_k(z) of eq. (12) unchanged.  The DBN's logit a(z) estimates
+  ``log p(person|f)/p(noise|f)``, so ``κ_{k,z}(z) = κ(z) · exp(−c·a(z))`` (|c·a| clipped to
+  ``kappa_clip``): an accepted blob (a > 0) competes with less clutter, so a person's mass
+  stays near 1; a noise blob (a < 0) is mostly explained as clutter.  Particles keep the
+  plain Gaussian g, so no good particle of a person is down-weighted, and only the blobs are
+  scored (the ``features`` stage scores particles only for display at level ``particles``).
+- ``"blob_particle"``: both, with the particle score normalised within each blob
+  (``s(x) − max_{x' gated to z} s(x')``: the best particle of every blob keeps factor 1, so
+  the score shapes the cloud inside a blob without moving the blob's total against κ).
+
 torch is loaded only when the tracker is built with the DBN on (never by the registry).
 """
 
@@ -160,7 +184,7 @@ def _gated_pairs(states: np.ndarray, Z: np.ndarray, params: PHDParams, confidenc
 
 
 @register(presets={"default": DBNPHDParams(), "paper": DBNPHDParams(
-    filter=PHDParams(), dbn=DBNParams(score="logit"))})
+    filter=PHDParams(), dbn=DBNParams(score="logit", apply="particle"))})
 class DBNPHDTracker(_AssociatingTracker):
     """DBN-PHD: codebook blobs → particle PHD with a DBN colour+HOG likelihood → K-means →
     graph association."""
@@ -220,9 +244,11 @@ class DBNPHDTracker(_AssociatingTracker):
         boxes, fill = blobs_from_mask(mask, bp.scale, bp.min_area, bp.max_foreground)
         Z = xywh_to_cxcywh(boxes)
         if self.dbn is not None and len(boxes):
-            blob_prob = 1.0 / (1.0 + np.exp(-self.dbn.logits(boxes, frame)))
+            blob_a = self.dbn.logits(boxes, frame)
+            blob_prob = 1.0 / (1.0 + np.exp(-blob_a))
             accepted = blob_prob >= p.dbn.accept
         else:
+            blob_a = np.zeros(len(boxes))
             blob_prob = np.full(len(boxes), np.nan)
             accepted = np.ones(len(boxes), dtype=bool)
         log.scalar("dbn/blobs/count", len(boxes))
@@ -264,10 +290,19 @@ class DBNPHDTracker(_AssociatingTracker):
         rows, cols = _gated_pairs(cand.states, Z, fp, p.dbn.score_gate)
         log_g_pairs = gaussian_pairs(cand.states, Z, rows, cols, fp.likelihood)
         uniq, inv = np.unique(rows, return_inverse=True)
-        log.scalar("dbn/particles/scored", len(uniq) if self.dbn is not None else 0)
-        if self.dbn is not None and len(uniq):
+        apply = p.dbn.apply
+        on_particles = apply in ("particle", "blob_particle")
+        score_them = self.dbn is not None and len(uniq) and (on_particles or want_p)
+        log.scalar("dbn/particles/scored", len(uniq) if score_them else 0)
+        if score_them:
             logits = self.dbn.logits(state_boxes(cand.states[uniq]), frame)
-            log_g_pairs = log_g_pairs + self.dbn.log_score(logits)[inv]
+            if on_particles:
+                s_pairs = self.dbn.log_score(logits)[inv]
+                if apply == "blob_particle":        # best gated particle of each blob: 1
+                    best = np.full(len(Z), -np.inf)
+                    np.maximum.at(best, cols, s_pairs)
+                    s_pairs = s_pairs - best[cols]
+                log_g_pairs = log_g_pairs + s_pairs
             if want_p:
                 log.add(Points("dbn/particles/score", cand.states[uniq, :2],
                                weights=1.0 / (1.0 + np.exp(-logits)), values={"score": logits}))
@@ -277,6 +312,10 @@ class DBNPHDTracker(_AssociatingTracker):
         log_g[rows, cols] = log_g_pairs
         log_kappa = (log_clutter_density(Z, fp.clutter, fp.likelihood) if len(Z)
                      else np.zeros(0))
+        if self.dbn is not None and len(Z) and apply in ("blob", "blob_particle"):
+            # κ_{k,z}(z) = κ(z)·exp(−c·a(z)): the blob's noise odds (module docstring)
+            clip = p.dbn.kappa_clip
+            log_kappa = log_kappa - np.clip(p.dbn.c * blob_a, -clip, clip)
         up = update(cand, log_g, log_kappa, fp.likelihood.p_miss)
         updated = up.particles
         log.scalar("dbn/mass", updated.mass)
