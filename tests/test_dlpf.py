@@ -235,3 +235,94 @@ def test_wrong_frame_size_is_a_clear_error():
     tr.step(Frame(1, 0.0, np.zeros((240, 320, 3), np.uint8)), None)
     with pytest.raises(ValueError, match="frame 2: dlpf: frame size changed"):
         tr.step(Frame(2, 0.1, np.zeros((100, 100, 3), np.uint8)), None)
+
+
+# ------------------------------------------------------------------ online scale prior (ours)
+
+def test_scale_prior_learns_height_vs_row_online():
+    from pfscope.trackers.dlpf.scale import ScalePrior
+
+    rng = np.random.default_rng(0)
+    H = 480
+    prior = ScalePrior(H, min_samples=20)
+    lo, hi = 30.0, 200.0
+    assert not prior.ready()
+    flat = prior.draw(np.full(1000, 300.0), lo, hi, 1.0, np.random.default_rng(1))
+    assert flat.min() >= lo and flat.max() <= hi and np.std(np.log(flat)) > 0.4  # log-uniform
+
+    def boxes(n):  # a ground plane: h = 20 + 0.4 * centre row, 5 % noise
+        yc = rng.uniform(100, 450, n)
+        h = (20 + 0.4 * yc) * np.exp(rng.normal(0, 0.05, n))
+        return np.c_[np.zeros(n), yc - h / 2, h / 3, h]
+
+    prior.add(boxes(10))
+    assert not prior.ready()                                  # too few samples
+    narrow = ScalePrior(H, min_samples=5)
+    narrow.add(np.array([[0.0, 200.0, 20.0, 60.0]] * 30))      # all at one row: no slope
+    assert not narrow.ready()
+    prior.add(boxes(200))
+    assert prior.ready()
+    a, b = prior.coef()
+    assert a == pytest.approx(20, abs=6) and b / H == pytest.approx(0.4, abs=0.03)
+    assert 0.04 < prior.sigma < 0.1
+    y = np.full(2000, 400.0)
+    h = prior.draw(y, lo, hi, 1.0, np.random.default_rng(2))
+    assert np.median(h) == pytest.approx(180, rel=0.05)
+    assert h.max() <= hi                                      # clipped to the flat range
+    half = prior.draw(y, lo, hi, 0.5, np.random.default_rng(2))
+    near = np.abs(np.log(half / 180)) < 0.15
+    assert 0.45 < near.mean() < 0.75                          # half prior, half flat
+    with pytest.raises(ValueError):
+        ScalePrior(H, forget=0.0)
+
+
+def test_tracker_parents_use_the_scale_prior_once_ready():
+    from pfscope.trackers.dlpf.scale import ScalePrior
+
+    tr = make_tracker("dlpf", seed=0, **{"parents.prior_mix": "1.0", "parents.explore": "0"})
+    frames = list(_scene(3).frames())
+    tr.step(frames[0], None, None)
+    H = frames[0].image.shape[0]
+    assert isinstance(tr.scale_prior, ScalePrior) and not tr.scale_prior.ready()
+    yc = np.linspace(20, H - 20, 60)
+    h = 10 + 0.25 * yc
+    tr.scale_prior.add(np.c_[np.zeros(60), yc - h / 2, h / 3, h])
+    assert tr.scale_prior.ready()
+    res = tr.step(frames[1], None, "particles")
+    free = find(res.stages, "dlpf/parents/free", Points)[0]
+    expect = np.clip(tr.scale_prior.mean_height(free.xy[:, 1]), 0.1 * H, 0.3 * H)
+    err = np.abs(np.log(free.values["scale"] / expect))
+    assert np.median(err) < 0.15                               # drawn around h(y)
+    assert find(res.stages, "dlpf/parents/free", Points)  # still reported
+
+
+def test_reference_histogram_refresh_blends_the_supporting_hit():
+    from pfscope.trackers.report import StageLog
+
+    tr = make_tracker("dlpf", seed=0, **{"children.ref_update": "0.25",
+                                         "children.inject": "0"})
+    frames = list(_scene(3).frames())
+    tr.step(frames[0], None, None)
+    img = frames[1].image
+    track = tr._spawn(frames[0].image, np.array([100.0, 60.0, 30.0, 90.0]), parent=5)
+    old = track.ref.copy()
+    tr.tracks.append(track)
+    hit = np.array([10.0, 10.0, 30.0, 90.0])
+    track.support = hit
+    tr._update_children(img, 2, StageLog(tr.stages, None))
+    C = tr.params.children
+    q = ch.histograms(img, hit[None], (C.grid_x, C.grid_y), C.Mh, C.Ms, C.Mv, C.s_min,
+                      C.v_min)[0]
+    assert np.allclose(track.ref, 0.75 * old + 0.25 * q)
+    assert track.ref.sum() == pytest.approx(1.0)
+
+
+def test_landed_preset_keeps_the_first_settings():
+    from pfscope.trackers.api import make_params
+
+    landed = make_params("dlpf", "landed")
+    assert landed.parents.prior_mix == 0 and landed.classifier.hit_threshold == 0
+    assert landed.children.estimate == "map" and landed.children.ref_update == 0
+    assert landed.children.snap == 0
+    default = make_params("dlpf")
+    assert default.parents.prior_mix > 0 and default.confirm.count == 4

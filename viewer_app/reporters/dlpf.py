@@ -13,6 +13,7 @@ LAYOUT = TrackerLayout(
            ("Particles", ("dlpf/parents/free", "dlpf/children/count")),
            ("Tracks", ("dlpf/tracks", "tracks/count", "dlpf/confirm/candidates")),
            ("Bhattacharyya", ("dlpf/bhattacharyya/**",)),
+           ("Scale prior (px)", ("dlpf/scale/**",)),
            ("Motion", ("dlpf/motion/mean", "dlpf/motion/magnitude/**")),
            ("Step ms", ("timing/**",))),
 )

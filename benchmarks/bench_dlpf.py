@@ -1,0 +1,214 @@
+"""DLPF (jung2013) against an exhaustive sliding-window HOG detector feeding MT, in ONE run.
+
+jung2013 claims "significantly reduced computation" against exhaustive detection without
+measuring it.  This measures it: both pipelines run as two lanes of the same
+:func:`pfscope.trackers.pipeline.run` on the same frames (stepped one after the other on every
+frame, so a change of load on a shared machine hits both alike), and the script prints, per
+lane, classifier windows/frame, frames/s, MOTA, IDF1, OSPA (and recall/precision), and the
+ratios exhaustive / DLPF.
+
+Lanes:
+
+- ``dlpf``: ``make_tracker("dlpf", seed)`` (its defaults; ``--set NAME=VALUE`` overrides), no
+  detections file.  Windows/frame = the tracker's own count of windows its classifier scored
+  (parents' windows + the tracks' verification windows).  Time = the pipeline's
+  ``FrameReport.step_seconds`` of the lane (the whole DLPF step: LK, parents, classifier,
+  confirmation, children).
+- ``hog-mt``: :class:`ExhaustiveLane`: the ``hog`` detector (``make_detector("hog")``:
+  OpenCV's ``HOGDescriptor.detectMultiScale`` with the same default people SVM as DLPF's
+  classifier; ``--hog-upscale`` to enlarge the frame first) followed by the MT tracker
+  (``make_tracker("mt")``) on its detections: what ``pipeline.run(..., {"mt":
+  make_tracker("mt")}, detector="hog")`` does, but the detector runs inside the lane so that its
+  time is counted in the lane's ``step_seconds``.  Windows/frame =
+  :func:`~pfscope.trackers.dlpf.classifier.sliding_window_count` of the detector's own pyramid
+  parameters (win stride, padding, scale step, upscale / resize cap; OpenCV's 64 levels): the
+  number of 64×128 windows ``detectMultiScale`` scores on a frame of that size.
+
+Scores are the pipeline's (``run(...).scores``, CLEAR-MOT / identity / OSPA over exactly the
+frames run, ``--start .. --start + --frames − 1``).  The machine is shared: absolute fps are
+indicative, the ratios from the same run hold better.
+
+Usage (the README numbers)::
+
+    .venv/bin/python benchmarks/bench_dlpf.py --source pets --start 401 --seeds 0,1,2 --json /tmp/bench_dlpf.json
+    .venv/bin/python benchmarks/bench_dlpf.py --source synthetic --seeds 0,1,2
+
+``--seeds`` runs the whole comparison once per seed (DLPF is random, HOG+MT is not; the
+synthetic scene is also generated with that seed) and prints each run and the mean.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from typing import Optional
+
+from _common import (EXIT_NO_DATA, NoData, command_line, machine, open_bench_source,
+                     print_machine, table, write_json)
+
+from pfscope.trackers.api import StepResult, make_tracker
+from pfscope.trackers.data.sources import open_source
+from pfscope.trackers.data.synthetic import SceneConfig
+from pfscope.trackers.detect import make_detector
+from pfscope.trackers.dlpf.classifier import sliding_window_count
+from pfscope.trackers.pipeline import BaseHook, FrameReport, RunInfo, run
+from pfscope.trackers.types import Detections, Frame
+
+METRICS = ("MOTA", "IDF1", "OSPA", "Recall", "Precision", "IDSW")
+
+
+class ExhaustiveLane:
+    """Exhaustive HOG detector + MT as one lane: its ``step_seconds`` is detector + tracker."""
+
+    name = "hog-mt"
+    paper = "-"
+    stages = ("detect", "track")
+    needs_detections = False
+    needs_image = True
+
+    def __init__(self, detector_options: Optional[dict] = None, seed: int = 0):
+        self.detector = make_detector("hog", **(detector_options or {}))
+        self.mt = make_tracker("mt", seed)
+        self.detect_seconds = 0.0
+        self.windows = 0
+        self.frames = 0
+
+    def step(self, frame: Frame, detections: Optional[Detections],
+             level: Optional[str] = None) -> StepResult:
+        t0 = time.perf_counter()
+        dets = self.detector(frame)
+        self.detect_seconds += time.perf_counter() - t0
+        H, W = frame.image.shape[:2]
+        d = self.detector
+        self.windows += sliding_window_count(W, H, win_stride=d.win_stride, padding=d.padding,
+                                             scale=d.scale, upscale=d.upscale,
+                                             resize_to=d.resize_to)
+        self.frames += 1
+        return self.mt.step(frame, dets, level)
+
+    def finish(self):
+        return self.mt.finish()
+
+    def config(self) -> dict:
+        return {"tracker": "hog+mt", "detector": repr(self.detector), "mt": self.mt.config()}
+
+
+class StepTimes(BaseHook):
+    def begin(self, info: RunInfo) -> None:
+        self.seconds: dict[str, float] = {lane: 0.0 for lane in info.trackers}
+
+    def on_frame(self, report: FrameReport) -> None:
+        for lane, s in report.step_seconds.items():
+            self.seconds[lane] += s
+
+
+def open_for(spec: str, seed: int, frames: Optional[int]):
+    if spec == "synthetic":  # the scene is generated with the run's seed
+        return open_source("synthetic", synthetic_config=SceneConfig(frames=frames or 150,
+                                                                     seed=seed))
+    return open_bench_source(spec)
+
+
+def one_run(spec: str, seed: int, start: int, frames: Optional[int], dlpf_options: dict,
+            hog_options: dict) -> dict:
+    src = open_for(spec, seed, frames)
+    dlpf = make_tracker("dlpf", seed, **dlpf_options)
+    hog = ExhaustiveLane(hog_options, seed)
+    times = StepTimes()
+    res = run(src, {"dlpf": dlpf, "hog-mt": hog}, frames=frames, start=start, hooks=[times])
+    n = res.frames
+    out = {"source": getattr(src, "name", spec), "seed": seed, "start": start, "frames": n,
+           "size": None, "lanes": {}}
+    for lane, windows in (("dlpf", dlpf.windows_evaluated / max(dlpf.frames_seen, 1)),
+                          ("hog-mt", hog.windows / max(hog.frames, 1))):
+        s = res.scores.get(lane, {})
+        out["lanes"][lane] = {"windows_per_frame": windows,
+                              "fps": n / times.seconds[lane] if times.seconds[lane] else None,
+                              "ms_per_frame": 1000 * times.seconds[lane] / max(n, 1),
+                              **{m: float(s[m]) for m in METRICS if m in s}}
+    out["lanes"]["hog-mt"]["detector_ms_per_frame"] = 1000 * hog.detect_seconds / max(n, 1)
+    out["dlpf_tracks_config"] = dlpf.config()
+    out["hog_config"] = hog.config()
+    return out
+
+
+def ratios(d: dict, h: dict) -> dict:
+    r = {"windows (hog/dlpf)": h["windows_per_frame"] / d["windows_per_frame"],
+         "fps (dlpf/hog)": (d["fps"] or 0) / (h["fps"] or float("nan"))}
+    for m in ("MOTA", "IDF1"):
+        if m in d and m in h and h[m]:
+            r[f"{m} (dlpf/hog)"] = d[m] / h[m]
+    if "OSPA" in d and "OSPA" in h and d["OSPA"]:
+        r["OSPA (hog/dlpf)"] = h["OSPA"] / d["OSPA"]
+    return r
+
+
+def mean_lane(runs: list[dict], lane: str) -> dict:
+    keys = [k for k in runs[0]["lanes"][lane] if all(runs[i]["lanes"][lane].get(k) is not None
+                                                     for i in range(len(runs)))]
+    return {k: sum(r["lanes"][lane][k] for r in runs) / len(runs) for k in keys}
+
+
+def fmt(v) -> str:
+    if v is None:
+        return "-"
+    if isinstance(v, float):
+        return f"{v:.3f}" if abs(v) < 10 else f"{v:.1f}"
+    return str(v)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--source", default="pets", help="pets | synthetic | PATH (default pets)")
+    ap.add_argument("--start", type=int, default=None,
+                    help="first frame (default: 401 for pets — frames 1-400 are where DLPF's "
+                         "settings were chosen — else 1)")
+    ap.add_argument("--frames", type=int, default=None,
+                    help="frames to run (default: to the end; synthetic: 150)")
+    ap.add_argument("--seeds", default="0", help="comma-separated seeds, one run each")
+    ap.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
+                    help="DLPF parameter override (as pfscope record --set)")
+    ap.add_argument("--hog-upscale", type=float, default=1.0,
+                    help="hog detector upscale (default 1: the pipeline's hog detector as is)")
+    ap.add_argument("--json", default=None, metavar="FILE", help="write every number to FILE")
+    a = ap.parse_args(argv)
+    start = a.start if a.start is not None else (401 if a.source == "pets" else 1)
+    dlpf_options = dict(s.split("=", 1) for s in a.set)
+    hog_options = {"upscale": a.hog_upscale} if a.hog_upscale != 1.0 else {}
+    info = machine()
+    print_machine(info)
+    runs = []
+    try:
+        for seed in (int(s) for s in a.seeds.split(",")):
+            print(f"seed {seed}: running dlpf and hog-mt on {a.source} from frame {start} ...",
+                  file=sys.stderr, flush=True)
+            runs.append(one_run(a.source, seed, start, a.frames, dlpf_options, hog_options))
+    except NoData as e:
+        print(f"error: {e}", file=sys.stderr)
+        return EXIT_NO_DATA
+    r0 = runs[0]
+    print(f"\n=== {r0['source']}: frames {start}..{start + r0['frames'] - 1} "
+          f"({r0['frames']} frames), seeds {a.seeds}, both lanes in one pipeline run ===")
+    cols = ["windows_per_frame", "fps", "ms_per_frame", *METRICS]
+    rows = []
+    for r in runs:
+        for lane in ("dlpf", "hog-mt"):
+            rows.append([f"{lane} seed {r['seed']}", *(fmt(r["lanes"][lane].get(c)) for c in cols)])
+    means = {lane: mean_lane(runs, lane) for lane in ("dlpf", "hog-mt")}
+    if len(runs) > 1:
+        for lane in ("dlpf", "hog-mt"):
+            rows.append([f"{lane} mean", *(fmt(means[lane].get(c)) for c in cols)])
+    print(table(["lane", "windows/frame", "fps", "ms/frame", *METRICS], rows))
+    rat = ratios(means["dlpf"], means["hog-mt"])
+    print("\nratios (mean over seeds): " + ", ".join(f"{k} = {v:.3g}" for k, v in rat.items()))
+    print(f"hog detector alone: {means['hog-mt'].get('detector_ms_per_frame', float('nan')):.1f} "
+          f"ms/frame of the hog-mt lane's {means['hog-mt']['ms_per_frame']:.1f}")
+    write_json(a.json, {"command": command_line(), "machine": info, "start": start,
+                        "runs": runs, "mean": means, "ratios": rat})
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,121 @@
+"""Online perspective prior on the parents' window scale (ours; jung2013 §2.1 draws the scale
+"randomly" with no prior).
+
+A camera looking down on a ground plane sees a person ``h`` px tall whose feet are at image row
+``y_f`` with ``h ≈ a (y_f − y_horizon)``: height is linear in the foot row, hence also linear in
+the box's centre row ``y_c = y_f − h/2`` (``h = (y_c − y_horizon) / (1/a − 1/2)``).  So the
+prior is ``log h ~ N(log(α + β y_c), σ²)`` with ``α, β, σ`` **estimated online from the video**:
+every classifier-verified box of a confirmed track (its parent's best verification hit, and the
+box at confirmation) is one sample ``(y_c, h)``.  Nothing is scene-specific: before
+``min_samples`` samples spread over ``min_spread`` of the image height have arrived, or when the
+fit is not usable (a non-positive height anywhere in the image, a residual spread ≥
+``sigma_max``), :meth:`ScalePrior.ready` is False and the parents keep the flat log-uniform draw.
+
+Estimator: exponentially forgetting weighted least squares (``forget`` per sample) of ``h`` on
+``(1, y_c)``, i.e. sufficient statistics ``Σw, Σw y, Σw y², Σw h, Σw y h`` decayed by ``forget``
+at each new sample, so the prior follows a slow change (a zooming camera) but one bad sample
+cannot move it much.  The spread ``σ`` is the weighted RMS of ``log(h / ĥ(y))``, floored at
+``sigma_min`` (the classifier tolerates ~±10 % of scale, so a narrower draw gains nothing).
+
+:func:`draw` mixes the prior with the flat draw: a fraction ``mix`` of parents draw from the
+prior at their row, the rest log-uniformly (exploration: people off the plane, a wrong fit).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+class ScalePrior:
+    """Online fit of person height vs image row (module docstring)."""
+
+    def __init__(self, height: int, *, forget: float = 0.995, min_samples: int = 20,
+                 min_spread: float = 0.15, sigma_min: float = 0.08, sigma_max: float = 0.5):
+        if not (0 < forget <= 1 and min_samples >= 2 and 0 < sigma_min <= sigma_max):
+            raise ValueError("scale prior: need 0 < forget <= 1, min_samples >= 2, "
+                             "0 < sigma_min <= sigma_max")
+        self.height = float(height)
+        self.forget, self.min_samples = float(forget), int(min_samples)
+        self.min_spread, self.sigma_min, self.sigma_max = float(min_spread), float(sigma_min), \
+            float(sigma_max)
+        self.S = np.zeros(5)        # Σw, Σw y, Σw y², Σw h, Σw y h (y scaled by the height)
+        self.R = np.zeros(3)        # Σw, Σw r, Σw r² of log residuals against the fit then
+        self.n = 0
+        self._ymin, self._ymax = np.inf, -np.inf
+
+    def add(self, boxes: np.ndarray) -> None:
+        """Add person boxes ``(x, y, w, h)`` (N, 4) as samples ``(centre row, height)``."""
+        b = np.asarray(boxes, dtype=np.float64).reshape(-1, 4)
+        for x, y, w, h in b:
+            if not (h > 1 and np.isfinite(y)):
+                continue
+            yc = (y + h / 2) / self.height
+            if self.n >= 2:  # residual against the fit before this sample (honest spread)
+                ab = self.coef()
+                if ab is not None:
+                    pred = ab[0] + ab[1] * yc
+                    if pred > 1:
+                        r = np.log(h / pred)
+                        self.R = self.forget * self.R + np.array([1.0, r, r * r])
+            self.S = self.forget * self.S + np.array([1.0, yc, yc * yc, h, yc * h])
+            self.n += 1
+            self._ymin, self._ymax = min(self._ymin, yc), max(self._ymax, yc)
+
+    def coef(self) -> np.ndarray | None:
+        """``(α, β)`` of ``h = α + β y_c / H``, or None (degenerate)."""
+        sw, sy, syy, sh, syh = self.S
+        det = sw * syy - sy * sy
+        if sw <= 0 or det <= 1e-9 * max(sw * syy, 1e-12):
+            return None
+        beta = (sw * syh - sy * sh) / det
+        alpha = (sh - beta * sy) / sw
+        return np.array([alpha, beta])
+
+    @property
+    def sigma(self) -> float:
+        """Spread of ``log h`` around the fit (floored at ``sigma_min``)."""
+        w, s1, s2 = self.R
+        if w <= 0:
+            return self.sigma_max
+        var = max(s2 / w - (s1 / w) ** 2, 0.0) + (s1 / w) ** 2  # RMS: bias counts too
+        return max(float(np.sqrt(var)), self.sigma_min)
+
+    def ready(self) -> bool:
+        """Enough, spread-out samples and a fit that is positive over the image."""
+        if self.n < self.min_samples or self._ymax - self._ymin < self.min_spread:
+            return False
+        ab = self.coef()
+        if ab is None or min(ab[0], ab[0] + ab[1]) <= 1.0:
+            return False
+        return self.sigma < self.sigma_max
+
+    def mean_height(self, y_centre: np.ndarray) -> np.ndarray:
+        """Expected person height (px) for centre rows ``y_centre`` (px); needs :meth:`ready`."""
+        ab = self.coef()
+        assert ab is not None
+        return ab[0] + ab[1] * np.asarray(y_centre, dtype=np.float64) / self.height
+
+    def draw(self, y_centre: np.ndarray, lo: float, hi: float, mix: float,
+             rng: np.random.Generator) -> np.ndarray:
+        """Heights for parents at rows ``y_centre``: a fraction ``mix`` from the prior
+        (log-normal around :meth:`mean_height`, clipped to ``[lo, hi]``), the rest log-uniform in
+        ``[lo, hi]``; all log-uniform while not :meth:`ready`."""
+        y = np.asarray(y_centre, dtype=np.float64).reshape(-1)
+        n = len(y)
+        flat = np.exp(rng.uniform(np.log(lo), np.log(hi), n))
+        if not self.ready() or mix <= 0:
+            return flat
+        mu = np.log(np.maximum(self.mean_height(y), 1.0))
+        prior = np.exp(mu + rng.normal(0.0, self.sigma, n))
+        use = rng.random(n) < mix
+        return np.where(use, np.clip(prior, lo, hi), flat)
+
+    def describe(self) -> str:
+        if not self.ready():
+            return f"scale prior: not ready ({self.n} samples)"
+        a, b = self.coef()  # type: ignore[misc]
+        return (f"scale prior: h = {a:.1f} + {b:.1f} * y/H px, sigma {self.sigma:.3f} "
+                f"({self.n} samples)")
+
+
+__all__ = ["ScalePrior"]
