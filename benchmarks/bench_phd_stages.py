@@ -54,7 +54,7 @@ import numpy as np
 from pfscope.trackers.api import Rows, StepResult, make_params, make_tracker, params_config
 from pfscope.trackers.errors import InputError
 from pfscope.trackers.phd.clustering import kmeans_peaks
-from pfscope.trackers.phd.filter import (PHDStepResult, as_observations, birth,
+from pfscope.trackers.phd.filter import (PHDStepResult, as_observations, birth, gated_log_g,
                                          log_clutter_density, predict, resample, update)
 from pfscope.trackers.phd.tracker import PHDTracker
 from pfscope.trackers.pipeline import BaseHook, FrameReport, RunInfo
@@ -119,7 +119,7 @@ class StageTimedPHDTracker(PHDTracker):
         born = birth(predicted, Z, p, f.rng)
         t2 = pc()
         candidates = predicted.concat(born.particles)
-        log_g = f.likelihood.log_g(candidates.states, Z, frame)
+        log_g = gated_log_g(f.likelihood, candidates.states, Z, frame, p)  # as PHDFilter.step
         log_kappa = log_clutter_density(Z, p.clutter, p.likelihood)
         updated = update(candidates, log_g, log_kappa, p.likelihood.p_miss)
         t3 = pc()
