@@ -441,7 +441,7 @@ def cmd_record(args) -> int:
     for name, sc in res.scores.items():
         print(f"scores vs ground truth ({name}): MOTA {sc['MOTA']:.3f}  MOTP {sc['MOTP']:.3f}  "
               f"IDF1 {sc['IDF1']:.3f}  HOTA {sc['HOTA']:.3f}  IDSW {int(sc['IDSW'])}  "
-              f"OSPA {sc['OSPA']:.1f} px")
+              f"OSPA {sc['OSPA']:.1f} px  [{str(sc.get('convention', '?')).upper()} convention]")
     print(f"open it with:  rerun {res.out}")
     if args.serve and sys.stdin.isatty():
         input("web viewer running; press Enter to stop\n")
