@@ -264,6 +264,13 @@ def _reference(tmp_path, gt_txt, tracks_txt, n_frames, benchmark):
     t = np.loadtxt(tracks_txt, delimiter=",", ndmin=2)
     np.savetxt(tmp_path / "tr" / "x" / "data" / "SEQ.txt", t[t[:, 0] <= n_frames],
                delimiter=",", fmt="%.6f")
+    return run_trackeval(tmp_path, n_frames, benchmark)
+
+
+def run_trackeval(tmp_path, n_frames, benchmark) -> dict:
+    """TrackEval on the files already under ``tmp_path/gt/SEQ/gt/gt.txt`` and
+    ``tmp_path/tr/x/data/SEQ.txt``: its preprocessing, then CLEAR, Identity and HOTA."""
+    MotChallenge2DBox, metrics = _trackeval()
     with contextlib.redirect_stdout(io.StringIO()):
         ds = MotChallenge2DBox(dict(
             GT_FOLDER=str(tmp_path / "gt"), TRACKERS_FOLDER=str(tmp_path / "tr"),

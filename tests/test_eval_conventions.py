@@ -4,15 +4,13 @@ on a gt with MOT16 classes.  (TrackEval on PETS09-S2L1 under both: tests/test_ev
 
 from __future__ import annotations
 
-import contextlib
-import io
 import json
 
 import numpy as np
 import pytest
 from scipy.optimize import linear_sum_assignment
 
-from test_eval import _SAME, _trackeval, box, table
+from test_eval import _SAME, box, run_trackeval, table
 from pfscope.trackers.data.motio import MotTable, read_mot, write_mot
 from pfscope.trackers.eval import OnlineEvaluator, box_iou, detect_convention, evaluate
 from pfscope.trackers.eval import clear
@@ -103,23 +101,11 @@ def test_mot16_uses_the_classes_of_a_mot16_gt(tmp_path):
 
 def _trackeval_files(tmp_path, gt_txt, tracks_txt, n_frames, benchmark):
     """TrackEval's reader, preprocessing and CLEAR / Identity / HOTA on the files as they are."""
-    MotChallenge2DBox, metrics = _trackeval()
     (tmp_path / "gt" / "SEQ" / "gt").mkdir(parents=True)
     (tmp_path / "tr" / "x" / "data").mkdir(parents=True)
     (tmp_path / "gt" / "SEQ" / "gt" / "gt.txt").write_text(gt_txt.read_text())
     (tmp_path / "tr" / "x" / "data" / "SEQ.txt").write_text(tracks_txt.read_text())
-    with contextlib.redirect_stdout(io.StringIO()):
-        ds = MotChallenge2DBox(dict(
-            GT_FOLDER=str(tmp_path / "gt"), TRACKERS_FOLDER=str(tmp_path / "tr"),
-            SKIP_SPLIT_FOL=True, SEQ_INFO={"SEQ": n_frames}, BENCHMARK=benchmark,
-            TRACKERS_TO_EVAL=["x"], PRINT_CONFIG=False))
-        data = ds.get_preprocessed_seq_data(ds.get_raw_seq_data("x", "SEQ"), "pedestrian")
-        out = {}
-        for cls in metrics:
-            res = (cls(dict(PRINT_CONFIG=False)) if cls.__name__ != "HOTA" else cls()
-                   ).eval_sequence(data)
-            out.update({k: float(np.mean(v)) for k, v in res.items()})
-    return out
+    return run_trackeval(tmp_path, n_frames, benchmark)
 
 
 @pytest.mark.parametrize("convention,benchmark", [("mot16", "MOT17"), ("mot15", "MOT15")])

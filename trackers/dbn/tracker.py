@@ -88,10 +88,12 @@ from ..api import StepResult, register
 from ..params import param, part, to_dict
 from ..phd.association import AssocParams
 from ..phd.clustering import kmeans_peaks
+from ..phd.gating import LogGPairs, gate_pairs
 from ..phd.filter import (OBS_COLS, BirthParams, PHDFilter, PHDParams, birth, gate_threshold,
                           log_clutter_density, obs_std, predict, update)
 from ..phd.tracker import ClusterParams, _AssociatingTracker
 from ..report import Boxes, Mask, Points, StageLog
+from ..smc.resampling import resample as smc_resample
 from ..smc.weights import ParticleSet
 from ..types import Detections, Frame, xywh_to_cxcywh
 from .codebook import BackgroundParams, ForegroundModel, blobs_from_mask
@@ -160,27 +162,21 @@ class DBNPHDParams:
 
 def resample_alg3(ps: ParticleSet, n: int, rng: np.random.Generator) -> ParticleSet:
     """feng2015 Algorithm 3: ``n`` particles by systematic resampling of ``w̃ / N̂_k``, each
-    weighing ``N̂_k / n`` with ``N̂_k = Σ w̃`` (draw: one uniform)."""
-    if len(ps) == 0 or n <= 0 or not np.isfinite(ps.log_mass):
-        return ps.take(np.zeros(0, dtype=np.int64))
-    log_n_hat = ps.log_mass
-    c = np.cumsum(np.exp(ps.log_weights - log_n_hat))       # c_i = c_{i-1} + w̃_i / N̂_k
-    c[-1] = 1.0
-    mu = rng.uniform(0.0, 1.0 / n) + np.arange(n) / n        # μ_j = μ_1 + (j − 1)/N
-    idx = np.minimum(np.searchsorted(c, mu, side="left"), len(c) - 1)  # while μ_j > c_i: i++
-    return ps.take(idx).with_log_weights(np.full(n, log_n_hat - math.log(n)))
+    weighing ``N̂_k / n`` with ``N̂_k = Σ w̃`` — exactly the shared systematic resampler
+    (:func:`pfscope.trackers.smc.resample`) with a fixed ``n``."""
+    return smc_resample(ps, n, rng, "systematic")
 
 
 def _gated_pairs(states: np.ndarray, Z: np.ndarray, params: PHDParams, confidence: float):
     """Candidate pairs (rows, cols): particle inside the ``confidence`` gate of blob z under
-    the observation noise R(z)."""
-    if len(states) == 0 or len(Z) == 0:
+    the observation noise R(z) — the PHD filter's grid-indexed gate (:mod:`..phd.gating`), so
+    no (particles × blobs) array is formed."""
+    chunks = list(gate_pairs(states[:, OBS_COLS], Z, gate_threshold(confidence),
+                             std_z=obs_std(Z[:, 2:4], params.likelihood)))
+    if not chunks:
         return np.zeros(0, np.int64), np.zeros(0, np.int64)
-    std = obs_std(Z[:, 2:4], params.likelihood)                        # (N_z, 4)
-    q = (states[:, None, OBS_COLS] - Z[None]) / std[None]
-    d2 = np.einsum("ijk,ijk->ij", q, q)
-    rows, cols = np.nonzero(d2 <= gate_threshold(confidence))
-    return rows.astype(np.int64), cols.astype(np.int64)
+    return (np.concatenate([c.rows for c in chunks]).astype(np.int64),
+            np.concatenate([c.cols for c in chunks]).astype(np.int64))
 
 
 @register(presets={"default": DBNPHDParams(), "paper": DBNPHDParams(
@@ -308,8 +304,7 @@ class DBNPHDTracker(_AssociatingTracker):
                                weights=1.0 / (1.0 + np.exp(-logits)), values={"score": logits}))
 
         log.stage("update")
-        log_g = np.full((len(cand), len(Z)), -np.inf)
-        log_g[rows, cols] = log_g_pairs
+        log_g = LogGPairs(rows, cols, log_g_pairs)  # sparse: the update never sees N × Z
         log_kappa = (log_clutter_density(Z, fp.clutter, fp.likelihood) if len(Z)
                      else np.zeros(0))
         if self.dbn is not None and len(Z) and apply in ("blob", "blob_particle"):
