@@ -285,10 +285,11 @@ def test_synth_bg_noise_is_off_by_default_and_changes_pixels_only():
 
 def test_dbn_cuts_false_positives_and_raises_mota_on_a_noisy_synthetic_scene():
     """Issue 8 asks for "DBN-PHD beats its no-DBN baseline on OSPA" on a noisy synthetic
-    scene.  Measured over 10 seeds (100 frames, README "DBN-PHD (feng2015): Table I on our
-    data") that is NOT true: the mean OSPA is about the same and goes either way per seed, so
-    it is not asserted.  What holds on every seed is what the DBN is for — fewer noise tracks
-    and a better MOTA — and that is what this checks, over 3 seeds with a tolerance."""
+    scene.  With the person-blob training set, over seeds 1–5 (100 frames, 6 people) the mean
+    OSPA is better (44.6 vs 47.9 px) and 4 of 5 seeds are, but seed 5 is 18 px worse, and on
+    this test's 40-frame scenes 3 of 6 seeds go each way: not reliable enough to assert.
+    What holds on every seed is what the DBN is for — fewer noise tracks and a better MOTA —
+    and that is what this checks, over 3 seeds with a tolerance."""
     fp = {"dbn-phd": [], "phd-bgsub": []}
     mota = {"dbn-phd": [], "phd-bgsub": []}
     for seed in (1, 2, 3):
@@ -302,3 +303,134 @@ def test_dbn_cuts_false_positives_and_raises_mota_on_a_noisy_synthetic_scene():
     assert np.mean(fp["dbn-phd"]) < 0.8 * np.mean(fp["phd-bgsub"]), fp
     assert np.mean(mota["dbn-phd"]) > np.mean(mota["phd-bgsub"]) + 0.05, mota
     assert np.all(np.array(mota["dbn-phd"]) > np.array(mota["phd-bgsub"]) - 0.05), mota
+
+
+# ----------------------------------------------------------------------------- speed paths
+
+def test_per_box_crop_route_equals_the_whole_frame_integral_route():
+    """A few boxes (the blobs) are described from their own crops; many (the particles) from
+    the frame's integral histograms.  Both give the same features, at the border too."""
+    img = _image(3, h=121, w=163)
+    cfg = FeatureConfig()
+    for scale in (1.0, 0.5):
+        crop = FrameFeatures(img, cfg, scale)
+        assert crop.describe(BOXES).shape == (len(BOXES), cfg.dim) and crop._ii is None
+        whole = FrameFeatures(img, cfg, scale)
+        whole._integrals()                                   # forces the integral route
+        np.testing.assert_allclose(crop.describe(BOXES), whole.describe(BOXES),
+                                   rtol=1e-9, atol=1e-9)
+
+
+def test_codebook_first_match_equals_the_dense_first_match():
+    """The slot-by-slot matching gives, per pixel, whether any codeword matches (Kim eqs. (2),
+    (3)) and the first one that does — as the dense (L, P) evaluation."""
+    from pfscope.trackers.dbn.codebook import _Book
+
+    rng = np.random.default_rng(0)
+    P, L = 3000, 4
+    b = _Book(P, L)
+    b.v[:] = rng.uniform(0, 255, (L, P, 3))
+    b.vv[:] = np.einsum("lpc,lpc->lp", b.v, b.v)
+    inten = np.sqrt(b.vv)
+    b.imin[:] = inten * rng.uniform(0.8, 1.0, (L, P))
+    b.imax[:] = inten * rng.uniform(1.0, 1.2, (L, P))
+    b.f[:] = rng.integers(0, 3, (L, P))
+    x = (b.v[rng.integers(0, L, P), np.arange(P)] + rng.normal(0, 8, (P, 3))).astype(np.float32)
+    xx = np.einsum("pc,pc->p", x, x)
+    xi = np.sqrt(xx)
+    usable = rng.random((L, P)) < 0.7
+    for use in (None, usable):
+        eps, alpha, beta = 12.0, 0.6, 1.25
+        xv = np.einsum("pc,lpc->lp", x, b.v)
+        cd2 = xx[None] - xv * xv / np.maximum(b.vv, 1e-6)
+        dense = ((b.f > 0) & (cd2 <= eps * eps) & (xi[None] >= alpha * b.imax)
+                 & (xi[None] <= np.minimum(beta * b.imax, b.imin / alpha)))
+        if use is not None:
+            dense &= use
+        hit, slot = b.first_match(x, xx, xi, eps, alpha, beta, use)
+        assert 0.2 < hit.mean() < 0.95                      # both cases occur
+        np.testing.assert_array_equal(hit, dense.any(axis=0))
+        np.testing.assert_array_equal(slot[hit], np.argmax(dense, axis=0)[hit])
+
+
+def test_row_wise_codebook_update_equals_the_indexed_update():
+    from pfscope.trackers.dbn.codebook import _Book
+
+    rng = np.random.default_rng(1)
+    P, L = 2000, 3
+    a, b = _Book(P, L), _Book(P, L)
+    for book in (a, b):
+        book.v[:] = np.arange(L * P * 3, dtype=np.float32).reshape(L, P, 3) % 251
+        book.vv[:] = np.einsum("lpc,lpc->lp", book.v, book.v)
+        book.imin[:], book.imax[:] = 50, 200
+        book.f[:], book.q[:], book.lam[:] = 3, 5, 2
+    x = rng.uniform(0, 255, (P, 3)).astype(np.float32)
+    xi = np.sqrt(np.einsum("pc,pc->p", x, x))
+    hit = rng.random(P) < 0.9
+    slot = np.where(rng.random(P) < 0.8, 0, rng.integers(1, L, P))  # slot 0: the row route
+    a.update_hits(hit, slot, x, xi, 9)
+    pix = np.flatnonzero(hit)
+    b.update(pix, slot[pix], x, xi, 9)
+    for arr in ("v", "vv", "imin", "imax", "f", "lam", "p", "q"):
+        np.testing.assert_allclose(getattr(a, arr), getattr(b, arr), rtol=1e-6, err_msg=arr)
+
+
+# ----------------------------------------------------------------------------- training set
+
+def test_person_blobs_are_positives_and_partial_blobs_are_left_out():
+    gt = np.array([[100.0, 50.0, 40.0, 100.0]])
+    blobs = np.array([[102.0, 52.0, 40.0, 96.0],      # the person's blob: IoU ~0.9
+                      [100.0, 50.0, 40.0, 40.0],      # the head and torso only: IoU 0.4
+                      [300.0, 200.0, 30.0, 30.0]])    # noise far away
+    boxes, labels = dbn_model.sample_boxes((480, 640, 3), gt, blobs, np.random.default_rng(0),
+                                           n_random=0, n_near=0, n_jitter=0)
+    got = {tuple(b): lab for b, lab in zip(boxes.tolist(), labels.tolist())}
+    assert got[tuple(blobs[0])] == 1.0 and got[tuple(gt[0])] == 1.0
+    assert got[tuple(blobs[2])] == 0.0
+    assert tuple(blobs[1]) not in got
+
+
+def test_hue_rotation_augmentation_rolls_hue_bins_only():
+    cfg = FeatureConfig()
+    img = _image(4)
+    X = FrameFeatures(img, cfg).describe(BOXES[:3])
+    r = dbn_model.rotate_hue(X, cfg, 2)
+    np.testing.assert_array_equal(r[:, :cfg.hog_dim], X[:, :cfg.hog_dim])
+    np.testing.assert_array_equal(dbn_model.rotate_hue(r, cfg, cfg.hue_bins - 2), X)
+    # exact for whole bins: turn the image's hue by 2 bins (45 OpenCV units), same features
+    import cv2
+    hsv = cv2.cvtColor(img, cv2.COLOR_BGR2HSV)
+    turned = hsv.copy()
+    turned[..., 0] = (hsv[..., 0].astype(int) + 180 * 2 // cfg.hue_bins) % 180
+    from pfscope.trackers.dbn.features import bin_maps
+    _, c0 = bin_maps(img, cfg)
+    hb = np.argmax(c0, axis=2)
+    chrom = hb < cfg.hue_bins
+    h = hsv[..., 0].astype(int)
+    np.testing.assert_array_equal(hb[chrom], h[chrom] * cfg.hue_bins // 180)
+    hb2 = turned[..., 0].astype(int) * cfg.hue_bins // 180
+    np.testing.assert_array_equal(hb2[chrom], (hb[chrom] + 2) % cfg.hue_bins)
+
+
+def test_bench_dbn_times_every_stage_of_both_lanes_and_writes_json(tmp_path):
+    import json
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    out = tmp_path / "b.json"
+    r = subprocess.run([sys.executable, str(root / "benchmarks" / "bench_dbn.py"), "--source",
+                        "synthetic", "--frames", "12", "--json", str(out)],
+                       capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr[-2000:]
+    data = json.loads(out.read_text())
+    (run_,) = data["runs"]
+    assert run_["frames"] == 12
+    for lane in ("dbn-phd", "phd-bgsub"):
+        d = run_["lanes"][lane]
+        assert list(d["stage_ms"]) == ["background", "blobs", "predict", "birth", "features",
+                                       "update", "resample", "cluster", "associate"]
+        assert all(v >= 0 for v in d["stage_ms"].values())
+        # the stages are the step: their sum is the step time, up to the report's overhead
+        assert sum(d["stage_ms"].values()) <= d["ms_per_frame"] * 1.01 + 0.5
+        assert d["fps"] > 0 and d["OSPA"] is not None and d["MOTA"] is not None
+    assert "per-stage ms/frame" in r.stdout

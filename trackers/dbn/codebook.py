@@ -29,7 +29,8 @@ frames is promoted into the background (a parked car, a moved chair), cache code
 for ``cache_forget`` frames are dropped, and background codewords unseen for ``stale_delete``
 frames are dropped.
 
-Everything is numpy over ``(pixels, L)`` arrays — no Python loop over pixels.  ``scale < 1``
+Everything is numpy over ``(L, pixels)`` arrays (slot-major; a pixel is matched slot by slot
+only until its first match) — no Python loop over pixels.  ``scale < 1``
 runs the model on a down-sampled image (area averaging also removes sensor noise); blobs are
 reported in full-resolution pixels.
 
@@ -95,31 +96,61 @@ class BackgroundParams:
 
 
 class _Book:
-    """Codewords of every pixel: structure of arrays over (P pixels, L slots)."""
+    """Codewords of every pixel: structure of arrays over (L slots, P pixels), slot-major, so
+    one slot of every pixel is a contiguous row (the matching and the update walk slots)."""
 
     def __init__(self, n_pix: int, L: int):
-        self.v = np.zeros((n_pix, L, 3), np.float32)
-        self.vv = np.zeros((n_pix, L), np.float32)        # ‖v‖², cached
-        self.imin = np.zeros((n_pix, L), np.float32)
-        self.imax = np.zeros((n_pix, L), np.float32)
-        self.f = np.zeros((n_pix, L), np.int32)           # 0: empty slot
-        self.lam = np.zeros((n_pix, L), np.int32)
-        self.p = np.zeros((n_pix, L), np.int32)
-        self.q = np.zeros((n_pix, L), np.int32)
+        self.v = np.zeros((L, n_pix, 3), np.float32)
+        self.vv = np.zeros((L, n_pix), np.float32)        # ‖v‖², cached
+        self.imin = np.zeros((L, n_pix), np.float32)
+        self.imax = np.zeros((L, n_pix), np.float32)
+        self.f = np.zeros((L, n_pix), np.int32)           # 0: empty slot
+        self.lam = np.zeros((L, n_pix), np.int32)
+        self.p = np.zeros((L, n_pix), np.int32)
+        self.q = np.zeros((L, n_pix), np.int32)
 
-    def match(self, x, xx, inten, eps, alpha, beta, usable=None):
-        """(P, L) bool: codeword matches the pixel (Kim eqs. (2), (3))."""
-        xv = np.einsum("pc,plc->pl", x, self.v)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            cd2 = xx[:, None] - xv * xv / np.maximum(self.vv, 1e-6)
-        lo = alpha * self.imax
-        hi = np.minimum(beta * self.imax, self.imin / alpha)
-        ok = (self.f > 0) & (cd2 <= eps * eps) & (inten[:, None] >= lo) & (inten[:, None] <= hi)
-        return ok if usable is None else ok & usable
+    def first_match(self, x, xx, inten, eps, alpha, beta, usable=None):
+        """``(hit (P,) bool, slot (P,) int64)``: whether some codeword matches each pixel
+        (Kim eqs. (2), (3)) and the first one that does, computed slot by slot on the pixels
+        still unmatched (most background pixels match their first codeword, so the later
+        slots see a small fraction of the image).  ``usable`` (L, P): codewords allowed."""
+        L, P = self.f.shape
+        hit = np.zeros(P, bool)
+        slot = np.zeros(P, np.int64)
+        left = None                                   # None: every pixel (slot 0)
+        e2 = np.float32(eps * eps)
+        for s in range(L):
+            if left is None:
+                xs, xxs, ins = x, xx, inten
+                v, vv, imin, imax, f = self.v[s], self.vv[s], self.imin[s], self.imax[s], self.f[s]
+                us = None if usable is None else usable[s]
+            else:
+                if not len(left):
+                    break
+                xs, xxs, ins = x[left], xx[left], inten[left]
+                v, vv, imin, imax, f = (self.v[s, left], self.vv[s, left], self.imin[s, left],
+                                        self.imax[s, left], self.f[s, left])
+                us = None if usable is None else usable[s, left]
+            xv = np.einsum("pc,pc->p", xs, v)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                cd2 = xxs - xv * xv / np.maximum(vv, 1e-6)
+            ok = ((f > 0) & (cd2 <= e2) & (ins >= alpha * imax)
+                  & (ins <= np.minimum(beta * imax, imin / alpha)))
+            if us is not None:
+                ok &= us
+            if left is None:
+                hit[ok] = True
+                left = np.flatnonzero(~ok)
+            else:
+                got = left[ok]
+                hit[got] = True
+                slot[got] = s
+                left = left[~ok]
+        return hit, slot
 
     def update(self, pix, slot, x, inten, t):
         """Kim Alg. 1 step II(v): running mean and aux update of codeword ``slot`` of ``pix``."""
-        k = pix * self.f.shape[1] + slot               # flat (pixel, slot) index: 1-D takes
+        k = slot * self.f.shape[1] + pix               # flat (slot, pixel) index: 1-D takes
         fk = self.f.reshape(-1)[k]
         f = fk.astype(np.float32)[:, None]
         xp = x[pix]
@@ -134,18 +165,45 @@ class _Book:
         self.lam.reshape(-1)[k] = np.maximum(self.lam.reshape(-1)[k], t - q[k])
         q[k] = t
 
+    def update_hits(self, hit, slot, x, inten, t):
+        """:meth:`update` of codeword ``slot[p]`` of every pixel ``p`` with ``hit[p]``.  A slot
+        that most pixels matched is updated row-wise with masked writes (no gather/scatter of
+        a fancy index over the whole image); the others through :meth:`update`."""
+        L, P = self.f.shape
+        for s in range(L):
+            sel = hit & (slot == s)
+            n = int(np.count_nonzero(sel))
+            if n == 0:
+                continue
+            if n < P // 4:
+                self.update(np.flatnonzero(sel), np.full(n, s), x, inten, t)
+                continue
+            f = self.f[s]
+            ff = f.astype(np.float32)[:, None]
+            v = self.v[s]
+            nv = (ff * v + x) / (ff + 1)
+            np.copyto(v, nv, where=sel[:, None])
+            np.copyto(self.vv[s], np.einsum("pc,pc->p", nv, nv), where=sel)
+            np.copyto(self.imin[s], np.minimum(self.imin[s], inten), where=sel)
+            np.copyto(self.imax[s], np.maximum(self.imax[s], inten), where=sel)
+            np.add(f, 1, out=f, where=sel)
+            q = self.q[s]
+            np.copyto(self.lam[s], np.maximum(self.lam[s], t - q), where=sel)
+            np.copyto(q, t, where=sel)
+
     def add(self, pix, slot, x, inten, t):
         """Kim Alg. 1 step II(iv): a new codeword ``v = x``, ``aux = (I, I, 1, t − 1, t, t)``."""
-        self.v[pix, slot] = x[pix]
-        self.vv[pix, slot] = np.einsum("pc,pc->p", x[pix], x[pix])
-        self.imin[pix, slot] = inten[pix]
-        self.imax[pix, slot] = inten[pix]
-        self.f[pix, slot] = 1
-        self.lam[pix, slot] = t - 1
-        self.p[pix, slot] = t
-        self.q[pix, slot] = t
+        self.v[slot, pix] = x[pix]
+        self.vv[slot, pix] = np.einsum("pc,pc->p", x[pix], x[pix])
+        self.imin[slot, pix] = inten[pix]
+        self.imax[slot, pix] = inten[pix]
+        self.f[slot, pix] = 1
+        self.lam[slot, pix] = t - 1
+        self.p[slot, pix] = t
+        self.q[slot, pix] = t
 
     def clear(self, where):
+        """Empty the codewords at ``where`` (an (L, P) mask or a (slots, pixels) index)."""
         self.f[where] = 0
         self.lam[where] = 0
 
@@ -155,9 +213,9 @@ class _Book:
 
     def free_or_stalest(self, pix, key):
         """A slot per pixel: the first empty one, else the one with the largest ``key``."""
-        empty = self.f[pix] == 0
-        k = np.where(empty, np.int64(1) << 40, key[pix].astype(np.int64))
-        return np.argmax(k, axis=1)
+        empty = self.f[:, pix] == 0
+        k = np.where(empty, np.int64(1) << 40, key[:, pix].astype(np.int64))
+        return np.argmax(k, axis=0)
 
 
 class Codebook:
@@ -192,35 +250,28 @@ class Codebook:
         inten = np.sqrt(xx)
         b = self.book
         if t <= p.train_frames:
-            m = b.match(x, xx, inten, p.eps_train, p.alpha, p.beta)
-            hit = m.any(axis=1)
-            slot = np.argmax(m, axis=1)
-            pix = np.flatnonzero(hit)
-            b.update(pix, slot[pix], x, inten, t)
+            hit, slot = b.first_match(x, xx, inten, p.eps_train, p.alpha, p.beta)
+            b.update_hits(hit, slot, x, inten, t)
             miss = np.flatnonzero(~hit)
             if len(miss):
                 b.add(miss, b.free_or_stalest(miss, b.wrap_lambda(t)), x, inten, t)
             # provisional detection: temporal filter over the t frames seen so far
             usable = b.wrap_lambda(t) <= t / 2.0
-            fg = ~b.match(x, xx, inten, p.eps_detect, p.alpha, p.beta, usable).any(axis=1)
+            fg = ~b.first_match(x, xx, inten, p.eps_detect, p.alpha, p.beta, usable)[0]
             if t == p.train_frames:
                 b.clear(b.wrap_lambda(t) > p.train_frames / 2.0)   # Kim §2.1 temporal filter
             return fg.reshape(self._shape)
         # detection with layered modelling (Kim §3)
-        m = b.match(x, xx, inten, p.eps_detect, p.alpha, p.beta)
-        hit = m.any(axis=1)
-        slot = np.argmax(m, axis=1)
-        pix = np.flatnonzero(hit)
-        b.update(pix, slot[pix], x, inten, t)
+        hit, slot = b.first_match(x, xx, inten, p.eps_detect, p.alpha, p.beta)
+        b.update_hits(hit, slot, x, inten, t)
         fg = ~hit
         miss = np.flatnonzero(fg)
         c = self.cache
         if len(miss):
             # match the cache only on the foreground pixels (the cache is per pixel too)
             sub = _take(c, miss)
-            mc = sub.match(x[miss], xx[miss], inten[miss], p.eps_train, p.alpha, p.beta)
-            chit = mc.any(axis=1)
-            cslot = np.argmax(mc, axis=1)
+            chit, cslot = sub.first_match(x[miss], xx[miss], inten[miss], p.eps_train, p.alpha,
+                                          p.beta)
             c.update(miss[chit], cslot[chit], x, inten, t)
             new = miss[~chit]
             if len(new):
@@ -229,12 +280,12 @@ class Codebook:
         c.clear((c.f > 0) & (t - c.q > p.cache_forget))
         promote = np.argwhere((c.f > 0) & (c.f > p.cache_add))
         if len(promote):
-            pp, cs = promote[:, 0], promote[:, 1]
+            cs, pp = promote[:, 0], promote[:, 1]
             bs = b.free_or_stalest(pp, t - b.q)
             for arr in ("v", "vv", "imin", "imax", "f", "lam", "p", "q"):
-                getattr(b, arr)[pp, bs] = getattr(c, arr)[pp, cs]
-            b.lam[pp, bs] = 0
-            c.clear((pp, cs))
+                getattr(b, arr)[bs, pp] = getattr(c, arr)[cs, pp]
+            b.lam[bs, pp] = 0
+            c.clear((cs, pp))
         b.clear((b.f > 0) & (t - b.q > p.stale_delete))
         return fg.reshape(self._shape)
 
@@ -243,7 +294,7 @@ def _take(book: _Book, pix: np.ndarray) -> _Book:
     """A view-like copy of ``book`` restricted to pixels ``pix`` (for matching only)."""
     sub = _Book.__new__(_Book)
     for arr in ("v", "vv", "imin", "imax", "f", "lam", "p", "q"):
-        setattr(sub, arr, getattr(book, arr)[pix])
+        setattr(sub, arr, getattr(book, arr)[:, pix])
     return sub
 
 

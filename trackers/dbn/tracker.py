@@ -217,6 +217,10 @@ class DBNPHDTracker(_AssociatingTracker):
                             "info": dict(self.dbn.model.info)}
         return cfg
 
+    def _stage_log(self, level: Optional[str]) -> StageLog:
+        """The frame's stage log (a benchmark overrides this to time the stages)."""
+        return StageLog(self.stages, level)
+
     # ------------------------------------------------------------------------------- step
 
     def step(self, frame: Frame, detections: Optional[Detections],
@@ -224,7 +228,7 @@ class DBNPHDTracker(_AssociatingTracker):
         p = self.params
         fp = p.filter
         rng = self.filter.rng
-        log = StageLog(self.stages, level)
+        log = self._stage_log(level)
         want_p, want_c = log.wants("particles"), log.wants("clusters")
 
         log.stage("background")

@@ -1,0 +1,226 @@
+"""DBN-PHD (feng2015) against its no-DBN baseline ``phd-bgsub``, per stage, in ONE run.
+
+Both trackers run as two lanes of the same :func:`pfscope.trackers.pipeline.run` on the same
+frames (stepped one after the other on every frame, so a change of load on this shared machine
+hits both alike).  Per lane the script prints:
+
+- milliseconds per frame of every stage of the tracker (``background``, ``blobs``, ``predict``,
+  ``birth``, ``features``, ``update``, ``resample``, ``cluster``, ``associate``), measured by a
+  timing subclass whose stage log notes the clock at every stage change (the tracker's own
+  code, nothing re-implemented here);
+- frames/s of the whole tracker step (the pipeline's ``FrameReport.step_seconds``; image
+  reading and scoring are outside it, and common to both lanes);
+- OSPA, ME (pixels), MOTA, IDF1, FP, FN over exactly the frames run (the pipeline's scores).
+
+``dbn-phd`` and ``phd-bgsub`` have the same background model, births, filter, resampling,
+K-means and association; the DBN lane adds the DBN scores of the blobs (and of the particles
+at ``--level particles``).  The DBN model: ``--model FILE`` (``pfscope train-dbn``; for PETS
+train it on the other half than the frames benchmarked), else the default model (trained on
+first use on the built-in synthetic scene, never on the frames run).
+
+Usage (README numbers)::
+
+    pfscope train-dbn ../shared/data/PETS09-S2L1 --frames 1-400 --out /tmp/pets_1_400.pt
+    .venv/bin/python benchmarks/bench_dbn.py --source pets --start 401 --model /tmp/pets_1_400.pt \\
+        --seeds 0,1,2 --json /tmp/bench_dbn.json
+    .venv/bin/python benchmarks/bench_dbn.py --source synthetic --frames 100 --seeds 0
+
+Absolute times depend on the machine's load (printed); ratios within one run hold better.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from typing import Optional
+
+from _common import (EXIT_NO_DATA, NoData, command_line, machine, open_bench_source,
+                     print_machine, table, write_json)
+
+import numpy as np
+
+from pfscope.trackers.api import make_params
+from pfscope.trackers.dbn.tracker import DBNPHDTracker, PHDBgsubTracker
+from pfscope.trackers.errors import InputError
+from pfscope.trackers.pipeline import BaseHook, FrameReport, run
+from pfscope.trackers.report import StageLog
+
+LANES = ("dbn-phd", "phd-bgsub")
+METRICS = ("OSPA", "ME", "MOTA", "IDF1", "FP", "FN")
+
+
+class TimedStageLog(StageLog):
+    """A stage log that notes ``perf_counter`` at every stage change and at the end."""
+
+    def __init__(self, stages, level, sink: dict):
+        super().__init__(stages, level)
+        self._sink = sink
+        self._t: Optional[float] = None
+        self._cur: Optional[str] = None
+
+    def _tick(self, nxt: Optional[str]) -> None:
+        now = time.perf_counter()
+        if self._cur is not None and self._t is not None:
+            self._sink[self._cur] = self._sink.get(self._cur, 0.0) + now - self._t
+        self._cur, self._t = nxt, now
+
+    def stage(self, name: str) -> None:
+        self._tick(name)
+        super().stage(name)
+
+    def result(self):
+        self._tick(None)
+        return super().result()
+
+
+def timed(cls):
+    """``cls`` (a DBN-PHD tracker class) whose stages are timed into ``self.stage_seconds``
+    (stage → list of seconds, one per frame)."""
+
+    class Timed(cls):
+        def __init__(self, *a, **kw):
+            super().__init__(*a, **kw)
+            self.stage_seconds: dict[str, list[float]] = {s: [] for s in self.stages}
+            self._frame: dict[str, float] = {}
+
+        def _stage_log(self, level):
+            self._frame = {}
+            return TimedStageLog(self.stages, level, self._frame)
+
+        def step(self, frame, detections, level=None):
+            out = super().step(frame, detections, level)
+            for s in self.stages:
+                self.stage_seconds[s].append(self._frame.get(s, 0.0))
+            return out
+
+    Timed.__name__ = f"Timed{cls.__name__}"
+    return Timed
+
+
+class StepTimes(BaseHook):
+    def __init__(self):
+        self.seconds: dict[str, list[float]] = {}
+
+    def on_frame(self, report: FrameReport) -> None:
+        for lane, s in report.step_seconds.items():
+            self.seconds.setdefault(lane, []).append(s)
+
+
+def make_lane(name: str, seed: int, options: dict):
+    cls = DBNPHDTracker if name == "dbn-phd" else PHDBgsubTracker
+    params = make_params(name, None, options)
+    return timed(cls)(params, rng=np.random.default_rng(seed))
+
+
+def one_run(spec: str, seed: int, start: int, frames: Optional[int], level: Optional[str],
+            options: dict) -> dict:
+    src = open_bench_source(spec, frames=frames if spec == "synthetic" else None)
+    if spec == "synthetic":
+        from pfscope.trackers.data.sources import open_source
+        from pfscope.trackers.data.synthetic import SceneConfig
+
+        # the noisy scene of the README's Table I (background-subtraction noise, flicker)
+        src = open_source("synthetic", synthetic_config=SceneConfig(
+            frames=frames or 100, targets=6, width=320, height=240, seed=seed,
+            bg_noise=0.6, flicker=0.04))
+    length = getattr(src, "length", None)
+    n = frames if frames is not None else (length - start + 1 if length else None)
+    dbn_opts = dict(options)
+    base_opts = {k: v for k, v in options.items() if k != "model"}
+    lanes = {"dbn-phd": make_lane("dbn-phd", seed, dbn_opts),
+             "phd-bgsub": make_lane("phd-bgsub", seed, base_opts)}
+    hook = StepTimes()
+    t0 = time.perf_counter()
+    res = run(src, lanes, frames=n, start=start, level=level, hooks=[hook])
+    wall = time.perf_counter() - t0
+    if not res.outcome.ok:
+        raise SystemExit(f"run failed: {res.outcome.reason}")
+    out = {"source": getattr(src, "name", spec), "seed": seed, "start": start,
+           "frames": res.outcome.frames, "wall_seconds": wall, "lanes": {}}
+    for name, tr in lanes.items():
+        step = np.asarray(hook.seconds[name])
+        lane = {"fps": float(1.0 / step.mean()), "ms_per_frame": float(1e3 * step.mean()),
+                "stage_ms": {s: float(1e3 * np.mean(v)) for s, v in tr.stage_seconds.items()}}
+        sc = res.scores.get(name) or {}
+        lane.update({k: (float(sc[k]) if k in sc else None) for k in METRICS})
+        out["lanes"][name] = lane
+    return out
+
+
+def fmt(v) -> str:
+    if v is None:
+        return "-"
+    if isinstance(v, float):
+        return f"{v:.2f}" if abs(v) < 100 else f"{v:.0f}"
+    return str(v)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--source", default="pets", help="pets | synthetic | PATH (default pets)")
+    ap.add_argument("--start", type=int, default=None,
+                    help="first frame (default 401 for pets: the DBN trained on 1-400; else 1)")
+    ap.add_argument("--frames", type=int, default=None,
+                    help="frames to run (default: to the end; synthetic: 100)")
+    ap.add_argument("--seeds", default="0", help="comma-separated tracker seeds, one run each")
+    ap.add_argument("--model", default="", help="DBN model file (default: the default model)")
+    ap.add_argument("--level", default="tracks",
+                    help="report level asked of the trackers (default tracks, as record "
+                         "--level tracks; 'particles' also scores every gated particle)")
+    ap.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
+                    help="parameter override for both lanes (as pfscope record --set)")
+    ap.add_argument("--json", default=None, metavar="FILE", help="write every number to FILE")
+    a = ap.parse_args(argv)
+    start = a.start if a.start is not None else (401 if a.source == "pets" else 1)
+    options = dict(s.split("=", 1) for s in a.set)
+    if a.model:
+        options["model"] = a.model
+    info = machine()
+    print_machine(info)
+    runs = []
+    try:
+        for seed in (int(s) for s in a.seeds.split(",")):
+            print(f"seed {seed}: running dbn-phd and phd-bgsub on {a.source} from frame "
+                  f"{start} ...", file=sys.stderr, flush=True)
+            runs.append(one_run(a.source, seed, start, a.frames, a.level, options))
+    except NoData as e:
+        print(f"error: {e}", file=sys.stderr)
+        return EXIT_NO_DATA
+    except (InputError, ValueError) as e:               # bad --model / --set: one line
+        print(f"error: {e}", file=sys.stderr)
+        return 1
+    r0 = runs[0]
+    stages = list(r0["lanes"]["dbn-phd"]["stage_ms"])
+    print(f"\n=== {r0['source']}: frames {start}..{start + r0['frames'] - 1} "
+          f"({r0['frames']} frames), seeds {a.seeds}, both lanes in one pipeline run each, "
+          f"level {a.level} ===")
+    print("\nper-stage ms/frame (mean over the runs):")
+    rows = []
+    for lane in LANES:
+        ms = [np.mean([r["lanes"][lane]["stage_ms"][s] for r in runs]) for s in stages]
+        rows.append([lane, *[f"{m:.1f}" for m in ms], f"{sum(ms):.1f}"])
+    print(table(["lane", *stages, "sum"], rows))
+    cols = ["fps", "ms_per_frame", *METRICS]
+    rows = []
+    for r in runs:
+        for lane in LANES:
+            rows.append([f"seed {r['seed']}", lane, *[fmt(r["lanes"][lane][k]) for k in cols]])
+    if len(runs) > 1:
+        for lane in LANES:
+            vals = [[r["lanes"][lane][k] for r in runs] for k in cols]
+            rows.append(["mean", lane, *[fmt(float(np.mean(v)) if None not in v else None)
+                                         for v in vals]])
+    print()
+    print(table(["run", "lane", *cols], rows))
+    d = [r["lanes"]["dbn-phd"]["ms_per_frame"] / r["lanes"]["phd-bgsub"]["ms_per_frame"]
+         for r in runs]
+    print(f"\nstep time dbn-phd / phd-bgsub: {np.mean(d):.2f} (same frames, same run)")
+    write_json(a.json, {"command": command_line(), "machine": info, "runs": runs,
+                        "load_at_end": list(__import__("os").getloadavg())})
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
