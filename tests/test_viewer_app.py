@@ -220,6 +220,94 @@ def test_semantic_colours_are_disjoint_from_the_track_palette():
         assert not is_track_colour(np.array(rgba[:3])), role
 
 
+def test_particle_colours_spread_over_the_map_on_a_real_phd_cloud():
+    """The PHD's updated weights are heavy-tailed (most particles hold a tiny share): by rank,
+    each fifth of viridis gets about a fifth of the particles, so the cloud does not read as one
+    dark colour; heavier is never darker, smaller or drawn earlier."""
+    import pfscope
+    from pfscope.viewer_app.colors import TOP_FRACTION, _RAMP, weight_style, weight_summary
+
+    clouds = []
+    for fr in pfscope.stream(None, tracker="phd", frames=8, level="particles"):
+        for st in fr.stages:
+            clouds += [it.weights for it in st.items
+                       if getattr(it, "path", "") == "phd/particles/updated"
+                       and getattr(it, "weights", None) is not None]
+    assert clouds, "no updated cloud with weights"
+    w = clouds[-1]
+    assert np.max(w) / np.median(w) > 10  # heavy-tailed: what made a log scale read dark
+    order, colors, radii = weight_style(w, 1.5)
+    ws = w[order]
+    assert np.all(np.diff(ws) >= 0)  # lightest first, heaviest drawn last (on top)
+    dark = np.linalg.norm(colors[:, :3].astype(float) - _RAMP[0], axis=1) < 60
+    yellow = np.linalg.norm(colors[:, :3].astype(float) - _RAMP[-1], axis=1) < 60
+    assert dark.mean() < 0.25, dark.mean()
+    assert yellow.mean() > TOP_FRACTION * 0.5, yellow.mean()
+    lum = colors[:, :3].astype(float) @ [0.2126, 0.7152, 0.0722]
+    assert np.all(np.diff(lum) >= -1) and np.all(np.diff(radii) >= 0)
+    assert np.all(np.diff(colors[:, 3].astype(int)) >= 0)
+    summ = weight_summary(w)
+    assert TOP_FRACTION < summ["top_tenth"] <= 1 and 0 < summ["ess"] < 1
+    # equal weights (a predicted or resampled cloud): one colour, one radius
+    _, c_eq, r_eq = weight_style(np.full(50, 0.02), 1.5)
+    assert len(np.unique(c_eq, axis=0)) == 1 and len(np.unique(r_eq)) == 1
+    assert weight_summary(np.full(50, 0.02))["top_tenth"] == pytest.approx(0.1)
+
+
+def test_the_legend_in_the_about_note_matches_the_mapping():
+    from pfscope.viewer_app.colors import TOP_FRACTION
+    from pfscope.viewer_app.properties import about_markdown
+
+    md = about_markdown("x", [("Particles", ["phd/particles/updated"])], [], has_gt=True)
+    assert TOP_FRACTION == 0.1 and "heaviest tenth" in md and "ranked within its cloud" in md
+    assert "top_tenth" in md and "**OSPA**" in md
+
+
+def test_a_trail_restarts_where_its_track_jumps():
+    from pfscope.viewer_app.recorder import TrailBuffer
+
+    tb = TrailBuffer(jump=0.75)
+    box = lambda x: np.array([[x, 0.0, 10.0, 40.0]])  # noqa: E731 - 40 px tall
+    for k, x in enumerate([0, 5, 10, 15]):
+        live, strips = tb.update(k, np.array([3]), box(x))
+    assert len(strips[0]) == 4
+    live, strips = tb.update(4, np.array([3]), box(200))  # 185 px in a frame: another person
+    assert list(live) == []  # one point: no trail yet
+    live, strips = tb.update(5, np.array([3]), box(204))
+    assert [len(s) for s in strips] == [2] and strips[0][0][0] == 205.0
+
+
+def test_series_are_named_and_coloured_and_views_framed_on_the_image(tmp_path):
+    import rerun as rr
+
+    from pfscope.viewer_app.reporters.base import ROLES
+
+    out = tmp_path / "x.rrd"
+    assert main(["record", str(_toy(tmp_path, swap_at=6)), "--tracker", "passthrough",
+                 "--out", str(out), "--quiet"]) == 0
+    rec = read_rrd(out)
+
+    def style(entity):
+        static = [c for t, c in rec[entity] if not t and "SeriesLines:names" in c]
+        assert static, entity
+        return static[0]["SeriesLines:names"][0], static[0]["SeriesLines:colors"][0]
+
+    name, color = style("/plots/metrics/fn")
+    assert name == "misses"
+    assert color == int.from_bytes(bytes(ROLES["miss"][1][:3]) + b"\xff", "big")
+    assert style("/plots/metrics/ospa")[0] == "OSPA (px)"
+    assert style("/plots/detections/count")[0] == "detections"
+    series = [e for e in rec if e.startswith("/plots/")]
+    assert len({style(e)[1] for e in series}) == len(series)  # no two series share a colour
+    # every 2D view of the stored blueprint is framed on the image (120 x 80)
+    reader = rr.chunk.RrdReader(str(out))
+    bounds = [row for ch in reader.stream(store=reader.blueprints()[0])
+              if ch.entity_path.endswith("/VisualBounds2D")
+              for row in ch.to_record_batch().column("VisualBounds2D:range").to_pylist()]
+    assert len(bounds) == 2  # passthrough's "Tracks" and "All stages"
+    assert all(b == [{"x_range": [0.0, 120.0], "y_range": [0.0, 80.0]}] for b in bounds)
+
+
 # ------------------------------------------------------------------ 2. pictures
 
 def test_snapshot_of_a_tab_at_a_frame(tmp_path, capsys):

@@ -33,6 +33,13 @@ and ``backend``) the same runs go to an existing Dask distributed cluster instea
 summary, and a failing run (or a dying worker) does not stop the others.  The workers write
 straight into ``--out``, so it must be a folder every worker sees at the same path (a shared
 file system), and so must the sources; relative paths are made absolute here first.
+
+With ``--backend ray`` (``pip install "pfscope[ray]"``) the runs are Ray tasks (one CPU each):
+on the Ray instance this process is already connected to, else on ``--cluster ADDRESS``
+(``ray://HOST:10001`` for Ray Client, ``HOST:6379`` or ``auto`` for a cluster this machine is
+part of; an address starting with ``ray://`` implies ``--backend ray``), else on ``$RAY_ADDRESS``,
+else on a Ray instance started here for the batch and stopped after it.  The same files, resume,
+summary and failure rules as with Dask.
 """
 
 from __future__ import annotations
@@ -84,7 +91,7 @@ class Job:
         return Path(self.out_dir) / f"{self.run_id}{suffix}"
 
 
-BACKENDS = ("local", "dask")
+BACKENDS = ("local", "dask", "ray")
 
 
 def _init_worker() -> None:
@@ -228,14 +235,18 @@ def plan(args) -> tuple[list[Job], Path, int]:
 
 
 def _pick_backend(backend, cluster) -> tuple[Optional[str], str]:
-    """(cluster address or None, backend name): a cluster address means Dask."""
-    backend = str(backend or ("dask" if cluster else "local")).lower()
+    """(cluster address or None, backend name): a ``ray://`` address means Ray, any other
+    address Dask."""
+    implied = ("ray" if str(cluster).startswith("ray://") else "dask") if cluster else "local"
+    backend = str(backend or implied).lower()
     if backend not in BACKENDS:
         raise InputError(f"--backend {backend!r}: expected one of {', '.join(BACKENDS)}")
     if backend == "dask" and not cluster:
         raise InputError("--backend dask needs --cluster ADDRESS (e.g. tcp://scheduler:8786)")
     if backend == "local" and cluster:
-        raise InputError("--cluster is for --backend dask (leave --backend out)")
+        raise InputError("--cluster is for --backend dask or ray (leave --backend out)")
+    if backend == "dask" and str(cluster).startswith("ray://"):
+        raise InputError(f"--cluster {cluster} is a Ray address: use --backend ray")
     return (str(cluster) if cluster else None), backend
 
 
@@ -308,12 +319,74 @@ def _run_on_cluster(todo: list[Job], address: str, header, report) -> dict[str, 
     return rows
 
 
+def _import_ray():
+    try:
+        import ray
+    except ImportError:
+        raise InputError('--backend ray needs Ray: pip install "pfscope[ray]" (or "ray")') from None
+    return ray
+
+
+def _run_on_ray(todo: list[Job], address: Optional[str], header, report) -> dict[str, dict]:
+    """Run every job as a Ray task (1 CPU each) on the Ray instance this process is connected
+    to, else on ``address`` / ``$RAY_ADDRESS``, else on one started here (and stopped after)."""
+    import logging
+
+    ray = _import_ray()
+    started = False
+    if not ray.is_initialized():
+        try:
+            ray.init(address=address or None, include_dashboard=False, log_to_driver=False,
+                     logging_level=logging.WARNING)
+        except Exception as e:  # noqa: BLE001 - ConnectionError, RuntimeError ...: one line
+            msg = str(e).splitlines()[0] if str(e) else type(e).__name__
+            raise InputError(f"--backend ray: cannot start or reach Ray at "
+                             f"{address or os.environ.get('RAY_ADDRESS') or 'a local instance'}"
+                             f" ({msg})") from None
+        started = True
+    rows: dict[str, dict] = {}
+    pending: list = []
+    try:
+        cpus = int(ray.cluster_resources().get("CPU", 0))
+        where = address or ("a local Ray instance" if started else "the connected Ray cluster")
+        header(f"Ray {where} ({cpus} CPU(s))")
+        task = ray.remote(num_cpus=1, max_retries=0)(run_job_on_worker)
+        refs = {task.remote(_for_cluster(j)): j for j in todo}
+        pending = list(refs)
+        i = 0
+        while pending:
+            done, pending = ray.wait(pending, num_returns=1)
+            for ref in done:
+                j = refs[ref]
+                i += 1
+                try:
+                    row = {**ray.get(ref), "source": j.source}
+                except KeyboardInterrupt:
+                    raise
+                except BaseException as e:  # noqa: BLE001 - a worker died or the task was lost
+                    row = _died(j, e)
+                rows[j.run_id] = row
+                report(i, row)
+    finally:
+        for ref in pending:
+            try:
+                ray.cancel(ref, force=True)
+            except Exception:  # noqa: BLE001 - best effort
+                pass
+        if started:
+            ray.shutdown()
+    return rows
+
+
 def run_batch(jobs: list[Job], out: Path, workers: int, *, quiet: bool = False,
-              stream=None, cluster: Optional[str] = None) -> list[dict]:
+              stream=None, cluster: Optional[str] = None,
+              backend: Optional[str] = None) -> list[dict]:
     """Run ``jobs`` (skipping finished ones unless forced), write the summary, return rows.
 
-    ``cluster``: the address of a Dask distributed scheduler to run them on instead of the
-    local process pool (``workers`` is then unused)."""
+    ``backend``: ``"local"`` (a process pool of ``workers``), ``"dask"`` (the Dask distributed
+    scheduler at ``cluster``) or ``"ray"`` (Ray tasks: see the module docstring); by default
+    ``"dask"`` when ``cluster`` is given, else ``"local"``."""
+    cluster, backend = _pick_backend(backend, cluster)
     stream = stream or sys.stderr
     out.mkdir(parents=True, exist_ok=True)
     rows: dict[str, dict] = {}
@@ -345,7 +418,11 @@ def run_batch(jobs: list[Job], out: Path, workers: int, *, quiet: bool = False,
         print(f"batch [{i}/{total}] {row['run']}: {what}  (elapsed {el:.0f} s, ETA {eta:.0f} s)",
               file=stream)
 
-    if cluster and todo:
+    if backend == "ray" and todo:
+        rows.update(_run_on_ray(todo, cluster, header, report))
+    elif backend == "ray":
+        header(f"Ray {cluster or 'cluster'}")  # nothing to run: no need to start or connect
+    elif cluster and todo:
         rows.update(_run_on_cluster(todo, cluster, header, report))
     elif cluster:
         header(f"Dask cluster {cluster}")  # nothing to run: no need to connect
@@ -427,10 +504,13 @@ def add_batch_parser(sub, add_tracker_options) -> None:
     b.add_argument("--workers", type=int, default=None,
                    help="parallel processes (default: the number of cores)")
     b.add_argument("--cluster", default=None, metavar="ADDRESS",
-                   help="run on an existing Dask distributed cluster, e.g. tcp://host:8786 "
-                        "(pip install \"pfscope[distributed]\"); --out must be shared")
+                   help="run on an existing cluster: Dask, e.g. tcp://host:8786 (pip install "
+                        "\"pfscope[distributed]\"), or Ray, e.g. ray://host:10001 (pip install "
+                        "\"pfscope[ray]\"); --out must be shared")
     b.add_argument("--backend", default=None, choices=list(BACKENDS),
-                   help="local process pool (default) or dask (implied by --cluster)")
+                   help="local process pool (default), dask (implied by --cluster) or ray "
+                        "(implied by a ray:// address; without --cluster: the connected Ray, "
+                        "$RAY_ADDRESS, or a Ray instance started for the batch)")
     b.add_argument("--force", action="store_true", help="re-run finished runs, overwrite outputs")
     b.add_argument("--json", action="store_true", help="print the summary as JSON")
     b.add_argument("--quiet", action="store_true", help="no per-run progress lines")
@@ -439,7 +519,8 @@ def add_batch_parser(sub, add_tracker_options) -> None:
 
 def cmd_batch(args) -> int:
     jobs, out, workers = plan(args)
-    rows = run_batch(jobs, out, workers, quiet=args.quiet, cluster=args.cluster)
+    rows = run_batch(jobs, out, workers, quiet=args.quiet, cluster=args.cluster,
+                     backend=args.backend)
     if args.json:
         print(json.dumps(rows, indent=2, sort_keys=True, default=str))
     else:

@@ -3,7 +3,7 @@ time series and the text log."""
 
 from __future__ import annotations
 
-from typing import Sequence
+from typing import Optional, Sequence
 
 import rerun.blueprint as rrb
 
@@ -19,23 +19,46 @@ def _panels() -> tuple:
             rrb.SelectionPanel(state="collapsed"))
 
 
+def _bounds(size: Optional[tuple[int, int]]) -> dict:
+    """Frame a 2D view on the image (``size`` = width, height): without it the view fits its
+    content, and a particle or window off the image would shrink the video in that tab only."""
+    if not size:
+        return {}
+    w, h = size
+    return {"visual_bounds": rrb.VisualBounds2D(x_range=[0, w], y_range=[0, h])}
+
+
+def metric_plots(root: str = "plots/metrics") -> list:
+    """The metrics of each frame in two plots, as their scales differ: counts (true and
+    estimated targets, false positives, misses, ID switches) and OSPA in pixels."""
+    return [rrb.TimeSeriesView(origin=root, name="Metrics",
+                               contents=[f"{root}/**", f"- {root}/ospa"]),
+            rrb.TimeSeriesView(origin=root, name="OSPA", contents=[f"{root}/ospa"])]
+
+
 def default_blueprint(views: Sequence[tuple[str, Sequence[str]]] = (),
-                      plots: Sequence[tuple[str, Sequence[str]]] = ()) -> rrb.Blueprint:
+                      plots: Sequence[tuple[str, Sequence[str]]] = (),
+                      size: Optional[tuple[int, int]] = None,
+                      metrics: bool = True) -> rrb.Blueprint:
     """``views``: (title, engine paths) pairs, each becoming a 2D view over the video that shows
     those paths (``"phd/particles/**"`` ...) on top of the frame; ``plots``: (title, paths)
-    pairs of scalar series.  The tracker's views come first; the last tab shows everything."""
+    pairs of scalar series; ``size``: the frames' (width, height), which every 2D view is framed
+    on; ``metrics``: add the metric plots (there is ground truth).  The tracker's views come
+    first; the last tab shows everything."""
     tabs = []
     for title, paths in views:
         if "tracks/**" in paths:  # wherever tracks are shown, show their errors too
             paths = list(paths) + ["metrics/**"]
         contents = BASE_2D + [f"video/{p}" for p in paths]
-        tabs.append(rrb.Spatial2DView(origin="video", contents=contents, name=title))
-    tabs.append(rrb.Spatial2DView(origin="video", name="All stages"))
+        tabs.append(rrb.Spatial2DView(origin="video", contents=contents, name=title,
+                                      **_bounds(size)))
+    tabs.append(rrb.Spatial2DView(origin="video", name="All stages", **_bounds(size)))
     series = []
     for title, paths in plots:
         series.append(rrb.TimeSeriesView(origin="plots", contents=[f"plots/{p}" for p in paths],
                                          name=title))
-    series.append(rrb.TimeSeriesView(origin="plots/metrics", name="Metrics"))
+    if metrics:
+        series += metric_plots()
     series.append(rrb.TimeSeriesView(origin="plots", name="All series"))
     return rrb.Blueprint(
         rrb.Horizontal(
@@ -59,12 +82,13 @@ def _logs(log: str, events: str, about: str, event_contents=None) -> rrb.Tabs:
     )
 
 
-def compare_blueprint(roots: Sequence[str]) -> rrb.Blueprint:
+def compare_blueprint(roots: Sequence[str],
+                      size: Optional[tuple[int, int]] = None) -> rrb.Blueprint:
     """Several trackers side by side: one 2D view per tracker root over the shared video, and
     their metrics plotted together."""
     views = [rrb.Spatial2DView(origin="/", name=root, contents=[
         "/video", "/video/detections", "/video/gt", f"/{root}/video/tracks/**",
-        f"/{root}/video/metrics/**"]) for root in roots]
+        f"/{root}/video/metrics/**"], **_bounds(size)) for root in roots]
     plots = [rrb.TimeSeriesView(origin="/", name=title, contents=[
         f"/{root}/plots/metrics/{key}" for root in roots])
         for title, key in (("OSPA", "ospa"), ("ID switches", "idsw"), ("False positives", "fp"),

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Optional
+
 import numpy as np
 
 # viridis (matplotlib's perceptually uniform map), 9 stops, interpolated per channel.
@@ -9,14 +11,24 @@ _RAMP = np.array([[68, 1, 84], [71, 44, 122], [59, 81, 139], [44, 113, 142], [33
                   [39, 173, 129], [92, 200, 99], [170, 220, 50], [253, 231, 37]],
                  dtype=np.float64)
 
-#: Decades of weight the ramp spans: yellow = the cloud's 95th-percentile weight or more, dark
-#: purple = that weight / 10**WEIGHT_DECADES or less (log scale, so a cloud of many small weights still reads).
-WEIGHT_DECADES = 2.0
+#: How particle weights look (per cloud and frame): colour = the weight's rank within its cloud
+#: on viridis (dark purple = the lightest, yellow = the heaviest tenth), so every cloud spans the
+#: whole map whatever the spread of its weights; equal weights (a predicted or resampled cloud)
+#: share one rank, the middle teal.  Radius and opacity grow with the rank too, and heavier
+#: particles are drawn over lighter ones.  What a rank hides — how much of the weight the yellow
+#: tenth holds — is plotted beside the video (``plots/weights/<cloud>/top_tenth``).
+WEIGHT_RADIUS = (0.5, 1.5)   # radius = base x (lo + (hi - lo) x rank)
+WEIGHT_ALPHA = (110, 255)    # opacity from the lightest to the heaviest
+TOP_FRACTION = 0.1           # "the heaviest tenth": the yellow end of the map
 
 #: Track colours take hues in [TRACK_HUE_MIN, TRACK_HUE_MAX] degrees (orange → green → blue),
 #: saturated; the semantic colours (misses red, false positives magenta, detections/gt grey and
 #: white, switches black) lie outside, so a track is never mistaken for a mark.
 TRACK_HUE_MIN, TRACK_HUE_MAX = 35.0, 265.0
+#: Saturation of the deepest track blues (lightened so a blue id label reads on the viewer's grey
+#: label background) and the least saturation a track colour has (greys and white are below it).
+BLUE_SATURATION = 0.45
+MIN_TRACK_SATURATION = 0.4
 
 
 def ramp(t: np.ndarray, alpha: int = 200) -> np.ndarray:
@@ -33,36 +45,70 @@ def ramp(t: np.ndarray, alpha: int = 200) -> np.ndarray:
 
 
 def weight_scale(weights: np.ndarray) -> np.ndarray:
-    """(N,) non-negative weights -> [0, 1]: log10(w / w95) over WEIGHT_DECADES decades (w95: the
-    95th percentile)."""
+    """(N,) non-negative weights -> [0, 1]: each weight's rank within the cloud (ties share
+    their mean rank: equal weights all map to 0.5).  Sorting-based, no loop over particles."""
+    from scipy.stats import rankdata
+
     w = np.asarray(weights, dtype=np.float64).reshape(-1)
     if len(w) == 0:
         return w
-    # the 95th percentile, not the maximum: one outlier must not push the whole cloud to the
-    # dark end (weights above it saturate at yellow)
-    top = float(np.quantile(w, 0.95)) if len(w) > 20 else float(np.max(w))
-    if not top > 0:
-        top = float(np.max(w))
-    if not top > 0:
-        return np.zeros_like(w)
-    with np.errstate(divide="ignore"):
-        lg = np.log10(np.maximum(w, 0.0) / top)
-    return np.clip(1.0 + lg / WEIGHT_DECADES, 0.0, 1.0)
+    if len(w) == 1:
+        return np.full(1, 0.5)
+    w = np.where(np.isfinite(w), w, 0.0)
+    return (rankdata(w, method="average") - 1.0) / (len(w) - 1.0)
 
 
-def weight_colors(weights: np.ndarray, alpha: int = 200) -> np.ndarray:
-    """(N,) non-negative weights -> (N,4) uint8 RGBA: viridis on a per-cloud log scale (yellow =
-    the cloud's 95th-percentile weight or more, dark purple = 1/100 of it or less)."""
-    return ramp(weight_scale(weights), alpha)
+def weight_colors(weights: np.ndarray, alpha: Optional[int] = None) -> np.ndarray:
+    """(N,) non-negative weights -> (N,4) uint8 RGBA: viridis by rank within the cloud (see
+    :data:`WEIGHT_RADIUS`); opacity from ``WEIGHT_ALPHA`` by rank unless ``alpha`` is given."""
+    t = weight_scale(weights)
+    out = ramp(t, 255)
+    lo, hi = WEIGHT_ALPHA if alpha is None else (alpha, alpha)
+    out[:, 3] = np.round(lo + (hi - lo) * t).astype(np.uint8)
+    return out
+
+
+def weight_style(weights: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(order, colors, radii) for drawing a weighted cloud: ``order`` sorts the particles from the
+    lightest to the heaviest (so the heavy ones are drawn on top; stable, so deterministic),
+    colours and radii by rank, both in that order."""
+    t = weight_scale(weights)
+    order = np.argsort(t, kind="stable")
+    t = t[order]
+    colors = ramp(t, 255)
+    lo, hi = WEIGHT_ALPHA
+    colors[:, 3] = np.round(lo + (hi - lo) * t).astype(np.uint8)
+    rlo, rhi = WEIGHT_RADIUS
+    radii = (radius * (rlo + (rhi - rlo) * t)).astype(np.float32)
+    return order, colors, radii
+
+
+def weight_summary(weights: np.ndarray) -> dict[str, float]:
+    """What the rank colours hide: ``top_tenth`` = the share of the cloud's total weight held by
+    its heaviest tenth (0.1 when weights are equal, near 1 when a few particles carry it all), and
+    ``ess`` = the effective sample size over N, 1 / (N sum w_i^2) for normalised weights."""
+    w = np.asarray(weights, dtype=np.float64).reshape(-1)
+    w = np.where(np.isfinite(w) & (w > 0), w, 0.0)
+    total = float(w.sum())
+    if len(w) == 0 or not total > 0:
+        return {}
+    k = max(1, int(np.ceil(TOP_FRACTION * len(w))))
+    top = float(np.partition(w, len(w) - k)[len(w) - k:].sum())
+    wn = w / total
+    return {"top_tenth": top / total, "ess": float(1.0 / (len(w) * np.sum(wn * wn)))}
 
 
 def id_colors(ids: np.ndarray, alpha: int = 255) -> np.ndarray:
     """(N,) integer ids -> (N,4) uint8 RGBA, well separated hues (golden-ratio walk over the
-    track hue range, alternating two brightness levels)."""
+    track hue range, alternating two saturation/brightness levels; blues lightened)."""
     ids = np.asarray(ids, dtype=np.int64).reshape(-1)
     frac = (ids * 0.618033988749895) % 1.0
     h = (TRACK_HUE_MIN + frac * (TRACK_HUE_MAX - TRACK_HUE_MIN)) / 360.0
     s = np.where(ids % 2 == 0, 0.85, 0.7)
+    # deep blues are dark (a blue id label on the viewer's grey label background hardly reads):
+    # from azure on, desaturate towards BLUE_SATURATION, which lightens them (still saturated
+    # enough to be told from the grey/white marks: see is_track_colour)
+    s = s - np.clip((h * 360.0 - 195.0) / 45.0, 0.0, 1.0) * (s - BLUE_SATURATION)
     v = np.where(ids % 2 == 0, 0.95, 1.0)
     i = np.floor(h * 6).astype(int) % 6
     f = h * 6 - np.floor(h * 6)
@@ -80,7 +126,7 @@ def is_track_colour(rgb) -> bool:
     """Whether an RGB colour could be a track's (saturated, hue in the track range)."""
     r, g, b = (np.asarray(rgb, dtype=np.float64)[:3] / 255.0).tolist()
     mx, mn = max(r, g, b), min(r, g, b)
-    if mx == 0 or (mx - mn) / mx < 0.5:
+    if mx == 0 or (mx - mn) / mx < MIN_TRACK_SATURATION:
         return False
     d = mx - mn
     if mx == r:

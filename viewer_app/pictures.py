@@ -18,7 +18,7 @@ import tempfile
 from pathlib import Path
 
 #: tracker -> the video tab to show (the one with its particle clouds)
-TABS = {"phd": "Particles", "mt": "Association", "dlpf": "Children", "dbn-phd": "Resampled"}
+TABS = {"phd": "Particles", "mt": "Association", "dlpf": "Children", "dbn-phd": "Update"}
 
 
 def make_pictures(data: Path, out: Path, frame: int = 100, width: int = 1280,

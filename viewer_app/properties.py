@@ -82,18 +82,31 @@ def about_markdown(title: str, views: Iterable[tuple[str, Iterable[str]]],
     lines += ["", "## Plots", ""]
     for title_, paths in plots:
         lines.append(f"- **{title_}**: " + ", ".join(f"`{p}`" for p in paths) + ".")
-    lines += ["- **Metrics**: per-frame OSPA, true vs estimated count, FP, FN, ID switches "
-              "(with ground truth).", "",
+    if has_gt and not lanes:
+        lines += ["- **Metrics**: per frame, the true vs estimated count, false positives, misses "
+                  "and ID switches; **OSPA**: the per-frame OSPA distance (px)."]
+    lines += ["- **All series**: every series of the recording.", "",
               "## Colours", "",
               "- Tracks: one colour per track id (hues from orange through green to blue), "
-              "labelled with the id, with a trail of recent centres.",
+              "labelled with the id, with a trail of recent centres (a trail restarts where its "
+              "track jumps, e.g. an id taken over by another person). Blues are lightened so "
+              "their id labels read.",
+              "- Items with no identity (classifier windows, candidates, candidate edges): thin "
+              "grey.",
               "- Detections: thin grey boxes (scores in the hidden labels: select the entity "
               "and turn labels on). Ground truth: thin white boxes (gt ids hidden the same way).",
               "- Misses: red. False positives: magenta. ID switches: thick black. "
               "These never occur in the track palette.",
-              "- Particles: weight on the viridis map, log-scaled per cloud and frame: "
-              "yellow = that cloud's 95th-percentile weight or more (its largest is plotted under "
-              "`plots/weights`), dark purple = 1/100 of it or less.", ""]
+              "- Particles: colour = the particle's weight *ranked within its cloud* (each "
+              "cloud, each frame), on viridis: dark purple = the lightest, teal = the median, "
+              "yellow = the heaviest tenth. Heavier particles are also larger, more opaque and "
+              "drawn on top. A cloud of equal weights (predicted, resampled) is all teal. "
+              "Ranks hide how uneven the weights are: `plots/weights/<cloud>/top_tenth` is the "
+              "share of the cloud's weight its yellow tenth holds (0.1 = even, near 1 = a few "
+              "particles carry it all) and `.../ess` its effective sample size / N.",
+              "- Plots: misses red, false positives magenta, true count white, as on the video"
+              + ("; in the lane plots each lane has its own colour." if lanes else "."),
+              ""]
     if has_gt:
         lines += ["## Events", "",
                   "The **Events** log indexes every ID switch, false track, lost track and long "

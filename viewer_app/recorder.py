@@ -52,7 +52,7 @@ from pfscope.trackers.pipeline import BaseHook, FrameReport, Outcome, RunInfo
 from .blueprint import compare_blueprint, default_blueprint
 from .properties import about_markdown, any_values
 from .reporters import Reporter, layout_for
-from .reporters.base import annotation_context
+from .reporters.base import SERIES_PALETTE, annotation_context
 
 
 #: Longest wait for a flush or close of the recording, seconds ($PFSCOPE_FLUSH_TIMEOUT).
@@ -77,19 +77,34 @@ def versions() -> dict:
             "python": platform.python_version()}
 
 
+def _frame_size(source) -> Optional[tuple[int, int]]:
+    """(width, height) of the source's frames when known (the 2D views are framed on it)."""
+    w, h = getattr(source, "width", 0), getattr(source, "height", 0)
+    try:
+        w, h = int(w), int(h)
+    except (TypeError, ValueError):
+        return None
+    return (w, h) if w > 0 and h > 0 else None
+
+
 class TrailBuffer:
     """Recent centres of each live track (bounded: ``length`` points per track, tracks unseen
-    for ``forget`` frames are dropped)."""
+    for ``forget`` frames are dropped).  A trail restarts where its track jumps by more than
+    ``jump`` times the box height in one step (an id taken over by another person): a straight
+    line across the picture says nothing about where anyone walked."""
 
-    def __init__(self, length: int = 30, forget: int = 50):
-        self.length, self.forget = length, forget
+    def __init__(self, length: int = 30, forget: int = 50, jump: float = 0.75):
+        self.length, self.forget, self.jump = length, forget, float(jump)
         self.trails: dict[int, deque] = {}
         self.last_seen: dict[int, int] = {}
 
     def update(self, frame: int, ids: np.ndarray, boxes: np.ndarray):
         centres = boxes[:, :2] + boxes[:, 2:] / 2.0
-        for tid, c in zip(ids.tolist(), centres):
-            self.trails.setdefault(tid, deque(maxlen=self.length)).append(c)
+        for tid, c, h in zip(ids.tolist(), centres, boxes[:, 3].tolist()):
+            trail = self.trails.setdefault(tid, deque(maxlen=self.length))
+            if trail and float(np.hypot(*(c - trail[-1]))) > self.jump * max(h, 1.0):
+                trail.clear()
+            trail.append(c)
             self.last_seen[tid] = frame
         for tid in [t for t, f in self.last_seen.items() if frame - f > self.forget]:
             del self.trails[tid], self.last_seen[tid]
@@ -143,11 +158,12 @@ class RerunRecorder(BaseHook):
             layout = layout_for(info.trackers[names[0]].name)
             plots = [(title, paths) for title, paths in layout.plots
                      if self.timing or not all(p.startswith("timing/") for p in paths)]
-            blueprint = default_blueprint(layout.views, plots)
+            blueprint = default_blueprint(layout.views, plots, size=_frame_size(info.source),
+                                          metrics=info.has_gt)
             about = about_markdown(f"{names[0]} on {getattr(info.source, 'name', 'source')}",
                                    layout.views, plots, has_gt=info.has_gt)
         else:
-            blueprint = compare_blueprint(names)
+            blueprint = compare_blueprint(names, size=_frame_size(info.source))
             about = about_markdown(f"{' vs '.join(names)} on "
                                    f"{getattr(info.source, 'name', 'source')}",
                                    [(n, [f"{n}/video/tracks/**", f"{n}/video/metrics/**"])
@@ -191,9 +207,15 @@ class RerunRecorder(BaseHook):
                 self.slots[(name, st)] = len(self.slots)
         self.stride = len(self.slots)
         multi = len(names) > 1
+        series: dict = {}  # one series registry: every series of the file gets its own colour
+        size = _frame_size(info.source)
         self.reporters = {name: Reporter(rec, f"{name}/" if multi else "", self.max_points,
-                                         self.jpeg_quality) for name in names}
-        self.base = Reporter(rec, "", self.max_points, self.jpeg_quality)
+                                         self.jpeg_quality, series=series, size=size,
+                                         series_color=(tuple(SERIES_PALETTE[i % len(
+                                             SERIES_PALETTE)]) if multi else None))
+                          for i, name in enumerate(names)}
+        self.base = Reporter(rec, "", self.max_points, self.jpeg_quality, series=series,
+                             size=size)
         self.trails = {name: TrailBuffer() for name in names}
         self._before: set[str] = set()
 

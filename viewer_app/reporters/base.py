@@ -6,14 +6,22 @@ Styling rules (the engine says *what*, this module says *how it looks*):
   candidate edge) are class ids of one static ``AnnotationContext`` logged at the root;
 - items whose ids are track ids get the track colour of that id (``id_colors``), the same for
   a box, a trail, a vertex, an edge or a per-track child cloud;
-- particle weights go through viridis on a per-cloud log scale (yellow = the cloud's
-  95th-percentile weight or more, 2 decades down to dark purple), and the scale (that largest weight) is plotted under
-  ``plots/weights/<path>``;
+- particle weights go through viridis by rank within their cloud (dark purple = the lightest,
+  yellow = the heaviest tenth, equal weights all teal), radius and opacity grow with the rank and
+  the heavy particles are drawn last (on top); what ranks hide is plotted under
+  ``plots/weights/<path>/top_tenth`` (the share of the weight the yellow tenth holds) and
+  ``.../ess`` (effective sample size / N);
+- items with neither ids nor a role (classifier windows, candidates) are thin neutral grey, so
+  hundreds of them stay a background;
+- every scalar series is named (``misses``, ``phd/mass`` ...) and coloured once (static
+  ``SeriesLines``): the metric series in their marks' colours (misses red, false positives
+  magenta ...), the others from a palette in order of first appearance; in ``compare`` each
+  lane's series take the lane's colour;
 - labels are shown only on items whose ids are track ids and carry no values (a track's id);
   every other label (detection scores, gt ids, edge gains, cluster values) is logged but hidden
   (``show_labels=False``: select the entity in the viewer and turn labels on);
-- masks are ``SegmentationImage`` with their own class names; dense fields are colormapped
-  images;
+- masks are ``SegmentationImage`` with their own class names; dense fields are viridis images
+  over the video (low values transparent), stretched over the frame when on a coarser grid;
 - labels are built from an item's named ``values`` only for small item counts.
 """
 
@@ -22,12 +30,13 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Optional
 
+import cv2
 import numpy as np
 import rerun as rr
 
 from pfscope.trackers.report import (Boxes, Event, Field, Mask, Points, Scalar, Segments, Stage)
 
-from ..colors import id_colors, ramp, weight_colors
+from ..colors import id_colors, ramp, weight_style, weight_summary
 
 #: Semantic class ids of the static AnnotationContext (ids >= 1; 0 is "no class").
 #: Disjoint from the track palette (colors.TRACK_HUE_MIN..MAX): greys, white, black, red,
@@ -43,6 +52,30 @@ ROLES: dict[str, tuple[int, tuple[int, int, int, int]]] = {
 }
 MAX_LABELS = 60
 DEFAULT_POINT_RADIUS = 1.5
+STATIC_FLUSH_TIMEOUT = 10.0  # seconds; see Reporter._static
+#: Dense fields (a motion magnitude grid ...) are drawn over the video (images draw at -10 by
+#: default) as RGBA PNG of at most FIELD_MAX_PIXELS, opacity FIELD_ALPHA from low to high values.
+FIELD_DRAW_ORDER = -5.0
+FIELD_MAX_PIXELS = 100_000
+FIELD_ALPHA = (0, 170)
+
+#: Series names and colours of the metric plots (the colours of their marks on the video, light
+#: enough for the plots' dark background).
+SERIES_STYLE: dict[str, tuple[str, tuple[int, int, int]]] = {
+    "metrics/ospa": ("OSPA (px)", (255, 200, 60)),
+    "metrics/fn": ("misses", ROLES["miss"][1][:3]),
+    "metrics/fp": ("false positives", ROLES["false_positive"][1][:3]),
+    "metrics/idsw": ("ID switches", (200, 200, 200)),
+    "metrics/cardinality/true": ("true count", (250, 250, 250)),
+    "metrics/cardinality/estimated": ("estimated count", (170, 130, 255)),
+    "detections/count": ("detections", ROLES["detection"][1][:3]),
+    "tracks/count": ("tracks", (80, 170, 255)),
+    "timing/step_ms": ("step ms", (255, 110, 70)),
+}
+#: Colours of the other series, in order of first appearance (bright on the dark plots).
+SERIES_PALETTE = np.array([(255, 160, 60), (80, 200, 120), (90, 160, 240), (200, 140, 240),
+                           (60, 210, 220), (240, 220, 80), (240, 140, 200), (200, 150, 110),
+                           (150, 220, 60), (170, 170, 255)], dtype=np.uint8)
 
 
 def annotation_context() -> rr.AnnotationContext:
@@ -95,9 +128,16 @@ class Reporter:
     Entities logged in a frame are remembered so stale ones can be cleared at the frame's end."""
 
     def __init__(self, rec: rr.RecordingStream, root: str = "", max_points: int = 3000,
-                 jpeg_quality: int = 75):
+                 jpeg_quality: int = 75, *, series: Optional[dict] = None,
+                 series_color: Optional[tuple] = None,
+                 size: Optional[tuple[int, int]] = None):
         self.rec = rec
         self.root = root
+        self.size = size  # the frames' (width, height), when known: fields are stretched to it
+        # entity -> palette index of the scalar series already styled (share one dict between
+        # the reporters of a recording so their series get different colours)
+        self.series = {} if series is None else series
+        self.series_color = series_color
         self.max_points = int(max_points)
         self.jpeg_quality = int(jpeg_quality)
         self.logged: set[str] = set()
@@ -116,7 +156,7 @@ class Reporter:
 
     def item(self, item) -> None:
         if isinstance(item, Scalar):
-            self.rec.log(f"{self.root}plots/{item.path}", rr.Scalars(item.value))
+            self.scalar(item.path, item.value)
         elif isinstance(item, Event):
             self.rec.log(f"{self.root}log/{item.path}" if item.path else f"{self.root}log",
                          rr.TextLog(item.message, level=item.severity))
@@ -135,29 +175,46 @@ class Reporter:
 
     def points(self, p: Points) -> None:
         xy = p.xy.astype(np.float32)
-        colors = (weight_colors(p.weights) if p.weights is not None
-                  else _colors(p.ids, p.id_kind))
         n = len(xy)
-        if n > self.max_points:  # deterministic stride decimation, no RNG
-            keep = np.linspace(0, n - 1, self.max_points).round().astype(np.int64)
+        keep = (np.linspace(0, n - 1, self.max_points).round().astype(np.int64)
+                if n > self.max_points else None)  # deterministic stride decimation, no RNG
+        if keep is not None:
             xy = xy[keep]
-            colors = None if colors is None else colors[keep]
+        radii = np.float32(DEFAULT_POINT_RADIUS)
+        if p.weights is not None:
+            w = p.weights if keep is None else p.weights[keep]
+            order, colors, radii = weight_style(w, DEFAULT_POINT_RADIUS)
+            xy = xy[order]  # the heaviest last: drawn on top
+        else:
+            colors = _colors(p.ids, p.id_kind)
+            if colors is not None and keep is not None:
+                colors = colors[keep]
         class_ids = ROLES[p.role][0] if p.role in ROLES and colors is None else None
         self._log(self.video(p.path), rr.Points2D(xy, colors=colors, class_ids=class_ids,
-                                                  radii=DEFAULT_POINT_RADIUS))
+                                                  radii=radii, show_labels=False))
         if p.weights is not None:
-            top = float(np.max(p.weights)) if len(p.weights) else 0.0
-            self.rec.log(f"{self.root}plots/weights/{p.path}", rr.Scalars(top))
+            for key, v in weight_summary(p.weights).items():
+                self.scalar(f"weights/{p.path}/{key}", v)
 
     def boxes(self, b: Boxes, radii: float = 1.0) -> None:
         boxes = b.boxes.astype(np.float32)
         colors = _colors(b.ids, b.id_kind) if b.id_kind in ("track", "cluster") else None
-        class_ids = ROLES[b.role][0] if b.role in ROLES and colors is None else None
+        if colors is not None and b.values:  # evidence about a track (a window, a MAP box
+            radii = min(radii, 0.5)          # with its score), not the track: thin
+        role = b.role if b.role in ROLES else None
+        if colors is None and role is None:
+            # no identity, no role (classifier windows, candidates): a thin neutral background,
+            # fainter the more there are, so hundreds of windows do not hide the frame
+            colors = np.tile(np.array(ROLES["candidate"][1], dtype=np.uint8), (len(boxes), 1))
+            colors[:, 3] = int(np.clip(140 * np.sqrt(MAX_LABELS / max(len(boxes), 1)), 40, 140))
+            radii = min(radii, 0.5)
+        class_ids = ROLES[role][0] if role is not None and colors is None else None
         labels = value_labels(b.values, len(b), b.ids if b.id_kind == "track" else None)
         show = labels is not None and b.id_kind == "track" and not b.values
+        # show_labels always set: a class id would otherwise show its class name as a label
         self._log(self.video(b.path), rr.Boxes2D(
             mins=boxes[:, :2], sizes=boxes[:, 2:], colors=colors, class_ids=class_ids,
-            labels=labels, show_labels=show if labels is not None else None, radii=radii))
+            labels=labels, show_labels=show, radii=radii))
 
     def segments(self, s: Segments) -> None:
         strips = np.stack([s.a, s.b], axis=1).astype(np.float32)
@@ -168,17 +225,16 @@ class Reporter:
             if chosen else None
         self._log(self.video(s.path), rr.LineStrips2D(
             strips, colors=colors, class_ids=class_ids, labels=labels,
-            show_labels=False if labels is not None else None,
-            radii=1.5 if chosen else 0.5))
+            show_labels=False, radii=1.5 if chosen else 0.5))
 
     def mask(self, m: Mask) -> None:
         entity = self.video(m.path)
         if self._mask_classes.get(entity) != m.classes:
             palette = id_colors(np.arange(len(m.classes)), alpha=140)
             palette[0, 3] = 0  # background transparent
-            self.rec.log(entity, rr.AnnotationContext(
+            self._static(entity, rr.AnnotationContext(
                 [rr.AnnotationInfo(id=i, label=c, color=tuple(int(x) for x in palette[i]))
-                 for i, c in enumerate(m.classes)]), static=True)
+                 for i, c in enumerate(m.classes)]))
             self._mask_classes[entity] = m.classes
         self._log(entity, rr.SegmentationImage(m.mask))
 
@@ -187,10 +243,24 @@ class Reporter:
         lo = float(np.nanmin(v)) if f.vmin is None and v.size else (f.vmin or 0.0)
         hi = float(np.nanmax(v)) if f.vmax is None and v.size else (f.vmax or 1.0)
         t = np.clip((v - lo) / (hi - lo), 0, 1) if hi > lo else np.zeros_like(v)
-        rgb = ramp(t.reshape(-1), alpha=255)[:, :3].reshape(v.shape + (3,))
-        self._log(self.video(f.path), rr.Image(rgb, color_model="RGB").compress(
-            jpeg_quality=self.jpeg_quality))
-        self.rec.log(f"{self.root}plots/{f.path}/max", rr.Scalars(hi))
+        entity = self.video(f.path)
+        if t.size > FIELD_MAX_PIXELS:  # bounded file size: a finer field is shown coarser
+            k = np.sqrt(FIELD_MAX_PIXELS / t.size)
+            t = cv2.resize(t.astype(np.float32), (max(1, int(t.shape[1] * k)),
+                                                  max(1, int(t.shape[0] * k))),
+                           interpolation=cv2.INTER_AREA)
+        # RGBA PNG, low values nearly transparent so the frame shows through.  (A raw rr.Image
+        # drawn over the JPEG video blanks the video in Rerun 0.41; an encoded one blends.)
+        rgba = ramp(t.reshape(-1), alpha=255).reshape(t.shape + (4,))
+        rgba[..., 3] = np.round(FIELD_ALPHA[0] + (FIELD_ALPHA[1] - FIELD_ALPHA[0])
+                                * t).astype(np.uint8)
+        ok, png = cv2.imencode(".png", np.ascontiguousarray(rgba[..., [2, 1, 0, 3]]))
+        self._log(entity, rr.EncodedImage(contents=png.tobytes(), media_type="image/png",
+                                          draw_order=FIELD_DRAW_ORDER))
+        if self.size is not None:  # a grid coarser than the frame is stretched over it
+            w, h = self.size
+            self.rec.log(entity, rr.Transform3D(scale=[w / t.shape[1], h / t.shape[0], 1.0]))
+        self.scalar(f"{f.path}/max", hi)
 
     def track_boxes(self, path: str, ids: np.ndarray, boxes: np.ndarray) -> None:
         boxes = np.asarray(boxes, dtype=np.float32).reshape(-1, 4)
@@ -208,10 +278,39 @@ class Reporter:
         self._log(self.video(path), rr.Boxes2D(
             mins=boxes[:, :2], sizes=boxes[:, 2:], class_ids=np.full(len(boxes), ROLES[role][0]),
             labels=(labels if len(boxes) <= MAX_LABELS else []) if labels is not None else None,
-            show_labels=False if labels is not None else None, radii=radii))
+            show_labels=False, radii=radii))
 
     def scalar(self, path: str, value: float) -> None:
-        self.rec.log(f"{self.root}plots/{path}", rr.Scalars(float(value)))
+        entity = f"{self.root}plots/{path}"
+        if entity not in self.series:
+            self._style_series(entity, path)
+        self.rec.log(entity, rr.Scalars(float(value)))
+
+    def _style_series(self, entity: str, path: str) -> None:
+        """Name and colour a series the first time it is logged (static ``SeriesLines``)."""
+        name, color = SERIES_STYLE.get(path, (path, None))
+        if color is None:
+            k = sum(1 for v in self.series.values() if v >= 0)
+            color = tuple(int(c) for c in SERIES_PALETTE[k % len(SERIES_PALETTE)])
+            self.series[entity] = k
+        else:
+            self.series[entity] = -1
+        if self.series_color is not None:  # compare: a lane's series in the lane's colour
+            color = tuple(int(c) for c in self.series_color[:3])
+        if self.root:
+            name = f"{self.root.rstrip('/')}: {name}"
+        self._static(entity, rr.SeriesLines(names=[name], colors=[color]))
+
+    def _static(self, entity: str, archetype) -> None:
+        """Log static data on an entity that also gets temporal data, and flush it out at once:
+        were the static and the temporal rows of one entity pending in the batcher together,
+        the order it writes their chunks in would vary from run to run (same seed, different
+        file).  Happens once per entity (a new series, a new mask), so the flushes are few."""
+        self.rec.log(entity, archetype, static=True)
+        try:
+            self.rec.flush(timeout_sec=STATIC_FLUSH_TIMEOUT)
+        except Exception:  # noqa: BLE001 - a stalled file is the recorder's to report
+            pass
 
     def text(self, path: str, message: str, level: str = "INFO") -> None:
         self.rec.log(f"{self.root}log/{path}" if path else f"{self.root}log",

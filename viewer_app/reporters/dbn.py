@@ -11,9 +11,11 @@ from .base import TrackerLayout
 LAYOUT = TrackerLayout(
     views=(("Tracks", ("tracks/**",)),
            ("Foreground", ("dbn/foreground",)),
-           ("Blobs", ("dbn/blobs/**", "tracks/**")),
+           ("Blobs", ("dbn/blobs/**",)),  # no tracks (nor their miss marks) over the blobs
            ("DBN score", ("dbn/particles/score", "dbn/blobs/**")),
-           ("Update", ("dbn/particles/before", "dbn/particles/after", "dbn/update/**")),
+           # the cloud after the update only: the one before (equal weights, all teal) drawn
+           # with it covered it ("All stages" still shows both)
+           ("Update", ("dbn/particles/after", "dbn/update/**")),
            ("Birth", ("dbn/particles/birth", "dbn/blobs/accepted")),
            ("Resampled", ("dbn/particles/resampled", "tracks/**")),
            ("Clusters", ("dbn/clusters/**",)),
@@ -22,6 +24,5 @@ LAYOUT = TrackerLayout(
            ("Blobs", ("dbn/blobs/count", "dbn/blobs/rejected", "dbn/clusters/kept")),
            ("Particles", ("dbn/particles/count", "dbn/birth/count", "dbn/particles/scored")),
            ("Foreground", ("dbn/foreground/fraction",)),
-           ("Metrics", ("metrics/ospa",)),
            ("Step ms", ("timing/**",))),
 )
