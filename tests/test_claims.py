@@ -6,7 +6,7 @@ stated tolerance, never as stored numbers: a change to a tracker passes as long 
 still holds, and fails when it stops holding.  The per-seed numbers are in every assertion
 message; ``python tests/test_claims.py`` prints the tables (to re-measure after a change).
 
-Tracker parameters are the paper's (``make_tracker(name, seed)``), never tuned here; only the
+Tracker parameters are the paper's (``make_tracker(name, seed, preset="paper")``), never tuned; the
 scene is chosen.  Scenes are 320x240, 150 frames, 8 targets (the scene scales with the image).
 
 Measured when the claims were written (seeds 0–5; seeds 0–11 gave the same picture):
@@ -82,7 +82,8 @@ def _run(scene: str, seed: int, lanes: tuple = ("phd", "mt")):
     """One pipeline over synthetic scene ``scene`` (a name in this module) with ``seed``."""
     source = open_source("synthetic", synthetic_config=SceneConfig(seed=seed, **globals()[scene]))
     trace = _Trace()
-    res = run(source, [make_tracker(name, seed=seed) for name in lanes], hooks=[trace])
+    res = run(source, [make_tracker(name, seed=seed, preset="paper") for name in lanes],
+              hooks=[trace])
     assert res.outcome.status == "completed" and res.frames == BASE["frames"], res.outcome
     return source, res, trace
 

@@ -102,11 +102,14 @@ class Detections:
 class TrackSet:
     """Tracker output for one frame: the confirmed targets and their identities.
 
-    ids: (M,) int64; boxes: (M, 4) float64 ``(x, y, w, h)``.
+    ids: (M,) int64; boxes: (M, 4) float64 ``(x, y, w, h)``; conf: None (not given: the tracks
+    file's conf column is -1) or (M,) float64 per-row flags for that column (PHD-MT / MT with
+    ``fill_gaps``: 1.0 an estimate, 0.5 a box interpolated inside a linked gap).
     """
 
     ids: np.ndarray
     boxes: np.ndarray
+    conf: np.ndarray | None = None
 
     def __post_init__(self):
         boxes = _as_boxes(self.boxes, "TrackSet.boxes")
@@ -115,6 +118,11 @@ class TrackSet:
             raise ValueError(f"TrackSet: {len(boxes)} boxes but {len(ids)} ids")
         object.__setattr__(self, "boxes", boxes)
         object.__setattr__(self, "ids", ids)
+        if self.conf is not None:
+            conf = np.asarray(self.conf, dtype=np.float64).reshape(-1)
+            if len(conf) != len(ids):
+                raise ValueError(f"TrackSet: {len(ids)} ids but {len(conf)} conf values")
+            object.__setattr__(self, "conf", conf)
 
     @classmethod
     def empty(cls) -> "TrackSet":

@@ -151,6 +151,7 @@ def format_rows(kind: str, frame, ids, boxes, score=None, cls=None, vis=None) ->
     ids = np.asarray(ids, dtype=np.int64).reshape(-1)
     boxes = np.asarray(boxes, dtype=np.float64).reshape(-1, 4)
     n = len(frame)
+    given = score is not None
     score = np.ones(n) if score is None else np.asarray(score, dtype=np.float64).reshape(-1)
     lines = []
     for i in range(n):
@@ -162,6 +163,8 @@ def format_rows(kind: str, frame, ids, boxes, score=None, cls=None, vis=None) ->
             lines.append(f"{head},{int(score[i])},{c},{v:.3f}")
         elif kind == "det":
             lines.append(f"{head},{score[i]:.3f},-1,-1,-1")
+        elif given:  # tracks with a confidence (PHD-MT: 1 = estimate, 0.5 = filled gap frame)
+            lines.append(f"{head},{score[i]:g},-1,-1,-1")
         else:
             lines.append(f"{head},-1,-1,-1,-1")
     return lines
@@ -194,7 +197,8 @@ class TrackWriter:
 
     def write(self, frame: int, tracks: TrackSet) -> None:
         if len(tracks):
-            lines = format_rows("tracks", np.full(len(tracks), frame), tracks.ids, tracks.boxes)
+            lines = format_rows("tracks", np.full(len(tracks), frame), tracks.ids, tracks.boxes,
+                                score=getattr(tracks, "conf", None))
             self._fh.write("".join(line + "\n" for line in lines))
             self._fh.flush()  # a killed run leaves the rows written so far in the .part file
 

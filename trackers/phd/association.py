@@ -71,6 +71,15 @@ Readings and choices (all constants are :class:`AssocParams` fields):
   frames is reported from its first frame), and :meth:`GraphAssociator.flush` returns the rest at
   the end of a sequence.  A track confirmed only after more than ``L`` frames (because of gaps)
   loses its rows older than ``L`` frames.
+* **Gap filling** (``fill_gaps``, not in the paper; off in the ``paper`` preset).  An edge of gap
+  ``i > 1`` links a track across ``i − 1`` frames where it had no estimate.  With ``fill_gaps``
+  those frames get a row by linear interpolation of ``(y1, y2, w, h)`` between the two ends (the
+  velocity of the row is the mean velocity over the gap), flagged in
+  :attr:`FinalRows.filled`.  Only frames strictly inside a chosen edge are filled -- never before
+  a track's first vertex, after its last, or across an edge that was not chosen; a gap box that
+  another track's estimate of the frame covers (IoU >= ``fill_overlap``) is not filled -- and only
+  frames still held back: the report lag becomes ``L = max(min_length − 1, depth)`` so that every
+  gap the graph can bridge is still in the buffer when it is closed (rows stay in frame order).
 """
 
 from __future__ import annotations
@@ -87,6 +96,10 @@ from .filter import STATE_DIM, obs_std
 
 #: Observable components of the state (y1, y2, w, h), maggio2007 §2 ``z = (y, w, h)``.
 OBS_INDEX = np.array([0, 1, 4, 5])
+#: Tracks-file ``conf`` of a row interpolated inside a linked gap (``fill_gaps``); rows of
+#: estimates get :data:`EST_CONF`.
+GAP_CONF = 0.5
+EST_CONF = 1.0
 
 
 @dataclass(frozen=True)
@@ -121,6 +134,13 @@ class AssocParams:
     speed_prior: float = param(0.1, "std of an unknown velocity, fraction of (w, h) per frame "
                                     "(not in paper)")
     accel_to_position: float = param(0.5, "c in y ← y + v + c·a (dt²/2, as phd.motion)")
+    fill_gaps: bool = param(False, "give the frames inside a linked gap a row interpolated "
+                                   "between its ends, flagged (tracks file conf "
+                                   "= GAP_CONF); the report lag becomes max(min_length − 1, "
+                                   "depth) frames (not in paper)")
+    fill_overlap: float = param(0.3, "fill_gaps: a gap box overlapping another track's "
+                                     "estimate of that frame by this IoU or more is not "
+                                     "filled")
 
     def __post_init__(self):
         if int(self.depth) != self.depth or self.depth < 1:
@@ -272,6 +292,15 @@ def max_weight_matching(weights: np.ndarray, allowed: np.ndarray) -> tuple[np.nd
     return rows[keep].astype(np.int64), cols[keep].astype(np.int64)
 
 
+def _iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(A, B) intersection over union of centre boxes ``(cx, cy, w, h)``."""
+    lo = np.maximum(a[:, None, :2] - a[:, None, 2:] / 2, b[None, :, :2] - b[None, :, 2:] / 2)
+    hi = np.minimum(a[:, None, :2] + a[:, None, 2:] / 2, b[None, :, :2] + b[None, :, 2:] / 2)
+    inter = np.prod(np.clip(hi - lo, 0.0, None), axis=-1)
+    union = np.prod(a[:, 2:], -1)[:, None] + np.prod(b[:, 2:], -1)[None, :] - inter
+    return inter / np.maximum(union, 1e-12)
+
+
 def boxes_xywh(states: np.ndarray) -> np.ndarray:
     """(N, 6) states -> (N, 4) top-left boxes ``(x, y, w, h)`` (MOT convention)."""
     return cxcywh_to_xywh(np.asarray(states, dtype=np.float64).reshape(-1, STATE_DIM)[:, OBS_INDEX])
@@ -284,12 +313,19 @@ def boxes_xywh(states: np.ndarray) -> np.ndarray:
 class FinalRows:
     """Finalised output of one past frame (bounded-lag reporting): confirmed tracks only.
 
-    ids (R,) int64; states (R, 6).  ``boxes`` gives (R, 4) ``(x, y, w, h)``.
+    ids (R,) int64; states (R, 6); filled (R,) bool: the row is interpolated inside a linked gap
+    (``AssocParams.fill_gaps``), not an estimate.  ``boxes`` gives (R, 4) ``(x, y, w, h)``.
     """
 
     frame: int
     ids: np.ndarray
     states: np.ndarray
+
+    filled: np.ndarray | None = None
+
+    def __post_init__(self):
+        if self.filled is None:
+            object.__setattr__(self, "filled", np.zeros(len(self.ids), dtype=bool))
 
     @property
     def boxes(self) -> np.ndarray:
@@ -364,13 +400,14 @@ class GraphAssociator:
         self._length = np.zeros(0, dtype=np.int64)
         self._next_id = 1
         self._last_frame: int | None = None
-        self._buffer: deque[tuple[int, np.ndarray, np.ndarray]] = deque()
+        self._buffer: deque[tuple[int, np.ndarray, np.ndarray, np.ndarray]] = deque()
 
     # ---- introspection
     @property
     def lag(self) -> int:
         """Frames between a step and the frame its ``finalised`` rows belong to."""
-        return self.params.min_length - 1
+        p = self.params
+        return max(p.min_length - 1, p.depth) if p.fill_gaps else p.min_length - 1
 
     @property
     def n_live(self) -> int:
@@ -384,6 +421,11 @@ class GraphAssociator:
     def live_tracks(self) -> TrackTails:
         return TrackTails(self._ids.copy(), self._tail_frame.copy(), self._tail.copy(),
                           self._length.copy())
+
+    def rescale_velocity(self, ratio: float) -> None:
+        """Multiply the tails' velocities (px/frame) by ``ratio`` (the frame rate changed)."""
+        if ratio != 1.0:
+            self._tail[:, 2:4] *= ratio
 
     # ---- input checking
     def _check(self, frame, states) -> np.ndarray:
@@ -478,16 +520,54 @@ class GraphAssociator:
                          edges_weight=np.zeros(0), edges_gap=np.zeros(0, dtype=np.int64),
                          chosen=np.zeros(0, dtype=bool))
 
-        # 5. bounded-lag output: rows of frames <= k − L, judged with the lengths known now
-        self._buffer.append((frame, ids.copy(), new.copy()))
+        # 5. gap filling: rows for the frames strictly inside each chosen edge of gap > 1
+        if p.fill_gaps and len(rows):
+            self._fill_gaps(self._prev[rows], self._prev_frame[rows], new[cols], frame,
+                            self._ids[rows])
+
+        # 6. bounded-lag output: rows of frames <= k − L, judged with the lengths known now
+        self._buffer.append((frame, ids.copy(), new.copy(), np.zeros(M, dtype=bool)))
         finalised = []
         while self._buffer and self._buffer[0][0] <= frame - self.lag:
-            f, bid, bst = self._buffer.popleft()
+            f, bid, bst, bfill = self._buffer.popleft()
             ok = self._confirmed_ids(bid, ended_ids, ended_len)
-            finalised.append(FinalRows(f, bid[ok], bst[ok]))
+            finalised.append(FinalRows(f, bid[ok], bst[ok], bfill[ok]))
 
         return AssocResult(frame=frame, states=new, ids=ids, lengths=lengths, confirmed=confirmed,
                            ended=ended_ids, finalised=tuple(finalised), **edges)
+
+    def _fill_gaps(self, src: np.ndarray, src_frame: np.ndarray, dst: np.ndarray, frame: int,
+                   ids: np.ndarray) -> None:
+        """Add interpolated rows to the buffered frames strictly between each chosen edge's ends
+        (``src`` at ``src_frame`` → ``dst`` at ``frame``).  A loop over the buffered frames
+        (at most ``depth``), vectorised over the edges."""
+        gap = frame - src_frame
+        long = gap > 1
+        if not long.any() or not self._buffer:
+            return
+        src, src_frame, dst, ids, gap = src[long], src_frame[long], dst[long], ids[long], gap[long]
+        obs = OBS_INDEX
+        vel = (dst[:, [0, 1]] - src[:, [0, 1]]) / gap[:, None]
+        for n, (f, bid, bst, bfill) in enumerate(self._buffer):
+            inside = (src_frame < f) & (f < frame)
+            if not inside.any():
+                continue
+            t = ((f - src_frame[inside]) / gap[inside])[:, None]
+            st = np.full((int(inside.sum()), STATE_DIM), np.nan)
+            st[:, obs] = (1.0 - t) * src[inside][:, obs] + t * dst[inside][:, obs]
+            st[:, 2:4] = vel[inside]
+            fid = ids[inside]
+            # a box another track's estimate already covers is not filled (the gap is then
+            # the other track's frame: filling it would report one target twice)
+            est = bst[~bfill]
+            if len(est):
+                free = _iou(st[:, obs], est[:, obs]).max(axis=1) < self.params.fill_overlap
+                st, fid = st[free], fid[free]
+            if not len(st):
+                continue
+            self._buffer[n] = (f, np.concatenate([bid, fid]),
+                               np.concatenate([bst, st]),
+                               np.concatenate([bfill, np.ones(len(st), dtype=bool)]))
 
     def _confirmed_ids(self, ids: np.ndarray, extra_ids=None, extra_len=None) -> np.ndarray:
         """Mask of ``ids`` whose track has at least ``min_length`` vertices (live or just ended)."""
@@ -507,7 +587,7 @@ class GraphAssociator:
         """End of sequence: the buffered rows (the last ``L`` frames) of confirmed tracks."""
         out = []
         while self._buffer:
-            f, bid, bst = self._buffer.popleft()
+            f, bid, bst, bfill = self._buffer.popleft()
             ok = self._confirmed_ids(bid)
-            out.append(FinalRows(f, bid[ok], bst[ok]))
+            out.append(FinalRows(f, bid[ok], bst[ok], bfill[ok]))
         return tuple(out)

@@ -29,6 +29,12 @@ associate             clusters    Segments ``assoc/edges/candidates`` / ``assoc/
                                   ``assoc/tracks/live``; Events ``assoc`` (confirmed, ended)
 ====================  ==========  =========================================================
 
+Presets (``pfscope trackers``): ``practical`` (the default) is the same algorithm with settings
+per second (:class:`RateParams`, converted with the frame rate read from the frames'
+timestamps), scene clutter with online estimates and birth odds (:mod:`.filter`, "Scene
+clutter"), detection scores, and, for PHD-MT, gap filling (:mod:`.association`); ``paper`` is
+maggio2007 §4 unchanged (the dataclass defaults).
+
 Output: :attr:`StepResult.tracks` are the confirmed tracks known at frame k (zero lag, what the
 live view shows).  :attr:`StepResult.rows` are the association's bounded-lag rows for the
 tracks file, which also report the first ``min_length − 1`` frames of every track;
@@ -37,7 +43,8 @@ tracks file, which also report the first ``min_length − 1`` frames of every tr
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+from dataclasses import dataclass, replace
 from typing import Optional
 
 import numpy as np
@@ -46,7 +53,8 @@ from ..api import Rows, StepResult, register
 from ..params import param, part, to_dict
 from ..report import Boxes, Points, Segments, StageLog
 from ..types import Detections, Frame, TrackSet, xywh_to_cxcywh
-from .association import AssocParams, AssocResult, FinalRows, GraphAssociator
+from .association import (EST_CONF, GAP_CONF, AssocParams, AssocResult, FinalRows,
+                          GraphAssociator)
 from .clustering import Clusters, kmeans_peaks
 from .filter import STATE_DIM, PHDFilter, PHDParams, PHDStepResult
 
@@ -69,12 +77,91 @@ class ClusterParams:
 
 
 @dataclass(frozen=True)
+class RateParams:
+    """Settings per second (the ``practical`` preset), converted to the per-frame fields with
+    the source's frame rate, read from the frames' timestamps (``fps = (index − 1) /
+    timestamp``; until a frame gives it -- frame 1 has timestamp 0 -- ``fallback_fps``, and the
+    particles' and tracks' velocities are rescaled when the true rate is learnt).  With
+    ``per_second`` false (``paper``) every per-frame field is used as given.
+
+    Noise follows continuous-time models: white-noise acceleration (velocity change std per
+    frame ``accel_per_s · dt^1.5`` in px/frame, fraction of (w, h)), a size random walk
+    (``size_per_s · √dt``); speeds scale with dt, probabilities per second with ``^dt``,
+    durations with the frame rate.  When ``per_second`` is true these fields overwrite:
+    filter.motion.{sigma_v, sigma_size, p_survival}, filter.birth.{birth_speed_std,
+    birth_odds}, filter.clutter.clutter_memory, assoc.{sigma_v, sigma_size, speed_prior,
+    depth, min_length}."""
+
+    per_second: bool = param(False, "convert the per-second settings below with the frame "
+                                    "rate (false: the per-frame fields as given, paper)")
+    fallback_fps: float = param(10.0, "frame rate assumed until the timestamps give one")
+    accel_per_s: float = param(1.0, "acceleration noise, fraction of (w, h) per s^1.5 "
+                                    "(→ sigma_v = accel_per_s · dt^1.5)")
+    size_per_s: float = param(0.1, "size random-walk std, fraction per √s "
+                                   "(→ sigma_size = size_per_s · √dt)")
+    birth_speed_per_s: float = param(1.5, "newborn speed std, sqrt(w h) per second "
+                                          "(→ birth_speed_std, speed_prior)")
+    survival_per_s: float = param(0.95, "probability that a target stays one more second "
+                                        "(→ p_survival = survival_per_s^dt)")
+    birth_odds_per_s: float = param(0.15, "odds per second that a detection no target "
+                                          "explains is a new target rather than clutter "
+                                          "(→ birth_odds = birth_odds_per_s · dt)")
+    gap_s: float = param(2.0, "longest gap the association bridges, seconds "
+                              "(→ depth = ceil(gap_s · fps))")
+    min_track_s: float = param(0.5, "shortest track reported, seconds of estimates "
+                                    "(→ min_length = max(2, round(min_track_s · fps)))")
+    memory_s: float = param(20.0, "averaging time of the online clutter and score estimates "
+                                  "(→ clutter_memory)")
+
+    def __post_init__(self):
+        for name in ("fallback_fps", "gap_s", "memory_s"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"RateParams.{name} must be > 0, got {getattr(self, name)!r}")
+        for name in ("accel_per_s", "size_per_s", "birth_speed_per_s", "birth_odds_per_s",
+                     "min_track_s"):
+            if not getattr(self, name) >= 0:
+                raise ValueError(f"RateParams.{name} must be >= 0, got {getattr(self, name)!r}")
+        if not 0.0 <= self.survival_per_s <= 1.0:
+            raise ValueError(f"RateParams.survival_per_s must be in [0, 1], "
+                             f"got {self.survival_per_s!r}")
+
+
+def assoc_per_frame(a: AssocParams, r: RateParams, fps: float) -> AssocParams:
+    """The association's per-frame fields from the per-second ones at ``fps``."""
+    dt = 1.0 / fps
+    depth = max(1, math.ceil(r.gap_s * fps - 1e-9))
+    min_length = min(max(2, round(r.min_track_s * fps)), depth + 1)
+    return replace(a, sigma_v=r.accel_per_s * dt ** 1.5, sigma_size=r.size_per_s * dt ** 0.5,
+                   speed_prior=r.birth_speed_per_s * dt, depth=depth, min_length=min_length)
+
+
+def filter_per_frame(f: PHDParams, r: RateParams, fps: float) -> PHDParams:
+    """The filter's per-frame fields from the per-second ones at ``fps``."""
+    dt = 1.0 / fps
+    return replace(
+        f,
+        motion=replace(f.motion, sigma_v=r.accel_per_s * dt ** 1.5,
+                       sigma_size=r.size_per_s * dt ** 0.5, p_survival=r.survival_per_s ** dt),
+        birth=replace(f.birth, birth_speed_std=r.birth_speed_per_s * dt,
+                      birth_odds=r.birth_odds_per_s * dt),
+        clutter=replace(f.clutter, clutter_memory=max(1.0, r.memory_s * fps)))
+
+
+@dataclass(frozen=True)
 class PHDTrackerParams:
     """PHD-MT: the filter's parts, the peak extraction and the association."""
 
     filter: PHDParams = part(PHDParams, "particle PHD filter")
     clusters: ClusterParams = part(ClusterParams, "modified K-means peaks")
     assoc: AssocParams = part(AssocParams, "graph-matching association")
+    rate: RateParams = part(RateParams, "settings per second (practical preset)")
+
+    def at_fps(self, fps: float) -> "PHDTrackerParams":
+        """The per-frame settings at ``fps`` (itself when ``rate.per_second`` is false)."""
+        if not self.rate.per_second:
+            return self
+        return replace(self, filter=filter_per_frame(self.filter, self.rate, fps),
+                       assoc=assoc_per_frame(self.assoc, self.rate, fps))
 
 
 @dataclass(frozen=True)
@@ -82,10 +169,26 @@ class MTParams:
     """MT: the association alone."""
 
     assoc: AssocParams = part(AssocParams, "graph-matching association")
+    rate: RateParams = part(RateParams, "settings per second (practical preset)")
+
+    def at_fps(self, fps: float) -> "MTParams":
+        if not self.rate.per_second:
+            return self
+        return replace(self, assoc=assoc_per_frame(self.assoc, self.rate, fps))
 
 
-def _rows(finalised: tuple[FinalRows, ...]) -> Rows:
-    return [(r.frame, TrackSet(r.ids, r.boxes)) for r in finalised]
+def frame_rate(frame: Frame) -> Optional[float]:
+    """Frames per second from a frame's index and timestamp (None when they cannot tell)."""
+    if frame.index > 1 and frame.timestamp > 0 and math.isfinite(frame.timestamp):
+        return (frame.index - 1) / frame.timestamp
+    return None
+
+
+def _rows(finalised: tuple[FinalRows, ...], flagged: bool) -> Rows:
+    if not flagged:
+        return [(r.frame, TrackSet(r.ids, r.boxes)) for r in finalised]
+    return [(r.frame, TrackSet(r.ids, r.boxes, np.where(r.filled, GAP_CONF, EST_CONF)))
+            for r in finalised]
 
 
 class _AssociatingTracker:
@@ -95,17 +198,42 @@ class _AssociatingTracker:
     needs_detections = True
     needs_image = False
 
+    params: "PHDTrackerParams | MTParams"
+
     def __init__(self, assoc: AssocParams):
         self.associator = GraphAssociator(assoc)
         self._announced: set[int] = set()
+        self.fps: Optional[float] = None        # the frame rate the settings are converted at
+        self._fps_known = False
+        self.active = self.params               # per-frame settings in use
+
+    def _retime(self, frame: Frame) -> None:
+        """Per-second settings: convert at the first frame, again (once) when the timestamps
+        first give the frame rate; velocities in px/frame are rescaled to the new rate."""
+        if not self.params.rate.per_second or self._fps_known:
+            return
+        fps = frame_rate(frame)
+        self._fps_known = fps is not None
+        fps = fps if fps is not None else self.params.rate.fallback_fps
+        if self.fps is not None and fps == self.fps:
+            return
+        ratio = 1.0 if self.fps is None else self.fps / fps
+        self.fps = fps
+        self.active = self.params.at_fps(fps)
+        self.associator.params = self.active.assoc
+        self.associator.rescale_velocity(ratio)
+        self._retime_filter(ratio)
+
+    def _retime_filter(self, ratio: float) -> None:
+        pass
 
     def _associate(self, frame: Frame, states: np.ndarray, log: StageLog) -> StepResult:
         log.stage("associate")
         res = self.associator.step(frame.index, states)
         self._report_association(frame, res, log)
         keep = res.confirmed
-        return StepResult(TrackSet(res.ids[keep], res.boxes[keep]), _rows(res.finalised),
-                          log.result())
+        return StepResult(TrackSet(res.ids[keep], res.boxes[keep]),
+                          _rows(res.finalised, self.associator.params.fill_gaps), log.result())
 
     def _report_association(self, frame: Frame, res: AssocResult, log: StageLog) -> None:
         log.scalar("assoc/tracks/live", self.associator.n_live)
@@ -135,10 +263,22 @@ class _AssociatingTracker:
 
     def finish(self) -> Rows:
         """End of sequence: every row not yet finalised."""
-        return _rows(self.associator.flush())
+        return _rows(self.associator.flush(), self.associator.params.fill_gaps)
 
 
-@register(presets={"paper": PHDTrackerParams()})
+#: The practical default of PHD-MT (README, "Presets"): maggio2007's algorithm with settings
+#: per second, scene clutter, detection scores and gap filling.
+PHD_PRACTICAL = PHDTrackerParams(
+    filter=PHDParams.of(clutter_model="scene", near_learn=True, score_model="gaussian",
+                        p_miss=0.1),
+    assoc=AssocParams(fill_gaps=True),
+    rate=RateParams(per_second=True))
+#: The practical default of MT: the same association settings per second.  No gap filling:
+#: MT links clutter into tracks across gaps, and filling them multiplies its false positives.
+MT_PRACTICAL = MTParams(rate=RateParams(per_second=True))
+
+
+@register(presets={"practical": PHD_PRACTICAL, "paper": PHDTrackerParams()})
 class PHDTracker(_AssociatingTracker):
     """PHD-MT: particle PHD filter + modified K-means peaks + graph-matching association."""
 
@@ -153,16 +293,25 @@ class PHDTracker(_AssociatingTracker):
         super().__init__(self.params.assoc)
         self.filter = PHDFilter(self.params.filter, rng, likelihood=likelihood)
 
+    def _retime_filter(self, ratio: float) -> None:
+        self.filter.set_params(self.active.filter)
+        if ratio != 1.0 and len(self.filter.particles):
+            ps = self.filter.particles
+            states = ps.states.copy()
+            states[:, 2:4] *= ratio
+            self.filter.particles = type(ps)(states, ps.log_weights, ps.labels, ps.extra)
+
     def config(self) -> dict:
         return {"tracker": self.name, "params": to_dict(self.params)}
 
     def step(self, frame: Frame, detections: Optional[Detections],
              level: Optional[str] = None) -> StepResult:
         dets = detections if detections is not None else Detections.empty()
+        self._retime(frame)
         log = StageLog(self.stages, level)
         r = self.filter.step(dets, frame)
         cp = self.params.clusters
-        clusters = kmeans_peaks(r.resampled, r.observations, cp.T, params=self.params.filter,
+        clusters = kmeans_peaks(r.resampled, r.observations, cp.T, params=self.filter.params,
                                 split_rule=cp.split_rule)
         self._report_filter(dets, r, clusters, log)
         return self._associate(frame, clusters.kept_centers, log)
@@ -216,7 +365,7 @@ class PHDTracker(_AssociatingTracker):
                           values={"m": clusters.masses[~k]}))
 
 
-@register(presets={"paper": MTParams()})
+@register(presets={"practical": MT_PRACTICAL, "paper": MTParams()})
 class MTTracker(_AssociatingTracker):
     """MT: the graph-matching association run directly on the detections (PHD-MT's baseline).
 
@@ -239,6 +388,7 @@ class MTTracker(_AssociatingTracker):
     def step(self, frame: Frame, detections: Optional[Detections],
              level: Optional[str] = None) -> StepResult:
         dets = detections if detections is not None else Detections.empty()
+        self._retime(frame)
         z = xywh_to_cxcywh(dets.boxes)
         states = np.full((len(z), STATE_DIM), np.nan)
         states[:, [0, 1, 4, 5]] = z
