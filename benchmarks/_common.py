@@ -166,3 +166,117 @@ def _json_default(o):
 
 def command_line() -> str:
     return " ".join([".venv/bin/python", *sys.argv])
+
+
+# ----------------------------------------------------------------------------- many-target scene
+
+def _frame_class():
+    import numpy as np
+
+    from pfscope.trackers.data.sources import Source
+    from pfscope.trackers.types import Frame
+
+    class DetOnlySource(Source):
+        """Frames carry a black image of the source's size (one read-only zero-stride view, no
+        pixels in memory: only the detections (``det``) and ``gt`` matter, but the image gives
+        the frame its size, which the filter's scene clutter model reads)."""
+
+        def frames(self, limit=None):
+            n = self.length if limit is None else min(limit, self.length)
+            img = np.broadcast_to(np.zeros((1, 1, 3), dtype=np.uint8),
+                                  (self.height, self.width, 3))
+            for k in range(1, n + 1):
+                yield Frame(k, (k - 1) / self.fps, img)
+
+    return DetOnlySource
+
+
+def targets_scene(targets: int, frames: int, seed: int = 0, p_detect: float = 0.9,
+                  clutter: float = 5.0):
+    """A seeded detections-only scene with ``targets`` people visible on every frame.
+
+    The image is 640 x 480 for 4 targets and grows by sqrt(targets / 4) per side, so the target
+    density stays the same as their number grows. Each target is a box (w 24-48 px, h 2-3 w)
+    moving at 0.5-2 px/frame in a random direction and bouncing off the image borders (so a
+    run of any length keeps all of them in view); it is detected with probability ``p_detect``
+    (box noise 5 % of its size), and Poisson(``clutter``) clutter boxes of person-like size fall
+    uniformly over the image each frame. Ground truth: the true boxes, ids 1..targets."""
+    import math
+
+    import numpy as np
+
+    from pfscope.trackers.data.motio import MotTable
+
+    rng = np.random.default_rng([seed, targets, 7])
+    side = math.sqrt(max(targets, 4) / 4.0)
+    W, H = 640.0 * side, 480.0 * side
+    T = targets
+    w = rng.uniform(24, 48, T)
+    h = w * rng.uniform(2, 3, T)
+    lo = np.c_[w / 2, h / 2]
+    span = np.c_[W - w, H - h]
+    p0 = rng.uniform(0.1, 0.9, (T, 2)) * span
+    ang = rng.uniform(0, 2 * math.pi, T)
+    v = rng.uniform(0.5, 2.0, T)[:, None] * np.c_[np.cos(ang), np.sin(ang)]
+    k = np.arange(frames, dtype=float)[:, None, None]
+    x = (p0[None] + k * v[None]) % (2 * span[None])
+    c = lo[None] + span[None] - np.abs(x - span[None])          # (frames, T, 2): bouncing
+    gt_boxes = np.concatenate([c - np.c_[w, h][None] / 2,
+                               np.broadcast_to(np.c_[w, h], c.shape)], axis=2)
+    det_mask = rng.random((frames, T)) < p_detect
+    noise = rng.standard_normal((frames, T, 4)) * 0.05 * np.c_[w, h, w, h][None]
+    n_cl = rng.poisson(clutter, frames)
+    fr, boxes = [], []
+    for i in range(frames):
+        tb = gt_boxes[i][det_mask[i]] + noise[i][det_mask[i]]
+        m = n_cl[i]
+        cw = rng.uniform(15, 60, m)
+        ch = cw * rng.uniform(2, 3, m)
+        cb = np.c_[rng.uniform(0, W, m) - cw / 2, rng.uniform(0, H, m) - ch / 2, cw, ch]
+        b = np.vstack([tb, cb])
+        b[:, 2:4] = np.maximum(b[:, 2:4], 2.0)
+        fr.append(np.full(len(b), i + 1))
+        boxes.append(b)
+    fr = np.concatenate(fr).astype(np.int64)
+    boxes = np.vstack(boxes)
+    n = len(fr)
+    det = MotTable(frame=fr, id=np.full(n, -1, np.int64), boxes=boxes, score=np.ones(n),
+                   cls=np.ones(n), vis=np.ones(n))
+    gfr = np.repeat(np.arange(1, frames + 1), T).astype(np.int64)
+    ng = len(gfr)
+    gt = MotTable(frame=gfr, id=np.tile(np.arange(1, T + 1), frames).astype(np.int64),
+                  boxes=gt_boxes.reshape(-1, 4).copy(), score=np.ones(ng), cls=np.ones(ng),
+                  vis=np.ones(ng))
+    cls = _frame_class()
+    return cls(name=f"targets{T}-seed{seed}", fps=25.0, length=frames, width=int(W),
+               height=int(H), gt=gt, det=det, kind="synthetic", location="built-in",
+               extra={"targets": T, "p_detect": p_detect, "clutter": clutter})
+
+
+# ----------------------------------------------------------------------------- memory, fits
+
+def rss_mb() -> float:
+    """Current resident set size of this process, MB (Linux ``/proc/self/statm``)."""
+    try:
+        pages = int(Path("/proc/self/statm").read_text().split()[1])
+        return pages * os.sysconf("SC_PAGE_SIZE") / 2 ** 20
+    except (OSError, ValueError, IndexError):
+        return float("nan")
+
+
+def peak_rss_mb() -> float:
+    """Peak resident set size of this process so far, MB (``ru_maxrss``)."""
+    import resource
+
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
+def loglog_slope(x, y) -> float:
+    """Least-squares slope of log y against log x (the exponent b of y ~ a x^b)."""
+    import numpy as np
+
+    x, y = np.asarray(x, float), np.asarray(y, float)
+    ok = (x > 0) & (y > 0) & np.isfinite(y)
+    if ok.sum() < 2:
+        return float("nan")
+    return float(np.polyfit(np.log(x[ok]), np.log(y[ok]), 1)[0])

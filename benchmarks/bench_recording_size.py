@@ -2,7 +2,7 @@
 
 Uses the app's own code path, :func:`viewer_app.run.record` with
 ``RecordOptions(tracker='phd', level=..., max_points=..., frames=N, seed=..., force=True)``
-(``preset`` None = the tracker's ``paper`` preset, ``timing`` off so the same seed gives the
+(``preset='paper'``, given explicitly, ``timing`` off so the same seed gives the
 same bytes, no ``tracker_options``), writing into a temporary folder (deleted afterwards unless
 ``--keep DIR``), on a source's public detections (``file`` detector, as ``pfscope record``
 picks for a MOT folder).  ``record`` runs the engine's one frame loop,
@@ -63,6 +63,7 @@ from pfscope.trackers.pipeline import run as run_pipeline
 DEFAULT_MAX_POINTS = 3000
 MB = 1e6
 LANE = "phd"
+PRESET = "paper"   # explicit: the registry's first preset need not be the paper's
 
 
 def recorder_jpeg_quality() -> int:
@@ -86,7 +87,8 @@ def run_record(source, out: Path, level: str, max_points: int, frames: int, seed
     stamps = []
     t0 = time.perf_counter()
     res = record(source, out, RecordOptions(tracker=LANE, level=level, max_points=max_points,
-                                            frames=frames, seed=seed, force=True),
+                                            frames=frames, seed=seed, force=True,
+                                            preset=PRESET),
                  progress=False, on_frame=lambda done: stamps.append(time.perf_counter()))
     if res.frames != frames or res.interrupted or Path(res.out) != Path(out):
         raise SystemExit(f"record() stopped after {res.frames} of {frames} frames "
@@ -124,7 +126,7 @@ def run_without_recording(source, frames: int, seed: int, jpeg_quality: Optional
     preset, same seed) + online metrics, ``level=None``.  Returns (loop seconds (F,), tracker
     step seconds (F,), JPEG bytes (F,) or None)."""
     timer = LoopTimer(LANE, jpeg_quality)
-    res = run_pipeline(source, {LANE: make_tracker(LANE, seed)}, frames=frames, level=None,
+    res = run_pipeline(source, {LANE: make_tracker(LANE, seed, preset=PRESET)}, frames=frames, level=None,
                        hooks=[timer])
     if res.frames != frames or res.outcome.status != "completed":
         raise SystemExit(f"pipeline stopped: {res.outcome.reason}")
@@ -317,7 +319,7 @@ def main(argv=None) -> int:
 
     info = C.machine()
     C.print_machine(info)
-    p = make_params(LANE)
+    p = make_params(LANE, PRESET)
     print(f"PHD-MT (tracker 'phd', preset 'paper': T={p.clusters.T:g}, K={p.assoc.depth}) "
           f"recorded with viewer_app.run.record (pipeline + RerunRecorder hook), file detector; "
           f"record default max_points={default_mp}")

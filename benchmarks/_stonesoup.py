@@ -1,0 +1,242 @@
+"""Stone Soup's SMC-PHD filter as a pipeline lane, for the speed and accuracy comparison of
+``benchmarks/bench.py`` (issue 12; issue 11 needs the accuracy side).
+
+Optional: needs the ``bench`` extra (``pip install -e .[bench]``, i.e. ``stonesoup``).
+:func:`available` says whether it is installed (and why not).
+
+What runs is Stone Soup's own code: ``SMCPHDPredictor`` (expansion birth scheme),
+``SMCPHDUpdater`` (with ``SystematicResampler``) on ``MultipleHypothesis`` of one missed-detection
+hypothesis plus one hypothesis per detection, as in Stone Soup's SMC-PHD tutorial. The model is
+pfscope's PHD filter's, written with Stone Soup components:
+
+- state ``(x, vx, y, vy, w, h)``; ``CombinedLinearGaussianTransitionModel`` of a
+  ``ConstantVelocity`` per axis (noise from pfscope's ``sigma_v`` at the scene's mean size) and a
+  ``RandomWalk`` per size (pfscope's ``sigma_size``); survival 0.99 per frame;
+- one ``LinearGaussian`` measurement model per detection, its noise sized by the detection as in
+  pfscope (``obs_std_source='detection'``: σ_w = max(sigma_obs · w, sigma_obs_min),
+  σ_x = sigma_obs_pos_ratio · σ_w, ...; paper: 0.15, 1 px, 0.5);
+- births sampled around the frame's detections as pfscope's (same spreads), birth rate 0.01 per
+  detection, p_D = 1 − p_M = 0.95;
+- clutter intensity (``clutter="pfscope"``, the default): pfscope's κ(z) of the preset
+  (``phd.filter.log_clutter_density``: the clutter rate spread over the gate volume V(z) of the
+  observation noise around z), its geometric mean over the frame's detections, set on the
+  updater before each frame (Stone Soup's updater takes one intensity for all detections);
+  ``clutter="uniform"``: the scene's true clutter rate spread uniformly over the image and the
+  size range (much lower: every new detection then claims nearly one target).
+
+**Same particle budget.** The lane runs right after a pfscope PHD lane in the same pipeline run
+and copies, every frame, that lane's particle counts: the number of newborn particles J_k (as
+``birth_probability = J_k / L_{k-1}``) and the number kept after resampling L_k (as the updater's
+``num_samples``), so both filters update exactly as many particles on every frame. Timed: the
+predictor, building the hypotheses and the updater (with its resampling); the lane's
+``step_seconds`` is that.
+
+``noise``: Stone Soup's ``SMCPHDUpdater`` evaluates ``measurement_model.logpdf(detection,
+prediction, noise=True)``, which draws a fresh measurement-noise sample per particle and
+detection inside the likelihood. ``noise=False`` overrides ``_get_measurement_loglikelihoods`` to
+pass ``noise=False`` (the textbook likelihood; everything else unchanged).
+"""
+
+from __future__ import annotations
+
+import datetime
+import math
+
+import numpy as np
+
+STATE_DIM = 6
+
+
+def available() -> str | None:
+    """None when Stone Soup can be imported, else a one-line reason."""
+    try:
+        import stonesoup  # noqa: F401
+    except ImportError as e:
+        return (f"Stone Soup comparison skipped: stonesoup is not installed ({e.name}); "
+                f"pip install -e '.[bench]'")
+    return None
+
+
+def version() -> str:
+    import stonesoup
+
+    return getattr(stonesoup, "__version__", "?")
+
+
+class _DetectionBirthSampler:
+    """Birth particles around the current frame's detections (pfscope's birth spreads).
+
+    Stone Soup's predictor calls ``sample(params={'num_samples': n}, timestamp=...,
+    random_state=...)``; the lane sets :attr:`Z` (N_z, 4) ``(cx, cy, w, h)`` before predicting."""
+
+    def __init__(self, rng: np.random.Generator, spread: float = 1.0, speed_std: float = 0.1,
+                 lk=None):
+        self.rng, self.spread, self.speed_std, self.lk = rng, spread, speed_std, lk
+        self.pos_ratio = 0.5 if lk is None else lk.sigma_obs_pos_ratio
+        self.Z = np.zeros((0, 4))
+
+    def sample(self, params, timestamp=None, random_state=None, **kwargs):
+        from stonesoup.types.array import StateVectors
+        from stonesoup.types.state import ParticleState
+
+        n = int(params["num_samples"])
+        Z = self.Z
+        sv = np.zeros((STATE_DIM, n))
+        if n and len(Z):
+            pick = Z[self.rng.integers(0, len(Z), n)]
+            sw, sh = _obs_std(pick[:, 2], self.lk), _obs_std(pick[:, 3], self.lk)
+            e = self.rng.standard_normal((4, n)) * self.spread
+            s = np.sqrt(pick[:, 2] * pick[:, 3]) * self.speed_std
+            v = self.rng.standard_normal((2, n)) * s
+            sv[0] = pick[:, 0] + e[0] * self.pos_ratio * sw
+            sv[2] = pick[:, 1] + e[1] * self.pos_ratio * sh
+            sv[1], sv[3] = v
+            sv[4] = np.maximum(pick[:, 2] + e[2] * sw, 1.0)
+            sv[5] = np.maximum(pick[:, 3] + e[3] * sh, 1.0)
+        return ParticleState(StateVectors(sv), log_weight=np.full(n, -math.log(max(n, 1))),
+                             timestamp=timestamp)
+
+
+def _obs_std(size, lk=None):
+    """pfscope's observation std of a size (``sigma_obs`` × size, at least ``sigma_obs_min``)."""
+    ratio, floor = (0.15, 1.0) if lk is None else (lk.sigma_obs, lk.sigma_obs_min)
+    return np.maximum(ratio * np.asarray(size, dtype=float), floor)
+
+
+class StoneSoupPHDLane:
+    """A pipeline lane (Tracker protocol) running Stone Soup's SMC-PHD on the detections, with
+    the particle counts of the pfscope lane ``budget_from`` (a :class:`PHDTracker`) that steps
+    before it in the same run (``births()`` returns that lane's J_k of the current frame).
+    Reports no tracks; :attr:`mass` (PHD mass after the update) and :attr:`states` (the
+    particles, ``(N, 6)`` in pfscope's order ``(cx, cy, vx, vy, w, h)``) are read by the
+    benchmark's hooks."""
+
+    name = "stonesoup-smcphd"
+    paper = "Vo, Singh, Doucet 2003 (Stone Soup SMCPHDUpdater)"
+    stages = ("filter",)
+    needs_detections = True
+    needs_image = False
+
+    def __init__(self, budget_from, births, *, width: float, height: float,
+                 size_range=(10.0, 200.0), noise: bool = True, seed: int = 0,
+                 mean_size: float = 40.0, clutter_rate: float = 5.0,
+                 clutter: str = "pfscope"):
+        from stonesoup.models.transition.linear import (
+            CombinedLinearGaussianTransitionModel,
+            ConstantVelocity,
+            RandomWalk,
+        )
+        from stonesoup.predictor.particle import SMCPHDPredictor
+        from stonesoup.resampler.particle import SystematicResampler
+        from stonesoup.types.array import StateVectors
+        from stonesoup.types.state import ParticleState
+        from stonesoup.updater.particle import SMCPHDUpdater
+
+        # Stone Soup draws its transition and measurement noise from numpy's global generator
+        # (its models have no seed here): seed it, so the same seed gives the same run
+        np.random.seed(seed)
+        self.budget_from = budget_from
+        self.births = births            # () -> J_k of the pfscope lane at this frame
+        self.noise = noise
+        self.rng = np.random.default_rng(seed)
+        fp = budget_from.params.filter
+        q_pos = (fp.motion.sigma_v * mean_size) ** 2
+        q_size = (fp.motion.sigma_size * mean_size) ** 2
+        self.transition = CombinedLinearGaussianTransitionModel(
+            [ConstantVelocity(q_pos), ConstantVelocity(q_pos), RandomWalk(q_size),
+             RandomWalk(q_size)])
+        self.lk = fp.likelihood
+        self.sampler = _DetectionBirthSampler(self.rng, fp.birth.birth_spread,
+                                              fp.birth.birth_speed_std, fp.likelihood)
+        self.predictor = SMCPHDPredictor(
+            transition_model=self.transition,
+            death_probability=-math.log(fp.motion.p_survival),  # survival = exp(-λ Δt), Δt 1 s
+            birth_probability=0.1, birth_rate=0.01, birth_sampler=self.sampler)
+        lo, hi = size_range
+        volume = float(width) * float(height) * (hi - lo) ** 2
+        cls = SMCPHDUpdater if noise else _no_noise_class()
+        self.updater = cls(measurement_model=None, resampler=SystematicResampler(),
+                           prob_detect=1.0 - fp.likelihood.p_miss,
+                           clutter_intensity=clutter_rate / volume)
+        if clutter not in ("pfscope", "uniform"):
+            raise ValueError(f"clutter must be 'pfscope' or 'uniform', got {clutter!r}")
+        self.clutter = clutter
+        self.uniform_intensity = clutter_rate / volume
+        self.t0 = datetime.datetime(2000, 1, 1)
+        # an empty filter cannot grow in Stone Soup (births are a fraction of the particles):
+        # start from one particle of negligible weight
+        self.state = ParticleState(StateVectors(np.zeros((STATE_DIM, 1))),
+                                   log_weight=np.array([-700.0]), timestamp=self.t0)
+        self.mass = 0.0
+        self.states = np.zeros((0, STATE_DIM))
+        self.n_update = 0               # particles in this frame's update (prediction size)
+
+    def config(self) -> dict:
+        return {"tracker": self.name, "noise": self.noise, "clutter": self.clutter}
+
+    def finish(self):
+        return []
+
+    def step(self, frame, detections, level=None):
+        from pfscope.trackers.api import StepResult
+        from pfscope.trackers.types import TrackSet
+        from stonesoup.models.measurement.linear import LinearGaussian
+        from stonesoup.types.detection import Detection, MissedDetection
+        from stonesoup.types.hypothesis import SingleHypothesis
+        from stonesoup.types.multihypothesis import MultipleHypothesis
+
+        f = self.budget_from.filter
+        L_prev = len(self.state)
+        J = int(self.births())
+        L_next = max(len(f.particles), 1)
+        ts = self.t0 + datetime.timedelta(seconds=frame.index)
+        b = detections.boxes if detections is not None else np.zeros((0, 4))
+        Z = np.c_[b[:, 0] + b[:, 2] / 2, b[:, 1] + b[:, 3] / 2, b[:, 2], b[:, 3]]
+        self.sampler.Z = Z
+        J = max(J, 1) if len(Z) else 0
+        self.predictor.birth_probability = J / L_prev
+        self.predictor.birth_rate = max(0.01 * len(Z), 1e-12)
+        if J == 0:  # no detection: Stone Soup's expansion scheme needs >= 1 newborn
+            self.predictor.birth_probability = 1.0 / L_prev
+            self.sampler.Z = np.array([[0.0, 0.0, 1.0, 1.0]])
+        self.updater.num_samples = L_next
+        if self.clutter == "pfscope" and len(Z):
+            from pfscope.trackers.phd.filter import log_clutter_density
+
+            fp = self.budget_from.params.filter
+            self.updater.clutter_intensity = float(
+                np.exp(np.mean(log_clutter_density(Z, fp.clutter, fp.likelihood))))
+        prediction = self.predictor.predict(self.state, timestamp=ts)
+        self.n_update = len(prediction)
+        hyps = [SingleHypothesis(prediction, MissedDetection(timestamp=ts))]
+        for z in Z:
+            sw, sh = _obs_std(z[2], self.lk), _obs_std(z[3], self.lk)
+            r = self.lk.sigma_obs_pos_ratio
+            model = LinearGaussian(ndim_state=STATE_DIM, mapping=(0, 2, 4, 5),
+                                   noise_covar=np.diag([(r * sw) ** 2, (r * sh) ** 2,
+                                                        sw ** 2, sh ** 2]))
+            hyps.append(SingleHypothesis(prediction, Detection(z.reshape(4, 1), timestamp=ts,
+                                                               measurement_model=model)))
+        self.state = self.updater.update(MultipleHypothesis(hyps))
+        lw = np.asarray(self.state.log_weight, dtype=float)
+        self.mass = float(np.exp(np.logaddexp.reduce(lw))) if len(lw) else 0.0
+        sv = np.asarray(self.state.state_vector, dtype=float)
+        self.states = sv[[0, 2, 1, 3, 4, 5]].T
+        return StepResult(TrackSet(np.zeros(0, np.int64), np.zeros((0, 4))))
+
+
+def _no_noise_class():
+    from stonesoup.updater.particle import SMCPHDUpdater
+
+    class NoNoiseSMCPHDUpdater(SMCPHDUpdater):
+        """``SMCPHDUpdater`` whose likelihood does not draw measurement noise."""
+
+        def _get_measurement_loglikelihoods(self, prediction, detections):
+            g = np.zeros((prediction.state_vector.shape[1], len(detections)))
+            for i, detection in enumerate(detections):
+                model = self._check_measurement_model(detection.measurement_model)
+                g[:, i] = model.logpdf(detection, prediction, noise=False)
+            return g
+
+    return NoNoiseSMCPHDUpdater
+
