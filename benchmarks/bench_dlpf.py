@@ -33,6 +33,12 @@ Usage (the README numbers)::
     .venv/bin/python benchmarks/bench_dlpf.py --source pets --start 401 --seeds 0,1,2 --json /tmp/bench_dlpf.json
     .venv/bin/python benchmarks/bench_dlpf.py --source synthetic --seeds 0,1,2
 
+DLPF against DLPF (the speed of a change, e.g. the classifier's pyramid mode against the
+per-window HOG), as two lanes of one run, without the exhaustive lane::
+
+    .venv/bin/python benchmarks/bench_dlpf.py --source pets --start 401 --seeds 0,1,2 \
+        --baseline classifier.mode=window --no-exhaustive
+
 ``--seeds`` runs the whole comparison once per seed (DLPF is random, HOG+MT is not; the
 synthetic scene is also generated with that seed) and prints each run and the mean.
 """
@@ -111,25 +117,32 @@ def open_for(spec: str, seed: int, frames: Optional[int]):
 
 
 def one_run(spec: str, seed: int, start: int, frames: Optional[int], dlpf_options: dict,
-            hog_options: dict) -> dict:
+            hog_options: Optional[dict], baseline_options: Optional[dict] = None) -> dict:
+    """One pipeline run: the ``dlpf`` lane, the ``hog-mt`` lane (unless ``hog_options`` is
+    None) and a ``dlpf-base`` lane (DLPF with ``baseline_options``, when given)."""
     src = open_for(spec, seed, frames)
-    dlpf = make_tracker("dlpf", seed, **dlpf_options)
-    hog = ExhaustiveLane(hog_options, seed)
+    lanes: dict = {"dlpf": make_tracker("dlpf", seed, **dlpf_options)}
+    if baseline_options is not None:
+        lanes["dlpf-base"] = make_tracker("dlpf", seed, **baseline_options)
+    if hog_options is not None:
+        lanes["hog-mt"] = ExhaustiveLane(hog_options, seed)
     times = StepTimes()
-    res = run(src, {"dlpf": dlpf, "hog-mt": hog}, frames=frames, start=start, hooks=[times])
+    res = run(src, lanes, frames=frames, start=start, hooks=[times])
     n = res.frames
     out = {"source": getattr(src, "name", spec), "seed": seed, "start": start, "frames": n,
            "size": None, "lanes": {}}
-    for lane, windows in (("dlpf", dlpf.windows_evaluated / max(dlpf.frames_seen, 1)),
-                          ("hog-mt", hog.windows / max(hog.frames, 1))):
+    for lane, trk in lanes.items():
+        windows = (trk.windows / max(trk.frames, 1) if lane == "hog-mt"
+                   else trk.windows_evaluated / max(trk.frames_seen, 1))
         s = res.scores.get(lane, {})
         out["lanes"][lane] = {"windows_per_frame": windows,
                               "fps": n / times.seconds[lane] if times.seconds[lane] else None,
                               "ms_per_frame": 1000 * times.seconds[lane] / max(n, 1),
                               **{m: float(s[m]) for m in METRICS if m in s}}
-    out["lanes"]["hog-mt"]["detector_ms_per_frame"] = 1000 * hog.detect_seconds / max(n, 1)
-    out["dlpf_tracks_config"] = dlpf.config()
-    out["hog_config"] = hog.config()
+        out[f"{lane}_config"] = trk.config()
+    if "hog-mt" in lanes:
+        out["lanes"]["hog-mt"]["detector_ms_per_frame"] = \
+            1000 * lanes["hog-mt"].detect_seconds / max(n, 1)
     return out
 
 
@@ -172,19 +185,30 @@ def main(argv=None) -> int:
                     help="DLPF parameter override (as pfscope record --set)")
     ap.add_argument("--hog-upscale", type=float, default=1.0,
                     help="hog detector upscale (default 1: the pipeline's hog detector as is)")
+    ap.add_argument("--baseline", action="append", default=None, metavar="NAME=VALUE",
+                    help="also run a 'dlpf-base' lane: DLPF with these overrides (repeatable; "
+                         "e.g. classifier.mode=window for the per-window HOG), in the same run")
+    ap.add_argument("--no-exhaustive", action="store_true",
+                    help="leave out the hog-mt lane (e.g. to time dlpf against dlpf-base only)")
     ap.add_argument("--json", default=None, metavar="FILE", help="write every number to FILE")
     a = ap.parse_args(argv)
     start = a.start if a.start is not None else (401 if a.source == "pets" else 1)
     dlpf_options = dict(s.split("=", 1) for s in a.set)
-    hog_options = {"upscale": a.hog_upscale} if a.hog_upscale != 1.0 else {}
+    hog_options = None if a.no_exhaustive else \
+        ({"upscale": a.hog_upscale} if a.hog_upscale != 1.0 else {})
+    base_options = None if a.baseline is None else {**dlpf_options, **dict(
+        s.split("=", 1) for s in a.baseline)}
     info = machine()
     print_machine(info)
     runs = []
     try:
         for seed in (int(s) for s in a.seeds.split(",")):
-            print(f"seed {seed}: running dlpf and hog-mt on {a.source} from frame {start} ...",
+            lanes = ["dlpf"] + (["dlpf-base"] if base_options is not None else []) + \
+                ([] if hog_options is None else ["hog-mt"])
+            print(f"seed {seed}: running {', '.join(lanes)} on {a.source} from frame {start} ...",
                   file=sys.stderr, flush=True)
-            runs.append(one_run(a.source, seed, start, a.frames, dlpf_options, hog_options))
+            runs.append(one_run(a.source, seed, start, a.frames, dlpf_options, hog_options,
+                                base_options))
     except NoData as e:
         print(f"error: {e}", file=sys.stderr)
         return EXIT_NO_DATA
@@ -193,18 +217,28 @@ def main(argv=None) -> int:
           f"({r0['frames']} frames), seeds {a.seeds}, both lanes in one pipeline run ===")
     cols = ["windows_per_frame", "fps", "ms_per_frame", *METRICS]
     rows = []
+    names = list(r0["lanes"])
     for r in runs:
-        for lane in ("dlpf", "hog-mt"):
+        for lane in names:
             rows.append([f"{lane} seed {r['seed']}", *(fmt(r["lanes"][lane].get(c)) for c in cols)])
-    means = {lane: mean_lane(runs, lane) for lane in ("dlpf", "hog-mt")}
+    means = {lane: mean_lane(runs, lane) for lane in names}
     if len(runs) > 1:
-        for lane in ("dlpf", "hog-mt"):
+        for lane in names:
             rows.append([f"{lane} mean", *(fmt(means[lane].get(c)) for c in cols)])
     print(table(["lane", "windows/frame", "fps", "ms/frame", *METRICS], rows))
-    rat = ratios(means["dlpf"], means["hog-mt"])
-    print("\nratios (mean over seeds): " + ", ".join(f"{k} = {v:.3g}" for k, v in rat.items()))
-    print(f"hog detector alone: {means['hog-mt'].get('detector_ms_per_frame', float('nan')):.1f} "
-          f"ms/frame of the hog-mt lane's {means['hog-mt']['ms_per_frame']:.1f}")
+    rat = {}
+    if "hog-mt" in means:
+        rat = ratios(means["dlpf"], means["hog-mt"])
+        print("\nratios (mean over seeds): " + ", ".join(f"{k} = {v:.3g}" for k, v in rat.items()))
+        print(f"hog detector alone: {means['hog-mt'].get('detector_ms_per_frame', float('nan')):.1f}"
+              f" ms/frame of the hog-mt lane's {means['hog-mt']['ms_per_frame']:.1f}")
+    if "dlpf-base" in means:
+        d, b = means["dlpf"], means["dlpf-base"]
+        rat["fps (dlpf/dlpf-base)"] = (d["fps"] or 0) / (b["fps"] or float("nan"))
+        print(f"\ndlpf vs dlpf-base ({' '.join(a.baseline)}), mean over seeds: fps ratio "
+              f"{rat['fps (dlpf/dlpf-base)']:.3g}, ms/frame {d['ms_per_frame']:.1f} vs "
+              f"{b['ms_per_frame']:.1f}, MOTA {d.get('MOTA', float('nan')):.3f} vs "
+              f"{b.get('MOTA', float('nan')):.3f}")
     write_json(a.json, {"command": command_line(), "machine": info, "start": start,
                         "runs": runs, "mean": means, "ratios": rat})
     return 0

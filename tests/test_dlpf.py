@@ -326,3 +326,157 @@ def test_landed_preset_keeps_the_first_settings():
     assert landed.children.snap == 0
     default = make_params("dlpf")
     assert default.parents.prior_mix > 0 and default.confirm.count == 4
+
+
+# ------------------------------------------------------------------ classifier speed (pyramid)
+
+def _textured(h=300, w=400, seed=0):
+    import cv2
+    rng = np.random.default_rng(seed)
+    img = (rng.random((h, w)) * 255).astype(np.uint8)
+    return cv2.GaussianBlur(img, (5, 5), 1.5)
+
+
+def test_pyramid_descriptors_equal_opencv_hog_on_the_level_image():
+    import cv2
+    img = _textured()
+    clf = HOGWindowClassifier()                                 # mode "pyramid"
+    hog = cv2.HOGDescriptor()
+    for k in (0, 1, -2):                                        # at, below and above scale 1
+        s = clf.scale_step ** k
+        M = np.array([[1 / s, 0, 0.5 / s - 0.5], [0, 1 / s, 0.5 / s - 0.5]])
+        level = cv2.warpAffine(img, M, (int(400 * s), int(300 * s)),
+                               flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
+                               borderMode=cv2.BORDER_REPLICATE)
+        cells = [(3, 2), (4, 2), (5, 4), (12, 3)]               # overlapping and apart
+        w = np.array([[8 * u / s, 8 * v / s, 64 / s, 128 / s] for u, v in cells])
+        assert np.allclose(clf.snap(w), w)                      # already on the grid
+        d = clf.descriptors(img, w)
+        for (u, v), row in zip(cells, d):
+            ref = hog.compute(level, (8, 8), (0, 0), [(8 * u, 8 * v)]).reshape(-1)
+            err = np.abs(ref - row)
+            if k == 0:                                          # integer offsets: identical
+                assert err.max() < 1e-5
+            else:  # warpAffine rounds source coordinates to 1/32 px, per region: +-1 grey level
+                assert np.median(err) < 1e-4 and err.max() < 0.05
+            assert (ref @ clf.weights) == pytest.approx(row @ clf.weights, abs=0.02)
+        m = clf.score(img, w)
+        ref_m = d @ clf.weights + clf.bias
+        assert np.allclose(m, ref_m, atol=1e-4)
+
+
+def test_pyramid_snaps_within_half_a_step_and_scores_duplicates_once():
+    clf = HOGWindowClassifier(scale_step=1.1)
+    rng = np.random.default_rng(1)
+    c = rng.uniform([20, 20], [380, 280], (200, 2))
+    w = window_boxes(c, np.exp(rng.uniform(np.log(30), np.log(120), 200)))
+    sn = clf.snap(w)
+    r = sn[:, 3] / w[:, 3]
+    assert (r > 1.1 ** -0.5 - 1e-9).all() and (r < 1.1 ** 0.5 + 1e-9).all()
+    s = sn[:, 3] / 128                                          # level px -> frame px
+    assert (np.abs(sn[:, :2] - w[:, :2]) <= 4 * s[:, None] + 1e-9).all()
+    assert np.allclose(clf.snap(sn), sn)                        # idempotent
+    img = _textured()
+    a = clf.score(img, np.r_[w, w[:5]])                         # duplicates
+    assert np.array_equal(a[:5], a[-5:])
+    assert np.allclose(a[:200], clf.score(img, sn))
+    # the per-window path scores the snapped windows alike (up to border gradients)
+    exact = HOGWindowClassifier(mode="window").score(img, sn)
+    assert np.corrcoef(a[:200], exact)[0, 1] > 0.95
+    with pytest.raises(ValueError):
+        HOGWindowClassifier(mode="grid")
+
+
+# ------------------------------------------------------------------ IKSVM (Maji et al. 2008)
+
+def _toy_iksvm(bins=64):
+    from pfscope.trackers.dlpf.iksvm import train_iksvm
+    rng = np.random.default_rng(0)
+    X = np.abs(rng.normal(0, 0.05, (160, 3780))).astype(np.float32)
+    y = (np.arange(160) % 3 == 0).astype(int)
+    X[y == 1, :300] += 0.06
+    return train_iksvm(X, y, C=1.0, bins=bins), X, y, rng
+
+
+def test_iksvm_lookup_equals_the_exact_kernel_sum():
+    t, X, y, rng = _toy_iksvm()
+    test = np.abs(rng.normal(0, 0.05, (40, 3780))).astype(np.float32)
+    test[:20, :300] += 0.06
+    test[0, :10] = 5.0                                          # beyond every support vector
+    exact, fast = t.exact(test), t.decision(test)
+    spread = exact.max() - exact.min()
+    assert spread > 0.5                                          # a real decision function
+    assert np.abs(exact - fast).max() < 0.01 * spread
+    assert np.mean((exact[:20] > exact[20:].max())) > 0.5      # people score higher
+    assert ((t.exact(X) > 0) == (y > 0)).mean() > 0.95
+    coarse = _toy_iksvm(bins=4)[0]                              # fewer bins, larger error
+    assert np.abs(coarse.decision(test) - exact).max() > np.abs(fast - exact).max()
+
+
+def test_iksvm_file_round_trip_and_bad_files_give_one_line_errors(tmp_path):
+    from pfscope.trackers.dlpf.iksvm import IKSVMClassifier
+    from pfscope.trackers.errors import InputError
+
+    t, X, _, _ = _toy_iksvm()
+    path = tmp_path / "clf.npz"
+    IKSVMClassifier(t, {"frames": "1-10"}).save(str(path))
+    back = IKSVMClassifier.load(str(path))
+    assert np.allclose(back.decision(X[:20]), t.decision(X[:20]), atol=1e-5)
+    assert back.info["frames"] == "1-10"
+    tr = make_tracker("dlpf", model=str(path))
+    assert tr.classifier.describe().startswith("iksvm:") and "iksvm" in tr.config()["classifier"]
+    (tmp_path / "junk.npz").write_bytes(b"not a zip")
+    np.savez(tmp_path / "other.npz", a=np.zeros(3))
+    np.savez(tmp_path / "short.npz", kind=np.array("dlpf-iksvm"),
+             descriptor=np.array("opencv-hog-64x128-9bins-l2hys-3780"),
+             tables=np.zeros((100, 8), np.float32), hi=np.ones(100, np.float32),
+             bias=np.array(0.0))
+    for name, words in (("missing.npz", "no such file"), ("junk.npz", "not a .npz"),
+                        ("other.npz", "not a DLPF classifier"), ("short.npz", "shape")):
+        with pytest.raises(InputError) as e:
+            make_tracker("dlpf", model=str(tmp_path / name))
+        msg = str(e.value)
+        assert "\n" not in msg and name in msg and words in msg
+
+
+def test_train_classifier_command_trains_holds_out_and_writes_a_usable_model(tmp_path, capsys):
+    import argparse
+
+    from pfscope.trackers.errors import InputError
+    from pfscope.viewer_app.dlpf_cli import add_parser, cmd_train_classifier
+
+    ap = argparse.ArgumentParser(prog="pfscope")
+    add_parser(ap.add_subparsers(dest="command"))
+    out = tmp_path / "clf.npz"
+    args = ap.parse_args(["train-classifier", "synthetic", "--frames", "1-40", "--stride", "4",
+                          "--out", str(out), "--quiet"])
+    assert cmd_train_classifier(args) == 0
+    text = capsys.readouterr().out
+    assert "held out frames 33-40" in text and "ROC AUC" in text and out.exists()
+    from pfscope.trackers.dlpf.iksvm import IKSVMClassifier
+    info = IKSVMClassifier.load(str(out)).info
+    assert info["frames"] == "1-32" and info["held_out_frames"] == "33-40"
+    assert 0.0 <= info["holdout_accuracy"] <= 1.0 and info["lookup_max_error"] < 0.05
+    tr = make_tracker("dlpf", model=str(out), **{"parents.n": "60"})
+    res = run(_scene(4), [tr])
+    assert res.frames == 4
+    with pytest.raises(InputError, match="exists"):
+        cmd_train_classifier(args)
+    bad = ap.parse_args(["train-classifier", "synthetic", "--frames", "9-3", "--out",
+                         str(tmp_path / "b.npz")])
+    with pytest.raises(InputError, match="--frames"):
+        cmd_train_classifier(bad)
+
+
+def test_spread_moves_copies_of_a_parent_to_neighbouring_nodes_deterministically():
+    clf = HOGWindowClassifier()
+    w = window_boxes(np.repeat([[150.0, 120.0]], 20, axis=0),
+                     np.full(20, 80.0) * np.exp(np.linspace(-0.03, 0.03, 20)))
+    assert len(np.unique(clf.snap(w).round(6), axis=0)) == 1   # one node without spreading
+    a = clf.snap(w, np.random.default_rng(3))
+    b = clf.snap(w, np.random.default_rng(3))
+    assert np.array_equal(a, b)
+    assert len(np.unique(a.round(6), axis=0)) > 10
+    base = clf.snap(w[:1])[0]
+    assert (np.abs(a[:, :2] + a[:, 2:] / 2 - (base[:2] + base[2:] / 2)) < 0.5 * base[3]).all()
+    assert np.allclose(clf.snap(a), a)                         # on the grid

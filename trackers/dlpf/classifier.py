@@ -1,10 +1,11 @@
 """The parents' pedestrian classifier: HOG + linear SVM evaluated one window at a time
 (jung2013 §2.1; Dalal & Triggs 2005 features).
 
-jung2013 trains an intersection-kernel SVM (Maji et al. 2008).  The default here needs no
-training: OpenCV's pre-trained Dalal–Triggs people SVM
-(``cv2.HOGDescriptor_getDefaultPeopleDetector``: 3780 weights + bias over the 64×128 HOG window),
-applied to *single windows* instead of a sliding-window scan.
+jung2013 trains an intersection-kernel SVM (Maji et al. 2008): :mod:`.iksvm`
+(``pfscope train-classifier``, ``--set model=FILE``).  The default here needs no training:
+OpenCV's pre-trained Dalal–Triggs people SVM (``cv2.HOGDescriptor_getDefaultPeopleDetector``:
+3780 weights + bias over the 64×128 HOG window), applied to *single windows* instead of a
+sliding-window scan.
 
 One parent = one window.  A parent at ``(x, y)`` with person height ``h`` (its randomly drawn
 scale) looks at the window centred on ``(x, y)`` whose person part is ``h`` tall: Dalal & Triggs
@@ -13,11 +14,32 @@ train the 64×128 window with a 16-px context border, so the person fills the ce
 (replicated at the borders) and **resampled to 64×128 whatever its size**: people smaller than
 the HOG window (PETS09: ~80 px tall at 768×576, half that at 480×360) are enlarged, not skipped.
 
-Cost: one ``cv2.resize`` + one ``HOGDescriptor.compute`` per window (a loop over a few hundred
-windows, measured ~0.1 ms per window; stacking the resized windows into one mosaic image and
-calling ``compute`` once with ``winStride`` = window size was *not* faster on our machine and
-lets gradients leak across neighbouring windows), descriptors stacked into (N, 3780) and scored
-with one matrix product ``D·w + b``.
+Cost (``mode``):
+
+- ``"pyramid"`` (default).  The parents' windows are snapped to a pyramid: a window whose height
+  ``h_win`` gives the scale ``128 / h_win`` goes to the nearest level ``k`` (scale
+  ``scale_step**k``, default 1.1: within ±5 %) and its top-left corner to the nearest node of
+  that level's 8-px grid (within ±4 level px) — the grid and the window HOG's block stride, so
+  windows on one level share their 16×16 blocks.  Resampled parents are often exact copies
+  (about half the windows of a PETS09 frame are duplicates) and overlapping windows share most
+  blocks: per frame, each distinct window is scored once and each block it uses is computed
+  once.  Per level, the windows' union is split into connected regions (a cell occupancy grid,
+  ``cv2.connectedComponentsWithStats``); each region is resampled once from the frame
+  (``cv2.warpAffine``, level px ``u`` samples frame px ``(u + 0.5)/s − 0.5`` like
+  ``cv2.resize``; replicated border; 1 px more on each side so that border gradients see their
+  real neighbours) and its needed blocks are computed in one ``HOGDescriptor.compute`` call
+  with ``locations`` (a 16×16 "window" HOG: same cells, bins, Gaussian block weight, L2-Hys and
+  gamma as the 64×128 one); a window's descriptor is then a gather of its 7×15 blocks in
+  OpenCV's order (x outer).  At integer level offsets this equals OpenCV's descriptor of the
+  window on the level image exactly; elsewhere up to warpAffine's 1/32-px coordinate rounding
+  (tests/test_dlpf.py).  PETS09 frames 1–120: ~8.7 k blocks/frame instead of 310 × 105 = 32.5 k.
+- ``"window"``: one ``cv2.resize`` + one ``HOGDescriptor.compute`` per window (a loop over a
+  few hundred windows, ~0.1 ms per window), no snapping.
+
+Both stack descriptors into (N, 3780) and score them with one matrix product ``D·w + b`` (or
+the intersection-kernel SVM's lookup tables, :mod:`.iksvm`).  The tracker scores its tracks'
+few verification windows with the exact per-window path (``score(..., exact=True)``): their
+boxes localise the tracks.
 
 :func:`sliding_window_count` counts the windows OpenCV's exhaustive ``detectMultiScale`` scores
 on a frame, for the efficiency comparison.
@@ -26,11 +48,14 @@ on a frame, for the efficiency comparison.
 from __future__ import annotations
 
 import math
+from typing import Optional
 
 import cv2
 import numpy as np
 
 WIN_W, WIN_H = 64, 128
+CELL = 8            # HOG cell and block stride (px)
+BLOCK_LEN = 36      # 2x2 cells x 9 bins
 #: Fraction of the window the person occupies (Dalal & Triggs' 16-px context border).
 PERSON_W, PERSON_H = 0.5, 0.75
 
@@ -41,22 +66,43 @@ def window_boxes(centres: np.ndarray, heights: np.ndarray) -> np.ndarray:
     c = np.asarray(centres, dtype=np.float64).reshape(-1, 2)
     wh = np.asarray(heights, dtype=np.float64).reshape(-1) / PERSON_H
     ww = wh * WIN_W / WIN_H
-    return np.c_[c[:, 0] - ww / 2, c[:, 1] - wh / 2, ww, wh]
+    return np.stack([c[:, 0] - ww / 2, c[:, 1] - wh / 2, ww, wh], axis=1)
 
 
 def person_boxes(windows: np.ndarray) -> np.ndarray:
     """The person box inside each window (the window without its context border)."""
     w = np.asarray(windows, dtype=np.float64).reshape(-1, 4)
     pw, ph = w[:, 2] * PERSON_W, w[:, 3] * PERSON_H
-    return np.c_[w[:, 0] + (w[:, 2] - pw) / 2, w[:, 1] + (w[:, 3] - ph) / 2, pw, ph]
+    return np.stack([w[:, 0] + (w[:, 2] - pw) / 2, w[:, 1] + (w[:, 3] - ph) / 2, pw, ph], axis=1)
 
 
 class HOGWindowClassifier:
     """Linear SVM on HOG descriptors of single windows.  ``weights`` (3780,) and ``bias``
-    default to OpenCV's people detector; the score is the signed margin ``w·x + b``."""
+    default to OpenCV's people detector; the score is the signed margin ``w·x + b``.
 
-    def __init__(self, weights: np.ndarray | None = None, bias: float | None = None):
+    ``mode`` chooses how descriptors are computed (module docstring):
+
+    - ``"pyramid"`` (default): windows snapped to the 8-px grid of pyramid levels
+      ``scale_step`` apart, duplicates scored once, and every 16×16 HOG block computed once per
+      frame for all the windows that share it (:meth:`snap`, :meth:`descriptors`);
+    - ``"window"``: each window cut, resampled to 64×128 and described on its own (no snapping).
+    """
+
+    MODES = ("pyramid", "window")
+
+    def __init__(self, weights: np.ndarray | None = None, bias: float | None = None, *,
+                 mode: str = "pyramid", scale_step: float = 1.1):
+        if mode not in self.MODES:
+            raise ValueError(f"classifier mode must be one of {', '.join(self.MODES)}, "
+                             f"got {mode!r}")
+        if not scale_step > 1.0:
+            raise ValueError(f"classifier scale_step must be > 1, got {scale_step}")
+        self.mode, self.scale_step = mode, float(scale_step)
         self.hog = cv2.HOGDescriptor()
+        # one 16x16 block as a "window": same cells, bins, Gaussian block weighting
+        # (winSigma = (16+16)/8), L2-Hys and gamma correction as the 64x128 descriptor's blocks
+        self.block_hog = cv2.HOGDescriptor((16, 16), (16, 16), (8, 8), (8, 8), 9, 1, -1.0,
+                                           cv2.HOGDescriptor_L2Hys, 0.2, True)
         if weights is None:
             det = np.asarray(cv2.HOGDescriptor_getDefaultPeopleDetector(),
                              dtype=np.float32).reshape(-1)
@@ -68,9 +114,131 @@ class HOGWindowClassifier:
             raise ValueError(f"classifier: {len(self.weights)} SVM weights for a HOG descriptor "
                              f"of {size}")
 
-    def descriptors(self, grey: np.ndarray, windows: np.ndarray) -> np.ndarray:
-        """(N, 3780) float32 HOG descriptors of ``windows`` resampled to 64×128."""
+    # ------------------------------------------------------------------ snapping
+    def _levels(self, windows: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Pyramid level ``k`` (scale ``step**k``: a window ``128/step**k`` tall becomes 128) and
+        the window's top-left cell ``(cu, cv)`` on that level's 8-px grid."""
         w = np.asarray(windows, dtype=np.float64).reshape(-1, 4)
+        k = np.round(np.log(WIN_H / np.maximum(w[:, 3], 1e-6)) / math.log(self.scale_step))
+        k = k.astype(np.int64)
+        s = self.scale_step ** k
+        cu = np.round(w[:, 0] * s / CELL).astype(np.int64)
+        cv = np.round(w[:, 1] * s / CELL).astype(np.int64)
+        return k, cu, cv
+
+    def snap(self, windows: np.ndarray, rng: Optional[np.random.Generator] = None
+             ) -> np.ndarray:
+        """The windows (N, 4) the classifier actually scores: in ``"pyramid"`` mode each window
+        moved to the nearest pyramid level and 8-px grid node of that level (a shift of at most
+        4 level px and a scale change of at most ``±sqrt(scale_step)``); unchanged in
+        ``"window"`` mode.  With ``rng``, windows that land on the node of an earlier one are
+        moved to a random neighbouring node (:meth:`_spread`)."""
+        w = np.asarray(windows, dtype=np.float64).reshape(-1, 4)
+        if self.mode == "window" or len(w) == 0:
+            return w.copy()
+        k, cu, cv = self._levels(w)
+        if rng is not None:
+            k, cu, cv = self._spread(k, cu, cv, rng)
+        s = self.scale_step ** k
+        return np.stack([cu * CELL / s, cv * CELL / s, WIN_W / s, WIN_H / s], axis=1)
+
+    #: moves of a duplicate window: the 8 grid neighbours on its level, one level up or down
+    _MOVES = np.array([(0, -1, -1), (0, 0, -1), (0, 1, -1), (0, -1, 0), (0, 1, 0), (0, -1, 1),
+                       (0, 0, 1), (0, 1, 1), (-1, 0, 0), (1, 0, 0)], dtype=np.int64)
+
+    def _spread(self, k, cu, cv, rng: np.random.Generator, rounds: int = 3):
+        """Move windows that snapped onto an earlier window's node to a random neighbouring
+        node (``rounds`` tries): copies of one resampled parent (same position, jittered scale)
+        would otherwise collapse into one window, and the search would look at half as many
+        places; a neighbour shares most of its HOG blocks, so it costs little."""
+        k, cu, cv = k.copy(), cu.copy(), cv.copy()
+        for _ in range(rounds):
+            _, first = np.unique(_pack(k, cu, cv), return_index=True)
+            dup = np.ones(len(k), dtype=bool)
+            dup[first] = False
+            if not dup.any():
+                break
+            mv = self._MOVES[rng.integers(0, len(self._MOVES), int(dup.sum()))]
+            d = np.flatnonzero(dup)
+            s0 = self.scale_step ** k[d]
+            cx, cy = (cu[d] * CELL + WIN_W / 2) / s0, (cv[d] * CELL + WIN_H / 2) / s0
+            k[d] += mv[:, 0]
+            s1 = self.scale_step ** k[d]            # a level move keeps the window's centre
+            cu[d] = np.round((cx * s1 - WIN_W / 2) / CELL).astype(np.int64) + mv[:, 1]
+            cv[d] = np.round((cy * s1 - WIN_H / 2) / CELL).astype(np.int64) + mv[:, 2]
+        return k, cu, cv
+
+    # ------------------------------------------------------------------ descriptors
+    def descriptors(self, grey: np.ndarray, windows: np.ndarray) -> np.ndarray:
+        """(N, 3780) float32 HOG descriptors of ``windows`` (snapped first in ``"pyramid"``
+        mode, see :meth:`snap`), in OpenCV's 64×128 descriptor layout."""
+        d, inv = self._descriptors(grey, windows)
+        return d if inv is None else d[inv]
+
+    def _descriptors(self, grey: np.ndarray, windows: np.ndarray, exact: bool = False
+                     ) -> tuple[np.ndarray, Optional[np.ndarray]]:
+        """Descriptors of the distinct windows and the index of each window among them (None:
+        one row per window).  ``exact``: per window, unsnapped, whatever the mode."""
+        w = np.asarray(windows, dtype=np.float64).reshape(-1, 4)
+        if self.mode == "window" or exact:
+            return self._window_descriptors(grey, w), None
+        return self._pyramid_descriptors(grey, w)
+
+    def _pyramid_descriptors(self, grey: np.ndarray, w: np.ndarray
+                             ) -> tuple[np.ndarray, np.ndarray]:
+        if len(w) == 0:
+            return np.empty((0, self.hog.getDescriptorSize()), np.float32), np.zeros(0, np.int64)
+        k, cu, cv = self._levels(w)
+        _, first, inv = np.unique(_pack(k, cu, cv), return_index=True,
+                                  return_inverse=True)          # duplicates scored once
+        ukey = np.stack([k[first], cu[first], cv[first]], axis=1)
+        inv = inv.reshape(-1)
+        ucells = np.empty((len(ukey), (WIN_W // CELL - 1) * (WIN_H // CELL - 1), BLOCK_LEN),
+                          dtype=np.float32)
+        wx, wy = WIN_W // CELL, WIN_H // CELL            # window: 8 x 16 cells, 7 x 15 blocks
+        bi = np.arange(wx - 1)[:, None]                  # OpenCV's block order: x outer, y inner
+        bj = np.arange(wy - 1)[None, :]
+        for lev in np.unique(ukey[:, 0]):
+            sel = np.flatnonzero(ukey[:, 0] == lev)
+            s = self.scale_step ** int(lev)
+            u0, v0 = int(ukey[sel, 1].min()), int(ukey[sel, 2].min())
+            u, v = ukey[sel, 1] - u0, ukey[sel, 2] - v0   # cells on this level's local grid
+            gw, gh = int(u.max()) + wx, int(v.max()) + wy
+            cells = _rasterise(u, v, wx, wy, gw, gh)       # cells inside some window
+            need = _rasterise(u, v, wx - 1, wy - 1, gw, gh)  # blocks some window uses
+            # each connected group of overlapping windows is one region of the level image,
+            # resampled once; each block of it that some window uses is computed once
+            ncomp, lab, stats, _ = cv2.connectedComponentsWithStats(cells, connectivity=4)
+            bv, bu = np.nonzero(need)
+            blab = lab[bv, bu]
+            order = np.argsort(blab, kind="stable")
+            bv, bu, blab = bv[order], bu[order], blab[order]
+            cuts = np.searchsorted(blab, np.arange(1, ncomp + 1))
+            descs = []
+            for c in range(1, ncomp):
+                x, y, cw, chh = (int(t) for t in stats[c, :4])    # region, in cells
+                # 1 px more on each side so that the region's border gradients see their real
+                # neighbours; level px (a, b) samples frame px ((a + 0.5)/s - 0.5, ...)
+                ox, oy = (u0 + x) * CELL - 1, (v0 + y) * CELL - 1
+                M = np.array([[1.0 / s, 0.0, (ox + 0.5) / s - 0.5],
+                              [0.0, 1.0 / s, (oy + 0.5) / s - 0.5]])
+                region = cv2.warpAffine(grey, M, (cw * CELL + 2, chh * CELL + 2),
+                                        flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
+                                        borderMode=cv2.BORDER_REPLICATE)
+                sl = slice(cuts[c - 1], cuts[c])
+                locs = np.empty((sl.stop - sl.start, 2), dtype=np.int32)
+                locs[:, 0] = 1 + CELL * (bu[sl] - x)
+                locs[:, 1] = 1 + CELL * (bv[sl] - y)
+                descs.append(self.block_hog.compute(region, (CELL, CELL), (0, 0), locs)
+                             .reshape(-1, BLOCK_LEN))
+            row = np.full((gh, gw), -1, dtype=np.int64)
+            row[bv, bu] = np.arange(len(bv))
+            blocks = np.concatenate(descs)
+            idx = row[v[:, None, None] + bj[None], u[:, None, None] + bi[None]]  # (n, 7, 15)
+            ucells[sel] = blocks[idx.reshape(len(sel), -1)]
+        return ucells.reshape(len(ukey), -1), inv
+
+    def _window_descriptors(self, grey: np.ndarray, w: np.ndarray) -> np.ndarray:
         n = len(w)
         out = np.empty((n, self.hog.getDescriptorSize()), dtype=np.float32)
         if n == 0:
@@ -98,14 +266,50 @@ class HOGWindowClassifier:
             out[i] = compute(buf).reshape(-1)
         return out
 
-    def score(self, grey: np.ndarray, windows: np.ndarray) -> np.ndarray:
-        """SVM margins (N,) float64 of ``windows`` (N, 4) on the grey frame."""
-        d = self.descriptors(grey, windows)
+    def decision(self, d: np.ndarray) -> np.ndarray:
+        """SVM margins (N,) float64 of descriptors ``d`` (N, 3780)."""
         if len(d) == 0:
             return np.zeros(0)
         # einsum, not ``@``: a BLAS gemv this small gains nothing from threads, and OpenBLAS's
         # spinning worker threads then slowed the OpenCV calls after it ~3x on a 2-core machine
         return np.einsum("ij,j->i", d, self.weights).astype(np.float64) + self.bias
+
+    def score(self, grey: np.ndarray, windows: np.ndarray, *, exact: bool = False) -> np.ndarray:
+        """SVM margins (N,) float64 of ``windows`` (N, 4) on the grey frame (the windows of
+        :meth:`snap` in ``"pyramid"`` mode; ``exact``: the windows as given, each resampled to
+        64×128 on its own, whatever the mode)."""
+        d, inv = self._descriptors(grey, windows, exact)
+        m = self.decision(d)
+        return m if inv is None else m[inv]
+
+    def describe(self) -> str:
+        return "opencv-default-people-svm"
+
+
+def load_classifier(path: str = "", *, mode: str = "pyramid", scale_step: float = 1.1):
+    """The DLPF classifier: OpenCV's people SVM (``path`` empty) or a model file written by
+    ``pfscope train-classifier`` (:mod:`.iksvm`).  A missing, unreadable or mismatched file
+    raises ``ValueError`` with one line naming it."""
+    if not path:
+        return HOGWindowClassifier(mode=mode, scale_step=scale_step)
+    from .iksvm import IKSVMClassifier
+    return IKSVMClassifier.load(path, mode=mode, scale_step=scale_step)
+
+
+def _pack(k: np.ndarray, cu: np.ndarray, cv: np.ndarray) -> np.ndarray:
+    """One int64 key per (level, cell column, cell row) (each well inside ±2^20)."""
+    return ((k + (1 << 20)) << 42) | ((cu + (1 << 20)) << 21) | (cv + (1 << 20))
+
+
+def _rasterise(u: np.ndarray, v: np.ndarray, w: int, h: int, gw: int, gh: int) -> np.ndarray:
+    """(gh, gw) uint8 mask of the union of the ``w`` x ``h`` rectangles at ``(u, v)`` (a
+    difference array and two cumulative sums, no loop over rectangles)."""
+    d = np.zeros((gh + 1, gw + 1), dtype=np.int32)
+    np.add.at(d, (v, u), 1)
+    np.add.at(d, (v, u + w), -1)
+    np.add.at(d, (v + h, u), -1)
+    np.add.at(d, (v + h, u + w), 1)
+    return (d.cumsum(0).cumsum(1)[:gh, :gw] > 0).astype(np.uint8)
 
 
 def sliding_window_count(width: int, height: int, *, win_stride=(8, 8), padding=(8, 8),
@@ -129,5 +333,5 @@ def sliding_window_count(width: int, height: int, *, win_stride=(8, 8), padding=
     return total
 
 
-__all__ = ["HOGWindowClassifier", "window_boxes", "person_boxes", "sliding_window_count",
+__all__ = ["HOGWindowClassifier", "load_classifier", "window_boxes", "person_boxes", "sliding_window_count",
            "WIN_W", "WIN_H"]

@@ -13,8 +13,11 @@ One frame (stages in order):
               to the classifier-verified boxes of confirmed tracks, nothing scene-specific) is
               ready, a fraction ``prior_mix`` of them draw their scale from it instead (ours).
 ``classify``  each free parent evaluates the HOG+SVM classifier on its one window
-              (:mod:`.classifier`); hits above ``hit_threshold`` are merged by NMS; hits on an
-              already tracked person are ignored.
+              (:mod:`.classifier`; windows snapped to a pyramid grid so that duplicates and
+              shared HOG blocks are computed once per frame; the SVM is OpenCV's people SVM or
+              the paper's intersection-kernel SVM, ``classifier.model``); hits above
+              ``hit_threshold`` are merged by NMS; hits on an already tracked person are
+              ignored.
 ``confirm``   hits extend candidate objects; 4 sequential detections confirm one (§2.2,
               :mod:`.confirm`); its parent leaves the search, spawns children and takes the HSV
               reference histogram (eq. (12)).
@@ -75,7 +78,7 @@ from ..types import Detections, Frame, TrackSet
 from . import children as ch
 from . import motion as mo
 from . import parents as pa
-from .classifier import HOGWindowClassifier, person_boxes, window_boxes
+from .classifier import HOGWindowClassifier, load_classifier, person_boxes, window_boxes
 from .confirm import Confirmer
 from .scale import ScalePrior
 
@@ -153,6 +156,31 @@ class ClassifierParams:
                                    "of its children (ours; 0 = the paper: colour only)")
     tracked_iou: float = param(0.3, "hits overlapping a live track by this IoU are ignored "
                                     "(the person is already tracked)")
+    mode: str = param("pyramid", "how window descriptors are computed: 'pyramid' (windows "
+                                 "snapped to the 8-px grid of pyramid levels scale_step apart; "
+                                 "duplicates and shared HOG blocks computed once per frame) or "
+                                 "'window' (each window resampled to 64x128 on its own); see "
+                                 "dlpf.classifier")
+    scale_step: float = param(1.1, "scale ratio between pyramid levels in 'pyramid' mode (the "
+                                    "window scale is rounded to a level: within +-5%)")
+    spread: bool = param(True, "in 'pyramid' mode, parents' windows that snap onto the same "
+                               "node are moved to neighbouring nodes (copies of a resampled "
+                               "parent would otherwise be one window)")
+    exact_verify: bool = param(True, "tracks' verification windows are scored unsnapped, each "
+                                     "resampled on its own (a few per track), in 'pyramid' "
+                                     "mode too")
+    model: str = param("", "classifier file from 'pfscope train-classifier' (an intersection-"
+                           "kernel SVM, jung2013 §2.1); empty: OpenCV's pre-trained people SVM.  "
+                           "Its margins are on another scale: use it with hit_threshold=0 "
+                           "(PETS09: chosen from {0, 0.5} on frames 321-400, held out of a "
+                           "model trained on 1-320)")
+
+    def __post_init__(self):
+        if self.mode not in HOGWindowClassifier.MODES:
+            raise ValueError(f"classifier.mode must be one of "
+                             f"{', '.join(HOGWindowClassifier.MODES)}, got {self.mode!r}")
+        if not self.scale_step > 1.0:
+            raise ValueError(f"classifier.scale_step must be > 1, got {self.scale_step}")
 
 
 @dataclass(frozen=True)
@@ -261,7 +289,9 @@ class DLPFTracker:
                  classifier: Optional[HOGWindowClassifier] = None):
         self.params = params or DLPFParams()
         self.rng = rng if rng is not None else np.random.default_rng(0)
-        self.classifier = classifier or HOGWindowClassifier()
+        cp = self.params.classifier
+        self.classifier = classifier or load_classifier(cp.model, mode=cp.mode,
+                                                        scale_step=cp.scale_step)
         c = self.params.confirm
         self.confirmer = Confirmer(c.count, c.max_gap, c.match_iou)
         self.parents: Optional[ParticleSet] = None
@@ -392,10 +422,15 @@ class DLPFTracker:
 
         # ---------------------------------------------------------------- classify (one window each)
         log.stage("classify")
-        windows = window_boxes(new[:, :2], heights)
+        # the windows the classifier scores ('pyramid' mode: snapped to its level grid)
+        windows = self.classifier.snap(window_boxes(new[:, :2], heights),
+                                       rng if P.classifier.spread else None)
         vwin, vtrack = self._verify_windows()
-        all_scores = self.classifier.score(grey, np.concatenate([windows, vwin]))
-        scores, vscores = all_scores[:len(windows)], all_scores[len(windows):]
+        scores = self.classifier.score(grey, windows)
+        # a track's few verification windows localise it: scored exactly (unsnapped), since
+        # the hit box pulls the track's box (children.snap) and feeds the scale prior
+        vscores = self.classifier.score(grey, vwin, exact=P.classifier.exact_verify)
+        all_scores = np.concatenate([scores, vscores])
         self.parents.extra[free, 1] = scores
         self._support(vwin, vscores, vtrack)
         sup = [t.support for t in self.tracks if t.support is not None]
@@ -619,7 +654,8 @@ class DLPFTracker:
 
     def config(self) -> dict:
         return {"tracker": self.name, "paper": self.paper, "params": to_dict(self.params),
-                "classifier": "opencv-default-people-svm"}
+                "classifier": self.classifier.describe(),
+                "classifier_info": dict(getattr(self.classifier, "info", {}))}
 
 
 __all__ = ["DLPFTracker", "DLPFParams", "MotionParams", "ParentParams", "ClassifierParams",
