@@ -24,6 +24,16 @@ Readings (each a parameter of :func:`kmeans_peaks`):
   ``> split_above`` (1.0) and *kept only if both resulting clusters have mass
   >= min_split_mass* (default T); otherwise the state before the split is restored and that
   cluster is final.  Splits are tried one at a time, heaviest cluster first (deterministic).
+- **Local split trials** (bounded cost, not in the paper): after a split §3 lets K-means
+  iterate again over everything; here the trial Lloyd iterations run on the split cluster and
+  its :data:`SPLIT_NEIGHBOURS` nearest clusters (centres within twice its reach) only, so a
+  split costs O(its neighbourhood), not O(all particles) — a clutter storm with tens of split
+  attempts stays bounded (the far clusters are unchanged by a split that could not reach them
+  anyway).  A guarded split whose neighbourhood holds less than ``2 min_split_mass`` is not
+  tried (both halves could not reach it).
+- **Convergence** (``tol``, ``max_iter``): Lloyd stops when the labels are stable, when no centre's
+  observed part moved more than ``tol`` pixels (centres are then the means of the returned
+  labels), or after ``max_iter`` iterations (labels are then the nearest centres).
 - **No observations**: with no detection and no ``extra_centers`` the iteration starts from a
   single centre at the weighted mean of the particles (the split rule then separates peaks).
   ``extra_centers`` lets a caller add centres (e.g. the previous frame's peaks).
@@ -36,9 +46,9 @@ lowest index included (its distances are the direct ``Σ (x − c)² / σ²``, e
 expansion up to round-off): every centre's inverse variances are at least m (their minimum), so a
 centre at Euclidean distance e in the space scaled by sqrt(m) has d² >= e², and once the best
 of a particle's k nearest centres beats e_k² no other centre can win (the few particles it does
-not settle look at more centres, then at all).  Across Lloyd iterations and split attempts a
-particle keeps its candidates and that bound, so an iteration where most centres stay put costs
-about one pass over the particles.
+not settle look at more centres, then at all).  Across Lloyd iterations a particle keeps its
+candidates and that bound, so an iteration where most centres stay put costs about one pass over
+the particles.
 """
 
 from __future__ import annotations
@@ -65,6 +75,9 @@ INDEX_MIN_CENTERS = 32
 _NEIGHBOURS = (4, 32)
 #: Particles per block of the indexed assignment (bounds its memory).
 _BLOCK = 1 << 16
+#: A split's trial Lloyd iterations run on the split cluster and at most this many of its
+#: nearest neighbouring clusters (itself included).
+SPLIT_NEIGHBOURS = 4
 
 
 @dataclass(frozen=True)
@@ -104,13 +117,20 @@ class Clusters:
 
 def _distances(X: np.ndarray, centers: np.ndarray, params: PHDParams) -> np.ndarray:
     """(N, K) squared Mahalanobis distances of the observed part ``X`` (N, 4) to the centres,
-    each under the observation noise at its own size.  Expanded as matrix products
-    (``Σ x²/σ² − 2 Σ x c/σ² + Σ c²/σ²``) so one iteration is two (N,4)@(4,K) products; ``X``
-    is expected centred near 0 (see :func:`kmeans_peaks`) to keep cancellation negligible."""
+    each under the observation noise at its own size: ``Σ_d (x_d − c_d)² / σ_d²``, summed in
+    the order of :func:`_pair_distances` (so both give the very same floats), in place."""
     C = centers[:, OBS_COLS]
     inv = 1.0 / obs_std(centers[:, 4:6], params.likelihood) ** 2            # (K, 4)
-    d2 = (X * X) @ inv.T - 2.0 * X @ (C * inv).T + np.sum(C * C * inv, axis=1)[None, :]
-    return np.maximum(d2, 0.0)
+    acc = np.empty((len(X), len(C)))
+    q = np.empty_like(acc)
+    for d in range(4):
+        out = acc if d == 0 else q
+        np.subtract(X[:, d, None], C[None, :, d], out=out)
+        out *= out
+        out *= inv[None, :, d]
+        if d:
+            acc += q
+    return acc
 
 
 def _pair_distances(X: np.ndarray, CT: np.ndarray, invT: np.ndarray,
@@ -170,7 +190,7 @@ class _Tier:
 
 class _Assigner:
     """Nearest centre of every particle (lowest index on ties, as ``np.argmin``) and its d²,
-    across the Lloyd iterations and split attempts of one :func:`kmeans_peaks` call.
+    across the Lloyd iterations of one :func:`kmeans_peaks` call.
 
     Below :data:`INDEX_MIN_CENTERS` centres: the dense (N × K) matrix.  Above, exact, looking
     only at nearby centres.  Each centre's metric is diagonal with inverse variances
@@ -191,15 +211,6 @@ class _Assigner:
         self.m = np.zeros(4)                     # metric lower bound of the tree space
         self.Xs = np.zeros((0, 4))               # particles in the tree space
         self.tiers: list[_Tier] = []
-
-    def snapshot(self) -> tuple:
-        """The cache, to :meth:`restore` when a split is reverted."""
-        return (self.C, self.m, self.Xs,
-                [_Tier(t.members, t.cand, t.lab.copy(), t.best.copy(), t.bound.copy())
-                 for t in self.tiers])
-
-    def restore(self, snap: tuple) -> None:
-        self.C, self.m, self.Xs, self.tiers = snap
 
     def __call__(self, centers: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         X, K, n = self.X, len(centers), len(self.X)
@@ -307,10 +318,13 @@ def _dense_assign(X: np.ndarray, centers: np.ndarray,
     return labels, d2[np.arange(len(X)), labels]
 
 
-def _lloyd(X, states, w_rel, centers, assign, max_iter):
+def _lloyd(X, states, w_rel, centers, assign, max_iter, tol=0.0):
     """Weighted Lloyd iterations from ``centers`` until the assignment (``assign``, an
-    :class:`_Assigner`) is stable.  Returns centers, labels, relative masses, each particle's
-    d² to its centre, iterations."""
+    :class:`_Assigner` or any ``centers -> (labels, d²)``) is stable, no centre's observed part
+    moves more than ``tol`` pixels, or ``max_iter`` iterations.  Returns centers, labels,
+    relative masses, each particle's d² to its centre (at its last assignment), iterations.
+    Centres are the weighted means of the returned labels (an empty cluster keeps its
+    centre), except after ``max_iter`` iterations, where the labels are the nearest centres."""
     centers = centers.copy()
     K = len(centers)
     labels = None
@@ -335,11 +349,21 @@ def _lloyd(X, states, w_rel, centers, assign, max_iter):
         labels = new
         lab, w = labels[sel], w_rel[sel]
         m[touched] = np.bincount(lab, weights=w, minlength=K)[touched]
-        sums[touched] = np.stack([np.bincount(lab, weights=w * states[sel, d], minlength=K)
-                                  for d in range(STATE_DIM)], axis=1)[touched]
+        # the six weighted sums in one bincount over (cluster, coordinate) bins, each summed
+        # in particle order (the same floats as one bincount per coordinate)
+        bins = (lab * STATE_DIM)[:, None] + np.arange(STATE_DIM)
+        ws = states[sel] if len(sel) < len(labels) else states
+        sums[touched] = np.bincount(bins.ravel(), weights=(ws * w[:, None]).ravel(),
+                                    minlength=K * STATE_DIM).reshape(K, STATE_DIM)[touched]
         nz = m > 0
         # Weighted mean of every non-empty cluster; an empty cluster keeps its centre.
-        centers[nz] = sums[nz] / m[nz, None]
+        upd = nz & touched
+        if tol > 0:
+            step = np.max(np.abs(sums[upd][:, OBS_COLS] / m[upd, None]
+                                 - centers[upd][:, OBS_COLS]), initial=0.0)
+        centers[upd] = sums[upd] / m[upd, None]
+        if tol > 0 and step <= tol:
+            break                      # converged: centres are the means of `labels`
     else:
         labels, dmin = assign(centers)
     m = np.bincount(labels, weights=w_rel, minlength=K)
@@ -349,7 +373,7 @@ def _lloyd(X, states, w_rel, centers, assign, max_iter):
 def kmeans_peaks(ps: ParticleSet, Z, T: float = 0.6, *, params: PHDParams | None = None,
                  split_rule: str = "guarded", split_above: float = 1.0,
                  min_split_mass: float | None = None, max_iter: int = 50, max_splits: int = 64,
-                 extra_centers: np.ndarray | None = None) -> Clusters:
+                 extra_centers: np.ndarray | None = None, tol: float = 0.01) -> Clusters:
     """Modified K-means of maggio2007 §3 on the particle PHD ``ps``; ``Z`` (N_z, 4) the frame's
     observations (or a :class:`~trackers.types.Detections`) initialise the centres.
 
@@ -357,7 +381,9 @@ def kmeans_peaks(ps: ParticleSet, Z, T: float = 0.6, *, params: PHDParams | None
     :class:`PHDParams`).  split_rule: ``"guarded"`` (default) or ``"literal"`` — see the
     module docstring; split_above: a cluster heavier than this is a split candidate (1.0, §3);
     min_split_mass: guarded rule, both halves must reach it (default ``T``).  max_iter: Lloyd
-    iterations per run; max_splits: split attempts at most.  Deterministic (no randomness).
+    iterations per run (the first run and each split trial); max_splits: split attempts at
+    most; tol: convergence tolerance, pixels (largest move of a centre's (y1, y2, w, h)).
+    So ``n_iter <= max_iter (1 + max_splits)``.  Deterministic (no randomness).
     """
     if split_rule not in ("guarded", "literal"):
         raise ValueError(f"kmeans_peaks: split_rule must be 'guarded' or 'literal', got {split_rule!r}")
@@ -404,7 +430,7 @@ def kmeans_peaks(ps: ParticleSet, Z, T: float = 0.6, *, params: PHDParams | None
     assign = _Assigner(X, params)
 
     def run(c):
-        c, lab, m, dmin, it = _lloyd(X, S, w_rel, c, assign, max_iter)
+        c, lab, m, dmin, it = _lloyd(X, S, w_rel, c, assign, max_iter, tol)
         return c, lab, m * scale, dmin, it
 
     centers, labels, masses, dmin, n_iter = run(init - shift)
@@ -420,18 +446,40 @@ def kmeans_peaks(ps: ParticleSet, Z, T: float = 0.6, *, params: PHDParams | None
         if dmin[far] <= 0.0:           # every sample on the centre: nothing to split
             final[j] = True
             continue
-        snap = assign.snapshot()
-        t_centers, t_labels, t_masses, t_dmin, it = run(np.concatenate([centers, S[far][None]]))
+        # The trial runs on cluster j and its neighbours only: the clusters whose centres lie
+        # within twice j's reach (the d² of its farthest member, under j's metric).
+        inv_j = 1.0 / obs_std(centers[j, 4:6], params.likelihood) ** 2
+        dc = np.sum((centers[:, OBS_COLS] - centers[j, OBS_COLS]) ** 2 * inv_j, axis=1)
+        near = np.flatnonzero(dc <= 4.0 * dmin[far])
+        near = np.sort(near[np.argsort(dc[near], kind="stable")][:SPLIT_NEIGHBOURS])
+        if split_rule == "guarded" and masses[near].sum() < 2.0 * min_split_mass:
+            final[j] = True            # the trial cannot give two halves >= min_split_mass
+            continue
+        is_local = np.zeros(len(centers), dtype=bool)
+        is_local[near] = True
+        sel = np.flatnonzero(is_local[labels])
+        Xl = X[sel]
+        t_c, t_lab, t_m, t_d, it = _lloyd(Xl, S[sel], w_rel[sel],
+                                          np.concatenate([centers[near], S[far][None]]),
+                                          lambda c, Xl=Xl: _dense_assign(Xl, c, params),
+                                          max_iter, tol)
         n_iter += it
-        if split_rule == "literal" or (t_masses[j] >= min_split_mass
-                                       and t_masses[-1] >= min_split_mass):
-            centers, labels, masses, dmin = t_centers, t_labels, t_masses, t_dmin
-            final = np.append(final, False)
-            origin = np.append(origin, ORIGIN_SPLIT)
-            n_splits += 1
-        else:
+        t_m = t_m * scale
+        pos = int(np.searchsorted(near, j))
+        if split_rule == "guarded" and not (t_m[pos] >= min_split_mass
+                                            and t_m[-1] >= min_split_mass):
             final[j] = True            # guarded rule: revert, this cluster is one target
-            assign.restore(snap)
+            continue
+        k = len(centers)
+        centers = np.concatenate([centers, t_c[-1:]])
+        centers[near] = t_c[:-1]
+        masses = np.append(masses, t_m[-1])
+        masses[near] = t_m[:-1]
+        labels[sel] = np.append(near, k)[t_lab]
+        dmin[sel] = t_d
+        final = np.append(final, False)
+        origin = np.append(origin, ORIGIN_SPLIT)
+        n_splits += 1
     kept = masses >= T
     return Clusters(centers + shift, masses, labels.astype(np.int64), kept, origin, n_splits,
                     n_iter)
