@@ -9,6 +9,9 @@
     pfscope info FILE.rrd [--json]      pfscope view FILE.rrd
     pfscope snapshot FILE.rrd --frame N [--tab NAME] --out shot.png
     pfscope batch --sources A,B --trackers phd,mt [--seeds 0,1] --out DIR   (or SPEC.toml)
+    pfscope tune SEQUENCE [--tracker phd] [--trials N] [--metric hota|idf1|mota]
+                 [--frames A:B] [--holdout A:B] [--jobs J] [--seed S] [--out best.toml]
+    record / compare / batch / tune take --params FILE.toml (what tune writes)
 
 Bad input ends with one line on stderr naming the file/line/frame and exit status 2.
 """
@@ -115,8 +118,9 @@ def build_parser() -> argparse.ArgumentParser:
                                    "scene) and write a Rerun recording.")
     r.add_argument("source", nargs="?", default=None,
                    help="MOTChallenge folder, video file, image folder, or 'synthetic' (default)")
-    r.add_argument("--tracker", default=DEFAULT_TRACKER, choices=list(TRACKERS),
-                   help=f"tracker (default {DEFAULT_TRACKER}) — {tracker_help}")
+    r.add_argument("--tracker", default=None, choices=list(TRACKERS),
+                   help=f"tracker (default: the --params file's, else {DEFAULT_TRACKER}) — "
+                        f"{tracker_help}")
     _add_tracker_options(r)
     r.add_argument("--out", type=Path, default=None,
                    help="recording file (default recordings/<source>-<tracker>.rrd)")
@@ -232,6 +236,8 @@ def build_parser() -> argparse.ArgumentParser:
     from .batch import add_batch_parser
     add_batch_parser(sub, _add_tracker_options)
 
+    _add_tune_parser(sub, TRACKERS, DETECTORS, LEVELS)
+
     s = sub.add_parser("synth", help="write the synthetic scene as a MOTChallenge folder")
     s.add_argument("--out", type=Path, required=True, help="output folder (must not exist)")
     _add_synth_options(s, frames_help="number of frames (default 150)")
@@ -263,6 +269,9 @@ def build_parser() -> argparse.ArgumentParser:
     td.add_argument("--seed", type=int, default=0, help="random seed (same seed, same model)")
     td.add_argument("--force", action="store_true", help="overwrite an existing model file")
     td.add_argument("--quiet", action="store_true")
+
+    from .dlpf_cli import add_parser as add_train_classifier
+    add_train_classifier(sub)
     return ap
 
 
@@ -274,6 +283,84 @@ def _add_tracker_options(p: argparse.ArgumentParser) -> None:
                         "phd.p_miss sets it for phd only). `pfscope trackers` lists them all.")
     p.add_argument("--preset", default=None,
                    help="parameter preset (default: the tracker's first, its paper's settings)")
+    p.add_argument("--params", type=Path, default=None, metavar="FILE.toml",
+                   help="tracker parameters from a TOML file (what `pfscope tune` writes: "
+                        "tracker = ..., [params] ...); --set overrides it")
+
+
+def _add_tune_parser(sub, TRACKERS, DETECTORS, LEVELS) -> None:
+    from pfscope.trackers.api import DEFAULT_TRACKER
+
+    tn = sub.add_parser(
+        "tune", help="search a tracker's parameters with Optuna against a sequence's ground "
+                     "truth; write the best as a --params file",
+        description="Search the tracker's documented numeric parameters with Optuna's seeded "
+                    "TPE sampler, each trial running the pipeline without recording on the "
+                    "tuned-on frames and scoring it against the ground truth. Prints one line "
+                    "per trial, then the starting and the best parameters' scores on tuned-on "
+                    "and held-out frames separately (mean over --eval-seeds seeds); writes the "
+                    "best parameters as TOML (read by `record --params`), a recording of the "
+                    "study (objective per trial) and the best parameters' recording. Same "
+                    "seed and --batch, same result, whatever --jobs. Needs Optuna: "
+                    "pip install \"pfscope[tune]\".")
+    tn.add_argument("source", help="MOTChallenge folder with gt/gt.txt, or 'synthetic'")
+    tn.add_argument("--tracker", default=None, choices=list(TRACKERS),
+                    help=f"tracker to tune (default: the --params file's, else "
+                         f"{DEFAULT_TRACKER})")
+    _add_tracker_options(tn)
+    tn.add_argument("--trials", type=POSITIVE_INT, default=30,
+                    help="trials (default 30; the first is the starting values)")
+    tn.add_argument("--metric", choices=["hota", "idf1", "mota"], default="hota",
+                    help="objective maximised on the tuned-on frames (default hota)")
+    tn.add_argument("--frames", type=_frames_or_range, default=None, metavar="FIRST:LAST",
+                    help="frames to tune on: FIRST:LAST, or N for 1:N (default: the first "
+                         "half of the sequence)")
+    tn.add_argument("--holdout", type=_frame_range, default=None, metavar="FIRST:LAST",
+                    help="held-out frames, scored apart (default: the rest of the sequence; "
+                         "the synthetic scene is made twice as long as --frames)")
+    tn.add_argument("--jobs", type=POSITIVE_INT, default=None,
+                    help="parallel processes (default: the cores, at most --batch); the "
+                         "result does not depend on it")
+    tn.add_argument("--batch", type=POSITIVE_INT, default=4,
+                    help="trials asked of the sampler per round (default 4; the result "
+                         "depends on it)")
+    tn.add_argument("--seed", type=NONNEG_INT, default=0,
+                    help="sampler and tracker seed (and the synthetic scene's)")
+    tn.add_argument("--trial-seeds", type=POSITIVE_INT, default=1,
+                    help="tracker seeds averaged per trial (default 1)")
+    tn.add_argument("--eval-seeds", type=POSITIVE_INT, default=3,
+                    help="tracker seeds of the final table (default 3: seed .. seed+2)")
+    tn.add_argument("--space", action="append", default=[], metavar="NAME[=LO:HI[:log|lin]]",
+                    help="search this parameter (repeat; replaces the default list); without "
+                         "a range, one is derived from its starting value")
+    tn.add_argument("--convention", choices=["auto", "mot15", "mot16"], default="auto",
+                    help="evaluation convention (as `pfscope eval`; default auto)")
+    tn.add_argument("--detector", choices=list(DETECTORS), default=None)
+    tn.add_argument("--min-score", type=float, default=float("-inf"),
+                    help="drop file detections scoring below this")
+    tn.add_argument("--fps", type=POSITIVE, default=None,
+                    help="frame rate of an image folder or a video file")
+    tn.add_argument("--targets", type=POSITIVE_INT, default=None,
+                    help="synthetic scene: number of people (default 6)")
+    tn.add_argument("--clutter", type=NONNEG, default=None,
+                    help="synthetic scene: mean false detections per frame (default 2)")
+    tn.add_argument("--out", type=Path, default=Path("best.toml"),
+                    help="best parameters, TOML (default best.toml)")
+    tn.add_argument("--study-out", type=Path, default=None,
+                    help="recording of the study (default recordings/<source>-<tracker>-"
+                         "tune.rrd)")
+    tn.add_argument("--best-out", type=Path, default=None,
+                    help="recording of the best parameters over tuned-on and held-out frames "
+                         "(default recordings/<source>-<tracker>-tuned.rrd)")
+    tn.add_argument("--no-record", action="store_true",
+                    help="do not record the best parameters' run")
+    tn.add_argument("--level", choices=list(LEVELS), default="tracks",
+                    help="level of the best parameters' recording (default tracks)")
+    tn.add_argument("--tracks-out", type=Path, default=None,
+                    help="also write the best parameters' tracks (MOT text) here")
+    tn.add_argument("--force", action="store_true", help="overwrite existing outputs")
+    tn.add_argument("--json", action="store_true", help="print the result as JSON")
+    tn.add_argument("--quiet", action="store_true", help="no line per trial")
 
 
 def _tracker_options(args) -> dict:
@@ -283,6 +370,91 @@ def _tracker_options(args) -> dict:
         return parse_set(args.set_options)
     except ValueError as e:
         raise InputError(str(e)) from None
+
+
+def _read_params(args):
+    """The ``--params`` file (a :class:`~pfscope.trackers.params.ParamsFile`) or None."""
+    from pfscope.trackers.params import read_params_file
+
+    if getattr(args, "params", None) is None:
+        return None
+    try:
+        return read_params_file(args.params)
+    except ValueError as e:
+        raise InputError(str(e)) from None
+
+
+def _check_params_file(pf, tracker: str, preset) -> None:
+    """Every key and value of ``pf`` must fit ``tracker`` (one line naming file and key)."""
+    from pfscope.trackers.api import make_params
+
+    try:
+        base = make_params(tracker, preset)
+    except ValueError as e:
+        raise InputError(f"{pf.path}: {e}") from None
+    try:
+        pf.check(base)
+    except ValueError as e:
+        raise InputError(str(e)) from None
+
+
+def _single_tracker_params(args) -> tuple[str, object, dict]:
+    """``record`` / ``tune``: (tracker, preset, options) from --tracker, --preset, --params
+    and --set (--set wins over the file; the file's tracker and preset apply unless given)."""
+    from pfscope.trackers.api import DEFAULT_TRACKER
+
+    pf = _read_params(args)
+    tracker = args.tracker or (pf.tracker if pf else None) or DEFAULT_TRACKER
+    if pf is not None and pf.tracker and args.tracker and pf.tracker != args.tracker:
+        raise InputError(f"{pf.path}: these parameters are for tracker {pf.tracker!r}, not "
+                         f"{args.tracker!r} (leave out --tracker, or change 'tracker' in "
+                         f"the file)")
+    preset = args.preset or (pf.preset if pf else None)
+    if pf is not None and pf.preset and not args.preset:
+        from pfscope.trackers.api import tracker_info
+
+        try:
+            presets = tracker_info(tracker).presets
+        except ValueError as e:
+            raise InputError(f"{pf.path}: tracker: {e}") from None
+        if pf.preset not in presets:
+            raise InputError(f"{pf.path}: preset: tracker {tracker!r} has no preset "
+                             f"{pf.preset!r}; choose one of {', '.join(presets)}")
+    options: dict = {}
+    if pf is not None:
+        _check_params_file(pf, tracker, preset)
+        options.update(pf.options)
+    options.update(_tracker_options(args))
+    return tracker, preset, options
+
+
+def _lane_params_options(args, lane_trackers: list[str]) -> dict:
+    """``compare`` / ``batch``: the --params file's options, named ``TRACKER.key`` when the
+    file names its tracker (so they reach that tracker's lanes only)."""
+    pf = _read_params(args)
+    if pf is None:
+        return {}
+    if pf.tracker:
+        _check_params_file(pf, pf.tracker, None)
+        return {f"{pf.tracker}.{k}": v for k, v in pf.options.items()}
+    errors = []
+    for t in dict.fromkeys(lane_trackers):
+        try:
+            _check_params_file(pf, t, None)
+            break
+        except InputError as e:
+            errors.append(e)
+    else:
+        if errors:
+            raise errors[0]
+    return dict(pf.options)
+
+
+def _option_text(value) -> str:
+    """A typed option value as --set text (what parse_set / with_options read back)."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    return repr(value) if isinstance(value, float) else str(value)
 
 
 def _start_count(args) -> tuple[int, Optional[int]]:
@@ -339,10 +511,13 @@ def cmd_compare(args) -> int:
     start, count = _start_count(args)
     source = _open(args)
     out = args.out or RECORDINGS_DIR / f"{source.name}-compare.rrd"
+    from .lanes import parse_lanes
+
+    file_opts = _lane_params_options(args, [ln.tracker for ln in parse_lanes(names)])
     opts = RecordOptions(detector=args.detector, min_score=args.min_score, level=args.level,
                          max_points=args.max_points, frames=count, start=start, seed=args.seed,
                          force=args.force, preset=args.preset,
-                         tracker_options=_tracker_options(args))
+                         tracker_options={**file_opts, **_tracker_options(args)})
     res = record(source, out, opts, trackers=names, progress=not args.quiet)
     if res.scores:
         _print_scores(res.scores, args.json)
@@ -422,14 +597,15 @@ def _last_line(text: str) -> str:
 def cmd_record(args) -> int:
     from .run import RecordOptions, default_out_path, record
 
+    tracker, preset, options = _single_tracker_params(args)
     start, count = _start_count(args)
     source = _open(args)
-    out = args.out or default_out_path(source, args.tracker)
-    opts = RecordOptions(tracker=args.tracker, detector=args.detector, min_score=args.min_score,
+    out = args.out or default_out_path(source, tracker)
+    opts = RecordOptions(tracker=tracker, detector=args.detector, min_score=args.min_score,
                          level=args.level, max_points=args.max_points, frames=count, start=start,
                          seed=args.seed, force=args.force, tracks_out=args.tracks_out,
-                         spawn=args.spawn, serve=args.serve, preset=args.preset,
-                         timing=args.timing, tracker_options=_tracker_options(args))
+                         spawn=args.spawn, serve=args.serve, preset=preset,
+                         timing=args.timing, tracker_options=options)
     res = record(source, out, opts, progress=not args.quiet)
     size = res.bytes / 1e6
     state = ("interrupted; recording finished, readable and kept as incomplete"
@@ -560,6 +736,171 @@ def cmd_train_dbn(args) -> int:
     return 0
 
 
+def _batch_params(args) -> None:
+    """``batch --params FILE``: the file's options go in front of the --set options (so --set
+    wins), named ``TRACKER.key`` when the file names its tracker."""
+    if getattr(args, "params", None) is None:
+        return
+    from .lanes import parse_lanes, split_specs
+
+    lanes = parse_lanes(split_specs(args.trackers)) if args.trackers else []
+    opts = _lane_params_options(args, [ln.tracker for ln in lanes] or ["phd"])
+    args.set_options = [f"{k}={_option_text(v)}" for k, v in opts.items()] + \
+        list(args.set_options or [])
+
+
+def cmd_tune(args) -> int:
+    """``pfscope tune``: see :mod:`pfscope.viewer_app.tune`."""
+    import json
+    from dataclasses import asdict
+
+    from pfscope.trackers.api import make_params
+    from pfscope.trackers.outputs import check_output
+    from pfscope.trackers.params import write_params_file
+
+    from . import tune as T
+    from .run import RECORDINGS_DIR, RecordOptions, record
+
+    optuna = T.import_optuna()
+    tracker, preset, base_options = _single_tracker_params(args)
+    try:
+        make_params(tracker, preset, base_options)
+    except ValueError as e:
+        raise InputError(str(e)) from None
+    synthetic = args.source in (None, "synthetic")
+    if not synthetic and (args.targets is not None or args.clutter is not None):
+        raise InputError("--targets/--clutter only apply to the synthetic scene")
+    frames = args.frames
+    if isinstance(frames, int):
+        frames = (1, frames)
+    synth = None
+    if synthetic:
+        from pfscope.trackers.data.synthetic import SceneConfig
+
+        kw = {"seed": args.seed}
+        for name in ("targets", "clutter"):
+            if getattr(args, name) is not None:
+                kw[name] = getattr(args, name)
+        if frames is not None:
+            kw["frames"] = max(frames[1], args.holdout[1]) if args.holdout else 2 * frames[1]
+        elif args.holdout is not None:
+            kw["frames"] = max(SceneConfig().frames, args.holdout[1])
+        synth = tuple(asdict(SceneConfig(**kw)).items())
+    spec = T.SourceSpec(None if synthetic else str(args.source), args.fps, synth)
+    source = spec.open()
+    if source.gt is None:
+        raise InputError(f"{args.source}: no ground truth (gt/gt.txt): nothing to tune against")
+    length = source.length
+    if length is None:
+        raise InputError(f"{args.source}: length unknown; tune needs a sequence with a known "
+                         f"number of frames")
+    if frames is None:
+        if length < 2:
+            raise InputError(f"{args.source}: {length} frame(s): too short to tune and hold out")
+        frames = (1, length // 2)
+    holdout = args.holdout
+    if holdout is None:
+        holdout = (frames[1] + 1, length) if frames[1] < length else \
+            ((1, frames[0] - 1) if frames[0] > 1 else None)
+    for what, (a, b) in (("--frames", frames), ("--holdout", holdout or (1, 1))):
+        if b > length:
+            raise InputError(f"{what} {a}:{b}: {source.name} has {length} frames")
+    if holdout is not None and holdout[0] <= frames[1] and frames[0] <= holdout[1]:
+        raise InputError(f"--holdout {holdout[0]}:{holdout[1]} overlaps the tuned-on frames "
+                         f"{frames[0]}:{frames[1]}")
+    out = check_output(args.out, args.force, "parameters file")
+    study_out = check_output(args.study_out or RECORDINGS_DIR / f"{source.name}-{tracker}-tune.rrd",
+                             args.force)
+    best_out = None
+    if not args.no_record:
+        best_out = check_output(args.best_out or RECORDINGS_DIR / f"{source.name}-{tracker}-"
+                                                                   f"tuned.rrd", args.force)
+        if args.tracks_out is not None:
+            check_output(args.tracks_out, args.force, "tracks file")
+    elif args.tracks_out is not None:
+        raise InputError("--tracks-out needs the best parameters' run (drop --no-record)")
+    names = [p.resolve() for p in (out, study_out, best_out, args.tracks_out) if p is not None]
+    if len(set(names)) != len(names):
+        raise InputError("--out, --study-out, --best-out and --tracks-out must differ")
+    jobs = args.jobs or max(1, min(os.cpu_count() or 1, args.batch))
+    cfg = T.TuneConfig(source=spec, tracker=tracker, frames=frames, holdout=holdout,
+                       preset=preset, base_options=base_options, trials=args.trials,
+                       metric=args.metric, seed=args.seed, batch=args.batch, jobs=jobs,
+                       trial_seeds=args.trial_seeds, eval_seeds=args.eval_seeds,
+                       space=args.space or None, detector=args.detector,
+                       min_score=args.min_score,
+                       convention=None if args.convention == "auto" else args.convention)
+    from pfscope.trackers.api import tracker_info
+
+    preset_name = preset or next(iter(tracker_info(tracker).presets))
+    title = f"pfscope tune: {tracker} on {source.name}"
+    dims = T.search_space(tracker, make_params(tracker, preset, base_options), cfg.space)
+    log = None if args.quiet else (lambda line: print(line, file=sys.stderr, flush=True))
+    if log:
+        log(f"tune: {tracker} (preset {preset_name}) on {source.name}, {args.trials} "
+            f"trials, {T.METRICS[args.metric]} on frames {frames[0]}-{frames[1]} (held out: "
+            + (f"{holdout[0]}-{holdout[1]}" if holdout else "none") + f"), seed {args.seed}, "
+            f"{jobs} process(es), rounds of {args.batch}; searching "
+            + "; ".join(d.describe() for d in dims))
+    study = T.StudyRecorder(study_out, title, {
+        "tracker": tracker, "preset": preset_name, "source": source.name,
+        "metric": T.METRICS[args.metric], "tuned_on": f"{frames[0]}:{frames[1]}",
+        "held_out": f"{holdout[0]}:{holdout[1]}" if holdout else "none",
+        "trials": args.trials, "seed": args.seed, "batch": args.batch,
+        "trial_seeds": args.trial_seeds, "optuna": optuna.__version__,
+        "space": [d.describe() for d in dims]})
+    try:
+        result = T.run_study(cfg, log=log, on_trial=study.trial)
+    except BaseException:
+        kept = study.abort()
+        print(f"pfscope: tune: the study recording stays incomplete: {kept}", file=sys.stderr)
+        raise
+    best_params = make_params(tracker, preset, {**base_options, **result.best_options})
+    marked = {}
+    for d in result.dims:
+        for name, v in T._targets(make_params(tracker, preset, base_options), d.name):
+            marked[name] = f"tuned (start {v!r})"
+    info = T.tune_info(result, source.name)
+    header = (f"pfscope tune: {tracker} on {source.name}, best of {len(result.trials)} trials "
+              f"({T.METRICS[args.metric]} on frames {frames[0]}-{frames[1]})\n"
+              f"use: pfscope record {args.source} --params {out}")
+    write_params_file(out, tracker, best_params, preset=preset_name, info=info, header=header,
+                      marked=marked)
+    study_path = study.finish(T.markdown_summary(result, title, out),
+                              {"trial": result.best["number"],
+                               "objective": result.best_value, **result.best_options})
+    rec_res = None
+    if best_out is not None:
+        lo = min(frames[0], holdout[0]) if holdout else frames[0]
+        hi = max(frames[1], holdout[1]) if holdout else frames[1]
+        opts = RecordOptions(tracker=tracker, detector=args.detector, min_score=args.min_score,
+                             level=args.level, frames=hi - lo + 1, start=lo, seed=args.seed,
+                             force=args.force, tracks_out=args.tracks_out, preset=preset,
+                             tracker_options={**base_options, **result.best_options})
+        rec_res = record(source, best_out, opts, progress=not args.quiet)
+    if args.json:
+        print(json.dumps({
+            "tracker": tracker, "preset": preset, "source": source.name,
+            "metric": T.METRICS[args.metric], "best_trial": result.best["number"],
+            "best_value": result.best_value, "start_value": result.start_value,
+            "best_options": result.best_options, "table": result.table,
+            "trials": [{k: t[k] for k in ("number", "value", "options", "error")}
+                       for t in result.trials],
+            "params_file": str(out), "study": str(study_path),
+            "best_recording": str(rec_res.out) if rec_res else None}, indent=2, default=str))
+        return EXIT_INTERRUPTED if rec_res is not None and rec_res.interrupted else 0
+    print(f"{T.METRICS[args.metric]} on the tuned-on frames {frames[0]}-{frames[1]} (the "
+          f"search's runs, over those frames alone): "
+          f"{result.best_value:.4f} (trial {result.best['number']} of {len(result.trials)}; "
+          f"starting values {result.start_value:.4f})")
+    print(f"best: {T._fmt_opts(result.best_options)}")
+    print(T.format_table(result))
+    print(f"parameters: {out}   (pfscope record {args.source} --params {out})")
+    print(f"study: {study_path}" + (f"   best run: {rec_res.out}" if rec_res else "")
+          + (f"   tracks: {rec_res.tracks_out}" if rec_res and rec_res.tracks_out else ""))
+    return EXIT_INTERRUPTED if rec_res is not None and rec_res.interrupted else 0
+
+
 def main(argv: Optional[Sequence[str]] = None) -> int:
     os.environ.setdefault("RERUN_ANALYTICS", "0")
     args = build_parser().parse_args(argv)
@@ -578,6 +919,9 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             return cmd_repair(args)
         if args.command == "train-dbn":
             return cmd_train_dbn(args)
+        if args.command == "train-classifier":
+            from .dlpf_cli import cmd_train_classifier
+            return cmd_train_classifier(args)
         if args.command == "info":
             from .info import cmd_info
             return cmd_info(args)
@@ -589,7 +933,10 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             return cmd_snapshot(args)
         if args.command == "batch":
             from .batch import cmd_batch
+            _batch_params(args)
             return cmd_batch(args)
+        if args.command == "tune":
+            return cmd_tune(args)
     except InputError as e:
         print(f"pfscope: error: {e}", file=sys.stderr)
         return EXIT_BAD_INPUT
