@@ -152,10 +152,10 @@ def test_same_scene_at_two_frame_rates_gives_comparable_tracks():
 # ------------------------------------------------------------------------------ the mass
 
 def test_phd_mass_tracks_the_true_count_within_ten_percent():
-    """Scene clutter + birth odds: the PHD mass follows the true count (every ground-truth
+    """Scene clutter + birth odds (the ``scene`` preset): the PHD mass follows the true count (every ground-truth
     target present, occluded ones included) within 10% on average over seeds at p_D 0.9 with
     5 clutter boxes a frame (the paper preset: about half).  Measured 0.93-0.99 per seed."""
-    ratios = [(lambda r: r[2].mean() / r[3].mean())(_run(10.0, s)) for s in SEEDS]
+    ratios = [(lambda r: r[2].mean() / r[3].mean())(_run(10.0, s, "scene")) for s in SEEDS]
     assert abs(np.mean(ratios) - 1.0) <= 0.10, f"mass / count per seed: {np.round(ratios, 3)}"
     paper = [(lambda r: r[2].mean() / r[3].mean())(_run(10.0, s, "paper")) for s in SEEDS[:1]]
     assert np.mean(ratios) > paper[0], (ratios, paper)
@@ -167,8 +167,8 @@ def test_clutter_estimates_match_the_scene():
     λ 5.0-5.3, near < 0.01."""
     rates, near = [], []
     for s in SEEDS:
-        _run(10.0, s)
-        m = _run.scene_models[(10.0, s, "practical")]
+        _run(10.0, s, "scene")
+        m = _run.scene_models[(10.0, s, "scene")]
         rates.append(m.rate)
         near.append(m.near)
     assert abs(np.mean(rates) - 5.0) <= 1.0, rates
