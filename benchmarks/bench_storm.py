@@ -186,7 +186,7 @@ class Collect(BaseHook):
 
 def run_once(targets: int, detections: int, frames: int, seed: int, options: dict) -> dict:
     source = storm_scene(targets, detections, frames, seed)
-    tracker = make_tracker("phd", seed, **options)
+    tracker = make_tracker("phd", seed, preset="paper", **options)
     clock = StageClock()
     hook = Collect(clock, "phd")
     with timed_stages(clock):

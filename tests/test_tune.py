@@ -254,3 +254,18 @@ def test_params_file_errors_from_the_shell(tmp_path, capsys):
                    "--out", str(tmp_path / "y.rrd"), "--quiet"])
         err = capsys.readouterr().err
         assert rc == 2 and needle in err and len(err.strip().splitlines()) == 1
+
+
+def test_per_second_presets_search_the_fields_that_take_effect():
+    """With settings per second (the practical presets) the per-frame fields (sigma_v, depth,
+    min_length ...) are derived from rate.* each frame: searching them would waste trials."""
+    from pfscope.viewer_app.tune import search_space
+
+    for tracker in ("phd", "mt"):
+        practical = {d.name for d in search_space(tracker, make_params(tracker, "practical"))}
+        paper = {d.name for d in search_space(tracker, make_params(tracker, "paper"))}
+        assert any(n.startswith("rate.") for n in practical), practical
+        assert not any(n.startswith("rate.") for n in paper), paper
+        overridden = {"sigma_v", "depth", "min_length", "speed_prior", "assoc.depth",
+                      "assoc.min_length", "assoc.speed_prior"}
+        assert not practical & overridden, practical & overridden

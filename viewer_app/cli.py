@@ -282,7 +282,7 @@ def _add_tracker_options(p: argparse.ArgumentParser) -> None:
                         "(dotted names pick one part: filter.motion.sigma_v; in compare, "
                         "phd.p_miss sets it for phd only). `pfscope trackers` lists them all.")
     p.add_argument("--preset", default=None,
-                   help="parameter preset (default: the tracker's first, its paper's settings)")
+                   help="parameter preset (default: the tracker's first; `pfscope trackers NAME` lists them — phd and mt: practical, paper, …)")
     p.add_argument("--params", type=Path, default=None, metavar="FILE.toml",
                    help="tracker parameters from a TOML file (what `pfscope tune` writes: "
                         "tracker = ..., [params] ...); --set overrides it")

@@ -66,6 +66,16 @@ DEFAULT_SPACES: dict[str, tuple[str, ...]] = {
     "mt": ("depth=10:250:log", "min_length=1:11:log", "gate", "sigma_v", "sigma_obs",
            "speed_prior"),
 }
+#: The same for a preset whose settings are per second (``rate.per_second``, the practical
+#: presets): there the per-frame fields (sigma_v, depth, min_length, speed_prior, p_survival,
+#: birth odds) are derived from the ``rate.*`` fields each frame, so those are searched.
+DEFAULT_SPACES_PER_SECOND: dict[str, tuple[str, ...]] = {
+    "phd": ("p_miss", "filter.likelihood.sigma_obs", "clutter_rate", "clusters.T", "assoc.gate",
+            "rate.accel_per_s", "rate.birth_odds_per_s", "rate.gap_s", "rate.min_track_s",
+            "rate.survival_per_s"),
+    "mt": ("gate", "sigma_obs", "rate.accel_per_s", "rate.birth_speed_per_s", "rate.gap_s",
+           "rate.min_track_s"),
+}
 #: Log-range factor around a parameter's starting value (a probability near 1: of 1 - v).
 #: 5 was tried first: 40 trials on PETS09-S2L1 1-400 found nothing better than the paper
 #: preset, most of them far off (HOTA 0 for a quarter); 3 keeps the search near the preset.
@@ -229,8 +239,10 @@ def search_space(tracker: str, params: Any, specs: Optional[list[str]] = None) -
     if specs:
         entries = [parse_space_spec(s) for s in specs]
     else:
+        per_second = bool(getattr(getattr(params, "rate", None), "per_second", False))
+        defaults = DEFAULT_SPACES_PER_SECOND if per_second else DEFAULT_SPACES
         declared = getattr(tracker_info(tracker).cls, "tune_space", None) \
-            or DEFAULT_SPACES.get(tracker)
+            or defaults.get(tracker)
         if declared:
             entries = [parse_space_spec(s) for s in declared]
             # a preset may lack a name (another version of the tracker): search what exists
