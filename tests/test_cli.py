@@ -127,3 +127,16 @@ def test_compare_rejects_unknown_tracker(tmp_path, capsys):
     rc, _, err = _run(["compare", "--trackers", "phd,nope", "--frames", "5",
                        "--out", tmp_path / "c.rrd", "--quiet"], capsys)
     assert rc == 2 and "nope" in err and not (tmp_path / "c.rrd").exists()
+
+
+def test_classifier_option_reaches_the_trackers_that_have_one(tmp_path, capsys):
+    """`record --classifier MODEL` is `--set model=MODEL` for dlpf / dbn-phd; elsewhere it is a
+    one-line usage error, and a missing model file is one line naming it (no recording left)."""
+    out = tmp_path / "x.rrd"
+    rc, _, err = _run(["record", "--classifier", tmp_path / "m.npz", "--frames", "2",
+                       "--out", out, "--quiet"], capsys)
+    assert rc == 2 and "--classifier applies to dlpf" in err and "Traceback" not in err
+    rc, _, err = _run(["record", "--tracker", "dlpf", "--classifier", tmp_path / "m.npz",
+                       "--frames", "2", "--out", out, "--quiet"], capsys)
+    assert rc == 2 and "m.npz" in err and len(err.strip().splitlines()) == 1
+    assert not out.exists()

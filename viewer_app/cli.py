@@ -138,6 +138,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="frame rate of an image folder or a video file (MOT folders have theirs "
                         "in seqinfo.ini)")
     r.add_argument("--tracks-out", type=Path, default=None, help="also write MOT tracks here")
+    r.add_argument("--classifier", type=Path, default=None, metavar="MODEL",
+                   help="dlpf: an IKSVM from `pfscope train-classifier` (default OpenCV's people "
+                        "SVM); dbn-phd: a DBN from `pfscope train-dbn` (same as --set model=MODEL)")
     r.add_argument("--force", action="store_true", help="overwrite existing output files")
     live = r.add_mutually_exclusive_group()
     live.add_argument("--spawn", action="store_true", help="also stream to a native viewer")
@@ -363,6 +366,11 @@ def _add_tune_parser(sub, TRACKERS, DETECTORS, LEVELS) -> None:
     tn.add_argument("--quiet", action="store_true", help="no line per trial")
 
 
+#: Trackers whose person classifier ``--classifier FILE`` replaces (their ``model`` parameter):
+#: DLPF's IKSVM from ``pfscope train-classifier``, DBN-PHD's DBN from ``pfscope train-dbn``.
+CLASSIFIER_TRACKERS = ("dlpf", "dbn-phd")
+
+
 def _tracker_options(args) -> dict:
     from pfscope.trackers.params import parse_set
 
@@ -425,6 +433,12 @@ def _single_tracker_params(args) -> tuple[str, object, dict]:
         _check_params_file(pf, tracker, preset)
         options.update(pf.options)
     options.update(_tracker_options(args))
+    classifier = getattr(args, "classifier", None)
+    if classifier is not None:
+        if tracker not in CLASSIFIER_TRACKERS:
+            raise InputError(f"--classifier applies to {' and '.join(CLASSIFIER_TRACKERS)} "
+                             f"(their person classifier), not to {tracker!r}")
+        options["model"] = str(classifier)
     return tracker, preset, options
 
 
