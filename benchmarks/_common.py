@@ -12,11 +12,13 @@ repository root, like the tests do; it is never copied into the repository.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import platform
 import statistics
 import sys
+import time
 from pathlib import Path
 from typing import Iterable, Optional, Sequence
 
@@ -280,3 +282,80 @@ def loglog_slope(x, y) -> float:
     if ok.sum() < 2:
         return float("nan")
     return float(np.polyfit(np.log(x[ok]), np.log(y[ok]), 1)[0])
+
+
+# ----------------------------------------------------------------------------- stage clocks
+
+class Clock:
+    """Per-frame stage seconds (``now``), filled by the installed clocks, emptied per frame."""
+
+    def __init__(self):
+        self.now: dict[str, float] = {}
+        self.births = 0
+        self.clusters = None
+        self._marks: list = []
+
+    def take(self) -> dict:
+        if self._marks:
+            for (name, t0), (_, t1) in zip(self._marks, self._marks[1:]):
+                if name is not None:
+                    self.now[name] = self.now.get(name, 0.0) + t1 - t0
+            self._marks = []
+        out, self.now = self.now, {}
+        return out
+
+
+@contextlib.contextmanager
+def phd_clocks(clock: Clock):
+    """Clocks around the functions PHD-MT / MT call (module attributes, restored after)."""
+    from pfscope.trackers.phd import association as assoc_mod
+    from pfscope.trackers.phd import filter as filter_mod
+    from pfscope.trackers.phd import tracker as tracker_mod
+
+    pc = time.perf_counter
+    saved = []
+    state = {"birth_end": None}
+
+    def wrap(owner, name, stage, after=None, since_birth=False):
+        fn = getattr(owner, name, None)
+        if fn is None:
+            print(f"note: {getattr(owner, '__name__', owner)}.{name} not found: stage {stage} "
+                  f"not timed", file=sys.stderr)
+            return
+
+        def timed(*a, **k):
+            t = pc()
+            out = fn(*a, **k)
+            t1 = pc()
+            t0 = state["birth_end"] if since_birth and state["birth_end"] is not None else t
+            clock.now[stage] = clock.now.get(stage, 0.0) + t1 - t0
+            if after is not None:
+                after(out, t1)
+            return out
+
+        saved.append((owner, name, fn))
+        setattr(owner, name, timed)
+
+    def on_birth(b, t1):
+        clock.births = len(b.particles)
+        state["birth_end"] = t1
+
+    def on_update(_, t1):
+        state["birth_end"] = None
+
+    def on_clusters(c, _):
+        clock.clusters = c
+
+    wrap(filter_mod, "predict", "predict")
+    wrap(filter_mod, "birth", "birth", on_birth)
+    # update = from the end of birth to the end of update: concat, clutter density, the gated
+    # likelihood (a generator the update consumes) and eq. (5)
+    wrap(filter_mod, "update", "update", on_update, since_birth=True)
+    wrap(filter_mod, "resample", "resample")
+    wrap(tracker_mod, "kmeans_peaks", "cluster", on_clusters)
+    wrap(assoc_mod.GraphAssociator, "step", "associate")
+    try:
+        yield clock
+    finally:
+        for owner, name, fn in reversed(saved):
+            setattr(owner, name, fn)

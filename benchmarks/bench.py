@@ -58,83 +58,8 @@ WARMUP = 5           # frames left out of the medians (the filter fills up)
 
 # ----------------------------------------------------------------------------- stage clocks
 
-class Clock:
-    """Per-frame stage seconds (``now``), filled by the installed clocks, emptied per frame."""
-
-    def __init__(self):
-        self.now: dict[str, float] = {}
-        self.births = 0
-        self.clusters = None
-        self._marks: list = []
-
-    def take(self) -> dict:
-        if self._marks:
-            for (name, t0), (_, t1) in zip(self._marks, self._marks[1:]):
-                if name is not None:
-                    self.now[name] = self.now.get(name, 0.0) + t1 - t0
-            self._marks = []
-        out, self.now = self.now, {}
-        return out
-
-
 @contextlib.contextmanager
-def phd_clocks(clock: Clock):
-    """Clocks around the functions PHD-MT / MT call (module attributes, restored after)."""
-    from pfscope.trackers.phd import association as assoc_mod
-    from pfscope.trackers.phd import filter as filter_mod
-    from pfscope.trackers.phd import tracker as tracker_mod
-
-    pc = time.perf_counter
-    saved = []
-    state = {"birth_end": None}
-
-    def wrap(owner, name, stage, after=None, since_birth=False):
-        fn = getattr(owner, name, None)
-        if fn is None:
-            print(f"note: {getattr(owner, '__name__', owner)}.{name} not found: stage {stage} "
-                  f"not timed", file=sys.stderr)
-            return
-
-        def timed(*a, **k):
-            t = pc()
-            out = fn(*a, **k)
-            t1 = pc()
-            t0 = state["birth_end"] if since_birth and state["birth_end"] is not None else t
-            clock.now[stage] = clock.now.get(stage, 0.0) + t1 - t0
-            if after is not None:
-                after(out, t1)
-            return out
-
-        saved.append((owner, name, fn))
-        setattr(owner, name, timed)
-
-    def on_birth(b, t1):
-        clock.births = len(b.particles)
-        state["birth_end"] = t1
-
-    def on_update(_, t1):
-        state["birth_end"] = None
-
-    def on_clusters(c, _):
-        clock.clusters = c
-
-    wrap(filter_mod, "predict", "predict")
-    wrap(filter_mod, "birth", "birth", on_birth)
-    # update = from the end of birth to the end of update: concat, clutter density, the gated
-    # likelihood (a generator the update consumes) and eq. (5)
-    wrap(filter_mod, "update", "update", on_update, since_birth=True)
-    wrap(filter_mod, "resample", "resample")
-    wrap(tracker_mod, "kmeans_peaks", "cluster", on_clusters)
-    wrap(assoc_mod.GraphAssociator, "step", "associate")
-    try:
-        yield clock
-    finally:
-        for owner, name, fn in reversed(saved):
-            setattr(owner, name, fn)
-
-
-@contextlib.contextmanager
-def stagelog_clocks(clock: Clock):
+def stagelog_clocks(clock: C.Clock):
     """Times between a tracker's ``StageLog.stage()`` calls (and ``result()``)."""
     from pfscope.trackers.report import StageLog
 
@@ -156,15 +81,15 @@ def stagelog_clocks(clock: Clock):
         StageLog.stage, StageLog.result = stage0, result0
 
 
-def clocks_for(tracker, clock: Clock):
+def clocks_for(tracker, clock: C.Clock):
     from pfscope.trackers.phd.tracker import MTTracker, PHDTracker
 
     if type(tracker) in (PHDTracker, MTTracker):
-        return phd_clocks(clock)
+        return C.phd_clocks(clock)
     return stagelog_clocks(clock)
 
 
-def make_collector(lane: str, clock: Clock, extra=None):
+def make_collector(lane: str, clock: C.Clock, extra=None):
     from pfscope.trackers.pipeline import BaseHook
 
     class Collect(BaseHook):
@@ -233,7 +158,7 @@ def bench_stages(args) -> dict:
         source = C.open_bench_source("synthetic", frames=frames)
         preset = preset_for(name, args.preset) or next(iter(info.presets))
         tracker = make_tracker(name, args.seed, preset=preset)
-        clock = Clock()
+        clock = C.Clock()
         hook = make_collector(name, clock)
         t = time.perf_counter()
         with clocks_for(tracker, clock):
@@ -284,7 +209,7 @@ def run_phd_scene(targets: int, frames: int, seed: int, extra_lanes=None, extra=
     source = C.targets_scene(targets, frames, seed)
     tracker = make_tracker("phd", seed, preset=preset_for("phd", preset),
                            **uncapped(targets, preset))
-    clock = Clock()
+    clock = C.Clock()
     hook = make_collector("phd", clock, extra)
     lanes = {"phd": tracker}
     hooks = [hook]
@@ -292,7 +217,7 @@ def run_phd_scene(targets: int, frames: int, seed: int, extra_lanes=None, extra=
         more, more_hooks = extra_lanes(tracker, clock, source, seed)
         lanes.update(more)
         hooks += more_hooks
-    with phd_clocks(clock):
+    with C.phd_clocks(clock):
         res = run_pipeline(source, lanes, frames=frames, level=None, hooks=hooks,
                            keep_rows=False, score=False)
     if res.outcome.status != "completed":

@@ -35,25 +35,17 @@ Usage::
 from __future__ import annotations
 
 import argparse
-import contextlib
 import math
-import resource
 import sys
 import time
-from dataclasses import dataclass
 
 import _common as C  # noqa: E402  (also puts the repository root on sys.path)
 import numpy as np
 
 from pfscope.trackers.api import make_params, make_tracker, params_config
 from pfscope.trackers.data.motio import MotTable
-from pfscope.trackers.data.sources import Source
-from pfscope.trackers.phd import association as assoc_mod
-from pfscope.trackers.phd import filter as filter_mod
-from pfscope.trackers.phd import tracker as tracker_mod
 from pfscope.trackers.pipeline import BaseHook, FrameReport
 from pfscope.trackers.pipeline import run as run_pipeline
-from pfscope.trackers.types import Frame
 
 STAGES = ("predict", "birth", "update", "resample", "cluster", "associate")
 WARMUP_FRAMES = 3
@@ -61,17 +53,7 @@ WARMUP_FRAMES = 3
 
 # ----------------------------------------------------------------------------- the scene
 
-class DetOnlySource(Source):
-    """A source whose frames carry a 1 x 1 image: only the detections (``det``) matter."""
-
-    def frames(self, limit=None):
-        n = self.length if limit is None else min(limit, self.length)
-        img = np.zeros((1, 1, 3), dtype=np.uint8)
-        for k in range(1, n + 1):
-            yield Frame(k, (k - 1) / self.fps, img)
-
-
-def storm_scene(targets: int, detections: int, frames: int, seed: int = 0) -> DetOnlySource:
+def storm_scene(targets: int, detections: int, frames: int, seed: int = 0):
     """The seeded scene of the module docstring, as a detections-only source."""
     rng = np.random.default_rng([seed, targets, detections])
     side = math.sqrt(max(targets, 4) / 4.0)
@@ -102,70 +84,15 @@ def storm_scene(targets: int, detections: int, frames: int, seed: int = 0) -> De
     n = len(fr)
     det_table = MotTable(frame=fr.astype(np.int64), id=ids.astype(np.int64),
                          boxes=boxes, score=np.ones(n), cls=np.ones(n), vis=np.ones(n))
-    return DetOnlySource(name=f"storm-t{targets}-d{detections}", fps=25.0, length=frames,
+    return C._frame_class()(name=f"storm-t{targets}-d{detections}", fps=25.0, length=frames,
                          width=int(W), height=int(H), det=det_table, kind="synthetic",
                          location="built-in")
-
-
-# ----------------------------------------------------------------------------- stage timing
-
-@dataclass
-class StageClock:
-    """Seconds per stage for the current frame, filled by the wrappers."""
-
-    def __post_init__(self):
-        self.now = dict.fromkeys(STAGES, 0.0)
-        self.kmeans = (0, 0)  # (Lloyd iterations, splits) of the frame
-        self.births = 0
-
-    def reset(self):
-        for k in self.now:
-            self.now[k] = 0.0
-
-
-@contextlib.contextmanager
-def timed_stages(clock: StageClock):
-    """Wrap the module-level functions the tracker calls with clocks, restore them after."""
-    pc = time.perf_counter
-    saved = []
-
-    def wrap(mod, name, stage, after=None):
-        fn = getattr(mod, name)
-
-        def timed(*a, **k):
-            t = pc()
-            out = fn(*a, **k)
-            clock.now[stage] += pc() - t
-            if after is not None:
-                after(out)
-            return out
-
-        saved.append((mod, name, fn))
-        setattr(mod, name, timed)
-
-    def on_clusters(c):
-        clock.kmeans = (int(c.n_iter), int(c.n_splits))
-
-    def on_birth(b):
-        clock.births = len(b.particles)
-
-    wrap(filter_mod, "predict", "predict")
-    wrap(filter_mod, "birth", "birth", on_birth)
-    wrap(filter_mod, "update", "update")
-    wrap(filter_mod, "resample", "resample")
-    wrap(tracker_mod, "kmeans_peaks", "cluster", on_clusters)
-    wrap(assoc_mod.GraphAssociator, "step", "associate")
-    try:
-        yield clock
-    finally:
-        for mod, name, fn in reversed(saved):
-            setattr(mod, name, fn)
 
 
 class Collect(BaseHook):
     """Per frame: step seconds, stage seconds, counts, finiteness of every weight."""
 
-    def __init__(self, clock: StageClock, lane: str):
+    def __init__(self, clock: C.Clock, lane: str):
         self.clock, self.lane = clock, lane
         self.step, self.stages, self.counts = [], [], []
         self.finite = True
@@ -177,19 +104,20 @@ class Collect(BaseHook):
         ps = self.tracker.filter.particles
         self.finite &= bool(np.all(np.isfinite(ps.log_weights)) and np.all(np.isfinite(ps.states)))
         self.step.append(report.step_seconds[self.lane])
-        self.stages.append([self.clock.now[s] for s in STAGES])
-        it, sp = self.clock.kmeans
+        now = self.clock.take()
+        self.stages.append([now.get(s, 0.0) for s in STAGES])
+        c = self.clock.clusters
+        it, sp = (int(c.n_iter), int(c.n_splits)) if c is not None else (0, 0)
         self.counts.append((len(ps), self.clock.births, it, sp,
                             len(report.detections) if report.detections is not None else 0))
-        self.clock.reset()
 
 
 def run_once(targets: int, detections: int, frames: int, seed: int, options: dict) -> dict:
     source = storm_scene(targets, detections, frames, seed)
     tracker = make_tracker("phd", seed, preset="paper", **options)
-    clock = StageClock()
+    clock = C.Clock()
     hook = Collect(clock, "phd")
-    with timed_stages(clock):
+    with C.phd_clocks(clock):
         res = run_pipeline(source, {"phd": tracker}, frames=frames, level=None, hooks=[hook],
                            keep_rows=False, score=False)
     if res.outcome.status != "completed":
@@ -215,10 +143,6 @@ def summarise(runs: list[dict], frames: int) -> dict:
             "finite": all(r["finite"] for r in runs)}
 
 
-def peak_rss_mb() -> float:
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
-
-
 def bench(configs: list[tuple[str, int, int]], frames: int, repeat: int, seed: int,
           options: dict) -> dict:
     """Run every (lane, targets, detections) ``repeat`` times, interleaved, smallest first."""
@@ -230,7 +154,7 @@ def bench(configs: list[tuple[str, int, int]], frames: int, repeat: int, seed: i
     for r in range(repeat):
         for cfg in configs:
             runs[cfg].append(run_once(cfg[1], cfg[2], frames, seed, options))
-            rss[cfg] = max(rss.get(cfg, 0.0), peak_rss_mb())
+            rss[cfg] = max(rss.get(cfg, 0.0), C.peak_rss_mb())
             print(f"  repeat {r + 1}/{repeat} {cfg[0]} targets={cfg[1]} detections={cfg[2]} "
                   f"({time.perf_counter() - t0:.1f} s)", file=sys.stderr)
             if r == repeat - 1:                   # last repeat: the row is final
@@ -248,11 +172,6 @@ def bench(configs: list[tuple[str, int, int]], frames: int, repeat: int, seed: i
         s["lane"], s["targets"], s["detections"] = cfg
         out[f"{cfg[0]}:t{cfg[1]}:d{cfg[2]}"] = s
     return out
-
-
-def exponent(xs, ys) -> float:
-    """Least-squares slope of log y against log x."""
-    return float(np.polyfit(np.log(xs), np.log(ys), 1)[0])
 
 
 def main(argv=None) -> int:
@@ -321,9 +240,9 @@ def main(argv=None) -> int:
     sc = sorted((s for s in results.values() if s["lane"] == "scale"), key=lambda s: s["targets"])
     if len(sc) >= 2:
         xs = [s["targets"] for s in sc]
-        summary["exponent_time_vs_targets"] = exponent(xs, [s["ms_per_frame"] for s in sc])
+        summary["exponent_time_vs_targets"] = C.loglog_slope(xs, [s["ms_per_frame"] for s in sc])
         summary["exponent_per_stage"] = {
-            stg: exponent(xs, [max(s["stages_ms"][stg], 1e-6) for s in sc]) for stg in STAGES}
+            stg: C.loglog_slope(xs, [max(s["stages_ms"][stg], 1e-6) for s in sc]) for stg in STAGES}
     for k, v in summary.items():
         if isinstance(v, dict):
             print(f"{k}: " + ", ".join(f"{s} {x:.2f}" for s, x in v.items()))
