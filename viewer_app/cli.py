@@ -366,11 +366,6 @@ def _add_tune_parser(sub, TRACKERS, DETECTORS, LEVELS) -> None:
     tn.add_argument("--quiet", action="store_true", help="no line per trial")
 
 
-#: Trackers whose person classifier ``--classifier FILE`` replaces (their ``model`` parameter):
-#: DLPF's IKSVM from ``pfscope train-classifier``, DBN-PHD's DBN from ``pfscope train-dbn``.
-CLASSIFIER_TRACKERS = ("dlpf", "dbn-phd")
-
-
 def _tracker_options(args) -> dict:
     from pfscope.trackers.params import parse_set
 
@@ -435,9 +430,17 @@ def _single_tracker_params(args) -> tuple[str, object, dict]:
     options.update(_tracker_options(args))
     classifier = getattr(args, "classifier", None)
     if classifier is not None:
-        if tracker not in CLASSIFIER_TRACKERS:
-            raise InputError(f"--classifier applies to {' and '.join(CLASSIFIER_TRACKERS)} "
-                             f"(their person classifier), not to {tracker!r}")
+        from pfscope.trackers.api import registry, tracker_info
+        from pfscope.trackers.params import leaves
+
+        def has_model(name: str) -> bool:
+            return any(n.rsplit(".", 1)[-1] == "model" for n, _, _ in
+                       leaves(tracker_info(name).params))
+
+        if not has_model(tracker):
+            owners = [n for n in registry() if has_model(n)]
+            raise InputError(f"--classifier sets the 'model' parameter, which {tracker!r} does "
+                             f"not have (trackers with a classifier model: {', '.join(owners)})")
         options["model"] = str(classifier)
     return tracker, preset, options
 

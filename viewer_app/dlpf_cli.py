@@ -24,7 +24,7 @@ def add_parser(sub) -> argparse.ArgumentParser:
                     "windows the first model scores positive; then it is retrained).  The last "
                     "--holdout fraction of the frames is held out and the accuracy and ROC AUC "
                     "there are reported.  Use the model with "
-                    "'pfscope record SOURCE --tracker dlpf --set model=MODEL'.  Never evaluate "
+                    "'pfscope record SOURCE --tracker dlpf --classifier MODEL'.  Never evaluate "
                     "on the frames it was trained on (PETS09-S2L1: train on 1-400, report on "
                     "401-795).")
     p.add_argument("source", help="sequence with ground truth (MOT layout: img1/, gt/gt.txt)")

@@ -252,3 +252,19 @@ def open_source(spec: str | os.PathLike | None, *, fps: Optional[float] = None,
             src.fps = fps
         return src
     raise InputError(f"{path}: no such file or folder")
+
+
+def training_frames(source, frames, stride: int, command: str):
+    """What a training command (``train-dbn``, ``train-classifier``) samples: ``(gt, first, last,
+    chosen)`` — the source's ground truth, the first and last wanted frames, the set of every
+    ``stride``-th wanted frame from the first.  No ground truth or no frames: one-line
+    :class:`InputError` naming ``command``."""
+    gt = getattr(source, "gt", None)
+    if gt is None:
+        raise InputError(f"{command}: {getattr(source, 'name', 'source')} has no ground truth "
+                         "(gt/gt.txt) to take people from")
+    wanted = sorted(set(int(f) for f in frames))
+    if not wanted:
+        raise InputError(f"{command}: no frames to train on")
+    first, last = wanted[0], wanted[-1]
+    return gt, first, last, set(f for f in wanted if (f - first) % max(1, stride) == 0)

@@ -414,15 +414,9 @@ def collect_samples(source, frames: Iterable[int], *, features: FeatureConfig = 
     random and shifted windows."""
     from .codebook import BackgroundParams, ForegroundModel, blobs_from_mask
 
-    gt = getattr(source, "gt", None)
-    if gt is None:
-        raise InputError(f"train-dbn: {getattr(source, 'name', 'source')} has no ground truth "
-                         "(gt/gt.txt) to take people from")
-    wanted = sorted(set(int(f) for f in frames))
-    if not wanted:
-        raise InputError("train-dbn: no frames to train on")
-    first, last = wanted[0], wanted[-1]
-    chosen = set(f for f in wanted if (f - first) % stride == 0)
+    from ..data.sources import training_frames
+
+    gt, first, last, chosen = training_frames(source, frames, stride, "train-dbn")
     bp = background or BackgroundParams()
     fm = ForegroundModel(bp)
     rng = np.random.default_rng(seed)

@@ -232,15 +232,9 @@ def collect_samples(source, frames: Iterable[int], *, stride: int = 4, negatives
     windows (person heights drawn log-uniformly in the range of the frame's gt heights ×[0.7,
     1.4]) overlapping no person (IoU < 0.2 with every gt box, in person-box terms), and one
     window per person shifted by ≥ 0.6 of its width or rescaled ×2 / ×0.5 (near misses)."""
-    gt = getattr(source, "gt", None)
-    if gt is None:
-        raise InputError(f"train-classifier: {getattr(source, 'name', 'source')} has no ground "
-                         "truth (gt/gt.txt) to take people from")
-    wanted = sorted(set(int(f) for f in frames))
-    if not wanted:
-        raise InputError("train-classifier: no frames to train on")
-    first, last = wanted[0], wanted[-1]
-    chosen = set(f for f in wanted if (f - first) % max(1, stride) == 0)
+    from ..data.sources import training_frames
+
+    gt, first, last, chosen = training_frames(source, frames, stride, "train-classifier")
     clf = HOGWindowClassifier(mode="window")
     rng = np.random.default_rng(seed)
     from .classifier import person_boxes

@@ -50,13 +50,13 @@ from typing import Optional
 import numpy as np
 
 from ..api import Rows, StepResult, register
-from ..params import param, part, to_dict
+from ..params import param, part, to_dict, with_options
 from ..report import Boxes, Points, Segments, StageLog
 from ..types import Detections, Frame, TrackSet, xywh_to_cxcywh
 from .association import (EST_CONF, GAP_CONF, AssocParams, AssocResult, FinalRows,
                           GraphAssociator)
 from .clustering import Clusters, kmeans_peaks
-from .filter import STATE_DIM, PHDFilter, PHDParams, PHDStepResult
+from .filter import STATE_DIM, PHDFilter, PHDParams, PHDStepResult, _check
 
 
 @dataclass(frozen=True)
@@ -115,15 +115,11 @@ class RateParams:
 
     def __post_init__(self):
         for name in ("fallback_fps", "gap_s", "memory_s"):
-            if not getattr(self, name) > 0:
-                raise ValueError(f"RateParams.{name} must be > 0, got {getattr(self, name)!r}")
+            _check(self, name, getattr(self, name) > 0, "> 0")
         for name in ("accel_per_s", "size_per_s", "birth_speed_per_s", "birth_odds_per_s",
                      "min_track_s"):
-            if not getattr(self, name) >= 0:
-                raise ValueError(f"RateParams.{name} must be >= 0, got {getattr(self, name)!r}")
-        if not 0.0 <= self.survival_per_s <= 1.0:
-            raise ValueError(f"RateParams.survival_per_s must be in [0, 1], "
-                             f"got {self.survival_per_s!r}")
+            _check(self, name, getattr(self, name) >= 0, ">= 0")
+        _check(self, "survival_per_s", 0.0 <= self.survival_per_s <= 1.0, "in [0, 1]")
 
 
 def assoc_per_frame(a: AssocParams, r: RateParams, fps: float) -> AssocParams:
@@ -273,16 +269,12 @@ class _AssociatingTracker:
 #: settings (README, "Presets"); the ``scene`` preset is the same with clutter as a density
 #: over the image learnt online, the better model when clutter falls at random (the synthetic
 #: scene: mass within 10 % of the true count, where ``gate`` under-counts by ~20 %).
-PHD_SCENE = PHDTrackerParams(
-    filter=PHDParams.of(clutter_model="scene", near_learn=True, score_model="gaussian",
-                        p_miss=0.1),
-    assoc=AssocParams(fill_gaps=True),
-    rate=RateParams(per_second=True))
 PHD_PRACTICAL = PHDTrackerParams(
     filter=PHDParams.of(clutter_model="gate", near_learn=True, score_model="gaussian",
                         p_miss=0.1),
     assoc=AssocParams(fill_gaps=True),
     rate=RateParams(per_second=True))
+PHD_SCENE = with_options(PHD_PRACTICAL, {"filter.clutter.clutter_model": "scene"})
 #: The practical default of MT: the same association settings per second.  No gap filling:
 #: MT links clutter into tracks across gaps, and filling them multiplies its false positives.
 MT_PRACTICAL = MTParams(rate=RateParams(per_second=True))
