@@ -281,7 +281,19 @@ def test_kmeans_with_the_index_equals_brute_force(monkeypatch, seed, rule):
     np.testing.assert_array_equal(indexed.kept, brute.kept)
 
 
+def _brute_d2(X, centers, p):
+    """(N, K) Σ_d (x_d − c_d)² / σ_d² at each centre's size, coordinate by coordinate."""
+    inv = 1.0 / obs_std(centers[:, 4:6], p.likelihood) ** 2
+    C = centers[:, [0, 1, 4, 5]]
+    acc = (X[:, 0, None] - C[None, :, 0]) ** 2 * inv[None, :, 0]
+    for d in range(1, 4):
+        acc = acc + (X[:, d, None] - C[None, :, d]) ** 2 * inv[None, :, d]
+    return acc
+
+
 def test_indexed_assignment_is_the_argmin_with_ties_and_outliers():
+    from pfscope.trackers.phd import _kernels
+
     rng = np.random.default_rng(3)
     K, n = 80, 6000
     centers = np.zeros((K, 6))
@@ -295,14 +307,17 @@ def test_indexed_assignment_is_the_argmin_with_ties_and_outliers():
     X = centers[src][:, [0, 1, 4, 5]] + rng.normal(0, 4, (n, 4))
     X[:50, :2] += rng.uniform(-5000, 5000, (50, 2))    # far from every centre
     p = PHDParams()
-    want_d2 = clustering._distances(X, centers, p)
-    assign = clustering._Assigner(X, p)
-    for step in range(3):                              # cached bounds across moves
-        lab, d2 = assign(centers)
-        want_d2 = clustering._distances(X, centers, p)
+    lk = p.likelihood
+    lab = np.full(n, -1, dtype=np.int64)
+    for step in range(3):                              # the previous labels as first guesses
+        inv = _kernels._inv_var(centers, lk.sigma_obs, lk.sigma_obs_min, lk.sigma_obs_pos_ratio)
+        new, d2 = np.empty(n, dtype=np.int64), np.empty(n)
+        _kernels.assign(X, centers, inv, lab, new, d2, clustering.INDEX_MIN_CENTERS)
+        want_d2 = _brute_d2(X, centers, p)
         want = np.argmin(want_d2, axis=1)
-        np.testing.assert_array_equal(lab, want)
-        np.testing.assert_allclose(d2, want_d2[np.arange(n), want], rtol=1e-9, atol=1e-6)
+        np.testing.assert_array_equal(new, want)
+        np.testing.assert_allclose(d2, want_d2[np.arange(n), want], rtol=1e-12, atol=0)
+        lab = new
         centers = centers.copy()
         centers[rng.integers(0, K, 5), :2] += rng.normal(0, 20, (5, 2))
     assert not np.any(lab == 41)                       # ties go to the lower index

@@ -6,8 +6,6 @@ import math
 
 import numpy as np
 import pytest
-
-from pfscope.trackers.phd import clustering
 from pfscope.trackers.phd.clustering import kmeans_peaks
 from pfscope.trackers.phd.filter import PHDFilter, PHDParams, obs_std
 from pfscope.trackers.smc import ParticleSet
@@ -88,7 +86,9 @@ def test_max_iter_and_max_splits_cap_the_work():
     one = kmeans_peaks(ps, Z, max_iter=1, max_splits=0)
     assert one.n_iter == 1 and one.n_splits == 0
     # a single iteration still returns each particle's nearest centre
-    d2 = clustering._distances(ps.states[:, [0, 1, 4, 5]], one.centers, PHDParams())
+    inv = 1.0 / obs_std(one.centers[:, 4:6]) ** 2
+    X, C = ps.states[:, [0, 1, 4, 5]], one.centers[:, [0, 1, 4, 5]]
+    d2 = sum((X[:, d, None] - C[None, :, d]) ** 2 * inv[None, :, d] for d in range(4))
     np.testing.assert_array_equal(one.labels, np.argmin(d2, axis=1))
 
 

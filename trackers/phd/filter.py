@@ -16,10 +16,13 @@ stage from :class:`PHDStepResult`):
 
 Cost linear in the number of targets (DESIGN.md "gating"): g(z|x) is evaluated only on the pairs
 inside a generous observation-noise gate of each detection (a grid index on the particles'
-positions, :mod:`.gating`; the dropped likelihood is below 3e-14 of its peak, so the results
-are those of the dense eq. (5) up to float noise — the bound is in :mod:`.gating`), M(z) goes
-through the same index, the newborn per frame are capped (``max_births_per_frame``) and memory
-is bounded by ``pair_budget`` candidate pairs at a time, whatever the number of detections.
+positions; the dropped likelihood is below 3e-14 of its peak, so the results are those of the
+dense eq. (5) up to float noise — the bound is in :mod:`.gating`), M(z) goes through the same
+kind of index, and the newborn per frame are capped (``max_births_per_frame``).  For the
+Gaussian g of the paper the stages are fused numba kernels (:mod:`._kernels`: predict, M(z),
+the newborn, eq. (5) evaluated inside the gates with no pair arrays, so memory is O(N + N_z)
+whatever the number of detections); a likelihood of another kind goes through
+:func:`gated_log_g`, whose memory is bounded by ``pair_budget`` candidate pairs at a time.
 
 Readings of the paper (each a :class:`PHDParams` field):
 
@@ -83,7 +86,7 @@ from typing import Iterable, Iterator, Optional, Protocol, Union
 import numpy as np
 
 from ..params import param, part, with_options
-from . import motion
+from . import _kernels, motion
 from .gating import DEFAULT_BUDGET, LogGPairs, gate_pairs, tail_radius2
 from ..smc.resampling import SCHEMES
 from ..smc.resampling import resample as _resample_set
@@ -261,7 +264,8 @@ class GatingParams:
                                     "of the observation noise get g = 0 (there g < 3e-14 "
                                     "of its peak at 1e-12)")
     pair_budget: int = param(DEFAULT_BUDGET, "candidate (particle, detection) pairs handled at "
-                                             "once: bounds the update's memory (~150 B each)")
+                                             "once: bounds the update's memory (~150 B each) "
+                                             "for a likelihood other than the Gaussian")
 
     def __post_init__(self):
         _check(self, "gate_tail", 0.0 < self.gate_tail < 1.0, "in (0, 1)")
@@ -589,17 +593,27 @@ def mass_near(predicted: ParticleSet, Z: np.ndarray, bp: BirthParams = BirthPara
     """M(z) (N_z,): predicted mass inside the ``gate`` confidence ellipsoid of the observation
     noise around each z (maggio2007 §2, "cumulative masses M(z_{k,j}) of the propagated
     particles that are inside the 99% confidence interval").  Only the particles near each z
-    are looked at (:func:`~.gating.gate_pairs`, exact: the same float64 distances as the dense
-    test); ``budget`` bounds the candidate pairs in memory."""
+    are looked at (a grid on the particles' positions, :func:`._kernels.mass_near_kernel`;
+    the same float64 distances as the dense test); memory is O(N + N_z), so ``budget`` (kept
+    for the API) has nothing left to bound."""
     Z = np.asarray(Z, dtype=np.float64).reshape(-1, OBS_DIM)
-    out = np.zeros(len(Z))
     if len(predicted) == 0 or len(Z) == 0:
-        return out
-    w = predicted.weights
-    for ch in gate_pairs(predicted.states[:, OBS_COLS], Z, gate_threshold(bp.gate, OBS_DIM),
-                         std_z=obs_std(Z[:, 2:4], lk), budget=budget):
-        out += np.bincount(ch.cols, weights=w[ch.rows], minlength=len(Z))
+        return np.zeros(len(Z))
+    std_z = obs_std(Z[:, 2:4], lk)
+    r2 = gate_threshold(bp.gate, OBS_DIM)
+    cell = _grid_cell(std_z, r2)
+    ok, out = _kernels.mass_near_kernel(predicted.states, predicted.weights, Z, std_z, r2,
+                                        cell[0], cell[1])
+    if not ok:
+        raise ValueError("mass_near: non-finite particle positions")
     return out
+
+
+def _grid_cell(std: np.ndarray, r2: float) -> np.ndarray:
+    """Grid cells as wide as a typical gate box ((y1, y2) half-widths ``r σ``): a typical box
+    then spans at most 2 × 2 cells (as :func:`.gating.gate_pairs`)."""
+    cell = 2.0 * math.sqrt(r2) * np.median(std[:, :2], axis=0)
+    return np.where(cell > 0, cell, 1.0)
 
 
 def allocate_births(m_near: np.ndarray, bp: BirthParams = BirthParams()) -> np.ndarray:
@@ -642,23 +656,18 @@ def birth(predicted: ParticleSet, Z, params: PHDParams, rng: np.random.Generator
     bp, lk = params.birth, params.likelihood
     m_near = mass_near(predicted, Z, bp, lk, params.gating.pair_budget)
     j = allocate_births(m_near, bp)
-    det = np.repeat(np.arange(len(Z), dtype=np.int64), j)
-    n = len(det)
-    zr = Z[det]
-    std = obs_std(zr[:, 2:4], lk)
+    n = int(j.sum())
     eps = rng.standard_normal((n, OBS_DIM))
     theta = rng.uniform(0.0, 2.0 * math.pi, n)
     speed_n = rng.standard_normal(n)
-    obs = zr + bp.birth_spread * std * eps
-    scale = np.sqrt(zr[:, 2] * zr[:, 3])
-    speed = (bp.birth_speed_mean + bp.birth_speed_std * speed_n) * scale
-    states = np.empty((n, STATE_DIM))
-    states[:, OBS_COLS] = obs
-    states[:, 2] = speed * np.cos(theta)
-    states[:, 3] = speed * np.sin(theta)
-    states[:, 4:6] = np.maximum(states[:, 4:6], params.motion.min_size)
     # eq. (4), newborn branch, with γ_z ∝ p_z: every newborn of z weighs birth_intensity / J_z.
-    log_w = (log_birth_weight(Z, params, log_kappa) - np.log(np.maximum(j, 1)))[det]
+    lw_det = log_birth_weight(Z, params, log_kappa) - np.log(np.maximum(j, 1))
+    # one fused pass (numba): (y, w, h) = z + spread σ(z) ε, speed (mean + std n) sqrt(w h)
+    # in direction θ, sizes clipped to min_size
+    states, log_w, det = _kernels.birth_fill(
+        Z, j, lw_det, eps, np.cos(theta), np.sin(theta), speed_n, lk.sigma_obs,
+        lk.sigma_obs_min, lk.sigma_obs_pos_ratio, bp.birth_spread, bp.birth_speed_mean,
+        bp.birth_speed_std, params.motion.min_size)
     return BirthResult(ParticleSet(states, log_w), j, m_near, det)
 
 
@@ -678,9 +687,24 @@ class UpdateResult:
     miss_mass: float
 
 
+@dataclass(frozen=True)
+class GatedGaussian:
+    """``log g`` of :class:`GaussianLikelihood` on the pairs inside the update gate, left for
+    :func:`update` to evaluate on the fly: one fused pass over the particles near each
+    detection (a grid on their positions, :func:`._kernels.gauss_update`), with no pair
+    arrays.  ``Z`` (N_z, 4) the detections, ``params`` the likelihood's settings, ``r2`` the
+    squared Mahalanobis gate radius (``tail_radius2(gate_tail)``, bound in :mod:`.gating`; the
+    test is in float64 here, exactly the ellipsoid)."""
+
+    Z: np.ndarray
+    params: LikelihoodParams
+    r2: float
+
+
 #: What :func:`update` takes as the likelihood: a dense (N, N_z) matrix, one
-#: :class:`~.gating.LogGPairs`, or an iterable of them over disjoint sets of detections.
-LogG = Union[np.ndarray, LogGPairs, Iterable[LogGPairs]]
+#: :class:`~.gating.LogGPairs`, an iterable of them over disjoint sets of detections, or a
+#: :class:`GatedGaussian`.
+LogG = Union[np.ndarray, LogGPairs, Iterable[LogGPairs], GatedGaussian]
 
 
 def update(particles: ParticleSet, log_g: LogG, log_kappa: np.ndarray,
@@ -695,7 +719,10 @@ def update(particles: ParticleSet, log_g: LogG, log_kappa: np.ndarray,
     - sparse: a :class:`~.gating.LogGPairs` (g = 0 on every pair it does not list), or an
       iterable of them (e.g. a generator, so only one is in memory at a time), each holding
       *every* listed pair of its detections (a detection may not appear in two of them;
-      :func:`gated_log_g` yields such chunks).
+      :func:`gated_log_g` yields such chunks), or
+    - the Gaussian g itself on the gated pairs (:class:`GatedGaussian`, what
+      :meth:`PHDFilter.step` passes for a :class:`GaussianLikelihood`): evaluated inside the
+      update by one numba kernel, O(N + pairs) time and O(N + N_z) memory.
 
     ``log_kappa`` (N_z,) is ``log κ(z)``; the filter never knows which likelihood it runs (like
     nchopin/particles' ``logG``).  The sparse form costs O(pairs + N per chunk)."""
@@ -704,6 +731,8 @@ def update(particles: ParticleSet, log_g: LogG, log_kappa: np.ndarray,
         raise ValueError(f"update: p_miss must be in [0, 1], got {p_miss}")
     if isinstance(log_g, np.ndarray):
         return _update_dense(particles, log_g, log_kappa, p_miss)
+    if isinstance(log_g, GatedGaussian):
+        return _update_gaussian(particles, log_g, log_kappa, p_miss)
     chunks = [log_g] if isinstance(log_g, LogGPairs) else log_g
     return _update_pairs(particles, chunks, log_kappa, p_miss)
 
@@ -738,6 +767,38 @@ def _update_dense(particles: ParticleSet, log_g: np.ndarray, log_kappa: np.ndarr
     terms[:, 0] = log_pm
     terms[:, 1:] = log_psi - log_den[None, :]
     new_lw = lw + logsumexp(terms, axis=1)
+    return UpdateResult(ParticleSet(particles.states, new_lw, particles.labels, particles.extra),
+                        np.exp(log_c), kappa, np.exp(log_c - log_den), p_miss * m_pred)
+
+
+def _update_gaussian(particles: ParticleSet, g: GatedGaussian, log_kappa: np.ndarray,
+                     p_miss: float) -> UpdateResult:
+    """Eq. (5) with the Gaussian g evaluated inside the gate by :func:`._kernels.gauss_update`
+    (C(z) and each particle's bracket by online log-sum-exps; the same sums as
+    :func:`_update_pairs` on the gated pairs, in another order)."""
+    lw = particles.log_weights
+    Z = np.asarray(g.Z, dtype=np.float64).reshape(-1, OBS_DIM)
+    n, n_z = len(particles), len(log_kappa)
+    if len(Z) != n_z:
+        raise ValueError(f"update: {len(Z)} detections but {n_z} clutter densities")
+    log_pm, log_pd = _log_probs(p_miss)
+    m_pred = particles.mass
+    kappa = np.exp(log_kappa)
+    if n_z == 0 or n == 0:
+        out = ParticleSet(particles.states, lw + log_pm, particles.labels, particles.extra)
+        return UpdateResult(out, np.zeros(n_z), kappa, np.zeros(n_z), p_miss * m_pred)
+    lk = g.params
+    by_det = lk.obs_std_source == "detection"
+    std = obs_std(Z[:, 2:4] if by_det else particles.states[:, 4:6], lk)
+    log_norm = np.log(std).sum(-1)
+    cell = _grid_cell(std if by_det else np.max(std[:, :2], axis=0, keepdims=True), g.r2)
+    ok, new_lw, log_c = _kernels.gauss_update(
+        particles.states, lw, Z, std, log_norm, by_det, log_kappa, log_pd, log_pm,
+        float(g.r2), cell[0], cell[1])
+    if not ok:
+        raise ValueError("update: non-finite particle positions")
+    log_den = np.logaddexp(log_kappa, log_c)
+    log_den = np.where(np.isfinite(log_den), log_den, 0.0)              # κ = C = 0: term is 0
     return UpdateResult(ParticleSet(particles.states, new_lw, particles.labels, particles.extra),
                         np.exp(log_c), kappa, np.exp(log_c - log_den), p_miss * m_pred)
 
@@ -930,7 +991,8 @@ class PHDFilter:
         self.scene = SceneModel(self.params)
 
     def step(self, Z, frame: Optional[Frame] = None) -> PHDStepResult:
-        """One frame: predict → birth → update (eq. (5) on the gated pairs, :func:`gated_log_g`)
+        """One frame: predict → birth → update (eq. (5) on the gated pairs:
+        :class:`GatedGaussian` for the Gaussian likelihood, :func:`gated_log_g` for any other)
         → resample.  ``Z`` is (N_z, 4) ``(y1, y2, w, h)`` or a
         :class:`~pfscope.trackers.types.Detections`; ``frame`` is handed to the likelihood
         (image-based likelihoods need the pixels)."""
@@ -941,7 +1003,12 @@ class PHDFilter:
         log_kappa_geo, log_kappa = self.scene.log_kappa(Z, scores, frame)
         born = birth(predicted, Z, p, self.rng, log_kappa_geo)
         candidates = predicted.concat(born.particles)
-        log_g = gated_log_g(self.likelihood, candidates.states, Z, frame, p)
+        if type(self.likelihood) is GaussianLikelihood:
+            # maggio2007's Gaussian: evaluated inside the update's fused kernel
+            log_g: LogG = GatedGaussian(Z, self.likelihood.params,
+                                        tail_radius2(p.gating.gate_tail, OBS_DIM))
+        else:
+            log_g = gated_log_g(self.likelihood, candidates.states, Z, frame, p)
         updated = update(candidates, log_g, log_kappa, p.likelihood.p_miss)
         self.scene.learn(scores, updated.per_det_mass)
         resampled = resample(updated.particles, p.resampling, self.rng)

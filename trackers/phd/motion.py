@@ -23,6 +23,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ._kernels import propagate_into
+
 #: maggio2007 §4 defaults.
 SIGMA_V = 0.03        # velocity (acceleration) noise std per frame, as a fraction of w / h
 SIGMA_SIZE = 0.1      # size noise std per frame, as a fraction of w / h
@@ -41,13 +43,12 @@ def propagate(states: np.ndarray, rng: np.random.Generator, *, sigma_v: float = 
     if x.ndim != 2 or x.shape[1] != 6:
         raise ValueError(f"propagate: expected states (N, 6), got {x.shape}")
     n = len(x)
-    out = x.copy()
+    out = np.empty_like(x)
     if n == 0:
         return out
     eps = rng.standard_normal((n, 4))
-    size = x[:, 4:6]                       # (w, h) at k-1 scale every noise term
-    acc = sigma_v * size * eps[:, 0:2]     # acceleration on (v1, v2)
-    out[:, 0:2] += x[:, 2:4] + accel_to_position * acc   # first order on position
-    out[:, 2:4] += acc
-    out[:, 4:6] = np.maximum(size + sigma_size * size * eps[:, 2:4], min_size)  # zero order
+    # one fused pass (numba): a = σ_v (w, h) ε, y += v + c a, v += a (first order on position),
+    # (w, h) += σ_size (w, h) ε clipped to min_size (zero order on size)
+    propagate_into(x, eps, float(sigma_v), float(sigma_size), float(accel_to_position),
+                   float(min_size), out)
     return out

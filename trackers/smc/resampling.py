@@ -13,11 +13,33 @@ normalized to preserve the total mass").
 
 from __future__ import annotations
 
-import numpy as np
+import math
 
-from .weights import ParticleSet, normalised_weights
+import numpy as np
+from numba import njit
+
+from .weights import ParticleSet, logsumexp, normalised_weights
 
 SCHEMES = ("systematic", "stratified", "residual", "multinomial")
+
+
+@njit(cache=True, nogil=True)
+def _systematic_index(lw, log_mass, u0, n):
+    """Ancestors (n,) of systematic resampling: ``u_k = (u0 + k) / n`` against the CDF of
+    ``exp(lw − log_mass)`` (its last bin forced to 1, summed in order as ``np.cumsum``), the
+    first bin whose CDF exceeds ``u_k`` (``searchsorted(side="right")``: zero-weight bins are
+    never picked)."""
+    N = lw.shape[0]
+    idx = np.empty(n, np.int64)
+    j = 0
+    c = math.exp(lw[0] - log_mass) if N > 1 else 1.0
+    for k in range(n):
+        u = (u0 + k) / n
+        while j < N - 1 and c <= u:
+            j += 1
+            c = c + math.exp(lw[j] - log_mass) if j < N - 1 else 1.0
+        idx[k] = j
+    return idx
 
 
 def _cdf(w: np.ndarray) -> np.ndarray:
@@ -35,10 +57,13 @@ def _invert(cdf: np.ndarray, u: np.ndarray) -> np.ndarray:
 
 def systematic(log_weights: np.ndarray, n: int, rng: np.random.Generator) -> np.ndarray:
     """One uniform offset, ``n`` evenly spaced points: ``u_j = (U + j) / n``.  Lowest variance
-    in practice; counts differ from ``n w_i`` by less than 1."""
-    w = normalised_weights(log_weights)
-    u = (rng.random() + np.arange(n)) / n
-    return _invert(_cdf(w), u)
+    in practice; counts differ from ``n w_i`` by less than 1.  One walk over the CDF (numba,
+    :func:`_systematic_index`), no (N,) or (n,) temporaries."""
+    lw = np.asarray(log_weights, dtype=np.float64).reshape(-1)
+    lse = logsumexp(lw)
+    if not np.isfinite(lse):
+        raise ValueError("cannot normalise weights with zero (or non-finite) total mass")
+    return _systematic_index(lw, float(lse), float(rng.random()), int(n))
 
 
 def stratified(log_weights: np.ndarray, n: int, rng: np.random.Generator) -> np.ndarray:
@@ -101,5 +126,8 @@ def resample(ps: ParticleSet, n: int, rng: np.random.Generator,
     n = int(n)
     if len(ps) == 0 or n == 0 or not np.isfinite(ps.log_mass):
         return ps.take(np.zeros(0, dtype=np.int64))
-    idx = resample_indices(ps.log_weights, n, rng, scheme)
+    if scheme == "systematic" and n > 0:    # the log-mass is known: one pass fewer
+        idx = _systematic_index(ps.log_weights, ps.log_mass, float(rng.random()), n)
+    else:
+        idx = resample_indices(ps.log_weights, n, rng, scheme)
     return ps.take(idx).with_log_weights(np.full(n, ps.log_mass - np.log(n)))

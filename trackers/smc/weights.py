@@ -11,6 +11,7 @@ mass 1.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Optional
 
 import numpy as np
@@ -114,8 +115,10 @@ class ParticleSet:
     def dim(self) -> int:
         return int(self.states.shape[1])
 
-    @property
+    @cached_property
     def log_mass(self) -> float:
+        """``logsumexp(log_weights)``, computed once (a set's arrays are never changed in
+        place: every operation returns a new set)."""
         return float(logsumexp(self.log_weights))
 
     @property

@@ -1,0 +1,290 @@
+"""The numba kernels of the PHD filter and its K-means (trackers/phd/_kernels.py) against
+brute-force numpy references on random inputs: dense matrices, every pair, every centre."""
+
+
+import numpy as np
+import pytest
+from pfscope.trackers.phd import _kernels as K
+from pfscope.trackers.phd.filter import (
+    GatedGaussian,
+    LikelihoodParams,
+    PHDParams,
+    log_likelihood,
+    mass_near,
+    obs_std,
+    update,
+)
+from pfscope.trackers.phd.gating import tail_radius2
+from pfscope.trackers.smc import ParticleSet
+from pfscope.trackers.smc.resampling import _systematic_index
+
+OBS = [0, 1, 4, 5]
+
+
+def _states(rng, n, spread=300.0, far=0):
+    x = np.empty((n, 6))
+    x[:, :2] = rng.uniform(-spread, spread, (n, 2))
+    x[:, 2:4] = rng.normal(0, 2, (n, 2))
+    x[:, 4] = rng.uniform(10, 60, n)
+    x[:, 5] = x[:, 4] * rng.uniform(1.5, 3, n)
+    if far:
+        x[:far, :2] += rng.uniform(-1e5, 1e5, (far, 2))
+    return x
+
+
+def _dets_near(rng, states, nz, clutter=3):
+    """Detections on some particles (noisy) plus a few anywhere."""
+    pick = rng.choice(len(states), nz, replace=False)
+    Z = states[pick][:, OBS] + rng.normal(0, 2, (nz, 4))
+    Z[:clutter, :2] = rng.uniform(-400, 400, (min(clutter, nz), 2))
+    Z[:, 2:4] = np.abs(Z[:, 2:4]) + 2
+    return Z
+
+
+# ----------------------------------------------------------------------------- predict, birth
+
+def test_propagate_kernel_is_the_numpy_model_bit_for_bit():
+    rng = np.random.default_rng(0)
+    x = _states(rng, 500)
+    x[:10, 4:6] = 0.5                                  # clipped to min_size
+    eps = rng.standard_normal((500, 4))
+    out = np.empty_like(x)
+    K.propagate_into(x, eps, 0.03, 0.1, 0.5, 1.0, out)
+    want = x.copy()
+    size = x[:, 4:6]
+    acc = 0.03 * size * eps[:, 0:2]
+    want[:, 0:2] += x[:, 2:4] + 0.5 * acc
+    want[:, 2:4] += acc
+    want[:, 4:6] = np.maximum(size + 0.1 * size * eps[:, 2:4], 1.0)
+    np.testing.assert_array_equal(out, want)
+    assert np.all(out[:, 4:6] >= 1.0)
+
+
+def test_birth_fill_is_the_numpy_birth_bit_for_bit():
+    rng = np.random.default_rng(1)
+    Z = np.c_[rng.uniform(0, 600, 7), rng.uniform(0, 400, 7), rng.uniform(3, 60, 7),
+              rng.uniform(8, 150, 7)]
+    j = np.array([0, 5, 1, 0, 30, 2, 11])
+    lw_det = rng.normal(-5, 1, 7)
+    n = int(j.sum())
+    eps, theta, sp = rng.standard_normal((n, 4)), rng.uniform(0, 2 * np.pi, n), rng.normal(0, 1, n)
+    lk = LikelihoodParams()
+    states, log_w, det = K.birth_fill(Z, j, lw_det, eps, np.cos(theta), np.sin(theta), sp,
+                                      lk.sigma_obs, lk.sigma_obs_min, lk.sigma_obs_pos_ratio,
+                                      1.3, 0.05, 0.1, 4.0)
+    d = np.repeat(np.arange(7), j)
+    zr = Z[d]
+    obs = zr + 1.3 * obs_std(zr[:, 2:4], lk) * eps
+    speed = (0.05 + 0.1 * sp) * np.sqrt(zr[:, 2] * zr[:, 3])
+    want = np.empty((n, 6))
+    want[:, OBS] = obs
+    want[:, 2], want[:, 3] = speed * np.cos(theta), speed * np.sin(theta)
+    want[:, 4:6] = np.maximum(want[:, 4:6], 4.0)
+    np.testing.assert_array_equal(states, want)
+    np.testing.assert_array_equal(det, d)
+    np.testing.assert_array_equal(log_w, lw_det[d])
+
+
+# ----------------------------------------------------------------------------- grid, M(z)
+
+@pytest.mark.parametrize("cell", [0.01, 5.0, 40.0, 1e4])
+def test_grid_puts_every_point_in_its_cell_in_index_order(cell):
+    rng = np.random.default_rng(2)
+    x = _states(rng, 2000, far=20)
+    ok, x0, y0, cx, cy, ni, nj, order, starts = K.grid_build(x[:, 0], x[:, 1], cell, cell)
+    assert ok and ni * nj <= 4 * 2000 + 64                      # cells grew when too many
+    np.testing.assert_array_equal(np.sort(order), np.arange(2000))
+    key = (np.minimum(np.floor((x[:, 0] - x0) / cx), ni - 1) * nj
+           + np.minimum(np.floor((x[:, 1] - y0) / cy), nj - 1)).astype(np.int64)
+    np.testing.assert_array_equal(order, np.argsort(key, kind="stable"))
+    np.testing.assert_array_equal(starts, np.searchsorted(key[order], np.arange(ni * nj + 1)))
+
+
+def test_grid_refuses_non_finite_points():
+    x = np.array([0.0, np.nan, 3.0])
+    assert not K.grid_build(x, np.zeros(3), 1.0, 1.0)[0]
+    ps = ParticleSet(np.c_[x, np.zeros((3, 3)), np.full((3, 2), 20.0)], np.zeros(3))
+    with pytest.raises(ValueError, match="non-finite"):
+        mass_near(ps, np.array([[0.0, 0.0, 20.0, 20.0]]))
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_mass_near_kernel_equals_the_dense_gate_sum(seed):
+    rng = np.random.default_rng(seed)
+    x = _states(rng, 3000, far=30)
+    Z = _dets_near(rng, x, 40)
+    w = rng.uniform(0, 1e-3, 3000)
+    std = obs_std(Z[:, 2:4])
+    r2 = 13.28
+    d2 = (((x[:, None, OBS] - Z[None]) / std[None]) ** 2).sum(-1)
+    want = ((d2 <= r2) * w[:, None]).sum(0)
+    for cell in (3.0, 50.0, 1e5):
+        ok, got = K.mass_near_kernel(x, w, Z, std, r2, cell, cell)
+        assert ok
+        np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-18)
+    assert (want > 0).sum() >= 30
+
+
+# ----------------------------------------------------------------------------- update
+
+def _dense_reference(ps, Z, lk, log_kappa, p_miss, r2):
+    """Eq. (5) on the dense matrix with g = 0 outside the gate d² <= r2 (the brute force)."""
+    states = ps.states
+    log_g = log_likelihood(states, Z, lk)
+    if lk.obs_std_source == "detection":
+        std = obs_std(Z[:, 2:4], lk)[None]
+    else:
+        std = obs_std(states[:, None, 4:6], lk)
+    d2 = (((states[:, None, OBS] - Z[None]) / std) ** 2).sum(-1)
+    log_g = np.where(d2 <= r2, log_g, -np.inf)
+    return update(ps, log_g, log_kappa, p_miss)
+
+
+@pytest.mark.parametrize("source", ["detection", "particle"])
+@pytest.mark.parametrize("p_miss", [0.0, 0.05, 1.0])
+@pytest.mark.parametrize("kappa", ["gate", "zero", "mixed"])
+def test_gauss_update_equals_the_dense_eq5_on_the_gate(source, p_miss, kappa):
+    rng = np.random.default_rng([len(source), int(p_miss * 100), len(kappa)])
+    x = _states(rng, 1500, far=15)
+    Z = _dets_near(rng, x, 25)
+    lw = rng.normal(-7, 2, 1500)
+    lw[:20] = -np.inf                                  # dead particles
+    ps = ParticleSet(x, lw)
+    lk = LikelihoodParams(obs_std_source=source)
+    log_kappa = rng.normal(-14, 1, 25)
+    if kappa == "zero":
+        log_kappa[:] = -np.inf
+    elif kappa == "mixed":
+        log_kappa[::3] = -np.inf
+    r2 = tail_radius2(1e-12)
+    got = update(ps, GatedGaussian(Z, lk, r2), log_kappa, p_miss)
+    want = _dense_reference(ps, Z, lk, log_kappa, p_miss, r2)
+    a, b = got.particles.log_weights, want.particles.log_weights
+    np.testing.assert_array_equal(np.isfinite(a), np.isfinite(b))
+    f = np.isfinite(b)
+    np.testing.assert_allclose(a[f], b[f], rtol=1e-12, atol=1e-9)
+    np.testing.assert_allclose(got.c_z, want.c_z, rtol=1e-10, atol=1e-300)
+    np.testing.assert_allclose(got.per_det_mass, want.per_det_mass, rtol=1e-10, atol=1e-14)
+    assert got.miss_mass == pytest.approx(want.miss_mass)
+    if p_miss < 1:
+        assert np.count_nonzero(got.c_z > 0) >= 20     # the detections did win mass
+
+
+def test_gauss_update_refuses_non_finite_positions():
+    x = _states(np.random.default_rng(5), 10)
+    x[3, 1] = np.inf
+    with pytest.raises(ValueError, match="non-finite"):
+        update(ParticleSet(x, np.zeros(10)),
+               GatedGaussian(x[:2, OBS], LikelihoodParams(), 62.0), np.zeros(2), 0.05)
+
+
+# ----------------------------------------------------------------------------- resample
+
+@pytest.mark.parametrize("N,n", [(1, 4), (7, 3), (2000, 3000), (5000, 40)])
+def test_systematic_index_is_searchsorted_on_the_cdf(N, n):
+    rng = np.random.default_rng(N + n)
+    lw = rng.normal(0, 3, N)
+    lw[rng.random(N) < 0.3] = -np.inf
+    lw[0] = 0.0
+    lse = float(np.log(np.sum(np.exp(lw - lw.max()))) + lw.max())
+    for u0 in (0.0, rng.random(), 1.0 - 1e-12):
+        cdf = np.cumsum(np.exp(lw - lse))
+        cdf[-1] = 1.0
+        want = np.minimum(np.searchsorted(cdf, (u0 + np.arange(n)) / n, side="right"), N - 1)
+        got = _systematic_index(lw, lse, u0, n)
+        np.testing.assert_array_equal(got, want)
+        assert not np.any(np.isneginf(lw[got]))        # zero-weight bins never picked
+
+
+# ----------------------------------------------------------------------------- K-means
+
+def _brute_d2(X, centers, lk):
+    inv = 1.0 / obs_std(centers[:, 4:6], lk) ** 2
+    C = centers[:, OBS]
+    acc = (X[:, 0, None] - C[None, :, 0]) ** 2 * inv[None, :, 0]
+    for d in range(1, 4):
+        acc = acc + (X[:, d, None] - C[None, :, d]) ** 2 * inv[None, :, d]
+    return acc
+
+
+def _centers(rng, k):
+    c = np.zeros((k, 6))
+    c[:, :2] = rng.uniform(-300, 300, (k, 2))
+    c[:, 4] = rng.uniform(5, 60, k)
+    c[:, 5] = c[:, 4] * rng.uniform(1.5, 3, k)
+    if k >= 3:
+        c[k // 2] = c[1]                               # exact ties
+    return c
+
+
+@pytest.mark.parametrize("k", [1, 5, 40, 150])
+@pytest.mark.parametrize("guess", ["none", "random", "truth"])
+def test_assign_is_the_argmin_lowest_index_on_ties(k, guess):
+    rng = np.random.default_rng(k)
+    lk = LikelihoodParams()
+    centers = _centers(rng, k)
+    src = rng.integers(0, k, 4000)
+    X = centers[src][:, OBS] + rng.normal(0, 5, (4000, 4))
+    X[:40, :2] += rng.uniform(-1e4, 1e4, (40, 2))      # far from every centre
+    X[40:60] = centers[min(1, k - 1), OBS]             # on the tied centres
+    want_d2 = _brute_d2(X, centers, lk)
+    want = np.argmin(want_d2, axis=1)
+    prev = {"none": np.full(4000, -1), "random": rng.integers(0, k, 4000), "truth": want}[guess]
+    inv = K._inv_var(centers, lk.sigma_obs, lk.sigma_obs_min, lk.sigma_obs_pos_ratio)
+    for grid_min in (1, 10 ** 9):
+        lab, d2 = np.empty(4000, dtype=np.int64), np.empty(4000)
+        K.assign(X, centers, inv, prev.astype(np.int64), lab, d2, grid_min)
+        np.testing.assert_array_equal(lab, want)
+        np.testing.assert_allclose(d2, want_d2[np.arange(4000), want], rtol=1e-12, atol=0)
+    if k >= 3:
+        assert not np.any(lab == k // 2)               # the tie went to centre 1
+
+
+def _brute_lloyd(X, S, w, centers, lk, max_iter, tol):
+    """Plain weighted Lloyd on the dense distance matrix."""
+    c = centers.copy()
+    labels = None
+    for it in range(1, max_iter + 1):
+        d2 = _brute_d2(X, c, lk)
+        new = np.argmin(d2, axis=1)
+        if labels is not None and np.array_equal(new, labels):
+            return c, new, it
+        labels = new
+        m = np.bincount(labels, weights=w, minlength=len(c))
+        s = np.stack([np.bincount(labels, weights=S[:, d] * w, minlength=len(c))
+                      for d in range(6)], axis=1)
+        nz = m > 0
+        new_c = c.copy()
+        new_c[nz] = s[nz] / m[nz, None]
+        step = np.max(np.abs(new_c[:, OBS] - c[:, OBS]))
+        c = new_c
+        if tol > 0 and step <= tol:
+            return c, labels, it
+    return c, np.argmin(_brute_d2(X, c, lk), axis=1), max_iter
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+@pytest.mark.parametrize("k", [6, 60])
+@pytest.mark.parametrize("tol", [0.0, 0.01])
+def test_lloyd_equals_the_brute_force_iteration(seed, k, tol):
+    rng = np.random.default_rng(seed)
+    lk = PHDParams().likelihood
+    truth = _centers(rng, k)
+    src = rng.integers(0, k, 6000)
+    S = truth[src] + rng.normal(0, 4, (6000, 6))
+    S[:, 4:6] = np.abs(S[:, 4:6]) + 2
+    X = np.ascontiguousarray(S[:, OBS])
+    w = rng.uniform(0.1, 1, 6000)
+    init = truth + rng.normal(0, 8, truth.shape)      # centres off the peaks: they must move
+    init[:, 2:4] = 0
+    for grid_min in (1, 10 ** 9):
+        c, lab, m, dmin, it = K.lloyd(X, S, w, init, 50, tol, lk.sigma_obs, lk.sigma_obs_min,
+                                      lk.sigma_obs_pos_ratio, grid_min)
+        wc, wlab, wit = _brute_lloyd(X, S, w, init, lk, 50, tol)
+        assert it == wit >= 2
+        np.testing.assert_array_equal(lab, wlab)
+        np.testing.assert_allclose(c, wc, rtol=1e-12, atol=1e-9)
+        np.testing.assert_allclose(m, np.bincount(wlab, weights=w, minlength=k), rtol=1e-12)
+        if tol == 0:                                   # stopped on stable labels
+            np.testing.assert_allclose(dmin, _brute_d2(X, c, lk)[np.arange(6000), lab],
+                                       rtol=1e-12)
