@@ -355,3 +355,257 @@ def test_lagged_rows_survive_a_frame_jump_that_ends_their_track():
     rows += [(f.frame, int(i)) for f in r.finalised for i in f.ids]
     assert rows == [(k, 1) for k in range(1, 6)]
     assert [f.frame for f in assoc.flush()] == [100]
+
+
+# --------------------------------------------------------------------------- re-linking
+
+
+from pfscope.trackers.phd.appearance import (DIM as APP_DIM, AppearanceModel, box_features,  # noqa: E402
+                                             similarity)
+from pfscope.trackers.phd.association import propagate_damped, score_relinks  # noqa: E402
+
+
+def test_damped_propagation_is_the_cv_model_early_and_a_random_walk_late():
+    p = AssocParams(relink_tau=20.0, sigma_obs=0.0, sigma_obs_min=1e-6)
+    tail = np.array([state(100.0, 100.0, 40, 80, 2.0, 1.0)])
+    z = np.zeros((1, 2))
+    gaps = np.array([[2.0, 3.0, 400.0, 800.0]])
+    m_cv, v_cv = propagate(tail, tail[:, 2:4], z, z, gaps, p)
+    m_d, v_d = propagate_damped(tail, tail[:, 2:4], z, z, gaps, p)
+    # i << tau: the same mean and (up to the discretisation of the acceleration) variance
+    assert np.allclose(m_d[0, :2], m_cv[0, :2], rtol=1e-2)
+    assert np.allclose(v_d[0, :2, :2], v_cv[0, :2, :2], rtol=0.1)  # i³/3 vs i(4i²−1)/12
+    # i >> tau: the mean stops at y + v tau, the variance doubles with the gap (CV: x8)
+    assert np.allclose(m_d[0, 3, :2], [100 + 2.0 * 20, 100 + 1.0 * 20], atol=1e-6)
+    assert 1.9 < v_d[0, 3, 0] / v_d[0, 2, 0] < 2.1
+    assert v_cv[0, 3, 0] / v_cv[0, 2, 0] > 7.5
+
+
+def _hide_and_return(assoc, hidden, n_frames, jump=0.0, area=None):
+    """Target A walks right (1.5 px/frame) and is hidden on ``hidden``; it comes back shifted
+    by ``jump`` px; target B stays far away.  Returns A's id per frame (from the finalised
+    rows and the flush, as the tracks file has them) and the re-link pairs."""
+    assoc.area = area
+    rows, pairs = {}, []
+    for k in range(1, n_frames + 1):
+        st = [state(900.0, 500.0, 30, 60, 0.0, 0.0)]
+        if k not in hidden:
+            x = 50.0 + 1.5 * k + (jump if k > max(hidden) else 0.0)
+            st.insert(0, state(x, 100.0, 40, 80, 1.5, 0.0))
+        r = assoc.step(k, np.array(st))
+        pairs += r.relinked.tolist()
+        for fr in r.finalised:
+            rows[fr.frame] = fr
+    for fr in assoc.flush():
+        rows[fr.frame] = fr
+    ids_a = {f: int(fr.ids[np.argmin(fr.states[:, 0])]) for f, fr in rows.items()
+             if len(fr.ids) and fr.states[:, 0].min() < 600 and not fr.filled.all()}
+    return ids_a, pairs
+
+
+@pytest.mark.parametrize("relink_depth, jump, area, same", [
+    (0, 0.0, None, False),        # off (paper): a gap longer than K gives a new id
+    (60, 0.0, None, True),        # on: the new track takes the ended one's id
+    (60, 0.0, 1280 * 720, True),  # scored against a new target anywhere in the image
+    (60, 300.0, None, False),     # comes back far from the prediction: outside the gate
+    (60, 200.0, None, True),      # in the gate (3.1 std): linked when only the gate counts
+    (60, 200.0, 1280 * 720, False),  # ... but no likelier than a new target in the image
+])
+def test_a_track_ended_by_a_long_gap_is_relinked(relink_depth, jump, area, same):
+    K, last_seen, gap = 10, 15, 25
+    hidden = set(range(last_seen + 1, last_seen + gap))
+    assoc = GraphAssociator(AssocParams(depth=K, min_length=3, relink_depth=relink_depth,
+                                        relink_tau=30.0))
+    ids_a, pairs = _hide_and_return(assoc, hidden, last_seen + gap + 10, jump, area)
+    before = {ids_a[k] for k in ids_a if k <= last_seen}
+    after = {ids_a[k] for k in ids_a if k >= last_seen + gap}
+    assert len(before) == 1 and len(after) == 1  # every reported row of the new track renamed
+    assert (before == after) == same
+    if same:
+        assert len(pairs) == 1 and pairs[0][1] == before.pop()
+    else:
+        assert pairs == []
+
+
+def test_relinked_gap_is_filled_only_inside_the_buffer():
+    K, last_seen, gap = 10, 15, 8  # gap <= K: an ordinary edge, for comparison below
+    p = AssocParams(depth=K, min_length=3, relink_depth=40, relink_tau=30.0, fill_gaps=True)
+    hidden = set(range(last_seen + 1, last_seen + 14))  # 13 missed frames > K: a re-link
+    assoc = GraphAssociator(p)
+    assoc.step  # noqa: B018
+    rows = {}
+    for k in range(1, 40):
+        st = [] if k in hidden else [state(50.0 + 1.5 * k, 100.0, 40, 80, 1.5, 0.0)]
+        r = assoc.step(k, np.array(st).reshape(-1, 6))
+        for fr in r.finalised:
+            rows[fr.frame] = fr
+    for fr in assoc.flush():
+        rows[fr.frame] = fr
+    ids = {int(i) for fr in rows.values() for i in fr.ids}
+    assert len(ids) == 1
+    filled = sorted(f for f, fr in rows.items() if fr.filled.any())
+    # filled frames lie strictly inside the gap, and each on the line between the two ends
+    assert filled and all(last_seen < f < last_seen + 14 for f in filled)
+    for f in filled:
+        assert abs(rows[f].states[0, 0] - (50.0 + 1.5 * f)) < 1e-6
+    assert gap  # (the ordinary-edge case is covered by test_phd_practical)
+
+
+def test_two_targets_lost_while_crossing_get_their_own_ids_back():
+    """A walks right, B left on a parallel line; both are missed for 20 frames around the
+    crossing (K = 8).  Re-linking uses the velocity: each new track takes its own old id."""
+    p = AssocParams(depth=8, min_length=3, relink_depth=40, relink_tau=60.0)
+    assoc = GraphAssociator(p)
+    assoc.area = 640.0 * 480.0
+    hidden = set(range(21, 41))  # they pass each other at frame 35
+    ids = {"A": {}, "B": {}}
+    for k in range(1, 55):
+        if k in hidden:
+            st = np.zeros((0, 6))
+        else:
+            st = np.array([state(100.0 + 4 * k, 200.0, 30, 70, 4.0, 0.0),
+                           state(380.0 - 4 * k, 215.0, 30, 70, -4.0, 0.0)])
+        r = assoc.step(k, st)
+        for i, x, ok in zip(r.ids.tolist(), r.states[:, 2].tolist(), r.confirmed.tolist()):
+            if ok:  # as reported (the new tracks are renamed when confirmed)
+                ids["A" if x > 0 else "B"][k] = i
+    for name in "AB":
+        assert len(set(ids[name].values())) == 1, ids[name]
+        assert max(ids[name]) > 41  # seen again after the gap
+    assert ids["A"][20] != ids["B"][20]
+
+
+def test_relink_scores_prefer_the_fitting_track():
+    p = AssocParams(relink_depth=50, relink_tau=20.0)
+    lost = np.array([state(100.0, 100.0, 40, 80, 2.0, 0.0), state(300.0, 100.0, 40, 80, -2.0, 0.0)])
+    z = np.zeros((2, 2))
+    first = np.array([state(128.0, 100.0, 40, 80, 2.0, 0.0)])
+    sc = score_relinks(lost, lost[:, 2:4], z, z, np.array([10, 10]), first, np.array([30]), p,
+                       area=640 * 480)
+    assert sc.allowed[0, 0] and sc.weight[0, 0] > 0
+    assert not (sc.allowed[1, 0] and sc.weight[1, 0] > sc.weight[0, 0])
+    # a new track that began before the ended one's last estimate cannot continue it
+    sc = score_relinks(lost, lost[:, 2:4], z, z, np.array([10, 10]), first, np.array([10]), p)
+    assert not sc.allowed.any()
+
+
+@pytest.mark.parametrize("bad, msg", [({"relink_depth": -1}, "relink_depth"),
+                                      ({"relink_depth": 2.5}, "relink_depth"),
+                                      ({"relink_tau": 0.0}, "relink_tau"),
+                                      ({"app_weight": -1.0}, "app_weight"),
+                                      ({"app_alpha": 0.0}, "app_alpha")])
+def test_bad_relink_and_appearance_params_are_rejected(bad, msg):
+    with pytest.raises(ValueError, match=msg):
+        AssocParams(**bad)
+
+
+# --------------------------------------------------------------------------- appearance
+
+
+def _image_with(boxes_colours, h=240, w=320):
+    img = np.zeros((h, w, 3), np.uint8)
+    img[:] = (40, 160, 40)  # green background
+    for (cx, cy, bw, bh), col in boxes_colours:
+        img[int(cy - bh / 2):int(cy + bh / 2), int(cx - bw / 2):int(cx + bw / 2)] = col
+    return img
+
+
+def test_box_features_tell_colours_apart():
+    red, blue = (20, 20, 220), (220, 30, 20)
+    img = _image_with([((60, 100, 30, 70), red), ((200, 100, 30, 70), blue)])
+    f = box_features(img, np.array([[60, 100, 30, 70], [200, 100, 30, 70], [62, 101, 28, 66],
+                                    [-100, -100, 20, 20]], float))
+    assert f.shape == (4, APP_DIM)
+    rho = similarity(f, f)
+    assert rho[0, 2] > 0.99 and rho[0, 1] < 0.05
+    assert np.isnan(f[3]).all() and np.isnan(rho[3]).all()  # outside the image: unknown
+    # the states layout (N, 6) is read the same way
+    st = np.array([state(60.0, 100.0, 30, 70, 0.0, 0.0)])
+    assert np.allclose(box_features(img, st), f[:1])
+
+
+def test_appearance_model_learns_what_similarity_means():
+    m = AppearanceModel()
+    prior = m.llr(np.array([0.9, 0.5]))
+    rng = np.random.default_rng(0)
+    for _ in range(200):
+        m.observe_same(rng.uniform(0.95, 1.0, 3))
+        feats = np.eye(4).repeat(APP_DIM // 4, axis=1) / (APP_DIM // 4) * 2  # disjoint colours
+        m.observe_different(feats)
+    assert m.mu_same < 0.05 < 0.5 < m.mu_diff
+    post = m.llr(np.array([0.98, 0.5, np.nan]))
+    assert post[0] > 0 > post[1] and post[2] == 0.0
+    assert post[1] < prior[1]  # the learnt model is more sure a poor match is another target
+    assert m.llr(np.array([0.0])).item() == -AppearanceModel.LLR_CLIP
+    # a model of few crops says less, either way
+    few, many = m.llr(np.array([0.98, 0.5]), n=1.0), m.llr(np.array([0.98, 0.5]), n=100.0)
+    assert np.all(np.abs(few) < np.abs(many)) and np.all(np.sign(few) == np.sign(many))
+
+
+def test_appearance_keeps_identities_through_an_ambiguous_swap():
+    """Red and blue stand side by side (16 px apart), are missed for 4 frames and come back
+    swapped. By motion alone the ids follow the places; with the colours they follow the
+    people."""
+    red = np.zeros(APP_DIM)
+    red[:APP_DIM // 2:7] = 1.0
+    blue = np.zeros(APP_DIM)
+    blue[3:APP_DIM // 2:7] = 1.0
+    red[APP_DIM // 2:] = red[:APP_DIM // 2]
+    blue[APP_DIM // 2:] = blue[:APP_DIM // 2]
+    red /= red[:APP_DIM // 2].sum()
+    blue /= blue[:APP_DIM // 2].sum()
+
+    def run(app_weight):
+        assoc = GraphAssociator(AssocParams(depth=10, min_length=2, app_weight=app_weight))
+        out = []
+        for k in range(1, 25):
+            if 11 <= k <= 14:
+                r = assoc.step(k, np.zeros((0, 6)), np.zeros((0, APP_DIM)))
+                continue
+            pos = (100.0, 116.0) if k <= 10 else (116.0, 100.0)  # red first, then swapped
+            st = np.array([state(pos[0], 100.0, 40, 80, 0.0, 0.0),
+                           state(pos[1], 100.0, 40, 80, 0.0, 0.0)])
+            r = assoc.step(k, st, np.stack([red, blue]))
+            out.append((k, r.ids.tolist()))
+        return dict(out)
+
+    off, on = run(0.0), run(3.0)
+    assert off[10] == on[10]
+    assert off[15] == off[10][::-1]  # motion: the places keep their ids (a swap of people)
+    assert on[15] == on[10] and on[24] == on[10]  # colours: each person keeps its id
+
+
+def test_a_duplicate_born_next_to_a_track_does_not_take_it_over(monkeypatch):
+    """The PHD's peaks sometimes split one target in two for a frame.  The new track born on
+    the duplicate has a colour model of one crop, as good a match to the next crop as the
+    established track's; its evidence counts n / (n + MODEL_N0), so the established track keeps
+    the target although the duplicate sits exactly where the next estimate comes."""
+    red = np.zeros(APP_DIM)
+    red[::5] = 1.0
+    red[:APP_DIM // 2] /= red[:APP_DIM // 2].sum()
+    red[APP_DIM // 2:] /= red[APP_DIM // 2:].sum()
+    other = np.roll(red, 2)
+
+    def run():
+        assoc = GraphAssociator(AssocParams(depth=10, min_length=2, app_weight=2.0))
+        for k in range(1, 21):  # one red target standing still, a differently dressed one far off
+            r = assoc.step(k, np.array([state(100.0, 100.0, 40, 80, 0.0, 0.0),
+                                        state(250.0, 100.0, 40, 80, 0.0, 0.0)]),
+                           np.stack([red, other]))
+        a = int(r.ids[0])
+        r = assoc.step(21, np.array([state(100.0, 100.0, 40, 80, 0.0, 0.0),
+                                     state(104.0, 100.0, 40, 80, 0.0, 0.0),
+                                     state(250.0, 100.0, 40, 80, 0.0, 0.0)]),
+                       np.stack([red, red, other]))
+        dup = int(r.ids[1])
+        assert dup != a
+        r = assoc.step(22, np.array([state(104.0, 100.0, 40, 80, 0.0, 0.0),
+                                     state(250.0, 100.0, 40, 80, 0.0, 0.0)]),
+                       np.stack([red, other]))
+        return a, dup, int(r.ids[0])
+
+    a, dup, got = run()
+    assert got == a
+    monkeypatch.setattr(AppearanceModel, "MODEL_N0", 0.0)  # no shrinkage: the contest is real
+    a, dup, got = run()
+    assert got == dup

@@ -112,6 +112,13 @@ def test_per_second_settings_convert_with_the_frame_rate():
         assert q.filter.birth.birth_odds == pytest.approx(r.birth_odds_per_s * dt)
         assert q.assoc.depth == int(np.ceil(r.gap_s * fps - 1e-9))
         assert q.assoc.min_length == max(2, round(r.min_track_s * fps))
+        # re-linking and the colour model, in seconds
+        assert q.assoc.relink_depth == int(np.ceil(r.relink_s * fps - 1e-9)) > q.assoc.depth
+        assert q.assoc.relink_tau == pytest.approx(r.relink_tau_s * fps)
+        assert q.assoc.app_alpha == pytest.approx(1.0 - np.exp(-dt / r.app_memory_s))
+    assert p.assoc.app_weight > 0 and make_params("mt").assoc.app_weight == 0
+    off = make_params("phd", None, {"rate.relink_s": "0"}).at_fps(7.0)
+    assert off.assoc.relink_depth == 0
     # the same gap in seconds at both rates
     assert p.at_fps(25.0).assoc.depth / p.at_fps(7.0).assoc.depth == pytest.approx(25 / 7, rel=0.1)
 

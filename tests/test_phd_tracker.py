@@ -149,3 +149,34 @@ def test_cli_strings_are_converted_and_checked():
         make_tracker("phd", p_miss="lots")
     with pytest.raises(ValueError, match="p_miss"):
         make_tracker("phd", p_miss="1.5")
+
+
+def test_appearance_reads_real_pixels_only():
+    """The practical PHD-MT hands the association colour features of its estimates when the
+    frame has pixels, none for a blank stand-in (a broadcast view, as the tuner builds for
+    trackers that need no image), and none when ``app_weight`` is 0."""
+    from pfscope.trackers.phd.appearance import DIM
+    from pfscope.trackers.types import Detections, Frame
+
+    img = np.zeros((240, 320, 3), np.uint8)
+    img[50:130, 100:140] = (200, 30, 30)
+    blank = np.broadcast_to(np.zeros((1, 1, 3), np.uint8), (240, 320, 3))
+    dets = Detections(np.array([[100.0, 50.0, 40.0, 80.0]]), np.array([1.0]))
+
+    def features_seen(image, **options):
+        tr = make_tracker("phd", seed=0, **options)
+        seen = []
+        step = tr.associator.step
+        tr.associator.step = lambda k, st, feats=None: (seen.append(feats), step(k, st, feats))[1]
+        for k in range(1, 6):
+            tr.step(Frame(k, (k - 1) / 10.0, image), dets)
+        return seen, tr.associator.area
+
+    seen, area = features_seen(img)
+    got = [f for f in seen if f is not None and len(f)]
+    assert got and all(f.shape[1] == DIM and np.isfinite(f).all() for f in got)
+    assert area == 240 * 320
+    seen, area = features_seen(blank)
+    assert all(f is None for f in seen) and area == 240 * 320
+    seen, _ = features_seen(img, **{"assoc.app_weight": "0"})
+    assert all(f is None for f in seen)

@@ -80,10 +80,32 @@ Readings and choices (all constants are :class:`AssocParams` fields):
   another track's estimate of the frame covers (IoU >= ``fill_overlap``) is not filled -- and only
   frames still held back: the report lag becomes ``L = max(min_length − 1, depth)`` so that every
   gap the graph can bridge is still in the buffer when it is closed (rows stay in frame order).
+* **Re-linking** (``relink_depth``, not in the paper; off in ``paper``).  An occlusion or a dip of
+  the PHD mass longer than ``K`` frames ends a track, and the target comes back under a new id.
+  A confirmed track that falls out of the window is kept (its last vertex, velocity terms and
+  colour model) for ``relink_depth`` frames after its last vertex.  When a track is confirmed
+  (it reaches ``min_length`` vertices), its *first* vertex is scored against every kept track
+  that ended before it began, with a damped motion model over the gap
+  (:func:`propagate_damped`: the same acceleration noise, the velocity pulled back to rest with
+  time constant ``relink_tau``, so the prediction stops drifting and its variance grows
+  linearly), and with the image area known, against a new target anywhere in the image
+  (:func:`score_relinks`); an exact maximum-weight matching decides, and a matched new track
+  takes the old id -- in the live tails, in the rows still held back and in this frame's ids
+  (:attr:`AssocResult.relinked`).  With ``fill_gaps`` the held-back frames inside the re-linked
+  gap are filled.  Cost: (kept tracks) × (tracks confirmed this frame).
+* **Appearance** (``app_weight``, not in the paper; off in ``paper``).  When the tracker passes
+  colour features of the estimates (:mod:`.appearance`: RGB histograms of the upper and lower
+  half of the box), each track keeps an exponential average (rate ``app_alpha``), and every
+  edge and re-link weight gets ``app_weight ×`` the log-likelihood ratio same/different target
+  of the Bhattacharyya similarity, whose two distributions are learnt online from the matching
+  itself (:class:`.appearance.AppearanceModel`: gap-1 edges are one target, two estimates of
+  one frame are two), shrunk by ``n / (n + MODEL_N0)`` for a model of ``n`` crops.  A poor colour match can then veto an edge the motion allows (its weight
+  drops to ≤ 0) or hand a contested vertex to the track that looks like it.
 """
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from dataclasses import dataclass
 from functools import cached_property
@@ -92,6 +114,7 @@ import numpy as np
 
 from ..types import cxcywh_to_xywh
 from ..params import param
+from .appearance import DIM as APP_DIM, AppearanceModel, similarity
 from .filter import STATE_DIM, obs_std
 
 #: Observable components of the state (y1, y2, w, h), maggio2007 §2 ``z = (y, w, h)``.
@@ -141,6 +164,18 @@ class AssocParams:
     fill_overlap: float = param(0.3, "fill_gaps: a gap box overlapping another track's "
                                      "estimate of that frame by this IoU or more is not "
                                      "filled")
+    relink_depth: int = param(0, "re-linking (not in paper; 0: off): a confirmed track unseen "
+                                 "for more than depth frames stays re-linkable for this many "
+                                 "frames; a new track, when confirmed, takes its id if its "
+                                 "first estimate fits the ended track's damped prediction")
+    app_weight: float = param(0.0, "appearance (not in paper; 0: off): weight of the colour "
+                                   "log-likelihood ratio (phd.appearance, learnt online) added "
+                                   "to the edge and re-link weights when the frame has pixels")
+    app_alpha: float = param(0.1, "appearance: per-frame update rate of a track's colour model "
+                                  "(exponential average)")
+    relink_tau: float = param(20.0, "re-linking: time constant of the velocity damping, "
+                                    "frames (the motion noise sigma_v with a pull of the "
+                                    "velocity back to rest: an Ornstein-Uhlenbeck process)")
 
     def __post_init__(self):
         if int(self.depth) != self.depth or self.depth < 1:
@@ -156,6 +191,15 @@ class AssocParams:
                 raise ValueError(f"AssocParams.{name} must be >= 0")
         if self.sigma_obs < 0 or self.sigma_obs_min <= 0:
             raise ValueError("AssocParams: sigma_obs must be >= 0 and sigma_obs_min > 0")
+        if int(self.relink_depth) != self.relink_depth or self.relink_depth < 0:
+            raise ValueError(f"AssocParams.relink_depth must be an integer >= 0, "
+                             f"got {self.relink_depth}")
+        if not self.app_weight >= 0:
+            raise ValueError(f"AssocParams.app_weight must be >= 0, got {self.app_weight}")
+        if not 0.0 < self.app_alpha <= 1.0:
+            raise ValueError(f"AssocParams.app_alpha must be in (0, 1], got {self.app_alpha}")
+        if not self.relink_tau > 0:
+            raise ValueError(f"AssocParams.relink_tau must be > 0, got {self.relink_tau}")
 
     @cached_property
     def gate_d2(self) -> float:
@@ -272,6 +316,76 @@ def score_edges(tail_states: np.ndarray, v: np.ndarray, b: np.ndarray, c: np.nda
     return EdgeScores(gain=gain, d2=d2, floor=floor, weight=weight, allowed=d2 <= g2)
 
 
+def propagate_damped(tail_states: np.ndarray, v: np.ndarray, b: np.ndarray, c: np.ndarray,
+                     gaps: np.ndarray, params: AssocParams) -> tuple[np.ndarray, np.ndarray]:
+    """Mean and diagonal covariance of the observable estimate ``gaps`` frames after an ended
+    tail, under the re-linking model: the velocity is an Ornstein-Uhlenbeck process, the
+    white-noise acceleration of :func:`propagate` (std ``σ_a = sigma_v · (w, h)`` per frame)
+    with a pull back to rest of time constant ``τ = relink_tau`` (a person slows, stops,
+    turns: ``dv = −v/τ dt + σ_a dW``), so over a long gap the position drifts
+    ``v τ (1 − e^{−i/τ})`` and its variance grows linearly,
+    ``σ_a² τ² [i − 2τ(1 − e^{−i/τ}) + τ(1 − e^{−2i/τ})/2]``, not as ``i³``; for ``i ≪ τ`` both
+    give ``σ_a² i³/3``.  The tail's velocity error enters through
+    ``k = τ(1 − e^{−i/τ})`` instead of ``i``; size and estimate noise as in :func:`propagate`.
+
+    tail_states (T, 6); v, b, c (T, 2) from :func:`tail_velocity`; gaps (T,) or (T, G).
+    Returns ``mean, var (T, [G,] 4)``.
+    """
+    i = np.asarray(gaps, dtype=np.float64)
+    extra = i.ndim - 1
+    sh = (slice(None),) + (None,) * extra
+    i = i[..., None]
+    tau = float(params.relink_tau)
+    size = tail_states[:, 4:6][sh]
+    r = obs_noise_var(tail_states, params)[sh]
+    r_y, r_wh = r[..., :2], r[..., 2:]
+    k = tau * -np.expm1(-i / tau)
+    mean_y = tail_states[:, 0:2][sh] + k * v[sh]
+    sa2 = (params.sigma_v * size) ** 2
+    drift = sa2 * tau ** 2 * (i - 2.0 * k + 0.5 * tau * -np.expm1(-2.0 * i / tau))
+    var_y = drift + 2.0 * r_y + b[sh] * k + c[sh] * k ** 2
+    var_wh = (params.sigma_size * size) ** 2 * i + 2.0 * r_wh
+    mean_wh = np.broadcast_to(size, var_y.shape)
+    return (np.concatenate([mean_y, mean_wh], axis=-1),
+            np.concatenate([var_y, var_wh], axis=-1))
+
+
+def score_relinks(lost_states: np.ndarray, v: np.ndarray, b: np.ndarray, c: np.ndarray,
+                  lost_frames: np.ndarray, first_states: np.ndarray, first_frames: np.ndarray,
+                  params: AssocParams, area: float | None = None) -> EdgeScores:
+    """Gains and weights of every (ended track, new track) pair: the new track's first estimate
+    against the ended tail's damped prediction (:func:`propagate_damped`) over the gap between
+    them.  (L, C) arrays; a pair is allowed when the new track began after the ended one's
+    last estimate, within ``relink_depth`` frames, and inside the gate.
+
+    Weight: with the image ``area`` (px²) known, the log-likelihood ratio of the two
+    explanations of the new track's first position -- the ended target come back (the
+    predicted density of the centre) against a new target anywhere in the image (``1/area``):
+    ``log N(y; ŷ, Σ_y) + log area`` -- so a re-link must fit better than chance, which a long
+    gap (wide prediction) or a small image makes harder.  Without the area, as in
+    :func:`score_edges`: the gain above the floor of the widest re-link (gap
+    ``relink_depth``)."""
+    L, C = len(lost_states), len(first_states)
+    gaps = first_frames[None, :].astype(np.float64) - lost_frames[:, None]  # (L, C)
+    g = np.clip(gaps, 1.0, None)
+    mean, var = propagate_damped(lost_states, v, b, c, g, params)  # (L, C, 4)
+    res = first_states[None, :, OBS_INDEX] - mean
+    d2 = np.sum(res ** 2 / var, axis=-1)
+    gain = -0.5 * d2 - 0.5 * np.sum(np.log(2.0 * np.pi * var), axis=-1)
+    allowed = (gaps >= 1) & (gaps <= params.relink_depth) & (d2 <= params.gate_d2)
+    if area is not None and area > 0:
+        pos = -0.5 * np.sum(res[..., :2] ** 2 / var[..., :2]
+                            + np.log(2.0 * np.pi * var[..., :2]), axis=-1)
+        floor = np.full(L, -math.log(area))
+        return EdgeScores(gain=gain, d2=d2, floor=floor, weight=pos - floor[:, None],
+                          allowed=allowed)
+    widest = np.full((L, 1), float(max(params.relink_depth, 1)))
+    _, var_r = propagate_damped(lost_states, v, b, c, widest, params)
+    floor = -0.5 * params.gate_d2 - 0.5 * np.sum(np.log(2.0 * np.pi * var_r[:, 0]), axis=-1)
+    return EdgeScores(gain=gain, d2=d2, floor=floor, weight=gain - floor[:, None],
+                      allowed=allowed)
+
+
 def max_weight_matching(weights: np.ndarray, allowed: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Exact maximum-weight bipartite matching restricted to ``allowed`` edges.
 
@@ -344,6 +458,8 @@ class AssocResult:
     ``edges_dst_index (E,)`` index into ``states``, ``edges_gain (E,)`` ``log f``,
     ``edges_weight (E,)`` matching weight, ``edges_gap (E,)`` frames, ``chosen (E,)`` in the cover.
     ``ended (P,)``: ids of tracks whose tail fell out of the K-frame window this frame.
+    ``relinked (P, 2)``: ``(new id, old id)`` of tracks confirmed this frame that took the id of
+    an ended track (``relink_depth``); ``ids`` already carry the old id.
     ``finalised``: bounded-lag rows of past frames (usually one, for frame ``k − L``).
     """
 
@@ -361,6 +477,11 @@ class AssocResult:
     chosen: np.ndarray
     ended: np.ndarray
     finalised: tuple[FinalRows, ...]
+    relinked: np.ndarray | None = None
+
+    def __post_init__(self):
+        if self.relinked is None:
+            object.__setattr__(self, "relinked", np.zeros((0, 2), dtype=np.int64))
 
     @property
     def boxes(self) -> np.ndarray:
@@ -398,6 +519,23 @@ class GraphAssociator:
         self._prev = np.zeros((0, STATE_DIM))
         self._prev_frame = np.zeros(0, dtype=np.int64)  # -1: the track has one vertex
         self._length = np.zeros(0, dtype=np.int64)
+        self._first = np.zeros((0, STATE_DIM))           # first vertex of each live track
+        self._first_frame = np.zeros(0, dtype=np.int64)
+        self._app = np.zeros((0, APP_DIM))                # colour model of each live track
+        self._app_n = np.zeros(0)                         # colour observations in it
+        self._lost_app = np.zeros((0, APP_DIM))
+        self._lost_app_n = np.zeros(0)
+        self._app_model = AppearanceModel()
+        #: image area in px² (set by the tracker from the frames): re-links are then scored
+        #: against a new target anywhere in the image (:func:`score_relinks`)
+        self.area: float | None = None
+        # ended confirmed tracks still re-linkable (relink_depth): id, last vertex, its frame,
+        # velocity terms (tail_velocity at the end), length
+        self._lost_ids = np.zeros(0, dtype=np.int64)
+        self._lost = np.zeros((0, STATE_DIM))
+        self._lost_frame = np.zeros(0, dtype=np.int64)
+        self._lost_vbc = np.zeros((0, 3, 2))
+        self._lost_len = np.zeros(0, dtype=np.int64)
         self._next_id = 1
         self._last_frame: int | None = None
         self._buffer: deque[tuple[int, np.ndarray, np.ndarray, np.ndarray]] = deque()
@@ -422,10 +560,18 @@ class GraphAssociator:
         return TrackTails(self._ids.copy(), self._tail_frame.copy(), self._tail.copy(),
                           self._length.copy())
 
+    @property
+    def n_lost(self) -> int:
+        """Number of ended tracks still re-linkable (``relink_depth``)."""
+        return len(self._lost_ids)
+
     def rescale_velocity(self, ratio: float) -> None:
         """Multiply the tails' velocities (px/frame) by ``ratio`` (the frame rate changed)."""
         if ratio != 1.0:
             self._tail[:, 2:4] *= ratio
+            self._lost[:, 2:4] *= ratio
+            # v (px/frame) and the error growth b i + c i² of an ended track, i in frames
+            self._lost_vbc *= np.array([ratio, ratio, ratio ** 2])[None, :, None]
 
     # ---- input checking
     def _check(self, frame, states) -> np.ndarray:
@@ -444,10 +590,18 @@ class GraphAssociator:
             raise ValueError(f"frame {frame}: estimates need positive width and height")
         return s
 
+    def _check_features(self, features, M: int) -> np.ndarray:
+        f = np.asarray(features, dtype=np.float64)
+        if f.shape != (M, APP_DIM):
+            raise ValueError(f"expected appearance features of shape ({M}, {APP_DIM}), "
+                             f"got {f.shape}")
+        return f
+
     # ---- one frame
-    def step(self, frame: int, states) -> AssocResult:
+    def step(self, frame: int, states, features=None) -> AssocResult:
         """Extend the path cover with the estimates of ``frame``; ``states (M, 6)``, NaN velocity
-        meaning unknown."""
+        meaning unknown; ``features (M, D)``: their colour features
+        (:func:`.appearance.box_features`, NaN rows unknown), used when ``app_weight > 0``."""
         new = self._check(frame, states)
         frame = int(frame)
         self._last_frame = frame
@@ -458,10 +612,23 @@ class GraphAssociator:
         expired = frame - self._tail_frame > p.depth
         ended_ids, ended_len = self._ids[expired], self._length[expired]
         if expired.any():
+            self._remember_lost(expired)
             keep = ~expired
             self._ids, self._tail, self._tail_frame = self._ids[keep], self._tail[keep], self._tail_frame[keep]
             self._prev, self._prev_frame = self._prev[keep], self._prev_frame[keep]
             self._length = self._length[keep]
+            self._first, self._first_frame = self._first[keep], self._first_frame[keep]
+            self._app, self._app_n = self._app[keep], self._app_n[keep]
+        if len(self._lost_ids):
+            keep = frame - self._lost_frame <= p.relink_depth
+            self._lost_ids, self._lost, self._lost_frame = (self._lost_ids[keep], self._lost[keep],
+                                                            self._lost_frame[keep])
+            self._lost_vbc, self._lost_len = self._lost_vbc[keep], self._lost_len[keep]
+            self._lost_app, self._lost_app_n = self._lost_app[keep], self._lost_app_n[keep]
+        use_app = features is not None and p.app_weight > 0
+        feats = self._check_features(features, M) if use_app else np.full((M, APP_DIM), np.nan)
+        if use_app:
+            self._app_model.observe_different(feats)
 
         # 2. score every (tail, new vertex) edge and match
         T = len(self._ids)
@@ -471,6 +638,11 @@ class GraphAssociator:
                                     np.where(self._prev_frame >= 0, self._tail_frame - self._prev_frame, 0),
                                     p)
             sc = score_edges(self._tail, v, b, c, gaps, new, p)
+            if use_app:
+                llr = self._app_model.llr(similarity(self._app, feats),
+                                          self._app_n[:, None])
+                sc = EdgeScores(gain=sc.gain, d2=sc.d2, floor=sc.floor,
+                                weight=sc.weight + p.app_weight * llr, allowed=sc.allowed)
             rows, cols = max_weight_matching(sc.weight, sc.allowed)
         else:
             sc = None
@@ -497,9 +669,21 @@ class GraphAssociator:
         self._prev = np.concatenate([self._prev, np.full((n_new, STATE_DIM), np.nan)])
         self._prev_frame = np.concatenate([self._prev_frame, np.full(n_new, -1, dtype=np.int64)])
         self._length = np.concatenate([self._length, np.ones(n_new, dtype=np.int64)])
-
-        lengths = self._length[np.searchsorted(self._ids, ids)]
-        confirmed = lengths >= p.min_length
+        self._first = np.concatenate([self._first, new[unmatched]])
+        self._first_frame = np.concatenate([self._first_frame,
+                                            np.full(n_new, frame, dtype=np.int64)])
+        if use_app and len(rows):
+            one = gaps[rows] == 1  # consecutive vertices of one track: the same target
+            if one.any():
+                self._app_model.observe_same(
+                    np.diagonal(similarity(self._app[rows[one]], feats[cols[one]])))
+            old = self._app[rows]
+            f = feats[cols]
+            mix = (1.0 - p.app_alpha) * old + p.app_alpha * f
+            self._app[rows] = np.where(np.isfinite(old), np.where(np.isfinite(f), mix, old), f)
+            self._app_n[rows] += np.isfinite(f[:, 0])
+        self._app = np.concatenate([self._app, feats[unmatched]])
+        self._app_n = np.concatenate([self._app_n, np.isfinite(feats[unmatched, 0]).astype(float)])
 
         # 4. edges for the observer: admissible pairs only
         if sc is not None:
@@ -525,6 +709,12 @@ class GraphAssociator:
             self._fill_gaps(self._prev[rows], self._prev_frame[rows], new[cols], frame,
                             self._ids[rows])
 
+        # 5b. re-linking: a track confirmed now may continue a recently ended one (renames it
+        # in the live arrays, the buffer and ``ids``)
+        relinked = self._relink(frame, ids) if p.relink_depth > 0 else np.zeros((0, 2), np.int64)
+        lengths = self._length[np.searchsorted(self._ids, ids)]
+        confirmed = lengths >= p.min_length
+
         # 6. bounded-lag output: rows of frames <= k − L, judged with the lengths known now
         self._buffer.append((frame, ids.copy(), new.copy(), np.zeros(M, dtype=bool)))
         finalised = []
@@ -534,18 +724,95 @@ class GraphAssociator:
             finalised.append(FinalRows(f, bid[ok], bst[ok], bfill[ok]))
 
         return AssocResult(frame=frame, states=new, ids=ids, lengths=lengths, confirmed=confirmed,
-                           ended=ended_ids, finalised=tuple(finalised), **edges)
+                           ended=ended_ids, finalised=tuple(finalised), relinked=relinked,
+                           **edges)
 
-    def _fill_gaps(self, src: np.ndarray, src_frame: np.ndarray, dst: np.ndarray, frame: int,
+    def _remember_lost(self, expired: np.ndarray) -> None:
+        """Keep the expiring confirmed tracks re-linkable (``relink_depth``)."""
+        p = self.params
+        sel = expired & (self._length >= p.min_length)
+        if p.relink_depth <= 0 or not sel.any():
+            return
+        prev_gap = np.where(self._prev_frame[sel] >= 0,
+                            self._tail_frame[sel] - self._prev_frame[sel], 0)
+        v, b, c = tail_velocity(self._tail[sel], self._prev[sel], prev_gap, p)
+        self._lost_ids = np.concatenate([self._lost_ids, self._ids[sel]])
+        self._lost = np.concatenate([self._lost, self._tail[sel]])
+        self._lost_frame = np.concatenate([self._lost_frame, self._tail_frame[sel]])
+        self._lost_vbc = np.concatenate([self._lost_vbc, np.stack([v, b, c], axis=1)])
+        self._lost_len = np.concatenate([self._lost_len, self._length[sel]])
+        self._lost_app = np.concatenate([self._lost_app, self._app[sel]])
+        self._lost_app_n = np.concatenate([self._lost_app_n, self._app_n[sel]])
+
+    def _relink(self, frame: int, ids: np.ndarray) -> np.ndarray:
+        """Tracks confirmed at ``frame`` that began after a re-linkable ended track and whose
+        first estimate fits its damped prediction (:func:`score_relinks`) take that track's id:
+        an exact maximum-weight matching between the ended tracks and the newly confirmed
+        ones.  Renames the track in the live arrays, in the buffered rows and in ``ids`` (this
+        frame's vertices, in place); with ``fill_gaps`` the buffered frames inside the re-linked
+        gap are filled.  Returns ``(P, 2)`` pairs ``(new id, old id)``."""
+        p = self.params
+        cand = np.flatnonzero((self._length == p.min_length) & (self._tail_frame == frame))
+        if not len(cand) or not len(self._lost_ids):
+            return np.zeros((0, 2), dtype=np.int64)
+        vbc = self._lost_vbc
+        sc = score_relinks(self._lost, vbc[:, 0], vbc[:, 1], vbc[:, 2], self._lost_frame,
+                           self._first[cand], self._first_frame[cand], p, self.area)
+        weight = sc.weight
+        if p.app_weight > 0:
+            weight = weight + p.app_weight * self._app_model.llr(
+                similarity(self._lost_app, self._app[cand]),
+                np.minimum(self._lost_app_n[:, None], self._app_n[cand][None, :]))
+        rows, cols = max_weight_matching(weight, sc.allowed)
+        if not len(rows):
+            return np.zeros((0, 2), dtype=np.int64)
+        live = cand[cols]
+        old_ids, new_ids = self._lost_ids[rows], self._ids[live]
+        self._ids[live] = old_ids
+        self._length[live] += self._lost_len[rows]
+        src, src_frame = self._lost[rows], self._lost_frame[rows]
+        dst, dst_frame = self._first[live], self._first_frame[live]
+        keep = np.ones(len(self._lost_ids), dtype=bool)
+        keep[rows] = False
+        self._lost_ids, self._lost, self._lost_frame = (self._lost_ids[keep], self._lost[keep],
+                                                        self._lost_frame[keep])
+        self._lost_vbc, self._lost_len = self._lost_vbc[keep], self._lost_len[keep]
+        self._lost_app, self._lost_app_n = self._lost_app[keep], self._lost_app_n[keep]
+        order = np.argsort(self._ids, kind="stable")  # keep the tails sorted by id
+        for name in ("_ids", "_tail", "_tail_frame", "_prev", "_prev_frame", "_length",
+                     "_first", "_first_frame", "_app", "_app_n"):
+            setattr(self, name, getattr(self, name)[order])
+        rename = dict(zip(new_ids.tolist(), old_ids.tolist()))
+
+        def renamed(a: np.ndarray) -> np.ndarray:
+            if not len(a):
+                return a
+            hit = np.isin(a, new_ids)
+            if not hit.any():
+                return a
+            out = a.copy()
+            out[hit] = [rename[x] for x in a[hit].tolist()]
+            return out
+
+        ids[:] = renamed(ids)
+        for n, (f, bid, bst, bfill) in enumerate(self._buffer):
+            self._buffer[n] = (f, renamed(bid), bst, bfill)
+        if p.fill_gaps:
+            self._fill_gaps(src, src_frame, dst, dst_frame, old_ids)
+        return np.stack([new_ids, old_ids], axis=1).astype(np.int64)
+
+    def _fill_gaps(self, src: np.ndarray, src_frame: np.ndarray, dst: np.ndarray, frame,
                    ids: np.ndarray) -> None:
         """Add interpolated rows to the buffered frames strictly between each chosen edge's ends
-        (``src`` at ``src_frame`` → ``dst`` at ``frame``).  A loop over the buffered frames
-        (at most ``depth``), vectorised over the edges."""
+        (``src`` at ``src_frame`` → ``dst`` at ``frame``, one frame or one per edge).  A loop
+        over the buffered frames (at most ``depth``), vectorised over the edges."""
+        frame = np.broadcast_to(np.asarray(frame, dtype=np.int64), np.shape(src_frame))
         gap = frame - src_frame
         long = gap > 1
         if not long.any() or not self._buffer:
             return
         src, src_frame, dst, ids, gap = src[long], src_frame[long], dst[long], ids[long], gap[long]
+        frame = frame[long]
         obs = OBS_INDEX
         vel = (dst[:, [0, 1]] - src[:, [0, 1]]) / gap[:, None]
         for n, (f, bid, bst, bfill) in enumerate(self._buffer):

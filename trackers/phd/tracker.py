@@ -32,7 +32,8 @@ associate             clusters    Segments ``assoc/edges/candidates`` / ``assoc/
 Presets (``pfscope trackers``): ``practical`` (the default) is the same algorithm with settings
 per second (:class:`RateParams`, converted with the frame rate read from the frames'
 timestamps), scene clutter with online estimates and birth odds (:mod:`.filter`, "Scene
-clutter"), detection scores, and, for PHD-MT, gap filling (:mod:`.association`); ``paper`` is
+clutter"), detection scores, re-linking of tracks ended by a long gap and, for PHD-MT, gap
+filling and a colour appearance cue (:mod:`.association`, :mod:`.appearance`); ``paper`` is
 maggio2007 §4 unchanged (the dataclass defaults).
 
 Output: :attr:`StepResult.tracks` are the confirmed tracks known at frame k (zero lag, what the
@@ -55,6 +56,7 @@ from ..report import Boxes, Points, Segments, StageLog
 from ..types import Detections, Frame, TrackSet, xywh_to_cxcywh
 from .association import (EST_CONF, GAP_CONF, AssocParams, AssocResult, FinalRows,
                           GraphAssociator)
+from .appearance import box_features
 from .clustering import Clusters, kmeans_peaks
 from .filter import STATE_DIM, PHDFilter, PHDParams, PHDStepResult, _check
 
@@ -90,7 +92,7 @@ class RateParams:
     durations with the frame rate.  When ``per_second`` is true these fields overwrite:
     filter.motion.{sigma_v, sigma_size, p_survival}, filter.birth.{birth_speed_std,
     birth_odds}, filter.clutter.clutter_memory, assoc.{sigma_v, sigma_size, speed_prior,
-    depth, min_length}."""
+    depth, min_length, relink_depth, relink_tau, app_alpha}."""
 
     per_second: bool = param(False, "convert the per-second settings below with the frame "
                                     "rate (false: the per-frame fields as given, paper)")
@@ -112,12 +114,19 @@ class RateParams:
                                     "(→ min_length = max(2, round(min_track_s · fps)))")
     memory_s: float = param(20.0, "averaging time of the online clutter and score estimates "
                                   "(→ clutter_memory)")
+    relink_s: float = param(5.0, "a confirmed track unseen for longer than gap_s stays "
+                                 "re-linkable until this many seconds after its last "
+                                 "estimate; 0: off (→ relink_depth = ceil(relink_s · fps))")
+    relink_tau_s: float = param(3.0, "re-linking: time constant of the velocity damping, "
+                                     "seconds (→ relink_tau = relink_tau_s · fps)")
+    app_memory_s: float = param(2.0, "averaging time of a track's colour model, seconds "
+                                     "(→ app_alpha = 1 − exp(−dt / app_memory_s))")
 
     def __post_init__(self):
-        for name in ("fallback_fps", "gap_s", "memory_s"):
+        for name in ("fallback_fps", "gap_s", "memory_s", "relink_tau_s", "app_memory_s"):
             _check(self, name, getattr(self, name) > 0, "> 0")
         for name in ("accel_per_s", "size_per_s", "birth_speed_per_s", "birth_odds_per_s",
-                     "min_track_s"):
+                     "min_track_s", "relink_s"):
             _check(self, name, getattr(self, name) >= 0, ">= 0")
         _check(self, "survival_per_s", 0.0 <= self.survival_per_s <= 1.0, "in [0, 1]")
 
@@ -127,8 +136,11 @@ def assoc_per_frame(a: AssocParams, r: RateParams, fps: float) -> AssocParams:
     dt = 1.0 / fps
     depth = max(1, math.ceil(r.gap_s * fps - 1e-9))
     min_length = min(max(2, round(r.min_track_s * fps)), depth + 1)
+    relink_depth = math.ceil(r.relink_s * fps - 1e-9) if r.relink_s > 0 else 0
     return replace(a, sigma_v=r.accel_per_s * dt ** 1.5, sigma_size=r.size_per_s * dt ** 0.5,
-                   speed_prior=r.birth_speed_per_s * dt, depth=depth, min_length=min_length)
+                   speed_prior=r.birth_speed_per_s * dt, depth=depth, min_length=min_length,
+                   relink_depth=relink_depth, relink_tau=r.relink_tau_s * fps,
+                   app_alpha=-math.expm1(-dt / r.app_memory_s))
 
 
 def filter_per_frame(f: PHDParams, r: RateParams, fps: float) -> PHDParams:
@@ -180,6 +192,14 @@ def frame_rate(frame: Frame) -> Optional[float]:
     return None
 
 
+def _has_pixels(frame: Frame) -> bool:
+    """Whether the frame carries a real image (not a blank stand-in: a broadcast view, as the
+    tuner gives trackers that do not need pixels)."""
+    im = frame.image
+    return (im is not None and getattr(im, "ndim", 0) == 3 and im.size > 0
+            and all(st != 0 for st in im.strides))
+
+
 def _rows(finalised: tuple[FinalRows, ...], flagged: bool) -> Rows:
     if not flagged:
         return [(r.frame, TrackSet(r.ids, r.boxes)) for r in finalised]
@@ -225,7 +245,12 @@ class _AssociatingTracker:
 
     def _associate(self, frame: Frame, states: np.ndarray, log: StageLog) -> StepResult:
         log.stage("associate")
-        res = self.associator.step(frame.index, states)
+        feats = None
+        if frame.image is not None and getattr(frame.image, "ndim", 0) >= 2:
+            self.associator.area = float(frame.width * frame.height)
+        if self.associator.params.app_weight > 0 and _has_pixels(frame):
+            feats = box_features(frame.image, states)
+        res = self.associator.step(frame.index, states, feats)
         self._report_association(frame, res, log)
         keep = res.confirmed
         return StepResult(TrackSet(res.ids[keep], res.boxes[keep]),
@@ -233,6 +258,10 @@ class _AssociatingTracker:
 
     def _report_association(self, frame: Frame, res: AssocResult, log: StageLog) -> None:
         log.scalar("assoc/tracks/live", self.associator.n_live)
+        for new_id, old_id in res.relinked.tolist():
+            log.event("assoc", f"frame {frame.index}: new track {new_id} re-linked to ended "
+                               f"track {old_id}")
+            self._announced.add(old_id)
         for tid in res.ended.tolist():
             if tid in self._announced:
                 log.event("assoc", f"frame {frame.index}: track {tid} ended "
@@ -263,7 +292,10 @@ class _AssociatingTracker:
 
 
 #: The practical default of PHD-MT (README, "Presets"): maggio2007's algorithm with settings
-#: per second, detection scores and gap filling; clutter as the paper reads it (``gate``: one
+#: per second, detection scores, gap filling, re-linking of tracks ended by a long gap
+#: (``rate.relink_s``) and a colour appearance cue in the edge weights (``assoc.app_weight``,
+#: when the frames have pixels; chosen on PETS09-S2L1 frames 1-400 among 0.5, 1, 2, 3);
+#: clutter as the paper reads it (``gate``: one
 #: clutter point around each detection), which keeps false detections that repeat in place (a
 #: real detector's) from becoming tracks.  Chosen on PETS09-S2L1 frames 1-400 among six clutter
 #: settings (README, "Presets"); the ``scene`` preset is the same with clutter as a density
@@ -272,11 +304,13 @@ class _AssociatingTracker:
 PHD_PRACTICAL = PHDTrackerParams(
     filter=PHDParams.of(clutter_model="gate", near_learn=True, score_model="gaussian",
                         p_miss=0.1),
-    assoc=AssocParams(fill_gaps=True),
+    assoc=AssocParams(fill_gaps=True, app_weight=2.0),
     rate=RateParams(per_second=True))
 PHD_SCENE = with_options(PHD_PRACTICAL, {"filter.clutter.clutter_model": "scene"})
-#: The practical default of MT: the same association settings per second.  No gap filling:
-#: MT links clutter into tracks across gaps, and filling them multiplies its false positives.
+#: The practical default of MT: the same association settings per second (re-linking
+#: included).  No gap filling: MT links clutter into tracks across gaps, and filling them
+#: multiplies its false positives.  No appearance: MT's vertices are raw detections, clutter
+#: included.
 MT_PRACTICAL = MTParams(rate=RateParams(per_second=True))
 
 
@@ -287,6 +321,9 @@ class PHDTracker(_AssociatingTracker):
     name = "phd"
     paper = "maggio2007"
     stages = ("predict", "birth", "update", "resample", "cluster", "associate")
+    #: the practical preset's appearance cue reads the pixels of the estimates' boxes (when a
+    #: frame has none -- a blank stand-in -- the association runs on motion alone)
+    needs_image = True
     Params = PHDTrackerParams
 
     def __init__(self, params: Optional[PHDTrackerParams] = None, *,
