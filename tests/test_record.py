@@ -244,3 +244,117 @@ def test_stage_timeline_orders_the_stages_inside_a_frame(tmp_path, capsys):
         tracks = [t["stage"] for t, _ in rec["/video/tracks"] if t["frame"] == frame]
         stages += [clusters[0], edges[0], tracks[0]]
         assert stages == sorted(stages) and len(set(stages)) == len(stages), stages
+
+
+# ----------------------------------------------------------------------------- cheap recording
+
+def test_columns_give_the_rows_that_logging_each_frame_gives(tmp_path):
+    """The recorder sends each entity's rows as columns (one call per flush): the file must hold
+    the rows that a `log` call per entity and frame gives — same times, same instances per row
+    (a radius for all points in one frame, one per point in the next), same values."""
+    import rerun as rr
+
+    from pfscope.viewer_app.reporters.base import Columns
+
+    rng = np.random.default_rng(0)
+    frames = []
+    for k in range(1, 6):
+        n = int(rng.integers(0, 5))
+        frames.append(dict(
+            k=k, xy=rng.random((n, 2)).astype(np.float32) * 100,
+            colors=rng.integers(0, 255, (n, 4)).astype(np.uint8),
+            radii=np.float32(1.5) if k % 2 else rng.random(n).astype(np.float32),
+            boxes=rng.random((n, 2)).astype(np.float32) * 50,
+            labels=[f"id {i}" for i in range(n)] if k != 3 else [],
+            strips=[rng.random((int(rng.integers(2, 5)), 2)).astype(np.float32)
+                    for _ in range(n)],
+            value=float(rng.random()), blob=bytes(rng.integers(0, 255, 10 + k).astype(np.uint8)),
+            tag=k <= 2))  # a component that goes away after frame 2
+
+    def write(path, buffered):
+        rec = rr.RecordingStream("t", recording_id="same")
+        rec.save(str(path))
+        cols = Columns(rec, immediate=not buffered)
+        for f in frames:
+            rec.set_time("frame", sequence=f["k"])
+            rec.set_time("time", duration=f["k"] / 10)
+            rec.set_time("stage", sequence=10 * f["k"])
+            cols.frame, cols.seconds, cols.stage = f["k"], f["k"] / 10, 10 * f["k"]
+            cols.add("p", rr.Points2D, positions=f["xy"], colors=f["colors"], radii=f["radii"],
+                     show_labels=False, class_ids=7 if f["tag"] else None)
+            cols.add("b", rr.Boxes2D, centers=f["boxes"], half_sizes=f["boxes"] / 4,
+                     labels=f["labels"], show_labels=False, radii=1.0)
+            cols.add("s", rr.LineStrips2D, strips=f["strips"], radii=0.5)
+            cols.add("v", rr.Scalars, scalars=np.array([f["value"]]))
+            cols.add("i", rr.EncodedImage, blob=f["blob"], media_type="image/jpeg")
+            if f["k"] == 3:
+                cols.send()
+        cols.send()
+        rec.flush()
+        rec.disconnect()
+        return read_rrd(path)
+
+    def rows(rec):
+        return {e: sorted((sorted(t.items()), sorted((k, repr(v)) for k, v in c.items()
+                                                     if v is not None))
+                          for t, c in r) for e, r in rec.items() if not e.startswith("/__")}
+
+    logged, sent = write(tmp_path / "log.rrd", False), write(tmp_path / "cols.rrd", True)
+    assert set(logged) >= {"/p", "/b", "/s", "/v", "/i"}
+    assert rows(sent) == rows(logged)
+    radii = [c["Points2D:radii"] for _, c in sorted(sent["/p"], key=lambda r: r[0]["frame"])]
+    assert [len(r) for r in radii[::2]] == [1, 1, 1]  # one radius for the cloud: not repeated
+
+
+def test_jpeg_worker_is_bounded_and_its_failure_is_one_line(tmp_path, capsys, monkeypatch):
+    from pfscope.viewer_app import recorder as R
+
+    enc = R.JpegEncoder(75, timeout=5)
+    img = np.zeros((8, 8, 3), np.uint8)
+    enc.submit(img)
+    with pytest.raises(RuntimeError, match="already"):
+        enc.submit(img)  # one frame in flight at most
+    assert enc.result()[:2] == b"\xff\xd8" and enc.result() is None
+    enc.close()
+
+    orig = R.JpegEncoder._encode
+
+    def fails_on_frame_4(self, image):
+        self.calls = getattr(self, "calls", 0) + 1
+        if self.calls == 4:
+            raise RuntimeError("simulated encoder failure")
+        return orig(self, image)
+
+    monkeypatch.setattr(R.JpegEncoder, "_encode", fails_on_frame_4)
+    out = tmp_path / "x.rrd"
+    rc, _, err = _run(["record", "--frames", "8", "--out", out, "--quiet"], capsys)
+    assert rc == 1 and "simulated encoder failure" in err and err.count("\n") == 1, err
+    assert not out.exists()
+    rec = read_rrd(tmp_path / "x.incomplete.rrd")
+    assert sorted({t["frame"] for t, _ in rec["/video"]}) == [1, 2, 3]
+    assert "simulated encoder failure" in str(rec["/log"][-1][1]["TextLog:text"])
+
+
+def test_video_from_the_source_jpeg_bytes(tmp_path):
+    """``video="source"`` stores each frame's JPEG file as it is (no encoding); ``auto`` does so
+    only when the first frame's file is not larger than its encoding; ``encode`` never."""
+    from pfscope.trackers.data.sources import open_source
+    from pfscope.trackers.errors import InputError
+    from pfscope.viewer_app.run import RecordOptions, record
+
+    root = _toy(tmp_path, n=4)
+    files = [(root / "img1" / f"{k:06d}.jpg").read_bytes() for k in range(1, 5)]
+    q75 = len(cv2.imencode(".jpg", cv2.imread(str(root / "img1" / "000001.jpg")),
+                           [cv2.IMWRITE_JPEG_QUALITY, 75])[1])
+    blobs = {}
+    for mode in ("encode", "source", "auto"):
+        out = tmp_path / f"{mode}.rrd"
+        record(open_source(root), out, RecordOptions(tracker="passthrough", video=mode),
+               progress=False)
+        rows = sorted(read_rrd(out)["/video"], key=lambda r: r[0]["frame"])
+        blobs[mode] = [bytes(c["EncodedImage:blob"][0]) for _, c in rows]
+    assert blobs["source"] == files
+    assert all(b != f for b, f in zip(blobs["encode"], files))
+    assert blobs["auto"] == (files if len(files[0]) <= q75 else blobs["encode"])
+    with pytest.raises(InputError, match="video"):
+        record(open_source(root), tmp_path / "x.rrd", RecordOptions(video="raw"), progress=False)

@@ -254,6 +254,31 @@ def test_particle_colours_spread_over_the_map_on_a_real_phd_cloud():
     assert weight_summary(np.full(50, 0.02))["top_tenth"] == pytest.approx(0.1)
 
 
+def test_fast_colour_paths_match_the_definitions():
+    """The recorder's shortcuts (one sort for ranks and draw order, a sampled viridis, a table of
+    id colours) give what the definitions give: rankdata's average ranks, the ramp within one
+    unit per channel, the computed id colours (also past the table, and for negative ids)."""
+    from scipy.stats import rankdata
+
+    from pfscope.viewer_app import colors as C
+
+    rng = np.random.default_rng(5)
+    for w in (rng.random(3000) ** 8, np.round(rng.random(500), 1), np.full(7, 0.3),
+              np.array([0.2, np.nan, np.inf, 0.2, 0.0]), np.array([1.0])):
+        clean = np.where(np.isfinite(w), w, 0.0)
+        ranks = C.weight_scale(w)
+        want = (rankdata(clean) - 1) / max(len(w) - 1, 1) if len(w) > 1 else np.full(1, 0.5)
+        assert np.allclose(ranks, want)
+        order, colors, radii = C.weight_style(w, 1.5)
+        assert np.array_equal(order, np.argsort(ranks, kind="stable"))
+        exact = C.ramp(ranks[order], 255)
+        assert np.abs(colors[:, :3].astype(int) - exact[:, :3].astype(int)).max() <= 1
+    ids = np.concatenate([rng.integers(0, 3000, 200), [0, 5, 1 << 17, -4]])
+    assert np.array_equal(C.id_colors(ids), C._id_colors(ids))
+    assert np.array_equal(C.id_colors(ids[:50], alpha=90), C._id_colors(ids[:50], alpha=90))
+    assert C.id_colors(np.arange(0)).shape == (0, 4)
+
+
 def test_the_legend_in_the_about_note_matches_the_mapping():
     from pfscope.viewer_app.colors import TOP_FRACTION
     from pfscope.viewer_app.properties import about_markdown

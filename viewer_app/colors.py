@@ -44,18 +44,53 @@ def ramp(t: np.ndarray, alpha: int = 200) -> np.ndarray:
     return out
 
 
+def _ranks_sorted(weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(order, t): ``order`` sorts the cloud from the lightest to the heaviest (stable, so
+    deterministic) and ``t`` is each sorted weight's rank in [0, 1] (ties share their mean rank:
+    equal weights all map to 0.5), from one sort — the same ranks as
+    ``scipy.stats.rankdata(w, "average")``, without a second sort."""
+    w = np.asarray(weights, dtype=np.float64).reshape(-1)
+    n = len(w)
+    if n == 0:
+        return np.zeros(0, dtype=np.int64), w
+    if n == 1:
+        return np.zeros(1, dtype=np.int64), np.full(1, 0.5)
+    w = np.where(np.isfinite(w), w, 0.0)
+    order = np.argsort(w, kind="stable")
+    ws = w[order]
+    first = np.empty(n, dtype=bool)
+    first[0] = True
+    np.not_equal(ws[1:], ws[:-1], out=first[1:])
+    starts = np.flatnonzero(first)
+    ends = np.append(starts[1:], n)
+    group_rank = (starts + ends - 1) / 2.0          # mean 0-based rank of each run of ties
+    t = group_rank[np.cumsum(first) - 1] / (n - 1.0)
+    return order, t
+
+
+#: The ramp sampled at RAMP_STEPS + 1 evenly spaced values of t, for the particle clouds: a
+#: lookup instead of the interpolation per point (at most one unit per channel from
+#: :func:`ramp`, the rounding of the sampled value).
+RAMP_STEPS = 4096
+_RAMP_TABLE: Optional[np.ndarray] = None
+
+
+def ramp_table(t: np.ndarray) -> np.ndarray:
+    """(N,) values in [0, 1] -> (N,4) uint8 RGBA (alpha 255) from the sampled ramp."""
+    global _RAMP_TABLE
+    if _RAMP_TABLE is None:
+        _RAMP_TABLE = ramp(np.linspace(0.0, 1.0, RAMP_STEPS + 1), 255)
+    idx = np.clip(np.asarray(t, dtype=np.float64).reshape(-1), 0.0, 1.0) * RAMP_STEPS
+    return _RAMP_TABLE[(idx + 0.5).astype(np.intp)]
+
+
 def weight_scale(weights: np.ndarray) -> np.ndarray:
     """(N,) non-negative weights -> [0, 1]: each weight's rank within the cloud (ties share
     their mean rank: equal weights all map to 0.5).  Sorting-based, no loop over particles."""
-    from scipy.stats import rankdata
-
-    w = np.asarray(weights, dtype=np.float64).reshape(-1)
-    if len(w) == 0:
-        return w
-    if len(w) == 1:
-        return np.full(1, 0.5)
-    w = np.where(np.isfinite(w), w, 0.0)
-    return (rankdata(w, method="average") - 1.0) / (len(w) - 1.0)
+    order, t_sorted = _ranks_sorted(weights)
+    t = np.empty_like(t_sorted)
+    t[order] = t_sorted
+    return t
 
 
 def weight_colors(weights: np.ndarray, alpha: Optional[int] = None) -> np.ndarray:
@@ -72,10 +107,8 @@ def weight_style(weights: np.ndarray, radius: float) -> tuple[np.ndarray, np.nda
     """(order, colors, radii) for drawing a weighted cloud: ``order`` sorts the particles from the
     lightest to the heaviest (so the heavy ones are drawn on top; stable, so deterministic),
     colours and radii by rank, both in that order."""
-    t = weight_scale(weights)
-    order = np.argsort(t, kind="stable")
-    t = t[order]
-    colors = ramp(t, 255)
+    order, t = _ranks_sorted(weights)
+    colors = ramp_table(t)
     lo, hi = WEIGHT_ALPHA
     colors[:, 3] = np.round(lo + (hi - lo) * t).astype(np.uint8)
     rlo, rhi = WEIGHT_RADIUS
@@ -98,9 +131,33 @@ def weight_summary(weights: np.ndarray) -> dict[str, float]:
     return {"top_tenth": top / total, "ess": float(1.0 / (len(w) * np.sum(wn * wn)))}
 
 
+#: Colours of ids 0 .. len - 1, computed once and grown on demand (up to _ID_TABLE_MAX ids):
+#: a cloud of thousands of particles of a few clusters costs one lookup, not the HSV maths.
+_ID_TABLE = np.zeros((0, 4), dtype=np.uint8)
+_ID_TABLE_MAX = 1 << 16
+
+
 def id_colors(ids: np.ndarray, alpha: int = 255) -> np.ndarray:
     """(N,) integer ids -> (N,4) uint8 RGBA, well separated hues (golden-ratio walk over the
     track hue range, alternating two saturation/brightness levels; blues lightened)."""
+    global _ID_TABLE
+    ids = np.asarray(ids, dtype=np.int64).reshape(-1)
+    if len(ids) == 0:
+        return np.zeros((0, 4), dtype=np.uint8)
+    lo, hi = int(ids.min()), int(ids.max())
+    if lo < 0 or hi >= _ID_TABLE_MAX:
+        return _id_colors(ids, alpha)
+    if hi >= len(_ID_TABLE):
+        size = min(_ID_TABLE_MAX, max(1024, 2 * (hi + 1)))
+        _ID_TABLE = _id_colors(np.arange(size))
+    out = _ID_TABLE[ids]
+    if alpha != 255:
+        out[:, 3] = alpha
+    return out
+
+
+def _id_colors(ids: np.ndarray, alpha: int = 255) -> np.ndarray:
+    """:func:`id_colors` computed (no table)."""
     ids = np.asarray(ids, dtype=np.int64).reshape(-1)
     frac = (ids * 0.618033988749895) % 1.0
     h = (TRACK_HUE_MIN + frac * (TRACK_HUE_MAX - TRACK_HUE_MIN)) / 360.0

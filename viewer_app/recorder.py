@@ -23,6 +23,15 @@ Timelines: ``frame`` (MOT frame number), ``time`` (the video's clock) and ``stag
 for each tracker its stages and its ``output``; slot = frame × slots-per-frame + index, so a
 frame's stages stay in order and frames never overlap, also with several trackers.
 
+Cost (issue 12): the frame loop pays for little more than building the rows.  The frame's JPEG
+is encoded on a worker thread while the rows are built (:class:`JpegEncoder`, one frame in flight,
+bounded wait); rows are kept per entity and sent as columns every ``flush_frames`` frames
+(:class:`~.reporters.base.Columns`: one conversion per entity and component for ten frames
+instead of one ``log`` call per entity and frame); the flush is started without waiting for it,
+and only every ``check_flushes``-th one is waited for (bounded), so the writer builds the chunks
+while the next frames run.  None of this depends on thread timing: the same seed and input give
+the same file.
+
 Files: the recording is written as ``<name>.incomplete.rrd`` and renamed to its final name
 only when the run completed; a failed or interrupted run keeps the ``.incomplete`` name (the
 file is finished and readable, its last entry says why it stopped).  A previous file under the
@@ -37,6 +46,8 @@ import platform
 import threading
 import uuid
 from collections import deque
+from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import TimeoutError as FutureTimeout
 from datetime import timedelta
 from pathlib import Path
 from typing import Optional
@@ -52,8 +63,16 @@ from pfscope.trackers.pipeline import BaseHook, FrameReport, Outcome, RunInfo
 from .blueprint import compare_blueprint, default_blueprint
 from .properties import about_markdown, any_values
 from .reporters import Reporter, layout_for
-from .reporters.base import SERIES_PALETTE, annotation_context
+from .reporters.base import SERIES_PALETTE, Columns, annotation_context
 
+
+#: What the ``video`` entity stores (``RerunRecorder(video=...)``): ``encode`` the decoded frame
+#: as JPEG at ``jpeg_quality`` (the default); ``source`` the source's own JPEG bytes when it has
+#: them (a MOT or image folder of JPEGs: no encoding at all, but high-quality sources make
+#: larger files — PETS09's are about twice a quality-75 encoding); ``auto`` the source's bytes
+#: when the first frame's are not larger than its encoding, else ``encode`` (decided once per
+#: run from the input, so the same input gives the same file).
+VIDEO_MODES = ("encode", "source", "auto")
 
 #: Longest wait for a flush or close of the recording, seconds ($PFSCOPE_FLUSH_TIMEOUT).
 FLUSH_TIMEOUT = float(os.environ.get("PFSCOPE_FLUSH_TIMEOUT", "30"))
@@ -61,6 +80,54 @@ FLUSH_TIMEOUT = float(os.environ.get("PFSCOPE_FLUSH_TIMEOUT", "30"))
 
 class RecordingStalled(RuntimeError):
     """Writing the recording did not finish within :data:`FLUSH_TIMEOUT`."""
+
+
+class JpegEncoder:
+    """Encodes a frame to JPEG on one worker thread (``cv2.imencode`` releases the GIL), so the
+    encoding overlaps the main thread's work (the recorder takes a frame's bytes when the next
+    frame arrives, after the trackers stepped on it).  The image is not copied: a source never
+    writes to an image it yielded (:class:`~pfscope.trackers.data.sources.Source`).
+
+    Bounded: at most one frame is in flight (:meth:`submit` refuses a second one before
+    :meth:`result` took the first), and :meth:`result` waits at most ``timeout`` seconds.  A
+    failure in the worker (or a timeout) is raised by :meth:`result` on the caller's thread.
+    The encoded bytes do not depend on the thread, so the recording stays the same."""
+
+    def __init__(self, quality: int, timeout: float = FLUSH_TIMEOUT):
+        self.params = [cv2.IMWRITE_JPEG_QUALITY, int(quality)]
+        self.timeout = float(timeout)
+        self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="pfscope-jpeg")
+        self._pending = None
+
+    def _encode(self, image: np.ndarray) -> bytes:
+        ok, buf = cv2.imencode(".jpg", image, self.params)
+        if not ok:
+            raise RuntimeError(f"JPEG encoding of a {image.shape} {image.dtype} frame failed")
+        return buf.tobytes()
+
+    def submit(self, image: np.ndarray) -> None:
+        if self._pending is not None:
+            raise RuntimeError("JpegEncoder: a frame is already being encoded")
+        self._pending = self._pool.submit(self._encode, image)
+
+    @property
+    def pending(self) -> bool:
+        return self._pending is not None
+
+    def result(self) -> Optional[bytes]:
+        """The bytes of the frame submitted last (None when none is pending)."""
+        fut, self._pending = self._pending, None
+        if fut is None:
+            return None
+        try:
+            return fut.result(timeout=self.timeout)
+        except FutureTimeout:
+            raise RecordingStalled(f"JPEG encoding of a frame took more than "
+                                   f"{self.timeout:.0f} s") from None
+
+    def close(self) -> None:
+        self._pending = None
+        self._pool.shutdown(wait=False, cancel_futures=True)
 
 
 def recording_id_for(config: dict) -> str:
@@ -122,7 +189,12 @@ class RerunRecorder(BaseHook):
     def __init__(self, out: Path, config: dict, *, max_points: int = 3000,
                  jpeg_quality: int = 75, flush_frames: int = 10, live: Optional[str] = None,
                  web_port: int = 9090, announce=print, timing: bool = False,
-                 properties: Optional[dict] = None, long_miss: int = 10, worst: int = 10):
+                 properties: Optional[dict] = None, long_miss: int = 10, worst: int = 10,
+                 check_flushes: int = 5, video: str = "encode"):
+        if video not in VIDEO_MODES:
+            raise ValueError(f"video must be one of {', '.join(VIDEO_MODES)}, got {video!r}")
+        self.video = video
+        self._passthrough: Optional[bool] = {"encode": False, "source": True}.get(video)
         self.out = Path(out)
         self.partial = incomplete_path(self.out)
         self.config = config
@@ -130,6 +202,16 @@ class RerunRecorder(BaseHook):
         # Flushing bounds what a SIGKILLed run loses.  Counted in frames, not seconds, so the
         # chunks of the file do not depend on the machine's speed (same input → same file).
         self.flush_frames = int(flush_frames)
+        # A flush is started every `flush_frames` frames without waiting for it (the chunks are
+        # cut where the flush command enters the stream, so the file is the same), and every
+        # `check_flushes`-th flush is waited for (bounded): a disk that stopped taking data is
+        # found within flush_frames x check_flushes frames, and the main thread does not sit
+        # idle while the writer builds the chunks of the other flushes.
+        self.check_flushes = max(1, int(check_flushes))
+        self._flushes = 0
+        self._jpeg: Optional[JpegEncoder] = None
+        # the last frame whose picture is still being encoded: (frame, seconds, source bytes)
+        self._picture: Optional[tuple[int, float, Optional[bytes]]] = None
         self.live, self.web_port, self.announce = live, web_port, announce
         # Wall-clock step times differ run to run: recorded only when asked, so that the same
         # seed and input give the same recording.
@@ -209,30 +291,45 @@ class RerunRecorder(BaseHook):
         multi = len(names) > 1
         series: dict = {}  # one series registry: every series of the file gets its own colour
         size = _frame_size(info.source)
+        # the frames' rows (video, overlays, scalars), kept per entity and sent as columns
+        # before each flush (every frame with a live viewer)
+        self.columns = Columns(rec)
         self.reporters = {name: Reporter(rec, f"{name}/" if multi else "", self.max_points,
                                          self.jpeg_quality, series=series, size=size,
                                          series_color=(tuple(SERIES_PALETTE[i % len(
-                                             SERIES_PALETTE)]) if multi else None))
+                                             SERIES_PALETTE)]) if multi else None),
+                                         columns=self.columns)
                           for i, name in enumerate(names)}
         self.base = Reporter(rec, "", self.max_points, self.jpeg_quality, series=series,
-                             size=size)
+                             size=size, columns=self.columns)
         self.trails = {name: TrailBuffer() for name in names}
         self._before: set[str] = set()
+        self._jpeg = JpegEncoder(self.jpeg_quality)
 
     def _stage(self, frame: int, lane: str, stage: str) -> None:
         assert self.rec is not None
-        self.rec.set_time("stage", sequence=frame * self.stride + self.slots[(lane, stage)])
+        slot = frame * self.stride + self.slots[(lane, stage)]
+        self.rec.set_time("stage", sequence=slot)
+        self.columns.stage = slot
 
     def on_frame(self, r: FrameReport) -> None:
         rec = self.rec
         assert rec is not None
         k = r.frame.index
+        self._take_picture()  # the previous frame's, encoded while the trackers stepped
         rec.set_time("frame", sequence=k)
         rec.set_time("time", duration=float(r.frame.timestamp))
+        self.columns.frame, self.columns.seconds = k, float(r.frame.timestamp)
         self._stage(k, "", "input")
-        ok, buf = cv2.imencode(".jpg", r.frame.image, [cv2.IMWRITE_JPEG_QUALITY, self.jpeg_quality])
-        if ok:
-            rec.log("video", rr.EncodedImage(contents=buf.tobytes(), media_type="image/jpeg"))
+        # this frame's picture: encoded on the worker, its row added when the next frame
+        # arrives (or at the next flush, or at the end), at this frame's times
+        jpeg = self._jpeg
+        assert jpeg is not None
+        source_bytes = getattr(r.frame, "encoded", None) if self._passthrough is not False \
+            else None
+        if source_bytes is None or not self._passthrough:
+            jpeg.submit(r.frame.image)
+        self._picture = (k, float(r.frame.timestamp), source_bytes)
         base = self.base
         if r.detections is not None:
             d = r.detections
@@ -263,8 +360,34 @@ class RerunRecorder(BaseHook):
             if m is not None and r.gt is not None and name in self.events:
                 self._log_events(name, self.events[name].update(k, r.gt, res.tracks, m), k)
         self._frames += 1
+        if self.live or not self.flush_frames:
+            self._take_picture()  # a live viewer sees each frame as it ends
+            self._send_columns()
         if self.flush_frames and self._frames % self.flush_frames == 0:
-            self._flush("writing stalled")
+            self._take_picture()  # a flushed frame is whole in the file
+            self._flushes += 1
+            if self._flushes % self.check_flushes == 0:
+                self._flush("writing stalled")
+            else:
+                self._flush_async("writing stalled")
+
+    def _take_picture(self) -> None:
+        """Add the row of the picture still pending (its encoding is waited for, bounded)."""
+        if self._picture is None:
+            return
+        (k, seconds, source_bytes), self._picture = self._picture, None
+        assert self._jpeg is not None
+        blob = self._jpeg.result()
+        if source_bytes is not None:
+            if self._passthrough is None:  # auto, first frame with bytes: keep the smaller
+                self._passthrough = blob is None or len(source_bytes) <= len(blob)
+            if self._passthrough:
+                blob = source_bytes
+        c = self.columns
+        now = c.frame, c.seconds, c.stage
+        c.frame, c.seconds, c.stage = k, seconds, k * self.stride + self.slots[("", "input")]
+        c.add("video", rr.EncodedImage, blob=blob, media_type="image/jpeg")
+        c.frame, c.seconds, c.stage = now
 
     def _metrics(self, rep: Reporter, frame: int, gt, tracks, m) -> None:
         """Per-frame metrics of what the view shows, and marks on the misses, false positives
@@ -299,6 +422,17 @@ class RerunRecorder(BaseHook):
         rec = self.rec
         if rec is None:
             return
+        picture_error: Optional[BaseException] = None
+        if self._jpeg is not None:
+            try:  # the last frame's picture (a frame that failed half-way has none pending)
+                if self._broken is None:
+                    self._take_picture()
+            except Exception as e:  # noqa: BLE001 - the run then failed: said below
+                picture_error = e
+                if outcome.status != "failed":
+                    outcome = Outcome("failed", outcome.frames,
+                                      f"failed: {type(e).__name__}: {e}", e)
+            self._jpeg.close()
         level = {"completed": "INFO", "interrupted": "WARN"}.get(outcome.status, "ERROR")
         rec.log("log", rr.TextLog(f"run {outcome.reason}", level=level))
         self._finish_index(outcome)
@@ -315,6 +449,8 @@ class RerunRecorder(BaseHook):
         if outcome.status == "completed":
             os.replace(self.partial, self.out)
             self.kept_as = None
+        if picture_error is not None:
+            raise picture_error
 
     def _root(self, lane: str) -> str:
         return f"{lane}/" if len(self.reporters) > 1 else ""
@@ -332,7 +468,7 @@ class RerunRecorder(BaseHook):
             rec.log(f"{self._root(lane)}events", rr.TextLog(
                 ev.message, level="WARN" if ev.kind in ("id_switch", "lost_track") else "INFO"))
         rec.set_time("frame", sequence=now)
-        rec.set_time("stage", sequence=now * self.stride + self.slots[(lane, "output")])
+        self._stage(now, lane, "output")
 
     def _finish_index(self, outcome: Outcome) -> None:
         """The end of the run: open events, the worst frames by OSPA, and the final scores and
@@ -356,7 +492,25 @@ class RerunRecorder(BaseHook):
     def _flush(self, what: str) -> None:
         assert self.rec is not None
         rec = self.rec
+        self._send_columns()
         self._bounded(lambda: rec.flush(timeout_sec=FLUSH_TIMEOUT), what)
+
+    def _send_columns(self) -> None:
+        columns = getattr(self, "columns", None)
+        if columns is not None and self._broken is None:
+            columns.send()
+
+    def _flush_async(self, what: str) -> None:
+        """Start a flush without waiting for it (see ``check_flushes``)."""
+        assert self.rec is not None
+        if self._broken is not None:
+            raise RecordingStalled(self._broken)
+        self._send_columns()
+        try:
+            self.rec.flush(timeout_sec=0)
+        except Exception as e:  # noqa: BLE001 - one line, like a failed waited-for flush
+            self._broken = f"{self.partial}: {what}: {e} (disk full or unwritable?)"
+            raise RecordingStalled(self._broken) from None
 
     def _bounded(self, fn, what: str, timeout: float = FLUSH_TIMEOUT) -> None:
         """Run ``fn`` (a flush or close) with a bounded wait: a full disk or a viewer that

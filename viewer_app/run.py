@@ -89,6 +89,7 @@ class RecordOptions:
     timing: bool = False               # record per-step wall time (breaks byte-identical reruns)
     tracker_options: dict = field(default_factory=dict)
     long_miss: int = 10                # failure index: a gt unmatched this many frames in a row
+    video: str = "encode"              # encode | source | auto (recorder.VIDEO_MODES)
 
 
 @dataclass
@@ -195,6 +196,10 @@ def record(source: Source, out: Path, opts: RecordOptions, *, trackers: Optional
         level_rank(opts.level)
     except ValueError as e:
         raise InputError(str(e)) from None
+    from .recorder import VIDEO_MODES
+
+    if opts.video not in VIDEO_MODES:
+        raise InputError(f"video: expected one of {', '.join(VIDEO_MODES)}, got {opts.video!r}")
     from .lanes import parse_lanes
 
     lanes = parse_lanes(list(trackers or [opts.tracker]))
@@ -259,11 +264,14 @@ def _record_locked(source, out, opts, lanes, infos, params, tracks_out, live, pr
     }
     if opts.start > 1:
         config["start"] = opts.start
+    if opts.video != "encode":  # (absent by default: earlier recording ids stay the same)
+        config["video"] = opts.video
     properties = {
         "run": {"lanes": names, "trackers": [ln.tracker for ln in lanes],
                 "detector": det_name or "none", "min_score": opts.min_score,
                 "level": opts.level, "max_points": opts.max_points, "first_frame": opts.start,
-                "frames": total, "seed": opts.seed, "preset": opts.preset or "default"},
+                "frames": total, "seed": opts.seed, "preset": opts.preset or "default",
+                **({"video": opts.video} if opts.video != "encode" else {})},
         "source": source.describe(),
     }
     for ln, t in zip(lanes, built.values()):
@@ -275,7 +283,8 @@ def _record_locked(source, out, opts, lanes, infos, params, tracks_out, live, pr
     recorder = RerunRecorder(out, config, max_points=opts.max_points, live=live,
                              web_port=WEB_PORT, timing=opts.timing,
                              announce=lambda msg: print(msg, file=sys.stderr),
-                             properties=properties, long_miss=opts.long_miss)
+                             properties=properties, long_miss=opts.long_miss,
+                             video=opts.video)
     hooks: list = [recorder]
     writer = None
     if tracks_out is not None:

@@ -24,10 +24,26 @@ from .motio import MotTable, read_mot
 IMAGE_EXTS = (".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff", ".webp")
 
 
+@dataclass(frozen=True)
+class EncodedFrame(Frame):
+    """A frame read from a JPEG file, with the file's bytes (``encoded``): a recorder may store
+    them as they are instead of encoding the decoded pixels again."""
+
+    encoded: Optional[bytes] = field(default=None, repr=False)
+
+
+def _is_jpeg(data: bytes) -> bool:
+    return data[:3] == b"\xff\xd8\xff"
+
+
 @dataclass
 class Source:
     """Base class. ``length`` is the number of frames when known; ``gt``/``det`` are the
-    sequence's ground truth and public detections when it has them."""
+    sequence's ground truth and public detections when it has them.
+
+    :meth:`frames` yields each frame's image as an array it never writes to again (a new array
+    per frame, or the same unchanging one): a recorder encodes a frame's picture while the next
+    frame is read and tracked."""
 
     name: str
     fps: float
@@ -52,6 +68,21 @@ class Source:
 
 
 def _read_image(path: Path, index: int, size: Optional[tuple[int, int]] = None) -> np.ndarray:
+    return _read_image_bytes(path, index, size)[0]
+
+
+def _read_frame(path: Path, index: int, timestamp: float,
+                size: Optional[tuple[int, int]] = None) -> Frame:
+    """Frame ``index`` from the image file ``path``; a JPEG keeps its bytes
+    (:class:`EncodedFrame`)."""
+    img, data = _read_image_bytes(path, index, size)
+    if _is_jpeg(data):
+        return EncodedFrame(index, timestamp, img, encoded=data)
+    return Frame(index, timestamp, img)
+
+
+def _read_image_bytes(path: Path, index: int,
+                      size: Optional[tuple[int, int]] = None) -> tuple[np.ndarray, bytes]:
     """Read and check one frame: a missing, truncated or undecodable file, or one whose size
     differs from ``size`` (width, height), is an :class:`InputError` naming file and frame.
     (OpenCV decodes a JPEG cut mid-file into a partly grey image with only a warning on
@@ -70,7 +101,7 @@ def _read_image(path: Path, index: int, size: Optional[tuple[int, int]] = None) 
     if size is not None and (img.shape[1], img.shape[0]) != tuple(size):
         raise InputError(f"{path}: frame {index}: image is {img.shape[1]}x{img.shape[0]}, "
                          f"expected {size[0]}x{size[1]}")
-    return img
+    return img, data
 
 
 def _check_rows_within(table: Optional[MotTable], length: int) -> None:
@@ -135,8 +166,7 @@ class MOTFolderSource(Source):
         """Frames ``start .. start + limit - 1`` (all from ``start`` when ``limit`` is None)."""
         n = self.length if limit is None else min(start - 1 + limit, self.length)
         for k in range(max(1, start), n + 1):
-            yield Frame(k, (k - 1) / self.fps,
-                        _read_image(self._path(k), k, (self.width, self.height)))
+            yield _read_frame(self._path(k), k, (k - 1) / self.fps, (self.width, self.height))
 
 
 class VideoFileSource(Source):
@@ -198,7 +228,7 @@ class ImageFolderSource(Source):
         start = max(1, start)
         files = self.files[start - 1:] if limit is None else self.files[start - 1:start - 1 + limit]
         for k, p in enumerate(files, start=start):
-            yield Frame(k, (k - 1) / self.fps, _read_image(p, k, (self.width, self.height)))
+            yield _read_frame(p, k, (k - 1) / self.fps, (self.width, self.height))
 
 
 class SyntheticSource(Source):

@@ -123,6 +123,93 @@ def _colors(ids: Optional[np.ndarray], id_kind: Optional[str]) -> Optional[np.nd
     return id_colors(ids)
 
 
+class Columns:
+    """What the reporters log, kept per entity and sent as columns (``send_columns``: one call
+    per entity and component for all the frames since the last :meth:`send`) instead of one
+    ``log`` call per entity and frame.  A ``log`` call converts every component on its own
+    (tens of microseconds of pyarrow each); a column converts ten frames at once, which is most
+    of what recording costs the frame loop.
+
+    The recorder keeps :attr:`frame`, :attr:`seconds` and :attr:`stage` equal to the
+    recording's timelines and calls :meth:`send` before every flush (so a flushed frame is whole
+    in the file).  Entities are sent in the order they first appeared and each entity's rows in
+    time order, so the same run gives the same file.  Each row keeps its own instance counts per
+    component (a radius for all points in one frame, one per point in the next).  An entity
+    whose components or archetype change from one row to the next has its rows so far sent
+    first.  ``immediate``: every row is logged at once with ``log`` (no buffering)."""
+
+    def __init__(self, rec: rr.RecordingStream, immediate: bool = False):
+        self.rec = rec
+        self.immediate = immediate
+        self.frame, self.seconds, self.stage = 0, 0.0, 0
+        self._rows: dict[str, dict] = {}
+
+    def add(self, entity: str, archetype, **fields) -> None:
+        """One row of ``archetype`` (``rr.Points2D`` ...) at ``entity``, the fields named as in
+        ``archetype.columns``; a field is an array or list of instances, or one value (a str,
+        a number, a bool, bytes); None fields are left out."""
+        fields = {k: v for k, v in fields.items() if v is not None}
+        if self.immediate:
+            self.rec.log(entity, archetype.from_fields(**fields))
+            return
+        key = (archetype, tuple(fields))
+        buf = self._rows.get(entity)
+        if buf is not None and buf["key"] != key:
+            self._send_one(entity, self._rows.pop(entity))
+            buf = None
+        if buf is None:
+            buf = self._rows[entity] = {"key": key, "frame": [], "seconds": [], "stage": [],
+                                        "fields": {k: [] for k in fields}}
+        buf["frame"].append(self.frame)
+        buf["seconds"].append(self.seconds)
+        buf["stage"].append(self.stage)
+        for k, v in fields.items():
+            buf["fields"][k].append(v)
+
+    def send(self) -> None:
+        rows, self._rows = self._rows, {}
+        for entity, buf in rows.items():
+            self._send_one(entity, buf)
+
+    def _send_one(self, entity: str, buf: dict) -> None:
+        archetype = buf["key"][0]
+        columns = []
+        for name, values in buf["fields"].items():
+            data, lengths = _column(values)
+            columns.extend(archetype.columns(**{name: data}).partition(lengths))
+        self.rec.send_columns(
+            entity,
+            indexes=[rr.TimeColumn("frame", sequence=np.asarray(buf["frame"], dtype=np.int64)),
+                     rr.TimeColumn("time", duration=np.asarray(buf["seconds"],
+                                                               dtype=np.float64)),
+                     rr.TimeColumn("stage", sequence=np.asarray(buf["stage"], dtype=np.int64))],
+            columns=columns)
+
+
+def _column(values: list) -> tuple[object, np.ndarray]:
+    """Rows of one component -> (all instances, instances per row).  A row is an array (its
+    first axis: instances), a number (one instance), or a list (strings, line strips), a
+    string or bytes (one instance)."""
+    if not any(isinstance(v, (list, tuple, str, bytes)) for v in values):
+        arrays = [np.asarray(v) for v in values]
+        arrays = [a.reshape(1) if a.ndim == 0 else a for a in arrays]
+        return (np.concatenate(arrays),
+                np.fromiter((len(a) for a in arrays), dtype=np.int64, count=len(arrays)))
+    flat: list = []
+    lengths = np.empty(len(values), dtype=np.int64)
+    for i, v in enumerate(values):
+        if isinstance(v, (list, tuple)):
+            flat.extend(v)
+            lengths[i] = len(v)
+        elif isinstance(v, np.ndarray) and v.ndim >= 1:
+            flat.extend(v.tolist())
+            lengths[i] = len(v)
+        else:
+            flat.append(v.item() if isinstance(v, np.generic) else v)
+            lengths[i] = 1
+    return flat, lengths
+
+
 class Reporter:
     """Logs stage items to ``rec`` under ``root`` (``""`` or ``"<tracker>/"`` in ``compare``).
     Entities logged in a frame are remembered so stale ones can be cleared at the frame's end."""
@@ -130,8 +217,11 @@ class Reporter:
     def __init__(self, rec: rr.RecordingStream, root: str = "", max_points: int = 3000,
                  jpeg_quality: int = 75, *, series: Optional[dict] = None,
                  series_color: Optional[tuple] = None,
-                 size: Optional[tuple[int, int]] = None):
+                 size: Optional[tuple[int, int]] = None,
+                 columns: Optional[Columns] = None):
         self.rec = rec
+        # rows go to `columns` (sent by the recorder); without it they are logged one by one
+        self.columns = columns if columns is not None else Columns(rec, immediate=True)
         self.root = root
         self.size = size  # the frames' (width, height), when known: fields are stretched to it
         # entity -> palette index of the scalar series already styled (share one dict between
@@ -149,6 +239,12 @@ class Reporter:
     def _log(self, entity: str, archetype) -> None:
         self.logged.add(entity)
         self.rec.log(entity, archetype)
+
+    def _row(self, entity: str, archetype, **fields) -> None:
+        """One row of ``archetype`` at ``entity`` (sent with the other rows by
+        :class:`Columns`)."""
+        self.logged.add(entity)
+        self.columns.add(entity, archetype, **fields)
 
     def stage(self, stage: Stage) -> None:
         for item in stage.items:
@@ -174,24 +270,22 @@ class Reporter:
             raise TypeError(f"unknown report item {type(item).__name__}")
 
     def points(self, p: Points) -> None:
-        xy = p.xy.astype(np.float32)
-        n = len(xy)
+        n = len(p.xy)
         keep = (np.linspace(0, n - 1, self.max_points).round().astype(np.int64)
                 if n > self.max_points else None)  # deterministic stride decimation, no RNG
-        if keep is not None:
-            xy = xy[keep]
+        # the kept points only are converted (a cloud can hold many times max_points)
+        xy = (p.xy if keep is None else p.xy[keep]).astype(np.float32)
         radii = np.float32(DEFAULT_POINT_RADIUS)
         if p.weights is not None:
             w = p.weights if keep is None else p.weights[keep]
             order, colors, radii = weight_style(w, DEFAULT_POINT_RADIUS)
             xy = xy[order]  # the heaviest last: drawn on top
-        else:
-            colors = _colors(p.ids, p.id_kind)
-            if colors is not None and keep is not None:
-                colors = colors[keep]
+        else:  # colours of the kept points only
+            colors = _colors(p.ids if p.ids is None or keep is None else np.asarray(p.ids)[keep],
+                             p.id_kind)
         class_ids = ROLES[p.role][0] if p.role in ROLES and colors is None else None
-        self._log(self.video(p.path), rr.Points2D(xy, colors=colors, class_ids=class_ids,
-                                                  radii=radii, show_labels=False))
+        self._row(self.video(p.path), rr.Points2D, positions=xy, colors=colors,
+                  class_ids=class_ids, radii=radii, show_labels=False)
         if p.weights is not None:
             for key, v in weight_summary(p.weights).items():
                 self.scalar(f"weights/{p.path}/{key}", v)
@@ -212,9 +306,8 @@ class Reporter:
         labels = value_labels(b.values, len(b), b.ids if b.id_kind == "track" else None)
         show = labels is not None and b.id_kind == "track" and not b.values
         # show_labels always set: a class id would otherwise show its class name as a label
-        self._log(self.video(b.path), rr.Boxes2D(
-            mins=boxes[:, :2], sizes=boxes[:, 2:], colors=colors, class_ids=class_ids,
-            labels=labels, show_labels=show, radii=radii))
+        self._boxes(self.video(b.path), boxes, colors=colors, class_ids=class_ids,
+                    labels=labels, show_labels=show, radii=radii)
 
     def segments(self, s: Segments) -> None:
         strips = np.stack([s.a, s.b], axis=1).astype(np.float32)
@@ -223,9 +316,9 @@ class Reporter:
         class_ids = ROLES[s.role][0] if s.role in ROLES else None
         labels = value_labels(s.values, len(s), s.ids if s.id_kind == "track" else None) \
             if chosen else None
-        self._log(self.video(s.path), rr.LineStrips2D(
-            strips, colors=colors, class_ids=class_ids, labels=labels,
-            show_labels=False, radii=1.5 if chosen else 0.5))
+        self._row(self.video(s.path), rr.LineStrips2D, strips=list(strips),
+                  colors=colors, class_ids=class_ids, labels=labels, show_labels=False,
+                  radii=1.5 if chosen else 0.5)
 
     def mask(self, m: Mask) -> None:
         entity = self.video(m.path)
@@ -264,27 +357,33 @@ class Reporter:
 
     def track_boxes(self, path: str, ids: np.ndarray, boxes: np.ndarray) -> None:
         boxes = np.asarray(boxes, dtype=np.float32).reshape(-1, 4)
-        self._log(self.video(path), rr.Boxes2D(
-            mins=boxes[:, :2], sizes=boxes[:, 2:], colors=id_colors(ids),
-            labels=[str(int(i)) for i in ids], radii=2.0))
+        self._boxes(self.video(path), boxes, colors=id_colors(ids),
+                    labels=[str(int(i)) for i in ids], radii=2.0)
 
     def track_strips(self, path: str, ids: np.ndarray, strips: list) -> None:
-        self._log(self.video(path), rr.LineStrips2D(
-            [np.asarray(s, dtype=np.float32) for s in strips], colors=id_colors(ids), radii=1.0))
+        self._row(self.video(path), rr.LineStrips2D,
+                  strips=[np.asarray(s, dtype=np.float32) for s in strips],
+                  colors=id_colors(ids), radii=1.0)
 
     def role_boxes(self, path: str, boxes: np.ndarray, role: str,
                    labels: Optional[list[str]] = None, radii: float = 1.0) -> None:
         boxes = np.asarray(boxes, dtype=np.float32).reshape(-1, 4)
-        self._log(self.video(path), rr.Boxes2D(
-            mins=boxes[:, :2], sizes=boxes[:, 2:], class_ids=np.full(len(boxes), ROLES[role][0]),
-            labels=(labels if len(boxes) <= MAX_LABELS else []) if labels is not None else None,
-            show_labels=False, radii=radii))
+        self._boxes(self.video(path), boxes, class_ids=np.full(len(boxes), ROLES[role][0]),
+                    labels=(labels if len(boxes) <= MAX_LABELS else [])
+                    if labels is not None else None, show_labels=False, radii=radii)
+
+    def _boxes(self, entity: str, boxes: np.ndarray, **fields) -> None:
+        """Boxes (N, 4) float32 ``x, y, w, h`` as a ``Boxes2D`` row (centres and half sizes,
+        as ``Boxes2D(mins=, sizes=)`` stores them)."""
+        half = boxes[:, 2:] / np.float32(2.0)
+        self._row(entity, rr.Boxes2D, centers=boxes[:, :2] + half, half_sizes=half,
+                  **fields)
 
     def scalar(self, path: str, value: float) -> None:
         entity = f"{self.root}plots/{path}"
         if entity not in self.series:
             self._style_series(entity, path)
-        self.rec.log(entity, rr.Scalars(float(value)))
+        self.columns.add(entity, rr.Scalars, scalars=np.array([value], dtype=np.float64))
 
     def _style_series(self, entity: str, path: str) -> None:
         """Name and colour a series the first time it is logged (static ``SeriesLines``)."""
@@ -317,4 +416,5 @@ class Reporter:
                      rr.TextLog(message, level=level))
 
 
-__all__ = ["Reporter", "TrackerLayout", "ROLES", "annotation_context", "value_labels"]
+__all__ = ["Reporter", "Columns", "TrackerLayout", "ROLES", "annotation_context",
+           "value_labels"]
