@@ -359,3 +359,59 @@ def phd_clocks(clock: Clock):
     finally:
         for owner, name, fn in reversed(saved):
             setattr(owner, name, fn)
+
+
+# ----------------------------------------------------------------------------- the scene's truth
+
+#: The clutter boxes of :func:`targets_scene`: width uniform in CLUTTER_W px, height = width ×
+#: uniform in CLUTTER_ASPECT, centre uniform over the image; the target boxes' noise std is
+#: BOX_NOISE × (w, h, w, h) on (x, y, w, h).  (Must match the literals in ``targets_scene``;
+#: ``tests/test_benchmarks.py`` checks them against a generated scene.)
+CLUTTER_W = (15.0, 60.0)
+CLUTTER_ASPECT = (2.0, 3.0)
+BOX_NOISE = 0.05
+
+
+def clutter_size_area() -> float:
+    """Area (px²) of the (w, h) support of the scene's clutter boxes:
+    ∫ (a_hi − a_lo) w dw over CLUTTER_W."""
+    (w0, w1), (a0, a1) = CLUTTER_W, CLUTTER_ASPECT
+    return (a1 - a0) * (w1 ** 2 - w0 ** 2) / 2.0
+
+
+def scene_truth(source) -> dict:
+    """The true model of a :func:`targets_scene` source, in the (cx, cy, w, h) observation
+    space: ``p_detect``, ``clutter_rate`` (per frame), ``clutter_density`` = rate / (image area ×
+    area of the clutter's (w, h) support) -- the clutter spread uniformly over the image and
+    that support (the uniform density of the same support and rate) -- ``box_noise``, and
+    ``targets`` (all present from frame 1 to the end: no births after frame 1)."""
+    ex = source.extra
+    area = float(source.width) * float(source.height)
+    return {"targets": int(ex["targets"]), "p_detect": float(ex["p_detect"]),
+            "clutter_rate": float(ex["clutter"]),
+            "clutter_density": float(ex["clutter"]) / (area * clutter_size_area()),
+            "box_noise": BOX_NOISE}
+
+
+def ospa_parts(est, gt, c: float = 100.0) -> dict:
+    """OSPA (order p = 1, cut-off ``c``) of one frame's estimated and true point sets, split in
+    its two parts: ``ospa = loc + card`` with ``loc`` = Σ min(d, c) over the optimal assignment
+    / n and ``card`` = c |m − k| / n (m estimates, k true, n = max(m, k)); also ``est``, ``true``
+    and ``cut`` (assigned pairs at the cut-off: in effect one miss plus one false target)."""
+    import numpy as np
+    from scipy.optimize import linear_sum_assignment
+
+    est = np.asarray(est, dtype=float).reshape(-1, 2)
+    gt = np.asarray(gt, dtype=float).reshape(-1, 2)
+    m, k = len(est), len(gt)
+    n = max(m, k)
+    if n == 0:
+        return {"ospa": 0.0, "loc": 0.0, "card": 0.0, "est": 0, "true": 0, "cut": 0}
+    loc, cut = 0.0, 0
+    if m and k:
+        d = np.minimum(np.sqrt(((est[:, None, :] - gt[None, :, :]) ** 2).sum(-1)), c)
+        r, q = linear_sum_assignment(d)
+        loc, cut = float(d[r, q].sum()), int((d[r, q] >= c).sum())
+    card = c * abs(m - k)
+    return {"ospa": (loc + card) / n, "loc": loc / n, "card": card / n, "est": m, "true": k,
+            "cut": cut}

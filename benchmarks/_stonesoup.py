@@ -22,7 +22,27 @@ pfscope's PHD filter's, written with Stone Soup components:
   observation noise around z), its geometric mean over the frame's detections, set on the
   updater before each frame (Stone Soup's updater takes one intensity for all detections);
   ``clutter="uniform"``: the scene's true clutter rate spread uniformly over the image and the
-  size range (much lower: every new detection then claims nearly one target).
+  size range (much lower: every new detection then claims nearly one target);
+  ``clutter="oracle"``: the *true model of the scene* (``truth``, from
+  ``_common.scene_truth``): the true clutter density (rate / (image area × area of the
+  clutter's (w, h) support), the scene's clutter being uniform over both), the true p_D, and
+  the true measurement noise (the scene's box noise, full covariance of (cx, cy, w, h) at the
+  detection's size) instead of pfscope's; motion, survival and births stay pfscope's
+  (birth mass 0.01 per detection, which against the true, tiny κ makes every clutter
+  detection a target of mass ≈ 1);
+- ``birth="truth"`` (with ``clutter="oracle"``): births in the true model's units as well.
+  The scene's targets are all there at frame 1 and none appear later, so the birth intensity
+  is uniform over the observation space with B_1 = the number of targets on frame 1 and a
+  floor ``birth_floor`` per frame after (with none at all a target missed on frame 1 could
+  never start). Stone Soup still samples the newborn particles around the detections (same
+  particles as pfscope); their total mass is set so that each detection's newborn term equals
+  the uniform birth's: p_D ∫ g(z|x) m_b K_z(x) dx = p_D B_k / V, i.e. m_b = B_k / (V ∫ g K_z)
+  (V = image area × clutter size area, ∫ g K_z = N(0; 0, R(z) + Σ_K(z)) on (cx, cy, w, h),
+  geometric mean over the frame's detections).
+
+``fps``: the per-frame settings are those of the pfscope lane's preset at this frame rate
+(``params.at_fps``: the ``practical`` preset's are per second); None: the preset's fields as
+given (``paper``).
 
 **Same particle budget.** The lane runs right after a pfscope PHD lane in the same pipeline run
 and copies, every frame, that lane's particle counts: the number of newborn particles J_k (as
@@ -120,7 +140,9 @@ class StoneSoupPHDLane:
     def __init__(self, budget_from, births, *, width: float, height: float,
                  size_range=(10.0, 200.0), noise: bool = True, seed: int = 0,
                  mean_size: float = 40.0, clutter_rate: float = 5.0,
-                 clutter: str = "pfscope"):
+                 clutter: str = "pfscope", fps: float | None = None,
+                 truth: dict | None = None, birth: str = "pfscope",
+                 birth_floor: float = 0.04):
         from stonesoup.models.transition.linear import (
             CombinedLinearGaussianTransitionModel,
             ConstantVelocity,
@@ -134,12 +156,25 @@ class StoneSoupPHDLane:
 
         # Stone Soup draws its transition and measurement noise from numpy's global generator
         # (its models have no seed here): seed it, so the same seed gives the same run
+        if clutter not in ("pfscope", "uniform", "oracle"):
+            raise ValueError(f"clutter must be 'pfscope', 'uniform' or 'oracle', got {clutter!r}")
+        if clutter == "oracle" and truth is None:
+            raise ValueError("clutter='oracle' needs truth (the scene's p_detect, "
+                             "clutter_density, box_noise)")
+        if birth not in ("pfscope", "truth"):
+            raise ValueError(f"birth must be 'pfscope' or 'truth', got {birth!r}")
+        if birth == "truth" and clutter != "oracle":
+            raise ValueError("birth='truth' needs clutter='oracle'")
+        self.birth = birth
+        self.birth_floor = float(birth_floor)
         np.random.seed(seed)
         self.budget_from = budget_from
         self.births = births            # () -> J_k of the pfscope lane at this frame
         self.noise = noise
+        self.truth = truth if clutter == "oracle" else None
         self.rng = np.random.default_rng(seed)
-        fp = budget_from.params.filter
+        params = budget_from.params if fps is None else budget_from.params.at_fps(fps)
+        fp = self.filter_params = params.filter
         q_pos = (fp.motion.sigma_v * mean_size) ** 2
         q_size = (fp.motion.sigma_size * mean_size) ** 2
         self.transition = CombinedLinearGaussianTransitionModel(
@@ -155,13 +190,15 @@ class StoneSoupPHDLane:
         lo, hi = size_range
         volume = float(width) * float(height) * (hi - lo) ** 2
         cls = SMCPHDUpdater if noise else _no_noise_class()
+        p_detect = 1.0 - fp.likelihood.p_miss
+        intensity = clutter_rate / volume
+        if self.truth is not None:
+            p_detect = float(self.truth["p_detect"])
+            intensity = float(self.truth["clutter_density"])
         self.updater = cls(measurement_model=None, resampler=SystematicResampler(),
-                           prob_detect=1.0 - fp.likelihood.p_miss,
-                           clutter_intensity=clutter_rate / volume)
-        if clutter not in ("pfscope", "uniform"):
-            raise ValueError(f"clutter must be 'pfscope' or 'uniform', got {clutter!r}")
+                           prob_detect=p_detect, clutter_intensity=intensity)
         self.clutter = clutter
-        self.uniform_intensity = clutter_rate / volume
+        self.uniform_intensity = intensity
         self.t0 = datetime.datetime(2000, 1, 1)
         # an empty filter cannot grow in Stone Soup (births are a fraction of the particles):
         # start from one particle of negligible weight
@@ -172,7 +209,41 @@ class StoneSoupPHDLane:
         self.n_update = 0               # particles in this frame's update (prediction size)
 
     def config(self) -> dict:
-        return {"tracker": self.name, "noise": self.noise, "clutter": self.clutter}
+        return {"tracker": self.name, "noise": self.noise, "clutter": self.clutter,
+                "prob_detect": float(self.updater.prob_detect),
+                "truth": self.truth, "birth": self.birth, "birth_floor": self.birth_floor}
+
+    def _birth_rate(self, frame_index: int, Z: np.ndarray) -> float:
+        """Total newborn mass of the frame: pfscope's 0.01 per detection, or (``birth='truth'``)
+        the uniform true birth B_k over V carried by kernels around the detections."""
+        if self.birth == "pfscope" or not len(Z):
+            return 0.01 * len(Z)
+        B = float(self.truth["targets"]) if frame_index <= 1 else self.birth_floor
+        V = float(self.truth["clutter_rate"]) / float(self.truth["clutter_density"])
+        lk, sp = self.lk, self.sampler.spread
+        log_int = []
+        for z in Z:
+            sw, sh = _obs_std(z[2], lk), _obs_std(z[3], lk)
+            r = lk.sigma_obs_pos_ratio
+            S = self._measurement_covar(z) + np.diag(
+                [(sp * r * sw) ** 2, (sp * r * sh) ** 2, (sp * sw) ** 2, (sp * sh) ** 2])
+            log_int.append(-2.0 * math.log(2 * math.pi) - 0.5 * np.linalg.slogdet(S)[1])
+        m_b = B / (V * math.exp(float(np.mean(log_int))))
+        return max(m_b * len(Z), 1e-300)
+
+    def _measurement_covar(self, z: np.ndarray) -> np.ndarray:
+        """Noise covariance of a detection ``z = (cx, cy, w, h)``: pfscope's (diagonal, sized
+        by the detection) or, for the oracle, the scene's true one: box noise ``s`` × (w, h, w,
+        h) on (x, y, w, h), so cx = x + w/2 has variance 1.25 (s w)² and covariance (s w)²/2
+        with w."""
+        if self.truth is not None:
+            s = float(self.truth["box_noise"])
+            a, b = (s * z[2]) ** 2, (s * z[3]) ** 2
+            return np.array([[1.25 * a, 0.0, 0.5 * a, 0.0], [0.0, 1.25 * b, 0.0, 0.5 * b],
+                             [0.5 * a, 0.0, a, 0.0], [0.0, 0.5 * b, 0.0, b]])
+        sw, sh = _obs_std(z[2], self.lk), _obs_std(z[3], self.lk)
+        r = self.lk.sigma_obs_pos_ratio
+        return np.diag([(r * sw) ** 2, (r * sh) ** 2, sw ** 2, sh ** 2])
 
     def finish(self):
         return []
@@ -195,7 +266,7 @@ class StoneSoupPHDLane:
         self.sampler.Z = Z
         J = max(J, 1) if len(Z) else 0
         self.predictor.birth_probability = J / L_prev
-        self.predictor.birth_rate = max(0.01 * len(Z), 1e-12)
+        self.predictor.birth_rate = max(self._birth_rate(frame.index, Z), 1e-300)
         if J == 0:  # no detection: Stone Soup's expansion scheme needs >= 1 newborn
             self.predictor.birth_probability = 1.0 / L_prev
             self.sampler.Z = np.array([[0.0, 0.0, 1.0, 1.0]])
@@ -203,18 +274,15 @@ class StoneSoupPHDLane:
         if self.clutter == "pfscope" and len(Z):
             from pfscope.trackers.phd.filter import log_clutter_density
 
-            fp = self.budget_from.params.filter
+            fp = self.filter_params
             self.updater.clutter_intensity = float(
                 np.exp(np.mean(log_clutter_density(Z, fp.clutter, fp.likelihood))))
         prediction = self.predictor.predict(self.state, timestamp=ts)
         self.n_update = len(prediction)
         hyps = [SingleHypothesis(prediction, MissedDetection(timestamp=ts))]
         for z in Z:
-            sw, sh = _obs_std(z[2], self.lk), _obs_std(z[3], self.lk)
-            r = self.lk.sigma_obs_pos_ratio
             model = LinearGaussian(ndim_state=STATE_DIM, mapping=(0, 2, 4, 5),
-                                   noise_covar=np.diag([(r * sw) ** 2, (r * sh) ** 2,
-                                                        sw ** 2, sh ** 2]))
+                                   noise_covar=self._measurement_covar(z))
             hyps.append(SingleHypothesis(prediction, Detection(z.reshape(4, 1), timestamp=ts,
                                                                measurement_model=model)))
         self.state = self.updater.update(MultipleHypothesis(hyps))

@@ -20,10 +20,16 @@ Sections (all by default; ``--only`` picks some):
                frames and whole-call time, their ratios, and bytes per frame;
 ``memory``     RSS over a 10,000-frame PHD-MT run (4 targets, detections-only scene) in a
                fresh process, sampled every 1,000 frames, its slope, and the peak RSS;
-``stonesoup``  Stone Soup's SMC-PHD (``_stonesoup.py``, needs the ``bench`` extra) as a lane
+``stonesoup``  Stone Soup's SMC-PHD (``_stonesoup.py``, needs the ``bench`` extra) as lanes
                of the same pipeline run as PHD-MT, on the same detections with the same number
-               of particles in every update, measurement-noise draw on and off; speed ratios and
-               OSPA (c = 100 px, p = 1) and mean PHD mass at 4, 16, 64 targets over seeds.
+               of particles in every update (``--ss-lanes``: pfscope's κ(z) without / with
+               Stone Soup's noise draw, ``oracle``: the scene's true clutter density, p_D and
+               measurement noise, ``oracle-birth``: and its true births); speed ratios, and
+               OSPA (c = 100 px, p = 1; localisation + cardinality) of PHD-MT's tracks file,
+               live tracks, cluster estimates and k-means(round mass) and of each Stone Soup
+               lane's k-means(round mass), at 4, 16, 64 targets (``--ss-targets``), 60 frames
+               (``--ss-frames``), frames after a warm-up (``--ss-warmup``), mean ± std over
+               seeds (``--ss-seeds``).
 
 Every run goes through the engine's one frame loop (``pfscope.trackers.pipeline.run``) at
 ``level=None`` without a recorder (``recording`` adds the app's recorder on purpose). Stage
@@ -414,6 +420,24 @@ def bench_memory(args) -> dict:
 
 # ----------------------------------------------------------------------------- Stone Soup
 
+#: Stone Soup lanes: name → (clutter model, measurement-noise draw in the likelihood, label)
+SS_LANES = {
+    "nonoise": ("pfscope", False, "Stone Soup SMC-PHD, pfscope κ(z), noise=False, k-means"),
+    "oracle": ("oracle", False, "Stone Soup SMC-PHD, oracle (true κ, p_D, R), k-means"),
+    "oracle-birth": ("oracle", False,
+                     "Stone Soup SMC-PHD, oracle + true births, k-means"),
+    "noise": ("pfscope", True, "Stone Soup SMC-PHD, pfscope κ(z), noise=True, k-means"),
+}
+#: PHD-MT's estimates that are scored (key → label)
+PF_ESTIMATES = {
+    "pf_tracks": "PHD-MT tracks file (confirmed, gap-filled)",
+    "pf_live": "PHD-MT live tracks (confirmed at frame k)",
+    "pf_clusters": "PHD-MT cluster estimates (kept K-means peaks)",
+    "pf_kmeans": "PHD-MT filter, k-means(round mass)",
+}
+OSPA_C = 100.0
+
+
 def _extract(states: np.ndarray, mass: float, rng, cap: int = 5000) -> np.ndarray:
     """Target estimates from particles (equal weights after resampling): round(mass) K-means
     centres (scipy ``kmeans2``, k-means++) of the positions of at most ``cap`` particles."""
@@ -430,6 +454,104 @@ def _extract(states: np.ndarray, mass: float, rng, cap: int = 5000) -> np.ndarra
     return centres
 
 
+def _centres(boxes) -> np.ndarray:
+    b = np.asarray(boxes, dtype=float).reshape(-1, 4)
+    return b[:, :2] + b[:, 2:4] / 2
+
+
+def ss_run(T: int, frames: int, seed: int, lanes, preset: str) -> dict:
+    """One pipeline run: PHD-MT (``preset``) then the Stone Soup ``lanes`` on
+    ``targets_scene(T, frames, seed)``. Per frame: OSPA parts (``_common.ospa_parts``) of every
+    estimate, PHD masses, step seconds, particles in the update."""
+    import _stonesoup as S
+
+    from pfscope.trackers.pipeline import BaseHook
+
+    # the k-means draws: one generator per estimate, so adding a lane changes no other row
+    rngs: dict = {}
+
+    def rng(key):
+        if key not in rngs:
+            rngs[key] = np.random.default_rng([seed, *key.encode()])
+        return rngs[key]
+
+    gts: list[np.ndarray] = []
+    holder: dict = {}
+
+    class SSCollect(BaseHook):
+        def __init__(self, ss):
+            self.ss, self.rows = ss, []
+
+        def on_frame(self, report):
+            g = gts[-1]                      # the PHD-MT collector (first hook) stored it
+            self.rows.append({k: {"secs": report.step_seconds[k], "mass": lane.mass,
+                                  "n_update": lane.n_update,
+                                  "parts": C.ospa_parts(_extract(lane.states, lane.mass,
+                                                                 rng(k)), g, OSPA_C)}
+                              for k, lane in self.ss.items()})
+
+    class TracksFile(BaseHook):
+        """The rows PHD-MT writes to its tracks file, by frame (bounded-lag and ``finish``)."""
+
+        def __init__(self):
+            self.by_frame: dict[int, list] = {}
+
+        def on_rows(self, lane, rows):
+            if lane == "phd":
+                for f, ts in rows:
+                    self.by_frame.setdefault(int(f), []).append(_centres(ts.boxes))
+
+    def lanes_capture(tracker, clock, source, seed):
+        truth = C.scene_truth(source)
+        ss = {f"ss_{name}": S.StoneSoupPHDLane(
+            tracker, lambda: clock.births, width=source.width, height=source.height,
+            noise=SS_LANES[name][1], seed=seed, clutter_rate=truth["clutter_rate"],
+            clutter=SS_LANES[name][0], fps=source.fps, truth=truth,
+            birth="truth" if name == "oracle-birth" else "pfscope") for name in lanes}
+        holder.update(clock=clock, ss=SSCollect(ss), file=TracksFile(), truth=truth,
+                      fps=source.fps)
+        return ss, [holder["ss"], holder["file"]]
+
+    def extra(tr, report):
+        c = tr.filter.particles
+        g = _centres(report.gt.boxes)
+        gts.append(g)
+        cl = holder["clock"].clusters
+        cl_est = cl.kept_centers[:, :2] if cl is not None else np.zeros((0, 2))
+        return {"n": len(c), "mass": float(c.mass),
+                "pf_kmeans": C.ospa_parts(_extract(c.states, c.mass, rng("pf_kmeans")), g,
+                                          OSPA_C),
+                "pf_clusters": C.ospa_parts(cl_est, g, OSPA_C),
+                "pf_live": C.ospa_parts(_centres(report.results["phd"].tracks.boxes), g,
+                                        OSPA_C)}
+
+    t = time.perf_counter()
+    hook, _, _src = run_phd_scene(T, frames, seed, extra_lanes=lanes_capture, extra=extra,
+                                  preset=preset)
+    wall = time.perf_counter() - t
+    by_frame = holder["file"].by_frame
+    per = {k: [e[k] for e in hook.extra] for k in ("pf_kmeans", "pf_clusters", "pf_live")}
+    per["pf_tracks"] = [C.ospa_parts(np.vstack(by_frame.get(i + 1, [np.zeros((0, 2))])), g,
+                                     OSPA_C) for i, g in enumerate(gts)]
+    ssh = holder["ss"]
+    for k in ssh.ss:
+        per[k] = [r[k]["parts"] for r in ssh.rows]
+    return {"wall": wall, "hook": hook, "ss_rows": ssh.rows, "lanes": list(ssh.ss),
+            "per_frame": per, "truth": holder["truth"], "fps": holder["fps"],
+            "mass": {"pf": [e["mass"] for e in hook.extra],
+                     **{k: [r[k]["mass"] for r in ssh.rows] for k in ssh.ss}}}
+
+
+def _summary(parts: list[dict], a: int, b: int) -> dict:
+    """Means over frames a+1..b of the OSPA parts, the missing and extra estimates."""
+    rows = parts[a:b]
+    out = {k: float(np.mean([p[k] for p in rows])) for k in ("ospa", "loc", "card", "est",
+                                                              "true", "cut")}
+    out["missing"] = float(np.mean([max(p["true"] - p["est"], 0) for p in rows]))
+    out["extra"] = float(np.mean([max(p["est"] - p["true"], 0) for p in rows]))
+    return out
+
+
 def bench_stonesoup(args) -> dict:
     import _stonesoup as S
 
@@ -437,134 +559,111 @@ def bench_stonesoup(args) -> dict:
     if why is not None:
         print(f"\n{why}")
         return {"skipped": why}
-    from pfscope.trackers.eval.ospa import ospa
-    from pfscope.trackers.pipeline import BaseHook
 
-    frames = args.ss_frames
-    print(f"\n=== Stone Soup {S.version()} SMC-PHD vs pfscope PHD-MT: same pipeline run, same "
-          f"detections (p_D 0.9, clutter 5/frame), same particles in every update; {frames} "
-          f"frames, seeds {', '.join(map(str, args.seeds))}; medians and OSPA over frames "
-          f"{frames // 2 + 1}..{frames} ===")
-
-    def lanes(tracker, clock, source, seed):
-        ss = {f"ss_{tag}": S.StoneSoupPHDLane(tracker, lambda: clock.births, width=source.width,
-                                               height=source.height, noise=noise, seed=seed,
-                                               clutter_rate=source.extra["clutter"])
-              for tag, noise in (("noise", True), ("nonoise", False))}
-        return ss, [SSCollect(ss)]
-
-    class SSCollect(BaseHook):
-        def __init__(self, ss):
-            self.ss = ss
-            self.rows = []
-
-        def on_frame(self, report):
-            self.rows.append({k: (report.step_seconds[k], lane.mass, lane.states,
-                                  lane.n_update) for k, lane in self.ss.items()})
-
-    def extra(tr, report):
-        c = tr.filter.particles
-        return (len(c), float(c.mass), c.states.copy(),
-                None if report.gt is None else report.gt.boxes.copy(),
-                np.array(report.results["phd"].tracks.boxes, dtype=float))
-
+    frames, warm, lanes = args.ss_frames, args.ss_warmup, list(args.ss_lanes)
+    print(f"\n=== Stone Soup {S.version()} SMC-PHD vs pfscope PHD-MT (preset {args.preset}): "
+          f"same pipeline run, same detections (p_D 0.9, Poisson clutter 5/frame, 25 fps), same "
+          f"particles in every update; {frames} frames, targets "
+          f"{', '.join(map(str, args.ss_targets))}, seeds {', '.join(map(str, args.ss_seeds))}; "
+          f"Stone Soup lanes {', '.join(lanes)}; times and OSPA over frames "
+          f"{warm + 1}..{frames} (warm-up 1..{warm} left out of every lane alike) ===")
+    keys = list(PF_ESTIMATES) + [f"ss_{name}" for name in lanes]
     results, rows = {}, []
     for T in args.ss_targets:
         per_seed = []
-        for seed in args.seeds:
-            captured = {}
-
-            def lanes_capture(tracker, clock, source, seed):
-                ss, hooks = lanes(tracker, clock, source, seed)
-                captured["hook"] = hooks[0]
-                return ss, hooks
-
-            t = time.perf_counter()
-            hook, _, _src = run_phd_scene(T, frames, seed, extra_lanes=lanes_capture,
-                                         extra=extra, preset=args.preset)
-            wall = time.perf_counter() - t
-            ssh = captured["hook"]
-            rng = np.random.default_rng(seed)
-            filt = [sum(r.get(s, 0.0) for s in PHD_STAGES[:4]) for r in hook.stages]
-            k0 = frames // 2      # steady state: the PHD-MT tracks need >= 5 frames to show
-            d = {"seed": seed, "run_seconds": wall,
-                 "pfscope_filter_ms": C.median(filt[k0:]) * 1e3,
-                 "pfscope_phdmt_ms": C.median(hook.step[k0:]) * 1e3,
-                 "particles_in_update": C.median(in_update(hook, lambda e: e[0])[k0:])}
+        for seed in args.ss_seeds:
+            r = ss_run(T, frames, seed, lanes, args.preset)
+            hook, ssr = r["hook"], r["ss_rows"]
+            filt = [sum(st.get(s, 0.0) for s in PHD_STAGES[:4]) for st in hook.stages]
+            pf_n = in_update(hook, lambda e: e["n"])
+            d = {"seed": seed, "run_seconds": r["wall"], "fps": r["fps"], "truth": r["truth"],
+                 "pfscope_filter_ms": C.median(filt[warm:]) * 1e3,
+                 "pfscope_phdmt_ms": C.median(hook.step[warm:]) * 1e3,
+                 "particles_in_update": C.median(pf_n[warm:])}
             # same budget: Stone Soup's update had L_(k-1) + J_k particles too (from frame 2;
             # frame 1 starts Stone Soup from one particle of negligible weight)
-            pf_n = in_update(hook, lambda e: e[0])
             d["budget_max_abs_diff"] = max(
-                (abs(r[k][3] - n) for r, n in zip(ssh.rows[1:], pf_n[1:])
-                 for k in ("ss_noise", "ss_nonoise")), default=0)
-            o = {"pf_kmeans": [], "pf_tracks": [], "ss_noise": [],
-                 "ss_nonoise": []}
-            mass = {"pf": [], "ss_noise": [], "ss_nonoise": []}
-            for i in range(k0, frames):
-                _n, m, states, gt, tracks = hook.extra[i]
-                g = gt[:, :2] + gt[:, 2:4] / 2
-                o["pf_kmeans"].append(ospa(_extract(states, m, rng), g, 100, 1))
-                tb = tracks.reshape(-1, 4)
-                o["pf_tracks"].append(ospa(tb[:, :2] + tb[:, 2:4] / 2, g, 100, 1))
-                mass["pf"].append(m)
-                for k in ("ss_noise", "ss_nonoise"):
-                    _, sm, sst, _ = ssh.rows[i][k]
-                    o[k].append(ospa(_extract(sst, sm, rng), g, 100, 1))
-                    mass[k].append(sm)
-            for k in ("ss_noise", "ss_nonoise"):
-                d[f"{k}_ms"] = C.median(r[k][0] for r in ssh.rows[k0:]) * 1e3
-            d["ospa"] = {k: float(np.mean(v)) for k, v in o.items() if v}
-            d["mean_mass"] = {k: float(np.mean(v)) for k, v in mass.items()}
+                (abs(row[k]["n_update"] - n) for row, n in zip(ssr[1:], pf_n[1:])
+                 for k in r["lanes"]), default=0)
+            for k in r["lanes"]:
+                d[f"{k}_ms"] = C.median(row[k]["secs"] for row in ssr[warm:]) * 1e3
+            d["parts"] = {k: _summary(r["per_frame"][k], warm, frames) for k in keys}
+            d["warmup"] = {k: _summary(r["per_frame"][k], 0, warm) if warm else None
+                           for k in keys}
+            d["ospa"] = {k: d["parts"][k]["ospa"] for k in keys}
+            d["mean_mass"] = {k: float(np.mean(v[warm:])) for k, v in r["mass"].items()}
+            d["per_frame"] = {k: {"ospa": [p["ospa"] for p in v], "est": [p["est"] for p in v]}
+                              for k, v in r["per_frame"].items()}
             per_seed.append(d)
-            print(f"  {T} targets, seed {seed}: {wall:.1f} s", file=sys.stderr)
+            print(f"  {T} targets, seed {seed}: {r['wall']:.1f} s", file=sys.stderr)
         agg = {"targets": T, "seeds": per_seed}
         agg["budget_max_abs_diff"] = max(d["budget_max_abs_diff"] for d in per_seed)
-        for key in ("pfscope_filter_ms", "pfscope_phdmt_ms", "ss_noise_ms", "ss_nonoise_ms",
-                    "particles_in_update"):
+        for key in ("pfscope_filter_ms", "pfscope_phdmt_ms", "particles_in_update",
+                    *(f"ss_{name}_ms" for name in lanes)):
             agg[key] = C.median(d[key] for d in per_seed)
-        for k in ("ss_noise", "ss_nonoise"):
+        for name in lanes:
+            k = f"ss_{name}"
             agg[f"ratio_{k}_vs_filter"] = C.median(d[f"{k}_ms"] / d["pfscope_filter_ms"]
                                                    for d in per_seed)
             agg[f"ratio_{k}_vs_phdmt"] = C.median(d[f"{k}_ms"] / d["pfscope_phdmt_ms"]
                                                   for d in per_seed)
-        agg["ospa_mean"] = {k: float(np.mean([d["ospa"][k] for d in per_seed]))
-                            for k in per_seed[0]["ospa"]}
+        agg["ospa_mean"] = {k: float(np.mean([d["ospa"][k] for d in per_seed])) for k in keys}
         agg["ospa_seed_std"] = {k: float(np.std([d["ospa"][k] for d in per_seed]))
-                                for k in per_seed[0]["ospa"]}
+                                for k in keys}
+        agg["parts_mean"] = {k: {q: float(np.mean([d["parts"][k][q] for d in per_seed]))
+                                 for q in per_seed[0]["parts"][k]} for k in keys}
+        agg["warmup_ospa_mean"] = ({k: float(np.mean([d["warmup"][k]["ospa"]
+                                                      for d in per_seed])) for k in keys}
+                                   if warm else {})
         agg["mean_mass"] = {k: float(np.mean([d["mean_mass"][k] for d in per_seed]))
                             for k in per_seed[0]["mean_mass"]}
+        best_ss = min(agg["ospa_mean"][f"ss_{name}"] for name in lanes) if lanes else None
+        agg["phdmt_tracks_below_stonesoup"] = (None if best_ss is None else
+                                               agg["ospa_mean"]["pf_tracks"] < best_ss)
         results[T] = agg
         rows.append([T, f"{agg['particles_in_update']:,.0f}", ms(agg["pfscope_filter_ms"]),
-                     ms(agg["pfscope_phdmt_ms"]), ms(agg["ss_noise_ms"]),
-                     ms(agg["ss_nonoise_ms"]),
-                     f"{agg['ratio_ss_noise_vs_filter']:.1f}x / "
-                     f"{agg['ratio_ss_noise_vs_phdmt']:.1f}x",
-                     f"{agg['ratio_ss_nonoise_vs_filter']:.1f}x / "
-                     f"{agg['ratio_ss_nonoise_vs_phdmt']:.1f}x"])
-    print(C.table(["targets", "particles in update", "pfscope PHD filter ms", "PHD-MT ms",
-                   "SS noise=True ms", "SS noise=False ms", "SS(noise) / filter / PHD-MT",
-                   "SS(no noise) / filter / PHD-MT"], rows))
+                     ms(agg["pfscope_phdmt_ms"])]
+                    + [f"{ms(agg[f'ss_{n}_ms'])} ({agg[f'ratio_ss_{n}_vs_filter']:.1f}x / "
+                       f"{agg[f'ratio_ss_{n}_vs_phdmt']:.1f}x)" for n in lanes])
+    print(C.table(["targets", "particles in update", "pfscope PHD filter ms", "PHD-MT ms"]
+                  + [f"SS {n} ms (/ filter / PHD-MT)" for n in lanes], rows))
     print("particles in the update, Stone Soup lanes vs PHD-MT, largest difference on any "
           f"frame after the first: {max(a['budget_max_abs_diff'] for a in results.values())} "
           "(1 on frames without births: Stone Soup's expansion scheme draws at least one)")
-    print("(ms: medians over frames, then over seeds; ratios: Stone Soup time / pfscope time in "
-          "the same run; 'filter' = predict+birth+update+resample, PHD-MT = the whole step with "
-          "K-means and association)")
+    print(f"(ms: medians over frames {warm + 1}..{frames}, then over seeds; ratios: Stone Soup "
+          "time / pfscope time in the same run; 'filter' = predict+birth+update+resample, "
+          "PHD-MT = the whole step with K-means and association)")
+    labels = {**PF_ESTIMATES, **{f"ss_{n}": SS_LANES[n][2] for n in lanes}}
     acc_rows = []
     for T, agg in results.items():
-        om, sd, mm = agg["ospa_mean"], agg["ospa_seed_std"], agg["mean_mass"]
-        for label, ko, km in (("pfscope PHD filter, k-means(round mass)", "pf_kmeans", "pf"),
-                              ("pfscope PHD-MT tracks (output)", "pf_tracks", "pf"),
-                              ("Stone Soup SMC-PHD noise=True, k-means", "ss_noise", "ss_noise"),
-                              ("Stone Soup SMC-PHD noise=False, k-means", "ss_nonoise",
-                               "ss_nonoise")):
-            acc_rows.append([T, label, f"{om[ko]:.1f} ± {sd[ko]:.1f}", f"{mm[km]:.2f}"])
-    print("\naccuracy on the same detections (OSPA c = 100 px, p = 1, on box centres, mean "
-          "over frames then seeds ± std over seeds; mass = mean PHD mass after the update; "
-          "true count = targets; Stone Soup is given the paper's κ(z), so the comparison is "
-          "like for like under the paper preset):")
-    print(C.table(["targets", "estimate", "OSPA px", "mean mass"], acc_rows, "rlrr"))
-    return {"stonesoup_version": S.version(), "frames": frames, "seeds": list(args.seeds),
+        om, sd, pm, mm = (agg["ospa_mean"], agg["ospa_seed_std"], agg["parts_mean"],
+                          agg["mean_mass"])
+        for k in keys:
+            p = pm[k]
+            mass = mm["pf"] if k.startswith("pf_") else mm[k]
+            acc_rows.append([T, labels[k], f"{om[k]:.1f} ± {sd[k]:.1f}", f"{p['loc']:.1f}",
+                             f"{p['card']:.1f}", f"{p['est']:.1f}", f"{p['missing']:.1f}",
+                             f"{p['extra']:.1f}", f"{p['cut']:.1f}",
+                             f"{agg['warmup_ospa_mean'][k]:.1f}" if warm else "-",
+                             f"{mass:.2f}"])
+    print(f"\naccuracy on the same detections: OSPA (c = {OSPA_C:.0f} px, p = 1, box centres) "
+          f"over frames {warm + 1}..{frames}, mean over frames then seeds ± std over seeds = "
+          "loc (assigned pairs, d cut at c) + card (c × |#est − #true| / max); est = mean "
+          "estimates per frame (true = targets); missing / extra = mean shortfall / excess of "
+          "estimates; cut = assigned pairs at the cut-off (a miss + a false target); OSPA "
+          f"1..{warm} = the warm-up frames left out; mass = mean PHD mass after the update "
+          "(PHD-MT's for every pfscope row). Oracle = Stone Soup given the scene's true clutter "
+          "density, p_D and measurement noise:")
+    print(C.table(["targets", "estimate", "OSPA px", "loc", "card", "est", "missing", "extra",
+                   "cut", f"OSPA 1..{warm}", "mass"], acc_rows, "rlrrrrrrrrr"))
+    for T, agg in results.items():
+        if lanes:
+            print(f"{T} targets: PHD-MT tracks file {agg['ospa_mean']['pf_tracks']:.1f} px vs "
+                  f"best Stone Soup lane "
+                  f"{min(agg['ospa_mean'][f'ss_{n}'] for n in lanes):.1f} px: "
+                  f"{'lower' if agg['phdmt_tracks_below_stonesoup'] else 'NOT lower'}")
+    return {"stonesoup_version": S.version(), "preset": args.preset, "frames": frames,
+            "warmup": warm, "seeds": list(args.ss_seeds), "lanes": lanes,
             "rows": list(results.values())}
 
 
@@ -588,19 +687,47 @@ def parse_args(argv=None):
     ap.add_argument("--preset", default="paper",
                     help="preset of every tracker that has it (default: paper; the others run "
                          "their first preset)")
+    ss = ap.add_argument_group("stonesoup section (override the mode's defaults)")
+    ss.add_argument("--ss-targets", nargs="+", type=int, metavar="N",
+                    help="target counts (full: 4 16 64; quick: 4 16)")
+    ss.add_argument("--ss-frames", type=int, metavar="N",
+                    help="frames per run (full and quick: 60)")
+    ss.add_argument("--ss-warmup", type=int, metavar="W",
+                    help="first frames left out of OSPA and times, for every lane alike "
+                         "(full and quick: 10)")
+    ss.add_argument("--ss-seeds", nargs="+", type=int, metavar="S",
+                    help="scene and filter seeds (full: 0 1 2; quick: 0)")
+    ss.add_argument("--ss-lanes", nargs="+", choices=tuple(SS_LANES), metavar="LANE",
+                    help="Stone Soup lanes: nonoise (pfscope's κ(z), no noise draw), oracle "
+                         "(the scene's true clutter density, p_D and measurement noise), "
+                         "oracle-birth (oracle + the scene's true births), noise (pfscope's "
+                         "κ(z), Stone Soup's default noise draw) (default: nonoise oracle "
+                         "oracle-birth)")
     ap.add_argument("--tiny", action="store_true", help=argparse.SUPPRESS)  # the smoke test
     ap.add_argument("--memory-child", nargs=2, type=int, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     full = dict(stage_frames=60, scale_frames=30, targets=[4, 16, 64, 256], rec_frames=100,
-                rec_repeat=3, mem_frames=10_000, mem_every=1_000, ss_frames=24,
-                ss_targets=[4, 16, 64], seeds=[0, 1, 2])
+                rec_repeat=3, mem_frames=10_000, mem_every=1_000, ss_frames=60, ss_warmup=10,
+                ss_targets=[4, 16, 64], ss_seeds=[0, 1, 2],
+                ss_lanes=["nonoise", "oracle", "oracle-birth"])
     quick = dict(stage_frames=15, scale_frames=12, targets=[4, 16, 64], rec_frames=25,
-                 rec_repeat=1, mem_frames=1_000, mem_every=100, ss_frames=14,
-                 ss_targets=[4, 16], seeds=[0])
+                 rec_repeat=1, mem_frames=1_000, mem_every=100, ss_frames=60, ss_warmup=10,
+                 ss_targets=[4, 16], ss_seeds=[0],
+                 ss_lanes=["nonoise", "oracle", "oracle-birth"])
     tiny = dict(stage_frames=7, scale_frames=7, targets=[4, 8], rec_frames=4, rec_repeat=1,
-                mem_frames=30, mem_every=10, ss_frames=8, ss_targets=[4], seeds=[0])
+                mem_frames=30, mem_every=10, ss_frames=8, ss_warmup=2, ss_targets=[4],
+                ss_seeds=[0], ss_lanes=list(SS_LANES))
     for k, v in (tiny if args.tiny else quick if args.quick else full).items():
-        setattr(args, k, v)
+        if getattr(args, k, None) is None:
+            setattr(args, k, v)
+    args.ss_lanes = list(dict.fromkeys(args.ss_lanes))
+    if args.ss_frames < 2:
+        ap.error(f"--ss-frames must be >= 2, got {args.ss_frames}")
+    if not 0 <= args.ss_warmup < args.ss_frames:
+        ap.error(f"--ss-warmup must be in [0, --ss-frames), got {args.ss_warmup} "
+                 f"(frames {args.ss_frames})")
+    if any(t < 1 for t in args.ss_targets):
+        ap.error(f"--ss-targets must be >= 1, got {' '.join(map(str, args.ss_targets))}")
     return args
 
 

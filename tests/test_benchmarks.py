@@ -105,4 +105,78 @@ def test_bench_runs_tiny_and_writes_json(tmp_path):
         assert row["ss_noise_ms"] > 0 and row["ss_nonoise_ms"] > 0
         for v in row["ospa_mean"].values():
             assert 0 <= v <= 100
-        assert set(row["mean_mass"]) == {"pf", "ss_noise", "ss_nonoise"}
+        lanes = {"ss_noise", "ss_nonoise", "ss_oracle", "ss_oracle-birth"}
+        assert set(row["mean_mass"]) == {"pf"} | lanes
+        assert set(row["ospa_mean"]) == {"pf_tracks", "pf_live", "pf_clusters",
+                                         "pf_kmeans"} | lanes
+        for parts in row["parts_mean"].values():     # OSPA = localisation + cardinality
+            assert parts["ospa"] == pytest.approx(parts["loc"] + parts["card"])
+        assert ss["warmup"] == 2 and ss["frames"] == 8
+        seed0 = row["seeds"][0]
+        assert len(seed0["per_frame"]["pf_tracks"]["ospa"]) == 8
+        assert seed0["truth"]["p_detect"] == 0.9 and seed0["truth"]["targets"] == 4
+
+
+def test_scene_truth_matches_the_scene(common):
+    """The true model given to the oracle Stone Soup lanes is the one targets_scene draws
+    from: clutter sizes inside the stated support, its rate, and the box noise."""
+    cl = common.targets_scene(4, 400, seed=1, p_detect=0.0)           # clutter only
+    w, h = cl.det.boxes[:, 2], cl.det.boxes[:, 3]
+    (w0, w1), (a0, a1) = common.CLUTTER_W, common.CLUTTER_ASPECT
+    assert w.min() >= w0 and w.max() <= w1
+    assert (h / w).min() >= a0 - 1e-9 and (h / w).max() <= a1 + 1e-9
+    assert len(cl.det) / 400 == pytest.approx(5.0, rel=0.1)
+    truth = common.scene_truth(cl)
+    assert common.clutter_size_area() == pytest.approx(1687.5)
+    assert truth["clutter_density"] == pytest.approx(
+        5.0 / (cl.width * cl.height * 1687.5), rel=1e-9)
+    tg = common.targets_scene(4, 400, seed=1, p_detect=1.0, clutter=0.0)  # targets only
+    err = (tg.det.boxes - tg.gt.boxes) / np.tile(tg.gt.boxes[:, 2:4], 2)
+    assert err.std(axis=0) == pytest.approx([common.BOX_NOISE] * 4, rel=0.1)
+
+
+def test_ospa_parts_add_up_to_ospa(common):
+    from pfscope.trackers.eval.ospa import ospa
+
+    rng = np.random.default_rng(0)
+    for m, k in ((0, 0), (0, 3), (4, 0), (3, 5), (6, 2), (5, 5)):
+        x, y = rng.uniform(0, 300, (m, 2)), rng.uniform(0, 300, (k, 2))
+        p = common.ospa_parts(x, y, 100.0)
+        assert p["ospa"] == pytest.approx(ospa(x, y, 100.0, 1.0))
+        assert p["ospa"] == pytest.approx(p["loc"] + p["card"])
+        assert (p["est"], p["true"]) == (m, k)
+        assert p["card"] == pytest.approx(100.0 * abs(m - k) / max(m, k, 1))
+
+
+@pytest.fixture(scope="module")
+def bench(common):
+    import bench
+
+    return bench
+
+
+def test_stonesoup_options_override_the_mode(bench, capsys):
+    a = bench.parse_args(["--quick", "--ss-targets", "8", "--ss-frames", "30", "--ss-warmup",
+                          "5", "--ss-seeds", "3", "4", "--ss-lanes", "oracle", "oracle"])
+    assert (a.ss_targets, a.ss_frames, a.ss_warmup, a.ss_seeds, a.ss_lanes) == (
+        [8], 30, 5, [3, 4], ["oracle"])
+    d = bench.parse_args([])
+    assert d.ss_frames >= 60 and d.ss_targets == [4, 16, 64] and d.ss_seeds == [0, 1, 2]
+    for bad in (["--ss-frames", "10", "--ss-warmup", "10"], ["--ss-targets", "0"],
+                ["--ss-lanes", "bogus"]):
+        with pytest.raises(SystemExit) as e:
+            bench.parse_args(bad)
+        assert e.value.code == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert "error:" in err[-1]                     # argparse's one-line error
+
+
+def test_oracle_births_count_the_targets_where_pfscope_births_count_the_clutter(bench):
+    """Given the true κ and p_D but pfscope's birth mass (0.01 per detection), Stone Soup makes
+    nearly every clutter detection a target; with the true births too its mass follows the
+    true count."""
+    pytest.importorskip("stonesoup")
+    r = bench.ss_run(4, 30, 0, ["oracle", "oracle-birth"], "paper")
+    m = {k: float(np.mean(v[10:])) for k, v in r["mass"].items()}
+    assert m["ss_oracle"] > 1.5 * 4
+    assert 0.75 * 4 < m["ss_oracle-birth"] < 1.25 * 4
