@@ -140,3 +140,16 @@ def test_classifier_option_reaches_the_trackers_that_have_one(tmp_path, capsys):
                        "--frames", "2", "--out", out, "--quiet"], capsys)
     assert rc == 2 and "m.npz" in err and len(err.strip().splitlines()) == 1
     assert not out.exists()
+
+
+def test_video_option_offers_exactly_the_recorder_modes():
+    """`--video` of record and compare lists the recorder's modes (a mode added to the recorder
+    but not to the CLI, or the reverse, fails here)."""
+    from pfscope.viewer_app.cli import build_parser
+    from pfscope.viewer_app.recorder import VIDEO_MODES
+
+    parser = build_parser()
+    subs = next(a for a in parser._actions if a.__class__.__name__ == "_SubParsersAction")
+    for cmd in ("record", "compare"):
+        video = next(a for a in subs.choices[cmd]._actions if "--video" in a.option_strings)
+        assert tuple(video.choices) == VIDEO_MODES and video.default == "encode"

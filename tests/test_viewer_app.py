@@ -83,6 +83,20 @@ def test_recording_carries_typed_properties_about_note_and_scores(tmp_path, caps
     assert "\n" not in line and "rerun" in line
 
 
+def test_info_names_the_preset_a_run_used(tmp_path, capsys):
+    """Without --preset the recording names the preset the tracker ran (PHD-MT's first one,
+    `practical`), not "default"; with --preset, that one."""
+    for preset, want in ((None, "practical"), ("paper", "paper")):
+        out = tmp_path / f"{want}.rrd"
+        args = ["record", str(_toy(tmp_path, n=4, name=want)), "--out", str(out), "--quiet",
+                "--level", "tracks"] + (["--preset", preset] if preset else [])
+        assert main(args) == 0
+        capsys.readouterr()
+        assert read_rrd(out)["/__properties/run"][0][1]["preset"] == [want]
+        assert main(["info", str(out)]) == 0
+        assert f"preset {want};" in capsys.readouterr().out
+
+
 def test_info_on_a_missing_file_is_one_line(tmp_path, capsys):
     assert main(["info", str(tmp_path / "nope.rrd")]) == 2
     assert "no such recording" in capsys.readouterr().err

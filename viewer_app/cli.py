@@ -134,6 +134,11 @@ def build_parser() -> argparse.ArgumentParser:
                    help="how much to record: tracks < clusters < particles (default clusters)")
     r.add_argument("--max-points", type=POSITIVE_INT, default=3000,
                    help="decimate each particle cloud to at most this many points per frame")
+    r.add_argument("--video", choices=["encode", "source", "auto"], default="encode",
+                   help="the frames in the recording: 'encode' = re-encode as JPEG on a worker "
+                        "thread (default), 'source' = the source's own JPEG bytes (no encoding; "
+                        "larger files when the source JPEGs are high quality), 'auto' = the "
+                        "source's bytes when its first frame is not larger than a re-encode")
     r.add_argument("--fps", type=POSITIVE, default=None,
                    help="frame rate of an image folder or a video file (MOT folders have theirs "
                         "in seqinfo.ini)")
@@ -168,6 +173,9 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--level", choices=list(LEVELS), default="tracks",
                    help="how much to record per tracker (default tracks)")
     c.add_argument("--max-points", type=POSITIVE_INT, default=3000)
+    c.add_argument("--video", choices=["encode", "source", "auto"], default="encode",
+                   help="the frames in the recording: encode (default) | source | auto "
+                        "(see `pfscope record --help`)")
     c.add_argument("--fps", type=POSITIVE, default=None)
     c.add_argument("--force", action="store_true")
     c.add_argument("--json", action="store_true", help="print the scores as JSON")
@@ -533,7 +541,7 @@ def cmd_compare(args) -> int:
     file_opts = _lane_params_options(args, [ln.tracker for ln in parse_lanes(names)])
     opts = RecordOptions(detector=args.detector, min_score=args.min_score, level=args.level,
                          max_points=args.max_points, frames=count, start=start, seed=args.seed,
-                         force=args.force, preset=args.preset,
+                         force=args.force, preset=args.preset, video=args.video,
                          tracker_options={**file_opts, **_tracker_options(args)})
     res = record(source, out, opts, trackers=names, progress=not args.quiet)
     if res.scores:
@@ -622,7 +630,7 @@ def cmd_record(args) -> int:
                          level=args.level, max_points=args.max_points, frames=count, start=start,
                          seed=args.seed, force=args.force, tracks_out=args.tracks_out,
                          spawn=args.spawn, serve=args.serve, preset=preset,
-                         timing=args.timing, tracker_options=options)
+                         timing=args.timing, tracker_options=options, video=args.video)
     res = record(source, out, opts, progress=not args.quiet)
     size = res.bytes / 1e6
     state = ("interrupted; recording finished, readable and kept as incomplete"

@@ -85,7 +85,7 @@ class RecordOptions:
     tracks_out: Optional[Path] = None
     spawn: bool = False
     serve: bool = False
-    preset: Optional[str] = None       # None: the tracker's first preset (its paper settings)
+    preset: Optional[str] = None       # None: each tracker's first (default) preset
     timing: bool = False               # record per-step wall time (breaks byte-identical reruns)
     tracker_options: dict = field(default_factory=dict)
     long_miss: int = 10                # failure index: a gt unmatched this many frames in a row
@@ -255,6 +255,8 @@ def _record_locked(source, out, opts, lanes, infos, params, tracks_out, live, pr
     det_opts = {"min_score": opts.min_score} if det_name == "file" else {}
     total = frames_to_read(source, opts.frames, opts.start)
 
+    # what `pfscope info` shows: the preset each lane runs (its first one when none was given)
+    preset_name = opts.preset or ", ".join(dict.fromkeys(next(iter(i.presets)) for i in infos))
     config = {
         "trackers": ",".join(names), "detector": det_name or "none",
         "min_score": opts.min_score, "level": opts.level, "max_points": opts.max_points,
@@ -270,7 +272,7 @@ def _record_locked(source, out, opts, lanes, infos, params, tracks_out, live, pr
         "run": {"lanes": names, "trackers": [ln.tracker for ln in lanes],
                 "detector": det_name or "none", "min_score": opts.min_score,
                 "level": opts.level, "max_points": opts.max_points, "first_frame": opts.start,
-                "frames": total, "seed": opts.seed, "preset": opts.preset or "default",
+                "frames": total, "seed": opts.seed, "preset": preset_name,
                 **({"video": opts.video} if opts.video != "encode" else {})},
         "source": source.describe(),
     }
