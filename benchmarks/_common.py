@@ -267,7 +267,18 @@ def rss_mb() -> float:
 
 
 def peak_rss_mb() -> float:
-    """Peak resident set size of this process so far, MB (``ru_maxrss``)."""
+    """Peak resident set size of this process so far, MB: ``VmHWM`` of /proc/self/status where
+    there is one, else ``ru_maxrss``.  Linux keeps ``ru_maxrss`` across fork + exec, so in a
+    child started by ``subprocess`` it reports the *parent's* peak when that is higher (this
+    was the "unattributed transient" of the memory section); ``VmHWM`` belongs to the
+    process's own address space."""
+    try:
+        with open("/proc/self/status") as f:
+            for line in f:
+                if line.startswith("VmHWM:"):
+                    return int(line.split()[1]) / 1024.0
+    except OSError:
+        pass
     import resource
 
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
