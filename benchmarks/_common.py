@@ -173,10 +173,8 @@ def command_line() -> str:
 # ----------------------------------------------------------------------------- many-target scene
 
 def _frame_class():
-    import numpy as np
-
     from pfscope.trackers.data.sources import Source
-    from pfscope.trackers.types import Frame
+    from pfscope.trackers.types import Frame, blank_image
 
     class DetOnlySource(Source):
         """Frames carry a black image of the source's size (one read-only zero-stride view, no
@@ -185,8 +183,7 @@ def _frame_class():
 
         def frames(self, limit=None):
             n = self.length if limit is None else min(limit, self.length)
-            img = np.broadcast_to(np.zeros((1, 1, 3), dtype=np.uint8),
-                                  (self.height, self.width, 3))
+            img = blank_image(self.height, self.width)
             for k in range(1, n + 1):
                 yield Frame(k, (k - 1) / self.fps, img)
 

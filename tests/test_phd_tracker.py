@@ -156,11 +156,12 @@ def test_appearance_reads_real_pixels_only():
     frame has pixels, none for a blank stand-in (a broadcast view, as the tuner builds for
     trackers that need no image), and none when ``app_weight`` is 0."""
     from pfscope.trackers.phd.appearance import DIM
-    from pfscope.trackers.types import Detections, Frame
+    from pfscope.trackers.types import Detections, Frame, blank_image
 
     img = np.zeros((240, 320, 3), np.uint8)
     img[50:130, 100:140] = (200, 30, 30)
-    blank = np.broadcast_to(np.zeros((1, 1, 3), np.uint8), (240, 320, 3))
+    blank = blank_image(240, 320)
+    assert Frame(1, 0.0, img).has_pixels and not Frame(1, 0.0, blank).has_pixels
     dets = Detections(np.array([[100.0, 50.0, 40.0, 80.0]]), np.array([1.0]))
 
     def features_seen(image, **options):

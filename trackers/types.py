@@ -58,6 +58,22 @@ class Frame:
     def width(self) -> int:
         return int(self.image.shape[1])
 
+    @property
+    def has_pixels(self) -> bool:
+        """Whether :attr:`image` holds real pixels, not a :func:`blank_image` stand-in (which
+        only gives the frame its size)."""
+        im = self.image
+        return (im is not None and getattr(im, "ndim", 0) == 3 and im.size > 0
+                and all(st != 0 for st in im.strides))
+
+
+def blank_image(height: int, width: int) -> np.ndarray:
+    """A black (height, width, 3) uint8 image that takes no memory (a read-only zero-stride
+    view): what a frame carries when nothing decodes its pixels (the tuner and the
+    detections-only benchmarks, for trackers that do not read them); ``Frame.has_pixels`` is
+    False for it."""
+    return np.broadcast_to(np.zeros((1, 1, 3), np.uint8), (int(height), int(width), 3))
+
 
 @dataclass(frozen=True)
 class Detections:

@@ -39,7 +39,6 @@ from __future__ import annotations
 import math
 import os
 import re
-import sys
 import time
 import warnings
 from dataclasses import dataclass, field
@@ -302,11 +301,11 @@ def blank_image_source(src):
     view: no memory, nothing decoded), for trackers that do not look at pixels.  None when
     the source's length is unknown or its timestamps are not ``(k - 1) / fps``."""
     from pfscope.trackers.data.sources import Source
-    from pfscope.trackers.types import Frame
+    from pfscope.trackers.types import Frame, blank_image
 
     if src.length is None or src.kind not in ("mot", "synthetic", "images"):
         return None
-    blank = np.broadcast_to(np.zeros((1, 1, 3), np.uint8), (src.height, src.width, 3))
+    blank = blank_image(src.height, src.width)
 
     class _Blank(Source):
         def frames(self, limit=None, start=1):

@@ -588,14 +588,13 @@ class BirthResult:
 
 
 def mass_near(predicted: ParticleSet, Z: np.ndarray, bp: BirthParams = BirthParams(),
-              lk: LikelihoodParams = LikelihoodParams(),
-              budget: int = DEFAULT_BUDGET) -> np.ndarray:
+              lk: LikelihoodParams = LikelihoodParams()) -> np.ndarray:
     """M(z) (N_z,): predicted mass inside the ``gate`` confidence ellipsoid of the observation
     noise around each z (maggio2007 §2, "cumulative masses M(z_{k,j}) of the propagated
     particles that are inside the 99% confidence interval").  Only the particles near each z
     are looked at (a grid on the particles' positions, :func:`._kernels.mass_near_kernel`;
-    the same float64 distances as the dense test); memory is O(N + N_z), so ``budget`` (kept
-    for the API) has nothing left to bound."""
+    the same float64 distances as the dense test); memory is O(N + N_z), with no pair budget
+    to bound."""
     Z = np.asarray(Z, dtype=np.float64).reshape(-1, OBS_DIM)
     if len(predicted) == 0 or len(Z) == 0:
         return np.zeros(len(Z))
@@ -654,7 +653,7 @@ def birth(predicted: ParticleSet, Z, params: PHDParams, rng: np.random.Generator
     Draw order: (J, 4) normals, J direction uniforms, J speed normals."""
     Z = as_observations(Z)
     bp, lk = params.birth, params.likelihood
-    m_near = mass_near(predicted, Z, bp, lk, params.gating.pair_budget)
+    m_near = mass_near(predicted, Z, bp, lk)
     j = allocate_births(m_near, bp)
     n = int(j.sum())
     eps = rng.standard_normal((n, OBS_DIM))
@@ -737,6 +736,15 @@ def update(particles: ParticleSet, log_g: LogG, log_kappa: np.ndarray,
     return _update_pairs(particles, chunks, log_kappa, p_miss)
 
 
+def _missed_only(particles: ParticleSet, log_kappa: np.ndarray, p_miss: float) -> UpdateResult:
+    """Eq. (5) with no detection or no particle: every weight × p_M, C(z) = 0."""
+    n_z = len(log_kappa)
+    out = ParticleSet(particles.states, particles.log_weights + _log_probs(p_miss)[0],
+                      particles.labels, particles.extra)
+    return UpdateResult(out, np.zeros(n_z), np.exp(log_kappa), np.zeros(n_z),
+                        p_miss * particles.mass)
+
+
 def _log_probs(p_miss: float) -> tuple[float, float]:
     log_pm = math.log(p_miss) if p_miss > 0 else -np.inf
     log_pd = math.log1p(-p_miss) if p_miss < 1 else -np.inf
@@ -752,12 +760,11 @@ def _update_dense(particles: ParticleSet, log_g: np.ndarray, log_kappa: np.ndarr
     if log_g.shape != (len(particles), n_z):
         raise ValueError(f"update: log_g must be (N particles, N_z) = ({len(particles)}, {n_z}), "
                          f"got {log_g.shape}")
+    if n_z == 0 or len(particles) == 0:
+        return _missed_only(particles, log_kappa, p_miss)
     log_pm, log_pd = _log_probs(p_miss)
     m_pred = particles.mass
     kappa = np.exp(log_kappa)
-    if n_z == 0 or len(particles) == 0:
-        out = ParticleSet(particles.states, lw + log_pm, particles.labels, particles.extra)
-        return UpdateResult(out, np.zeros(n_z), kappa, np.zeros(n_z), p_miss * m_pred)
     log_psi = log_pd + log_g                                            # (N, N_z)
     log_c = logsumexp(log_psi + lw[:, None], axis=0)                    # (N_z,)
     log_den = np.logaddexp(log_kappa, log_c)
@@ -781,12 +788,11 @@ def _update_gaussian(particles: ParticleSet, g: GatedGaussian, log_kappa: np.nda
     n, n_z = len(particles), len(log_kappa)
     if len(Z) != n_z:
         raise ValueError(f"update: {len(Z)} detections but {n_z} clutter densities")
+    if n_z == 0 or n == 0:
+        return _missed_only(particles, log_kappa, p_miss)
     log_pm, log_pd = _log_probs(p_miss)
     m_pred = particles.mass
     kappa = np.exp(log_kappa)
-    if n_z == 0 or n == 0:
-        out = ParticleSet(particles.states, lw + log_pm, particles.labels, particles.extra)
-        return UpdateResult(out, np.zeros(n_z), kappa, np.zeros(n_z), p_miss * m_pred)
     lk = g.params
     by_det = lk.obs_std_source == "detection"
     std = obs_std(Z[:, 2:4] if by_det else particles.states[:, 4:6], lk)
@@ -810,12 +816,11 @@ def _update_pairs(particles: ParticleSet, chunks: Iterable[LogGPairs], log_kappa
     particle's bracket ``p_M + Σ_z ψ/(κ + C)`` is a running log-sum-exp over the chunks."""
     lw = particles.log_weights
     n, n_z = len(particles), len(log_kappa)
+    if n_z == 0 or n == 0:
+        return _missed_only(particles, log_kappa, p_miss)
     log_pm, log_pd = _log_probs(p_miss)
     m_pred = particles.mass
     kappa = np.exp(log_kappa)
-    if n_z == 0 or n == 0:
-        out = ParticleSet(particles.states, lw + log_pm, particles.labels, particles.extra)
-        return UpdateResult(out, np.zeros(n_z), kappa, np.zeros(n_z), p_miss * m_pred)
     # Running log-sum-exp of the bracket per particle as (shift, sum): log = shift + log(sum).
     if np.isfinite(log_pm):
         acc_shift, acc_sum = np.full(n, log_pm), np.ones(n)

@@ -192,14 +192,6 @@ def frame_rate(frame: Frame) -> Optional[float]:
     return None
 
 
-def _has_pixels(frame: Frame) -> bool:
-    """Whether the frame carries a real image (not a blank stand-in: a broadcast view, as the
-    tuner gives trackers that do not need pixels)."""
-    im = frame.image
-    return (im is not None and getattr(im, "ndim", 0) == 3 and im.size > 0
-            and all(st != 0 for st in im.strides))
-
-
 def _rows(finalised: tuple[FinalRows, ...], flagged: bool) -> Rows:
     if not flagged:
         return [(r.frame, TrackSet(r.ids, r.boxes)) for r in finalised]
@@ -248,7 +240,7 @@ class _AssociatingTracker:
         feats = None
         if frame.image is not None and getattr(frame.image, "ndim", 0) >= 2:
             self.associator.area = float(frame.width * frame.height)
-        if self.associator.params.app_weight > 0 and _has_pixels(frame):
+        if self.associator.params.app_weight > 0 and frame.has_pixels:
             feats = box_features(frame.image, states)
         res = self.associator.step(frame.index, states, feats)
         self._report_association(frame, res, log)
