@@ -291,7 +291,7 @@ def _brute_d2(X, centers, p):
 
 
 def test_indexed_assignment_is_the_argmin_with_ties_and_outliers():
-    from pfscope.trackers.phd import _kernels
+    from pfscope.trackers.phd import _kmeans_kernels
 
     rng = np.random.default_rng(3)
     K, n = 80, 6000
@@ -309,9 +309,9 @@ def test_indexed_assignment_is_the_argmin_with_ties_and_outliers():
     lk = p.likelihood
     lab = np.full(n, -1, dtype=np.int64)
     for step in range(3):                              # the previous labels as first guesses
-        inv = _kernels._inv_var(centers, lk.sigma_obs, lk.sigma_obs_min, lk.sigma_obs_pos_ratio)
+        inv = _kmeans_kernels._inv_var(centers, lk.sigma_obs, lk.sigma_obs_min, lk.sigma_obs_pos_ratio)
         new, d2 = np.empty(n, dtype=np.int64), np.empty(n)
-        _kernels.assign(X, centers, inv, lab, new, d2, clustering.INDEX_MIN_CENTERS)
+        _kmeans_kernels.assign(X, centers, inv, lab, new, d2, clustering.INDEX_MIN_CENTERS)
         want_d2 = _brute_d2(X, centers, p)
         want = np.argmin(want_d2, axis=1)
         np.testing.assert_array_equal(new, want)

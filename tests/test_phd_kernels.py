@@ -1,10 +1,11 @@
-"""The numba kernels of the PHD filter and its K-means (trackers/phd/_kernels.py) against
+"""The numba kernels of the PHD filter and its K-means (trackers/phd/_kernels.py, _kmeans_kernels.py) against
 brute-force numpy references on random inputs: dense matrices, every pair, every centre."""
 
 
 import numpy as np
 import pytest
 from pfscope.trackers.phd import _kernels as K
+from pfscope.trackers.phd import _kmeans_kernels as KM
 from pfscope.trackers.phd.filter import (
     GatedGaussian,
     LikelihoodParams,
@@ -230,10 +231,10 @@ def test_assign_is_the_argmin_lowest_index_on_ties(k, guess):
     want_d2 = _brute_d2(X, centers, lk)
     want = np.argmin(want_d2, axis=1)
     prev = {"none": np.full(4000, -1), "random": rng.integers(0, k, 4000), "truth": want}[guess]
-    inv = K._inv_var(centers, lk.sigma_obs, lk.sigma_obs_min, lk.sigma_obs_pos_ratio)
+    inv = KM._inv_var(centers, lk.sigma_obs, lk.sigma_obs_min, lk.sigma_obs_pos_ratio)
     for grid_min in (1, 10 ** 9):
         lab, d2 = np.empty(4000, dtype=np.int64), np.empty(4000)
-        K.assign(X, centers, inv, prev.astype(np.int64), lab, d2, grid_min)
+        KM.assign(X, centers, inv, prev.astype(np.int64), lab, d2, grid_min)
         np.testing.assert_array_equal(lab, want)
         np.testing.assert_allclose(d2, want_d2[np.arange(4000), want], rtol=1e-12, atol=0)
     if k >= 3:
@@ -278,7 +279,7 @@ def test_lloyd_equals_the_brute_force_iteration(seed, k, tol):
     init = truth + rng.normal(0, 8, truth.shape)      # centres off the peaks: they must move
     init[:, 2:4] = 0
     for grid_min in (1, 10 ** 9):
-        c, lab, m, dmin, it = K.lloyd(X, S, w, init, 50, tol, lk.sigma_obs, lk.sigma_obs_min,
+        c, lab, m, dmin, it = KM.lloyd(X, S, w, init, 50, tol, lk.sigma_obs, lk.sigma_obs_min,
                                       lk.sigma_obs_pos_ratio, grid_min)
         wc, wlab, wit = _brute_lloyd(X, S, w, init, lk, 50, tol)
         assert it == wit >= 2

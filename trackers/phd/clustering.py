@@ -39,10 +39,10 @@ Readings (each a parameter of :func:`kmeans_peaks`):
   ``extra_centers`` lets a caller add centres (e.g. the previous frame's peaks).
 
 Cost (DESIGN.md, linear in the number of targets): the Lloyd iterations are one numba kernel
-(:func:`._kernels.lloyd`: assignment, then the weighted sums in one pass, no (N × K)
+(:func:`._kmeans_kernels.lloyd`: assignment, then the weighted sums in one pass, no (N × K)
 temporaries).  With fewer than :data:`INDEX_MIN_CENTERS` centres the assignment looks at every
 centre, as plain K-means does; with more, each particle looks only at the centres near it (a
-grid of the centres, :func:`._kernels.assign`), and the result is still *exact* — the same
+grid of the centres, :func:`._kmeans_kernels.assign`), and the result is still *exact* — the same
 labels, ties to the lowest index included, the same d² floats: every centre's inverse variances
 are at least m (their minimum), so a centre at Euclidean distance e in the position plane scaled
 by sqrt(m) has d² >= e², and the grid's rings around the particle are searched until the best
@@ -58,7 +58,7 @@ import numpy as np
 
 from ..smc.weights import ParticleSet
 from ..types import cxcywh_to_xywh
-from . import _kernels
+from . import _kmeans_kernels
 from .filter import OBS_COLS, STATE_DIM, PHDParams, as_observations, obs_std
 
 #: ``Clusters.origin`` codes for centres not initialised on an observation.
@@ -66,7 +66,7 @@ ORIGIN_SPLIT = -1
 ORIGIN_EXTRA = -2
 
 #: From this many centres on, the assignment step looks only at the centres near each particle
-#: (a grid of the centres, :func:`._kernels.assign`; same labels as looking at all of them).
+#: (a grid of the centres, :func:`._kmeans_kernels.assign`; same labels as looking at all of them).
 INDEX_MIN_CENTERS = 16
 #: A split's trial Lloyd iterations run on the split cluster and at most this many of its
 #: nearest neighbouring clusters (itself included).
@@ -111,12 +111,12 @@ class Clusters:
 def _lloyd(X, states, w_rel, centers, params: PHDParams, max_iter, tol=0.0):
     """Weighted Lloyd iterations from ``centers`` until the assignment is stable, no centre's
     observed part moves more than ``tol`` pixels, or ``max_iter`` iterations
-    (:func:`._kernels.lloyd`).  Returns centers, labels, relative masses, each particle's d²
+    (:func:`._kmeans_kernels.lloyd`).  Returns centers, labels, relative masses, each particle's d²
     to its centre (at its last assignment), iterations.  Centres are the weighted means of the
     returned labels (an empty cluster keeps its centre), except after ``max_iter`` iterations,
     where the labels are the nearest centres."""
     lk = params.likelihood
-    c, lab, m, dmin, it = _kernels.lloyd(
+    c, lab, m, dmin, it = _kmeans_kernels.lloyd(
         X, states, w_rel, np.ascontiguousarray(centers, dtype=np.float64), int(max_iter),
         float(tol), lk.sigma_obs, lk.sigma_obs_min, lk.sigma_obs_pos_ratio,
         int(INDEX_MIN_CENTERS))
