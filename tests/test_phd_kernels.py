@@ -241,6 +241,61 @@ def test_assign_is_the_argmin_lowest_index_on_ties(k, guess):
         assert not np.any(lab == k // 2)               # the tie went to centre 1
 
 
+@pytest.mark.parametrize("layout", ["many", "line", "same", "cluster+far"])
+def test_assign_grid_of_centres_is_exact_for_any_layout(layout):
+    """The grid over the centres (rings of cells around each particle) against argmin over
+    every centre: thousands of centres, centres on a line (a degenerate grid), all on one
+    point (ties everywhere), and one far-away centre that stretches the grid."""
+    rng = np.random.default_rng(7)
+    lk = LikelihoodParams()
+    k = {"many": 1500, "line": 300, "same": 40, "cluster+far": 200}[layout]
+    centers = _centers(rng, k)
+    if layout == "many":
+        centers[:, :2] = rng.uniform(-3000, 3000, (k, 2))
+    elif layout == "line":
+        centers[:, 1] = 17.0
+    elif layout == "same":
+        centers[:] = centers[0]
+    else:
+        centers[-1, :2] = (5e5, -5e5)
+    n = 6000
+    src = rng.integers(0, k, n)
+    X = centers[src][:, OBS] + rng.normal(0, 20, (n, 4))
+    X[:50, :2] = rng.uniform(-2e4, 2e4, (50, 2))       # far from the centres
+    X[50:80] = centers[rng.integers(0, k, 30)][:, OBS]  # exactly on centres
+    want_d2 = _brute_d2(X, centers, lk)
+    want = np.argmin(want_d2, axis=1)
+    inv = KM._inv_var(centers, lk.sigma_obs, lk.sigma_obs_min, lk.sigma_obs_pos_ratio)
+    for prev in (np.full(n, -1), rng.integers(0, k, n), want):
+        lab, d2 = np.empty(n, dtype=np.int64), np.empty(n)
+        KM.assign(X, centers, inv, prev.astype(np.int64), lab, d2, 1)
+        np.testing.assert_array_equal(lab, want)
+        np.testing.assert_allclose(d2, want_d2[np.arange(n), want], rtol=1e-12, atol=0)
+
+
+def test_lloyd_with_hundreds_of_centres_equals_the_brute_force_iteration():
+    """Late Lloyd iterations skip the particles of centres with no moved centre in reach (a
+    grid of the moved centres): the same labels and centres as the dense iteration."""
+    rng = np.random.default_rng(3)
+    lk = PHDParams().likelihood
+    k = 400
+    truth = _centers(rng, k)
+    truth[:, :2] = rng.uniform(-2000, 2000, (k, 2))
+    src = rng.integers(0, k, 20000)
+    S = truth[src] + rng.normal(0, 6, (20000, 6))
+    S[:, 4:6] = np.abs(S[:, 4:6]) + 2
+    X = np.ascontiguousarray(S[:, OBS])
+    w = rng.uniform(0.1, 1, 20000)
+    init = truth + rng.normal(0, 10, truth.shape)
+    init[:, 2:4] = 0
+    c, lab, m, dmin, it = KM.lloyd(X, S, w, init, 50, 0.0, lk.sigma_obs, lk.sigma_obs_min,
+                                   lk.sigma_obs_pos_ratio, 1)
+    wc, wlab, wit = _brute_lloyd(X, S, w, init, lk, 50, 0.0)
+    assert it == wit >= 3
+    np.testing.assert_array_equal(lab, wlab)
+    np.testing.assert_allclose(c, wc, rtol=1e-12, atol=1e-9)
+
+
 def _brute_lloyd(X, S, w, centers, lk, max_iter, tol):
     """Plain weighted Lloyd on the dense distance matrix."""
     c = centers.copy()

@@ -10,7 +10,7 @@ import math
 import numpy as np
 from numba import njit
 
-from ._kernels import grid_build
+from ._kernels import grid_build, grid_span
 
 
 # ----------------------------------------------------------------------------- K-means
@@ -82,8 +82,7 @@ def _min_inv(inv):
 @njit(cache=True, nogil=True)
 def _metric(centers, m):
     """The scaled space of :func:`assign`: ``rm`` (4,) = sqrt(m), m (4,) at most the inverse
-    variances of every centre, ``cs`` (K, 4) the centres in it, ``dcc`` (K, K) their
-    distances and ``gap`` (K,) each centre's distance to its nearest other centre."""
+    variances of every centre, and ``cs`` (K, 4) the centres in it."""
     K = centers.shape[0]
     rm = np.sqrt(m)
     cs = np.empty((K, 4))
@@ -92,59 +91,197 @@ def _metric(centers, m):
         cs[c, 1] = centers[c, 1] * rm[1]
         cs[c, 2] = centers[c, 4] * rm[2]
         cs[c, 3] = centers[c, 5] * rm[3]
-    dcc = np.empty((K, K))
-    for c in range(K):
-        for e in range(K):
-            a0 = cs[c, 0] - cs[e, 0]
-            a1 = cs[c, 1] - cs[e, 1]
-            a2 = cs[c, 2] - cs[e, 2]
-            a3 = cs[c, 3] - cs[e, 3]
-            dcc[c, e] = math.sqrt(a0 * a0 + a1 * a1 + a2 * a2 + a3 * a3)
-    gap = np.full(K, np.inf)
-    for c in range(K):
-        for e in range(K):
-            if e != c and dcc[c, e] < gap[c]:
-                gap[c] = dcc[c, e]
-    return rm, cs, dcc, gap
+    return rm, cs
 
 
 @njit(cache=True, nogil=True)
-def _first_guess(cs):
-    """A cheap first centre for particles without a previous label: a grid of about K cells
-    on the centres' scaled (y1, y2), each cell's centre nearest to its middle.  Returns
-    ``(u0, v0, g, ni, nj, rep)``; any guess is fine (the search from it is exact), a near one
-    is fast."""
-    K = cs.shape[0]
+def _grid_of(u, v):
+    """A grid of about ``len(u)`` square cells on the points ``(u, v)`` (:func:`grid_build`,
+    which coarsens it to at most 4n + 64 cells)."""
+    n = u.shape[0]
     u0 = np.inf
     u1 = -np.inf
     v0 = np.inf
     v1 = -np.inf
-    for c in range(K):
-        u0 = min(u0, cs[c, 0])
-        u1 = max(u1, cs[c, 0])
-        v0 = min(v0, cs[c, 1])
-        v1 = max(v1, cs[c, 1])
-    if not (np.isfinite(u0) and np.isfinite(u1) and np.isfinite(v0) and np.isfinite(v1)):
-        return 0.0, 0.0, 1.0, 1, 1, np.zeros(1, np.int64)
-    g = max(2.0, math.sqrt(max(u1 - u0, 1.0) * max(v1 - v0, 1.0) / K))
-    while (math.floor((u1 - u0) / g) + 1.0) * (math.floor((v1 - v0) / g) + 1.0) > 4.0 * K + 64:
-        g *= 2.0
-    ni = math.floor((u1 - u0) / g) + 1
-    nj = math.floor((v1 - v0) / g) + 1
-    rep = np.empty(ni * nj, np.int64)
-    for a in range(ni):
-        mu = u0 + (a + 0.5) * g
-        for b in range(nj):
-            mv = v0 + (b + 0.5) * g
-            best = np.inf
-            r = 0
+    for c in range(n):
+        u0 = min(u0, u[c])
+        u1 = max(u1, u[c])
+        v0 = min(v0, v[c])
+        v1 = max(v1, v[c])
+    du = u1 - u0
+    dv = v1 - v0
+    g = 1e-6
+    if n > 0 and du >= 0.0 and dv >= 0.0:          # False for NaN / inf extents
+        g = max(math.sqrt(du * dv / n), max(du, dv) / n, 1e-6)
+    return grid_build(u, v, g, g)
+
+
+@njit(cache=True, nogil=True)
+def _slack(pu, pv, x0, y0, g, r):
+    """Float slack of a ring bound: the cell edges and the point are O(|coordinates|)."""
+    return 1e-9 * (1.0 + abs(pu) + abs(pv) + abs(x0) + abs(y0) + g * r)
+
+
+#: A centre with more centres than this in its 3 × 3 block of cells gets no neighbour list
+#: (its particles use the ring search), so the lists stay O(K) in memory however crowded.
+_MAX_NEIGHBOURS = 64
+
+
+@njit(cache=True, nogil=True)
+def _neighbours(cs, x0, y0, g, ni, nj, order, starts):
+    """Each centre's nearby centres by increasing scaled distance, as CSR arrays
+    ``(first (K+1,), nb, nbd, cover (K,))``: every other centre within ``cover[c]`` of c is in
+    c's list (those of its 3 × 3 block of cells closer than the block's edge, whose distance
+    from c is ``cover[c]``; the centres beyond are at least that far).  A crowded block gives
+    an empty list and ``cover`` 0."""
+    K = cs.shape[0]
+    cover = np.zeros(K)
+    count = np.zeros(K + 1, np.int64)
+    for sweep in range(2):
+        if sweep == 1:
             for c in range(K):
+                count[c + 1] += count[c]
+            nb = np.empty(count[K], np.int64)
+            nbd = np.empty(count[K])
+        for c in range(K):
+            pu = cs[c, 0]
+            pv = cs[c, 1]
+            ci = min(int((pu - x0) / g), ni - 1)
+            cj = min(int((pv - y0) / g), nj - 1)
+            if sweep == 0:
+                cover[c] = min(pu - (x0 + (ci - 1) * g), x0 + (ci + 2) * g - pu,
+                               pv - (y0 + (cj - 1) * g), y0 + (cj + 2) * g - pv)
+                cover[c] = max(0.0, cover[c] - _slack(pu, pv, x0, y0, g, 2))
+                crowd = 0
+                for a in range(max(ci - 1, 0), min(ci + 1, ni - 1) + 1):
+                    for b in range(max(cj - 1, 0), min(cj + 1, nj - 1) + 1):
+                        crowd += starts[a * nj + b + 1] - starts[a * nj + b]
+                if crowd > _MAX_NEIGHBOURS + 1:
+                    cover[c] = 0.0
+            q = count[c] if sweep == 1 else 0
+            if cover[c] > 0.0:
+                for a in range(max(ci - 1, 0), min(ci + 1, ni - 1) + 1):
+                    for b in range(max(cj - 1, 0), min(cj + 1, nj - 1) + 1):
+                        cell = a * nj + b
+                        for k in range(starts[cell], starts[cell + 1]):
+                            e = order[k]
+                            if e == c:
+                                continue
+                            a0 = cs[c, 0] - cs[e, 0]
+                            a1 = cs[c, 1] - cs[e, 1]
+                            a2 = cs[c, 2] - cs[e, 2]
+                            a3 = cs[c, 3] - cs[e, 3]
+                            d = math.sqrt(a0 * a0 + a1 * a1 + a2 * a2 + a3 * a3)
+                            if d < cover[c]:
+                                if sweep == 0:
+                                    count[c + 1] += 1
+                                else:
+                                    nb[q] = e
+                                    nbd[q] = d
+                                    q += 1
+            if sweep == 1 and count[c + 1] - count[c] > 1:
+                lo = count[c]
+                hi = count[c + 1]
+                srt = np.argsort(nbd[lo:hi], kind="mergesort")
+                nb[lo:hi] = nb[lo:hi][srt]
+                nbd[lo:hi] = nbd[lo:hi][srt]
+    return count, nb, nbd, cover
+
+
+@njit(cache=True, nogil=True)
+def _cell_guess(cs, x0, y0, g, ni, nj, order, starts):
+    """(ni·nj,) a first-guess centre per cell, for particles with no previous label: the
+    cell's centre nearest to its middle, or (empty cell) the better of its neighbours'
+    guesses, spread by one forward and one backward sweep over the grid (O(cells + K)).
+    Any guess gives the exact answer (:func:`_ring_search` starts from it); a near one
+    lets the search stop after a ring or two."""
+    rep = np.full(ni * nj, -1, np.int64)
+    score = np.full(ni * nj, np.inf)
+    for a in range(ni):
+        for b in range(nj):
+            cell = a * nj + b
+            mu = x0 + (a + 0.5) * g
+            mv = y0 + (b + 0.5) * g
+            for k in range(starts[cell], starts[cell + 1]):
+                c = order[k]
                 d = (cs[c, 0] - mu) ** 2 + (cs[c, 1] - mv) ** 2
-                if d < best:
-                    best = d
-                    r = c
-            rep[a * nj + b] = r
-    return u0, v0, g, ni, nj, rep
+                if d < score[cell]:
+                    score[cell] = d
+                    rep[cell] = c
+    for sweep in range(2):
+        step = 1 if sweep == 0 else -1
+        for q in range(ni * nj):
+            cell = q if sweep == 0 else ni * nj - 1 - q
+            a = cell // nj
+            b = cell - a * nj
+            mu = x0 + (a + 0.5) * g
+            mv = y0 + (b + 0.5) * g
+            for t in range(2):
+                na = a - step if t == 0 else a
+                nb = b if t == 0 else b - step
+                if na < 0 or na >= ni or nb < 0 or nb >= nj:
+                    continue
+                c = rep[na * nj + nb]
+                if c < 0:
+                    continue
+                d = (cs[c, 0] - mu) ** 2 + (cs[c, 1] - mv) ** 2
+                if d < score[cell]:
+                    score[cell] = d
+                    rep[cell] = c
+    return rep
+
+
+@njit(cache=True, nogil=True)
+def _visit(X, i, centers, inv, order, starts, cell, lab, best):
+    for k in range(starts[cell], starts[cell + 1]):
+        c = order[k]
+        d = _d2(X, i, centers, inv, c)
+        if d < best or (d == best and c < lab):
+            best = d
+            lab = c
+    return lab, best
+
+
+@njit(cache=True, nogil=True)
+def _ring_search(X, i, pu, pv, centers, inv, lab, best, x0, y0, g, ni, nj, order, starts):
+    """The nearest centre (lowest index on ties) of particle i at scaled ``(pu, pv)``, from
+    ``(lab, best)`` (a centre and its d², or ``(-1, inf)``): the grid's cells in rings of
+    growing Chebyshev radius around the particle's cell, until the particle's distance to the
+    edge of the rings looked at exceeds sqrt(best) — every centre beyond has ``d² >= e²``
+    greater than it (a tie could not be missed: the test is strict, with float slack)."""
+    fi = math.floor((pu - x0) / g)
+    fj = math.floor((pv - y0) / g)
+    if not (abs(fi) < 1e12 and abs(fj) < 1e12):   # absurd coordinates: look at every centre
+        for c in range(centers.shape[0]):
+            d = _d2(X, i, centers, inv, c)
+            if d < best or (d == best and c < lab) or lab < 0:
+                best = d
+                lab = c
+        return lab, best
+    ci = int(fi)
+    cj = int(fj)
+    r0 = max(0, -ci, ci - (ni - 1), -cj, cj - (nj - 1))     # the first ring that meets the grid
+    r1 = max(ci, ni - 1 - ci, cj, nj - 1 - cj)              # the ring that covers it all
+    for r in range(r0, r1 + 1):
+        if r > 0:
+            # every unvisited cell is outside the (2r - 1)² square of rings 0..r-1 around
+            # (ci, cj), which holds the particle
+            edge = min(pu - (x0 + (ci - r + 1) * g), x0 + (ci + r) * g - pu,
+                       pv - (y0 + (cj - r + 1) * g), y0 + (cj + r) * g - pv)
+            if edge - _slack(pu, pv, x0, y0, g, r) > math.sqrt(best) * (1.0 + 1e-9):
+                break
+        for a in range(max(ci - r, 0), min(ci + r, ni - 1) + 1):
+            if a == ci - r or a == ci + r:
+                for b in range(max(cj - r, 0), min(cj + r, nj - 1) + 1):
+                    lab, best = _visit(X, i, centers, inv, order, starts, a * nj + b, lab, best)
+            else:
+                b = cj - r
+                if 0 <= b < nj:
+                    lab, best = _visit(X, i, centers, inv, order, starts, a * nj + b, lab, best)
+                b = cj + r
+                if 0 <= b < nj:
+                    lab, best = _visit(X, i, centers, inv, order, starts, a * nj + b, lab, best)
+    return lab, best
 
 
 @njit(cache=True, nogil=True)
@@ -161,46 +298,70 @@ def _assign(X, centers, inv, prev, labels, dmin, grid_min, m, stable, reach):
     if K < grid_min:
         _assign_dense(X, centers, inv, labels, dmin)
         return
-    rm, cs, dcc, gap = _metric(centers, m)
-    # each centre's others by increasing distance, sorted on first use
-    near = np.empty((K, K), np.int64)
-    sorted_row = np.zeros(K, np.bool_)
-    u0, v0, g, ni, nj, rep = _first_guess(cs)
+    rm, cs = _metric(centers, m)
+    ok, x0, y0, g, g2, ni, nj, order, starts = _grid_of(cs[:, 0].copy(), cs[:, 1].copy())
+    if not ok:                                     # a non-finite centre: look at all of them
+        _assign_dense(X, centers, inv, labels, dmin)
+        for i in range(n):
+            reach[i] = np.inf
+        return
+    first, nb, nbd, cover = _neighbours(cs, x0, y0, g, ni, nj, order, starts)
+    rep = np.empty(0, np.int64)                    # first guesses, made on first need
     for i in range(n):
         lab = prev[i]
-        if lab >= 0 and lab < K:
-            if stable[lab]:
-                labels[i] = lab
+        pu = X[i, 0] * rm[0]
+        pv = X[i, 1] * rm[1]
+        if not (np.isfinite(pu) and np.isfinite(pv)):
+            best = _d2(X, i, centers, inv, 0)      # as argmin over all centres: the first
+            lab = 0
+            for c in range(1, K):
+                d = _d2(X, i, centers, inv, c)
+                if d < best:
+                    best = d
+                    lab = c
+            labels[i] = lab
+            dmin[i] = best
+            reach[i] = np.inf
+            continue
+        if lab >= 0 and lab < K and stable[lab]:
+            labels[i] = lab
+            continue
+        if not (lab >= 0 and lab < K):
+            if rep.shape[0] == 0:
+                rep = _cell_guess(cs, x0, y0, g, ni, nj, order, starts)
+            fi = math.floor((pu - x0) / g)
+            fj = math.floor((pv - y0) / g)
+            a = 0 if not fi > 0.0 else (ni - 1 if fi > ni - 1.0 else int(fi))
+            b = 0 if not fj > 0.0 else (nj - 1 if fj > nj - 1.0 else int(fj))
+            lab = rep[a * nj + b]
+        if lab >= 0:
+            best = _d2(X, i, centers, inv, lab)
+            e0 = _scaled(X, i, rm, cs, lab)
+            # triangle inequality in the scaled space: a centre c at D(lab, c) from lab has
+            # d(x, c) >= D(lab, c) − e0; c's list holds every centre nearer than cover[lab],
+            # by increasing D, so the first listed one beyond sqrt(best) + e0 ends the look
+            slack = 1e-9 * (1.0 + e0)
+            c0 = lab
+            done = False
+            for q in range(first[c0], first[c0 + 1]):
+                if nbd[q] - e0 > math.sqrt(best) * (1.0 + 1e-9) + slack:
+                    done = True
+                    break
+                c = nb[q]
+                d = _d2(X, i, centers, inv, c)
+                if d < best or (d == best and c < lab):
+                    best = d
+                    lab = c
+            if done or cover[c0] - e0 > math.sqrt(best) * (1.0 + 1e-9) + slack:
+                labels[i] = lab                 # the usual case: no centre beyond the list
+                dmin[i] = best
+                reach[i] = (e0 if lab == c0 else _scaled(X, i, rm, cs, lab)) + math.sqrt(best)
                 continue
         else:
-            fi = math.floor((X[i, 0] * rm[0] - u0) / g)
-            fj = math.floor((X[i, 1] * rm[1] - v0) / g)
-            ci = 0 if not fi > 0.0 else (ni - 1 if fi > ni - 1.0 else int(fi))
-            cj = 0 if not fj > 0.0 else (nj - 1 if fj > nj - 1.0 else int(fj))
-            lab = rep[ci * nj + cj]
-        best = _d2(X, i, centers, inv, lab)
-        c0 = lab
-        e0 = _scaled(X, i, rm, cs, c0)
-        # triangle inequality in the scaled space: d²(x, c) >= (D(c0, c) − e0)² > best
-        # once D(c0, c) − e0 > sqrt(best), for c and every centre after it
-        if gap[c0] - e0 > math.sqrt(best) * (1.0 + 1e-9) + 1e-9 * (1.0 + e0):
-            labels[i] = lab                 # no other centre is near enough: the usual case
-            dmin[i] = best
-            reach[i] = e0 + math.sqrt(best)
-            continue
-        if not sorted_row[c0]:
-            near[c0] = np.argsort(dcc[c0])
-            sorted_row[c0] = True
-        for q in range(K):
-            c = near[c0, q]
-            if c == c0:
-                continue
-            if dcc[c0, c] - e0 > math.sqrt(best) * (1.0 + 1e-9) + 1e-9 * (1.0 + e0):
-                break
-            d = _d2(X, i, centers, inv, c)
-            if d < best or (d == best and c < lab):
-                best = d
-                lab = c
+            lab = -1
+            best = np.inf
+        lab, best = _ring_search(X, i, pu, pv, centers, inv, lab, best, x0, y0, g, ni, nj,
+                                 order, starts)
         labels[i] = lab
         dmin[i] = best
         reach[i] = _scaled(X, i, rm, cs, lab) + math.sqrt(best)
@@ -216,15 +377,78 @@ def assign(X, centers, inv, prev, labels, dmin, grid_min):
     Below ``grid_min`` centres every centre is looked at.  From ``grid_min`` on, exact too:
     every centre's inverse variances are at least ``m`` (their minimum over the centres,
     per coordinate), so in the (y1, y2, w, h) space scaled by ``sqrt(m)`` a centre at
-    Euclidean distance e has ``d² >= e²``.
+    Euclidean distance e has ``d² >= e²``, and at least its (y1, y2) distance.
 
-    From a first centre c (the previous label, else the centre nearest to the middle of the
-    particle's cell in a coarse grid, :func:`_first_guess`), the particle at scaled distance
-    e₀ from c looks at the other centres c' in increasing scaled distance ``D(c, c')`` and
-    stops once ``D(c, c') − e₀ > sqrt(best d²)`` (triangle inequality: every centre after
-    that has ``d² >= e² > best``) — after one or two looks for a particle near its centre."""
+    A particle starts from its previous centre (else a first guess per grid cell,
+    :func:`_cell_guess`) at scaled distance e₀, and looks at that centre's neighbours
+    (:func:`_neighbours`, by increasing distance D) until ``D − e₀ > sqrt(best d²)``; only when
+    the list ends before that does it search the grid's rings (:func:`_ring_search`).  Time and
+    memory are O(N + K) for K centres spread at about one per cell (no K × K table)."""
     _assign(X, centers, inv, prev, labels, dmin, grid_min, _min_inv(inv),
             np.zeros(centers.shape[0], np.bool_), np.empty(X.shape[0]))
+
+
+@njit(cache=True, nogil=True)
+def _near(centers, rm, c, e, R):
+    """Whether centre e is within scaled distance R of centre c (not strictly beyond it)."""
+    a0 = (centers[c, 0] - centers[e, 0]) * rm[0]
+    a1 = (centers[c, 1] - centers[e, 1]) * rm[1]
+    a2 = (centers[c, 4] - centers[e, 4]) * rm[2]
+    a3 = (centers[c, 5] - centers[e, 5]) * rm[3]
+    return not math.sqrt(a0 * a0 + a1 * a1 + a2 * a2 + a3 * a3) > R
+
+
+@njit(cache=True, nogil=True)
+def _unstable_near_moved(centers, space, moved, stable, reach_c):
+    """Clear ``stable[c]`` of every centre with a ``moved`` centre within its reach
+    (``reach_c[c]``, with float slack) in the space scaled by sqrt(space).  The moved centres
+    are put on a grid and each stable centre looks only at the cells its reach touches (or at
+    the moved list, when that is shorter): O(K + moved) for reaches of a cell or so."""
+    K = centers.shape[0]
+    rm = np.sqrt(space)
+    idx = np.empty(K, np.int64)
+    nm = 0
+    for e in range(K):
+        if moved[e]:
+            idx[nm] = e
+            nm += 1
+    if nm == 0:
+        return
+    idx = idx[:nm]
+    mu = np.empty(nm)
+    mv = np.empty(nm)
+    for k in range(nm):
+        mu[k] = centers[idx[k], 0] * rm[0]
+        mv[k] = centers[idx[k], 1] * rm[1]
+    ok, x0, y0, g, g2, ni, nj, order, starts = _grid_of(mu, mv)
+    for c in range(K):
+        if not stable[c]:
+            continue
+        R = reach_c[c] * (1.0 + 1e-9) + 1e-9
+        cu = centers[c, 0] * rm[0]
+        cv = centers[c, 1] * rm[1]
+        pad = R + 1e-7 * (1.0 + abs(cu) + abs(cv) + abs(x0) + abs(y0))
+        a0, a1 = grid_span(cu - pad, cu + pad, x0, g, ni)
+        b0, b1 = grid_span(cv - pad, cv + pad, y0, g, nj)
+        if ok and np.isfinite(pad) and (a1 - a0 + 1) * (b1 - b0 + 1) < nm:
+            if a1 < a0 or b1 < b0:
+                continue                            # no moved centre near
+            for a in range(a0, a1 + 1):
+                for b in range(b0, b1 + 1):
+                    cell = a * nj + b
+                    for k in range(starts[cell], starts[cell + 1]):
+                        if _near(centers, rm, c, idx[order[k]], R):
+                            stable[c] = False
+                            break
+                    if not stable[c]:
+                        break
+                if not stable[c]:
+                    break
+        else:
+            for k in range(nm):
+                if _near(centers, rm, c, idx[k], R):
+                    stable[c] = False
+                    break
 
 
 @njit(cache=True, nogil=True)
@@ -275,20 +499,7 @@ def lloyd(X, S, w, centers, max_iter, tol, sigma_obs, sigma_min, pos_ratio, grid
             for c in range(K):
                 stable[c] = same_space and not moved[c]
             if same_space:
-                rm = np.sqrt(space)
-                for c in range(K):
-                    if not stable[c]:
-                        continue
-                    for e in range(K):
-                        if moved[e]:
-                            a0 = (centers[c, 0] - centers[e, 0]) * rm[0]
-                            a1 = (centers[c, 1] - centers[e, 1]) * rm[1]
-                            a2 = (centers[c, 4] - centers[e, 4]) * rm[2]
-                            a3 = (centers[c, 5] - centers[e, 5]) * rm[3]
-                            dce = math.sqrt(a0 * a0 + a1 * a1 + a2 * a2 + a3 * a3)
-                            if not dce > reach_c[c] * (1.0 + 1e-9) + 1e-9:
-                                stable[c] = False
-                                break
+                _unstable_near_moved(centers, space, moved, stable, reach_c)
         _assign(X, centers, inv, labels, new, dmin, grid_min, space, stable, reach)
         if it > 1:
             for c in range(K):
