@@ -47,17 +47,23 @@ def _d2(X, i, centers, inv, c):
 
 
 @njit(cache=True, nogil=True)
+def _nearest_dense(X, i, centers, inv):
+    """Particle i's nearest centre and its d², looking at every centre (as ``argmin``: the
+    first of equal d², and centre 0 when every d² is NaN)."""
+    best = _d2(X, i, centers, inv, 0)
+    lab = 0
+    for c in range(1, centers.shape[0]):
+        d = _d2(X, i, centers, inv, c)
+        if d < best:
+            best = d
+            lab = c
+    return lab, best
+
+
+@njit(cache=True, nogil=True)
 def _assign_dense(X, centers, inv, labels, dmin):
     for i in range(X.shape[0]):
-        best = _d2(X, i, centers, inv, 0)
-        lab = 0
-        for c in range(1, centers.shape[0]):
-            d = _d2(X, i, centers, inv, c)
-            if d < best:
-                best = d
-                lab = c
-        labels[i] = lab
-        dmin[i] = best
+        labels[i], dmin[i] = _nearest_dense(X, i, centers, inv)
 
 
 @njit(cache=True, nogil=True)
@@ -252,12 +258,7 @@ def _ring_search(X, i, pu, pv, centers, inv, lab, best, x0, y0, g, ni, nj, order
     fi = math.floor((pu - x0) / g)
     fj = math.floor((pv - y0) / g)
     if not (abs(fi) < 1e12 and abs(fj) < 1e12):   # absurd coordinates: look at every centre
-        for c in range(centers.shape[0]):
-            d = _d2(X, i, centers, inv, c)
-            if d < best or (d == best and c < lab) or lab < 0:
-                best = d
-                lab = c
-        return lab, best
+        return _nearest_dense(X, i, centers, inv)
     ci = int(fi)
     cj = int(fj)
     r0 = max(0, -ci, ci - (ni - 1), -cj, cj - (nj - 1))     # the first ring that meets the grid
@@ -312,15 +313,7 @@ def _assign(X, centers, inv, prev, labels, dmin, grid_min, m, stable, reach):
         pu = X[i, 0] * rm[0]
         pv = X[i, 1] * rm[1]
         if not (np.isfinite(pu) and np.isfinite(pv)):
-            best = _d2(X, i, centers, inv, 0)      # as argmin over all centres: the first
-            lab = 0
-            for c in range(1, K):
-                d = _d2(X, i, centers, inv, c)
-                if d < best:
-                    best = d
-                    lab = c
-            labels[i] = lab
-            dmin[i] = best
+            labels[i], dmin[i] = _nearest_dense(X, i, centers, inv)
             reach[i] = np.inf
             continue
         if lab >= 0 and lab < K and stable[lab]:
