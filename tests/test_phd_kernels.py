@@ -70,7 +70,7 @@ def test_birth_fill_is_the_numpy_birth_bit_for_bit():
     n = int(j.sum())
     eps, theta, sp = rng.standard_normal((n, 4)), rng.uniform(0, 2 * np.pi, n), rng.normal(0, 1, n)
     lk = LikelihoodParams()
-    states, log_w, det = K.birth_fill(Z, j, lw_det, eps, np.cos(theta), np.sin(theta), sp,
+    states, log_w, det = K.birth_fill(Z, j, lw_det, eps, theta, sp,
                                       lk.sigma_obs, lk.sigma_obs_min, lk.sigma_obs_pos_ratio,
                                       1.3, 0.05, 0.1, 4.0)
     d = np.repeat(np.arange(7), j)
@@ -81,7 +81,9 @@ def test_birth_fill_is_the_numpy_birth_bit_for_bit():
     want[:, OBS] = obs
     want[:, 2], want[:, 3] = speed * np.cos(theta), speed * np.sin(theta)
     want[:, 4:6] = np.maximum(want[:, 4:6], 4.0)
-    np.testing.assert_array_equal(states, want)
+    np.testing.assert_array_equal(states[:, OBS], want[:, OBS])
+    # the kernel's cos/sin are libm's; numpy's may be its own SIMD ones on some CPUs (≤ 4 ulp)
+    np.testing.assert_allclose(states[:, 2:4], want[:, 2:4], rtol=4e-15, atol=1e-15)
     np.testing.assert_array_equal(det, d)
     np.testing.assert_array_equal(log_w, lw_det[d])
 

@@ -162,12 +162,13 @@ def mass_near_kernel(states, w, Z, std_z, r2, cell_x, cell_y):
 
 
 @njit(cache=True, nogil=True)
-def birth_fill(Z, j, lw_det, eps, cos_t, sin_t, speed_n, sigma_obs, sigma_min, pos_ratio,
+def birth_fill(Z, j, lw_det, eps, theta, speed_n, sigma_obs, sigma_min, pos_ratio,
                spread, speed_mean, speed_std, min_size):
     """The J = Σ j newborn: detection z's ``j[z]`` rows get ``(y, w, h) = z + spread σ(z) ε``,
     velocity ``(mean + std n) sqrt(w_z h_z) (cos θ, sin θ)``, sizes clipped to ``min_size``,
-    log-weight ``lw_det[z]``.  ``eps`` (J, 4), ``cos_t``/``sin_t``/``speed_n`` (J,) the caller's
-    draws.  Returns ``(states (J, 6), log_w (J,), det (J,))`` (the numpy birth's operations,
+    log-weight ``lw_det[z]``.  ``eps`` (J, 4), ``theta``/``speed_n`` (J,) the caller's
+    draws (``math.cos``/``math.sin`` here are libm's, the very floats of ``np.cos``/``np.sin``,
+    without their two (J,) temporaries).  Returns ``(states (J, 6), log_w (J,), det (J,))`` (the numpy birth's operations,
     same order)."""
     n = eps.shape[0]
     states = np.empty((n, 6))
@@ -190,8 +191,8 @@ def birth_fill(Z, j, lw_det, eps, cos_t, sin_t, speed_n, sigma_obs, sigma_min, p
             states[k, 4] = ww if not ww < min_size else min_size
             states[k, 5] = hh if not hh < min_size else min_size
             speed = (speed_mean + speed_std * speed_n[k]) * scale
-            states[k, 2] = speed * cos_t[k]
-            states[k, 3] = speed * sin_t[k]
+            states[k, 2] = speed * math.cos(theta[k])
+            states[k, 3] = speed * math.sin(theta[k])
             log_w[k] = lw_det[z]
             det[k] = z
             k += 1
@@ -235,57 +236,60 @@ def gauss_update(states, lw, Z, std, log_norm, by_det, log_kappa, log_pd, log_pm
         for i in range(n):
             hx_all = max(hx_all, std[i, 0])
             hy_all = max(hy_all, std[i, 1])
-    log_den = np.zeros(nz)
     sh = np.zeros(n)
     sm = np.zeros(n)
     if log_pm > -np.inf:
         for i in range(n):
             sh[i] = log_pm
             sm[i] = 1.0
-    for rnd in range(2):
-        for j in range(nz):
-            if rnd == 1 and log_c[j] == -np.inf:
-                continue                  # C = 0: ψ = 0 on every pair of z
-            if by_det:
-                hx = r * std[j, 0] * (1.0 + 1e-6) + 1e-9
-                hy = r * std[j, 1] * (1.0 + 1e-6) + 1e-9
-            else:
-                hx = r * hx_all * (1.0 + 1e-6) + 1e-9
-                hy = r * hy_all * (1.0 + 1e-6) + 1e-9
-            i0, i1 = grid_span(Z[j, 0] - hx, Z[j, 0] + hx, x0, cx, ni)
-            j0, j1 = grid_span(Z[j, 1] - hy, Z[j, 1] + hy, y0, cy, nj)
-            m = -np.inf
-            s = 0.0
-            for ci in range(i0, i1 + 1):
-                for p in range(starts[ci * nj + j0], starts[ci * nj + j1 + 1]):
-                    i = order[p]
-                    k = j if by_det else i
-                    q0 = (states[i, 0] - Z[j, 0]) / std[k, 0]
-                    q1 = (states[i, 1] - Z[j, 1]) / std[k, 1]
-                    q2 = (states[i, 4] - Z[j, 2]) / std[k, 2]
-                    q3 = (states[i, 5] - Z[j, 3]) / std[k, 3]
-                    d2 = q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3
-                    if not d2 <= r2:
-                        continue
-                    log_psi = log_pd + (-0.5 * d2 - log_norm[k] - _HALF_LOG_2PI_4)
-                    if rnd == 0:
-                        a = log_psi + lw[i]
-                        if a > -np.inf:
-                            m, s = _lse_add(m, s, a)
-                    else:
-                        t = log_psi - log_den[j]
-                        if t > -np.inf:
-                            sh[i], sm[i] = _lse_add(sh[i], sm[i], t)
-            if rnd == 0:
-                if s > 0.0:
-                    log_c[j] = m + math.log(s)
-                lk = log_kappa[j]
-                lc = log_c[j]
-                hi = max(lk, lc)
-                if hi == -np.inf:
-                    log_den[j] = 0.0          # κ = C = 0: the term is 0
-                else:
-                    log_den[j] = hi + math.log1p(math.exp(min(lk, lc) - hi))
+    # one detection at a time: its gated pairs once (C(z) by an online log-sum-exp, the pairs'
+    # log ψ kept in a buffer of at most N), then ψ/(κ + C) into each of those particles'
+    # brackets — the same terms in the same order as two sweeps over every detection
+    buf_i = np.empty(n, np.int64)
+    buf_v = np.empty(n)
+    for j in range(nz):
+        if by_det:
+            hx = r * std[j, 0] * (1.0 + 1e-6) + 1e-9
+            hy = r * std[j, 1] * (1.0 + 1e-6) + 1e-9
+        else:
+            hx = r * hx_all * (1.0 + 1e-6) + 1e-9
+            hy = r * hy_all * (1.0 + 1e-6) + 1e-9
+        i0, i1 = grid_span(Z[j, 0] - hx, Z[j, 0] + hx, x0, cx, ni)
+        j0, j1 = grid_span(Z[j, 1] - hy, Z[j, 1] + hy, y0, cy, nj)
+        m = -np.inf
+        s = 0.0
+        nb = 0
+        for ci in range(i0, i1 + 1):
+            for p in range(starts[ci * nj + j0], starts[ci * nj + j1 + 1]):
+                i = order[p]
+                k = j if by_det else i
+                q0 = (states[i, 0] - Z[j, 0]) / std[k, 0]
+                q1 = (states[i, 1] - Z[j, 1]) / std[k, 1]
+                q2 = (states[i, 4] - Z[j, 2]) / std[k, 2]
+                q3 = (states[i, 5] - Z[j, 3]) / std[k, 3]
+                d2 = q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3
+                if not d2 <= r2:
+                    continue
+                log_psi = log_pd + (-0.5 * d2 - log_norm[k] - _HALF_LOG_2PI_4)
+                buf_i[nb] = i
+                buf_v[nb] = log_psi
+                nb += 1
+                a = log_psi + lw[i]
+                if a > -np.inf:
+                    m, s = _lse_add(m, s, a)
+        if s > 0.0:
+            log_c[j] = m + math.log(s)
+        else:
+            continue                      # C = 0: ψ = 0 on every pair of z
+        lk = log_kappa[j]
+        lc = log_c[j]
+        hi = max(lk, lc)
+        log_den = hi + math.log1p(math.exp(min(lk, lc) - hi))
+        for q in range(nb):
+            t = buf_v[q] - log_den
+            if t > -np.inf:
+                i = buf_i[q]
+                sh[i], sm[i] = _lse_add(sh[i], sm[i], t)
     for i in range(n):
         if sm[i] > 0.0:
             new_lw[i] = lw[i] + (sh[i] + math.log(sm[i]))

@@ -611,7 +611,12 @@ def mass_near(predicted: ParticleSet, Z: np.ndarray, bp: BirthParams = BirthPara
 def _grid_cell(std: np.ndarray, r2: float) -> np.ndarray:
     """Grid cells as wide as a typical gate box ((y1, y2) half-widths ``r σ``): a typical box
     then spans at most 2 × 2 cells (as :func:`.gating.gate_pairs`)."""
-    cell = 2.0 * math.sqrt(r2) * np.median(std[:, :2], axis=0)
+    # np.median(std[:, :2], axis=0) without its generic machinery (same floats: the middle
+    # value, or the mean (a + b) / 2 of the two middle ones)
+    s = np.sort(std[:, :2], axis=0)
+    h = len(s) // 2
+    med = s[h] if len(s) % 2 else (s[h - 1] + s[h]) / 2.0
+    cell = 2.0 * math.sqrt(r2) * med
     return np.where(cell > 0, cell, 1.0)
 
 
@@ -664,7 +669,7 @@ def birth(predicted: ParticleSet, Z, params: PHDParams, rng: np.random.Generator
     # one fused pass (numba): (y, w, h) = z + spread σ(z) ε, speed (mean + std n) sqrt(w h)
     # in direction θ, sizes clipped to min_size
     states, log_w, det = _kernels.birth_fill(
-        Z, j, lw_det, eps, np.cos(theta), np.sin(theta), speed_n, lk.sigma_obs,
+        Z, j, lw_det, eps, theta, speed_n, lk.sigma_obs,
         lk.sigma_obs_min, lk.sigma_obs_pos_ratio, bp.birth_spread, bp.birth_speed_mean,
         bp.birth_speed_std, params.motion.min_size)
     return BirthResult(ParticleSet(states, log_w), j, m_near, det)
