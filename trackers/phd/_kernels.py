@@ -153,9 +153,12 @@ def mass_near_kernel(states, w, Z, std_z, r2, cell_x, cell_y):
                 i = order[p]
                 q0 = (states[i, 0] - Z[j, 0]) / std_z[j, 0]
                 q1 = (states[i, 1] - Z[j, 1]) / std_z[j, 1]
+                d2 = q0 * q0 + q1 * q1
+                if not d2 <= r2:              # adding squares cannot bring it back (rounding
+                    continue                  # is monotone): the same test, sooner
                 q2 = (states[i, 4] - Z[j, 2]) / std_z[j, 2]
                 q3 = (states[i, 5] - Z[j, 3]) / std_z[j, 3]
-                if q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3 <= r2:
+                if d2 + q2 * q2 + q3 * q3 <= r2:
                     s += w[i]
         out[j] = s
     return True, out
@@ -167,9 +170,8 @@ def birth_fill(Z, j, lw_det, eps, theta, speed_n, sigma_obs, sigma_min, pos_rati
     """The J = Σ j newborn: detection z's ``j[z]`` rows get ``(y, w, h) = z + spread σ(z) ε``,
     velocity ``(mean + std n) sqrt(w_z h_z) (cos θ, sin θ)``, sizes clipped to ``min_size``,
     log-weight ``lw_det[z]``.  ``eps`` (J, 4), ``theta``/``speed_n`` (J,) the caller's
-    draws (``math.cos``/``math.sin`` here are libm's, the very floats of ``np.cos``/``np.sin``,
-    without their two (J,) temporaries).  Returns ``(states (J, 6), log_w (J,), det (J,))`` (the numpy birth's operations,
-    same order)."""
+    draws (``math.cos``/``math.sin`` here: libm's, without two (J,) temporaries).  Returns
+    ``(states (J, 6), log_w (J,), det (J,))`` (the numpy birth's operations, same order)."""
     n = eps.shape[0]
     states = np.empty((n, 6))
     log_w = np.empty(n)
@@ -265,9 +267,12 @@ def gauss_update(states, lw, Z, std, log_norm, by_det, log_kappa, log_pd, log_pm
                 k = j if by_det else i
                 q0 = (states[i, 0] - Z[j, 0]) / std[k, 0]
                 q1 = (states[i, 1] - Z[j, 1]) / std[k, 1]
+                d2 = q0 * q0 + q1 * q1
+                if not d2 <= r2:              # outside on position alone (as mass_near_kernel)
+                    continue
                 q2 = (states[i, 4] - Z[j, 2]) / std[k, 2]
                 q3 = (states[i, 5] - Z[j, 3]) / std[k, 3]
-                d2 = q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3
+                d2 = d2 + q2 * q2 + q3 * q3
                 if not d2 <= r2:
                     continue
                 log_psi = log_pd + (-0.5 * d2 - log_norm[k] - _HALF_LOG_2PI_4)
