@@ -358,3 +358,30 @@ def test_video_from_the_source_jpeg_bytes(tmp_path):
     assert blobs["auto"] == (files if len(files[0]) <= q75 else blobs["encode"])
     with pytest.raises(InputError, match="video"):
         record(open_source(root), tmp_path / "x.rrd", RecordOptions(video="raw"), progress=False)
+
+
+def test_timed_stream_logs_at_the_latest_timelines(tmp_path):
+    """The recorder moves its timelines ~10 times a frame but sets them on the stream only
+    before a direct ``log``: each row lands at the values current at its log call."""
+    import rerun as rr
+
+    from pfscope.viewer_app.reporters.base import TimedStream
+
+    rec = rr.RecordingStream("t", recording_id="timed")
+    rec.save(str(tmp_path / "t.rrd"))
+    ts = TimedStream(rec)
+    ts.set_time("frame", sequence=1)
+    ts.set_time("stage", sequence=10)
+    ts.set_time("frame", sequence=5)
+    ts.log("e", rr.TextLog("a"))
+    ts.set_time("frame", sequence=7)                   # moved, never logged at
+    ts.set_time("frame", sequence=9)
+    ts.log("e", rr.TextLog("b"))
+    ts.set_time("stage", sequence=95)
+    ts.log("e", rr.TextLog("c"))
+    ts.flush()
+    ts.disconnect()
+    got = sorted((t["frame"], t["stage"], str(c["TextLog:text"]))
+                 for t, c in read_rrd(tmp_path / "t.rrd")["/e"])
+    assert [(f, s) for f, s, _ in got] == [(5, 10), (9, 10), (9, 95)]
+    assert ["a" in got[0][2], "b" in got[1][2], "c" in got[2][2]] == [True, True, True]

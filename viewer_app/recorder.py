@@ -26,8 +26,9 @@ frame's stages stay in order and frames never overlap, also with several tracker
 Cost (issue 12): the frame loop pays for little more than building the rows.  The frame's JPEG
 is encoded on a worker thread while the rows are built (:class:`JpegEncoder`, one frame in flight,
 bounded wait); rows are kept per entity and sent as columns every ``flush_frames`` frames
-(:class:`~.reporters.base.Columns`: one conversion per entity and component for ten frames
-instead of one ``log`` call per entity and frame); the flush is started without waiting for it,
+(:class:`~.reporters.base.Columns`: one conversion per entity and group of components for
+twenty frames instead of one ``log`` call per entity and frame; 20, not 10: a send's cost is
+mostly per call, so this halves it, and a SIGKILL still loses at most 20 frames); the flush is started without waiting for it,
 and only every ``check_flushes``-th one is waited for (bounded), so the writer builds the chunks
 while the next frames run.  None of this depends on thread timing: the same seed and input give
 the same file.
@@ -63,7 +64,7 @@ from pfscope.trackers.pipeline import BaseHook, FrameReport, Outcome, RunInfo
 from .blueprint import compare_blueprint, default_blueprint
 from .properties import about_markdown, any_values
 from .reporters import Reporter, layout_for
-from .reporters.base import SERIES_PALETTE, Columns, annotation_context
+from .reporters.base import SERIES_PALETTE, Columns, TimedStream, annotation_context
 
 
 #: What the ``video`` entity stores (``RerunRecorder(video=...)``): ``encode`` the decoded frame
@@ -187,7 +188,7 @@ class RerunRecorder(BaseHook):
     properties and seeds the recording id (same config → comparable recording)."""
 
     def __init__(self, out: Path, config: dict, *, max_points: int = 3000,
-                 jpeg_quality: int = 75, flush_frames: int = 10, live: Optional[str] = None,
+                 jpeg_quality: int = 75, flush_frames: int = 20, live: Optional[str] = None,
                  web_port: int = 9090, announce=print, timing: bool = False,
                  properties: Optional[dict] = None, long_miss: int = 10, worst: int = 10,
                  check_flushes: int = 5, video: str = "encode"):
@@ -233,8 +234,8 @@ class RerunRecorder(BaseHook):
         # `flush_frames` frames only, so the same input gives the same chunks (and a
         # `rerun rrd compare`-equal file) however fast or loaded the machine is.
         batcher = rr.ChunkBatcherConfig(flush_tick=timedelta(days=1), flush_num_bytes=2 << 20)
-        rec = rr.RecordingStream("pfscope", recording_id=recording_id_for(self.config),
-                                 send_properties=False, batcher_config=batcher)
+        rec = TimedStream(rr.RecordingStream("pfscope", recording_id=recording_id_for(self.config),
+                                             send_properties=False, batcher_config=batcher))
         self.rec = rec
         if len(names) == 1:
             layout = layout_for(info.trackers[names[0]].name)

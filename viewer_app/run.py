@@ -9,7 +9,7 @@ Safety rules the code keeps:
   when the run completed; a run that failed (for any reason) or was interrupted keeps
   ``*.incomplete.*`` names, and the recording's last entry says why it stopped;
 - Ctrl-C (SIGINT) and SIGTERM stop at the next frame and finish the file so it stays readable;
-- data is flushed every 10 frames, so even SIGKILL leaves a readable file.
+- data is flushed every 20 frames, so even SIGKILL leaves a readable file.
 """
 
 from __future__ import annotations

@@ -127,8 +127,9 @@ class Columns:
     """What the reporters log, kept per entity and sent as columns (``send_columns``: one call
     per entity and component for all the frames since the last :meth:`send`) instead of one
     ``log`` call per entity and frame.  A ``log`` call converts every component on its own
-    (tens of microseconds of pyarrow each); a column converts ten frames at once, which is most
-    of what recording costs the frame loop.
+    (tens of microseconds of pyarrow each); a column converts a flush's frames at once (the
+    components with the same instances per row in one call), which is most of what recording
+    costs the frame loop.
 
     The recorder keeps :attr:`frame`, :attr:`seconds` and :attr:`stage` equal to the
     recording's timelines and calls :meth:`send` before every flush (so a flushed frame is whole
@@ -168,22 +169,66 @@ class Columns:
 
     def send(self) -> None:
         rows, self._rows = self._rows, {}
+        times: dict = {}                 # the time columns of entities logged at the same rows
         for entity, buf in rows.items():
-            self._send_one(entity, buf)
+            self._send_one(entity, buf, times)
 
-    def _send_one(self, entity: str, buf: dict) -> None:
+    def _send_one(self, entity: str, buf: dict, times: Optional[dict] = None) -> None:
         archetype = buf["key"][0]
-        columns = []
+        # one conversion per group of components with the same instances per row (boxes,
+        # their colours and labels), each group cut into rows; the columns in field order
+        groups: dict[bytes, tuple[np.ndarray, dict]] = {}
         for name, values in buf["fields"].items():
             data, lengths = _column(values)
-            columns.extend(archetype.columns(**{name: data}).partition(lengths))
-        self.rec.send_columns(
-            entity,
-            indexes=[rr.TimeColumn("frame", sequence=np.asarray(buf["frame"], dtype=np.int64)),
-                     rr.TimeColumn("time", duration=np.asarray(buf["seconds"],
-                                                               dtype=np.float64)),
-                     rr.TimeColumn("stage", sequence=np.asarray(buf["stage"], dtype=np.int64))],
-            columns=columns)
+            groups.setdefault(lengths.tobytes(), (lengths, {}))[1][name] = data
+        parts = {}
+        for lengths, fields in groups.values():
+            # the archetype returns its columns in its own field order: match them by name
+            for col in archetype.columns(**fields).partition(lengths):
+                parts[str(col.component_descriptor().component).rpartition(":")[2]] = col
+        if set(parts) == set(buf["fields"]):
+            columns = [parts[name] for name in buf["fields"]]
+        else:                            # a component named otherwise: one field at a time
+            columns = []
+            for name, values in buf["fields"].items():
+                data, lengths = _column(values)
+                columns.extend(archetype.columns(**{name: data}).partition(lengths))
+        key = (tuple(buf["frame"]), tuple(buf["stage"]), tuple(buf["seconds"]))
+        indexes = None if times is None else times.get(key)
+        if indexes is None:
+            indexes = [rr.TimeColumn("frame", sequence=np.asarray(buf["frame"], dtype=np.int64)),
+                       rr.TimeColumn("time", duration=np.asarray(buf["seconds"],
+                                                                 dtype=np.float64)),
+                       rr.TimeColumn("stage", sequence=np.asarray(buf["stage"], dtype=np.int64))]
+            if times is not None:
+                times[key] = indexes
+        self.rec.send_columns(entity, indexes=indexes, columns=columns)
+
+
+class TimedStream:
+    """The recording stream with its timelines set when a row is logged, not when they move.
+    The frame loop moves them about ten times a frame (the frame, its time, a stage slot per
+    stage), but most rows go through :class:`Columns` with their own time columns; the few
+    direct ``log`` calls (events, clears, static items) first set the timelines that changed
+    since the last one.  Everything else goes straight to the stream."""
+
+    def __init__(self, rec: rr.RecordingStream):
+        self.raw = rec
+        self._want: dict[str, dict] = {}
+        self._have: dict[str, dict] = {}
+
+    def set_time(self, timeline: str, **kwargs) -> None:
+        self._want[timeline] = kwargs
+
+    def log(self, *args, **kwargs):
+        for name, value in self._want.items():
+            if self._have.get(name) != value:
+                self.raw.set_time(name, **value)
+                self._have[name] = value
+        return self.raw.log(*args, **kwargs)
+
+    def __getattr__(self, name):
+        return getattr(self.raw, name)
 
 
 def _column(values: list) -> tuple[object, np.ndarray]:
