@@ -609,3 +609,75 @@ def test_a_duplicate_born_next_to_a_track_does_not_take_it_over(monkeypatch):
     monkeypatch.setattr(AppearanceModel, "MODEL_N0", 0.0)  # no shrinkage: the contest is real
     a, dup, got = run()
     assert got == dup
+
+
+# --------------------------------------------------------------------------- storms: gated pairs
+
+def test_gated_pairs_score_exactly_the_gated_edges():
+    """score_edge_pairs (a k-d tree on the vertices, then the gate) lists the pairs that
+    score_edges allows, with the same floats."""
+    from pfscope.trackers.phd.association import score_edge_pairs
+
+    rng = np.random.default_rng(3)
+    p = AssocParams(depth=8)
+    T, M = 300, 400
+    tails = np.array([state(x, y, w, 2.5 * w, *(v if k % 3 else (NAN, NAN)))
+                      for k, (x, y, w, v) in enumerate(zip(rng.uniform(0, 800, T),
+                                                           rng.uniform(0, 600, T),
+                                                           rng.uniform(10, 60, T),
+                                                           rng.normal(0, 2, (T, 2))))])
+    prev = tails + rng.normal(0, 3, tails.shape)
+    v, b, c = tail_velocity(tails, prev, rng.integers(0, 3, T), p)
+    gaps = rng.integers(1, 8, T)
+    new = np.array([state(x, y, w, 2.5 * w) for x, y, w in
+                    zip(rng.uniform(0, 800, M), rng.uniform(0, 600, M), rng.uniform(10, 60, M))])
+    dense = score_edges(tails, v, b, c, gaps, new, p)
+    pairs = score_edge_pairs(tails, v, b, c, gaps, new, p)
+    er, ec = np.nonzero(dense.allowed)
+    assert len(er) > 50                                  # the test has gated pairs to compare
+    np.testing.assert_array_equal(pairs.rows, er)
+    np.testing.assert_array_equal(pairs.cols, ec)
+    np.testing.assert_array_equal(pairs.d2, dense.d2[er, ec])
+    np.testing.assert_array_equal(pairs.gain, dense.gain[er, ec])
+    np.testing.assert_array_equal(pairs.weight, dense.weight[er, ec])
+
+
+def test_sparse_matching_finds_the_dense_optimum():
+    from pfscope.trackers.phd.association import sparse_max_weight_matching
+
+    rng = np.random.default_rng(5)
+    for _ in range(200):
+        T, M = rng.integers(1, 30, 2)
+        w = rng.normal(0, 1, (T, M))
+        allowed = rng.random((T, M)) < rng.uniform(0.05, 0.7)
+        r1, c1 = max_weight_matching(w, allowed)
+        er, ec = np.nonzero(allowed)
+        r2, c2 = sparse_max_weight_matching(er, ec, w[er, ec], T, M)
+        assert len(set(r2.tolist())) == len(r2) and len(set(c2.tolist())) == len(c2)
+        assert np.all(allowed[r2, c2]) and np.all(w[r2, c2] > 0) and np.all(np.diff(r2) > 0)
+        assert w[r2, c2].sum() == pytest.approx(w[r1, c1].sum(), abs=1e-9)
+
+
+def test_the_sparse_association_of_a_storm_is_the_dense_one(monkeypatch):
+    """Above DENSE_MAX_PAIRS pairs a frame is scored on its gated pairs and matched on that
+    sparse graph: the same ids, edges and weights as the dense arrays (forced here on every
+    frame of a contested scene)."""
+    from pfscope.trackers.phd import association as A
+
+    def run():
+        assoc = GraphAssociator(AssocParams(depth=8))
+        out = []
+        for k, states in _contested_scene(np.random.default_rng(11), 40):
+            r = assoc.step(k, states)
+            out.append((r.ids.copy(), r.edges_src_id.copy(), r.edges_dst_index.copy(),
+                        r.edges_weight.copy(), r.edges_gain.copy(), r.chosen.copy(),
+                        r.edges_src.copy()))
+        return out
+
+    dense = run()
+    monkeypatch.setattr(A, "DENSE_MAX_PAIRS", 0)
+    sparse = run()
+    assert sum(len(x[1]) for x in dense) > 100
+    for x, y in zip(dense, sparse):
+        for u, w in zip(x, y):
+            np.testing.assert_array_equal(u, w)

@@ -66,6 +66,21 @@ def similarity(a: np.ndarray, b: np.ndarray) -> np.ndarray:
         return np.where(n > 0, np.sum(np.where(ok, rho, 0.0), axis=-1) / n, np.nan)
 
 
+def similarity_pairs(a: np.ndarray, b: np.ndarray, rows: np.ndarray,
+                     cols: np.ndarray) -> np.ndarray:
+    """(P,) :func:`similarity` of the pairs ``(a[rows], b[cols])`` only (no (A, B) arrays)."""
+    a = np.asarray(a, dtype=np.float64)[rows]
+    b = np.asarray(b, dtype=np.float64)[cols]
+    d = a.shape[1] // N_HALVES
+    sa = np.sqrt(a).reshape(len(a), N_HALVES, d)
+    sb = np.sqrt(b).reshape(len(b), N_HALVES, d)
+    rho = np.einsum("phd,phd->ph", np.nan_to_num(sa), np.nan_to_num(sb))
+    ok = np.isfinite(sa[:, :, 0]) & np.isfinite(sb[:, :, 0])
+    n = ok.sum(axis=-1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(n > 0, np.sum(np.where(ok, rho, 0.0), axis=-1) / n, np.nan)
+
+
 class AppearanceModel:
     """How much a colour similarity says about identity, learnt online from the association.
 

@@ -114,7 +114,7 @@ import numpy as np
 
 from ..types import cxcywh_to_xywh
 from ..params import param
-from .appearance import DIM as APP_DIM, AppearanceModel, similarity
+from .appearance import DIM as APP_DIM, AppearanceModel, similarity, similarity_pairs
 from .filter import STATE_DIM, obs_std
 
 #: Observable components of the state (y1, y2, w, h), maggio2007 §2 ``z = (y, w, h)``.
@@ -406,6 +406,100 @@ def max_weight_matching(weights: np.ndarray, allowed: np.ndarray) -> tuple[np.nd
     return rows[keep].astype(np.int64), cols[keep].astype(np.int64)
 
 
+#: Above this many (tail, new vertex) pairs a frame's edges are scored on the pairs inside the
+#: gate only (:func:`score_edge_pairs`) and matched on that sparse graph
+#: (:func:`sparse_max_weight_matching`): a clutter storm with thousands of estimates a frame
+#: needs memory and time in the number of gated pairs, not tails × vertices (issue 12).  Below
+#: it -- every scene of a few hundred targets -- the dense (T, M) arrays are cheaper.
+DENSE_MAX_PAIRS = 250_000
+
+
+@dataclass(frozen=True)
+class EdgePairs:
+    """The gated (tail, new vertex) edges of one frame as pairs: ``rows``/``cols`` (P,) and
+    their ``gain``, ``d2`` and ``weight`` (P,); ``floor`` (T,) as in :class:`EdgeScores`."""
+
+    rows: np.ndarray
+    cols: np.ndarray
+    gain: np.ndarray
+    d2: np.ndarray
+    floor: np.ndarray
+    weight: np.ndarray
+
+
+def score_edge_pairs(tail_states: np.ndarray, v: np.ndarray, b: np.ndarray, c: np.ndarray,
+                     gaps: np.ndarray, new_states: np.ndarray,
+                     params: AssocParams) -> EdgePairs:
+    """:func:`score_edges` on the pairs inside the gate only, the same value for each pair.
+    Candidates come from a k-d tree on the new vertices' positions: a pair can pass the gate
+    ``d2 <= gate_d2`` only if each position term does, i.e. inside the box
+    ``|z − ŷ| <= sqrt(gate_d2 · var)`` around the tail's prediction."""
+    from scipy.spatial import cKDTree
+
+    T = len(tail_states)
+    gaps = np.asarray(gaps, dtype=np.float64)
+    both = np.stack([gaps, np.full(T, float(params.depth))], axis=1)
+    mean, var = propagate(tail_states, v, b, c, both, params)
+    log_det = np.sum(np.log(2.0 * np.pi * var), axis=-1)
+    g2 = params.gate_d2
+    floor = -0.5 * g2 - 0.5 * log_det[:, 1]
+    z = new_states[:, OBS_INDEX]
+    half = np.sqrt(g2 * var[:, 0, :2]) * (1.0 + 1e-9)       # (T, 2) gate box half-widths
+    ok = np.all(np.isfinite(mean[:, 0, :2]), axis=1) & np.all(np.isfinite(half), axis=1)
+    zf = np.all(np.isfinite(z[:, :2]), axis=1)
+    rows_l, cols_l = [], []
+    if ok.any() and zf.any():
+        tree = cKDTree(z[zf, :2])
+        zi = np.flatnonzero(zf)
+        ti = np.flatnonzero(ok)
+        found = tree.query_ball_point(mean[ti, 0, :2], r=np.max(half[ti], axis=1), p=np.inf)
+        counts = np.fromiter((len(f) for f in found), dtype=np.int64, count=len(found))
+        if counts.sum():
+            rows_l = np.repeat(ti, counts)
+            cols_l = zi[np.concatenate([np.asarray(f, dtype=np.int64) for f in found
+                                        if len(f)])]
+    rows = np.asarray(rows_l, dtype=np.int64)
+    cols = np.asarray(cols_l, dtype=np.int64)
+    order = np.lexsort((cols, rows))                        # by tail, then vertex
+    rows, cols = rows[order], cols[order]
+    res = z[cols] - mean[rows, 0, :]
+    d2 = np.sum(res ** 2 / var[rows, 0, :], axis=-1)
+    keep = d2 <= g2
+    rows, cols, d2 = rows[keep], cols[keep], d2[keep]
+    gain = -0.5 * d2 - 0.5 * log_det[rows, 0]
+    return EdgePairs(rows=rows, cols=cols, gain=gain, d2=d2, floor=floor,
+                     weight=gain - floor[rows])
+
+
+def sparse_max_weight_matching(rows: np.ndarray, cols: np.ndarray, weights: np.ndarray,
+                               n_rows: int, n_cols: int) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`max_weight_matching` on a sparse graph: edges ``(rows, cols)`` with ``weights``
+    (P,).  Solved as a minimum-cost matching that covers every row (scipy's sparse LAPJVsp):
+    each row also gets a private dummy column of cost C and each edge costs ``C − w``, so a
+    matching costs ``C · rows − Σ w`` over its real edges and the cheapest is the heaviest.
+    Time and memory grow with the edges, not ``n_rows × n_cols``.  Returns ``rows, cols``
+    sorted by row."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import min_weight_full_bipartite_matching
+
+    ok = np.isfinite(weights) & (weights > 0)
+    r, c, w = rows[ok].astype(np.int64), cols[ok].astype(np.int64), weights[ok]
+    if not len(w):
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    # only the rows and columns with an edge take part (the others stay unmatched)
+    ur, r = np.unique(r, return_inverse=True)
+    uc, c = np.unique(c, return_inverse=True)
+    T, M = len(ur), len(uc)
+    big = 1.0 + 2.0 * float(np.max(w))
+    g = coo_matrix((np.concatenate([big - w, np.full(T, big)]),
+                    (np.concatenate([r, np.arange(T)]), np.concatenate([c, M + np.arange(T)]))),
+                   shape=(T, M + T)).tocsr()
+    ri, ci = min_weight_full_bipartite_matching(g)
+    real = ci < M
+    order = np.argsort(ri[real], kind="stable")
+    return (ur[ri[real][order]].astype(np.int64), uc[ci[real][order]].astype(np.int64))
+
+
 def _iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """(A, B) intersection over union of centre boxes ``(cx, cy, w, h)``."""
     lo = np.maximum(a[:, None, :2] - a[:, None, 2:] / 2, b[None, :, :2] - b[None, :, 2:] / 2)
@@ -633,19 +727,28 @@ class GraphAssociator:
         # 2. score every (tail, new vertex) edge and match
         T = len(self._ids)
         gaps = frame - self._tail_frame
+        sc = ep = None
         if T and M:
             v, b, c = tail_velocity(self._tail, self._prev,
                                     np.where(self._prev_frame >= 0, self._tail_frame - self._prev_frame, 0),
                                     p)
-            sc = score_edges(self._tail, v, b, c, gaps, new, p)
-            if use_app:
-                llr = self._app_model.llr(similarity(self._app, feats),
-                                          self._app_n[:, None])
-                sc = EdgeScores(gain=sc.gain, d2=sc.d2, floor=sc.floor,
-                                weight=sc.weight + p.app_weight * llr, allowed=sc.allowed)
-            rows, cols = max_weight_matching(sc.weight, sc.allowed)
+            if T * M <= DENSE_MAX_PAIRS:
+                sc = score_edges(self._tail, v, b, c, gaps, new, p)
+                if use_app:
+                    llr = self._app_model.llr(similarity(self._app, feats),
+                                              self._app_n[:, None])
+                    sc = EdgeScores(gain=sc.gain, d2=sc.d2, floor=sc.floor,
+                                    weight=sc.weight + p.app_weight * llr, allowed=sc.allowed)
+                rows, cols = max_weight_matching(sc.weight, sc.allowed)
+            else:   # a storm of estimates: the gated pairs only (DENSE_MAX_PAIRS)
+                ep = score_edge_pairs(self._tail, v, b, c, gaps, new, p)
+                if use_app:
+                    llr = self._app_model.llr(similarity_pairs(self._app, feats, ep.rows,
+                                                               ep.cols), self._app_n[ep.rows])
+                    ep = EdgePairs(rows=ep.rows, cols=ep.cols, gain=ep.gain, d2=ep.d2,
+                                   floor=ep.floor, weight=ep.weight + p.app_weight * llr)
+                rows, cols = sparse_max_weight_matching(ep.rows, ep.cols, ep.weight, T, M)
         else:
-            sc = None
             rows = cols = np.zeros(0, dtype=np.int64)
 
         # 3. matched vertices continue their track; the others start new tracks (input order)
@@ -686,18 +789,21 @@ class GraphAssociator:
         self._app_n = np.concatenate([self._app_n, np.isfinite(feats[unmatched, 0]).astype(float)])
 
         # 4. edges for the observer: admissible pairs only
-        if sc is not None:
-            er, ec = np.nonzero(sc.allowed)
-            chosen_mask = np.zeros((T, M), dtype=bool)
-            chosen_mask[rows, cols] = True
+        if sc is not None or ep is not None:
+            if sc is not None:
+                er, ec = np.nonzero(sc.allowed)
+                e_gain, e_weight = sc.gain[er, ec], sc.weight[er, ec]
+            else:
+                er, ec, e_gain, e_weight = ep.rows, ep.cols, ep.gain, ep.weight
+            chosen = np.isin(er * M + ec, rows * M + cols)
             # each edge's source is the tail as it was before this frame: for a matched tail that
             # vertex has just moved to _prev
             matched_tail = np.zeros(T, dtype=bool)
             matched_tail[rows] = True
             edges = dict(edges_src=np.where(matched_tail[er][:, None], self._prev[er], self._tail[er]),
                          edges_src_id=self._ids[er], edges_dst_index=ec.astype(np.int64),
-                         edges_gain=sc.gain[er, ec], edges_weight=sc.weight[er, ec],
-                         edges_gap=gaps[er].astype(np.int64), chosen=chosen_mask[er, ec])
+                         edges_gain=e_gain, edges_weight=e_weight,
+                         edges_gap=gaps[er].astype(np.int64), chosen=chosen)
         else:
             edges = dict(edges_src=np.zeros((0, STATE_DIM)), edges_src_id=np.zeros(0, dtype=np.int64),
                          edges_dst_index=np.zeros(0, dtype=np.int64), edges_gain=np.zeros(0),
