@@ -681,3 +681,19 @@ def test_the_sparse_association_of_a_storm_is_the_dense_one(monkeypatch):
     for x, y in zip(dense, sparse):
         for u, w in zip(x, y):
             np.testing.assert_array_equal(u, w)
+
+
+def test_pair_similarities_are_the_matrix_entries():
+    """The storm path's colour similarities (pairs only) equal the dense matrix's entries,
+    unknown halves and unknown features included."""
+    from pfscope.trackers.phd.appearance import similarity, similarity_pairs
+
+    rng = np.random.default_rng(2)
+    a, b = rng.random((12, APP_DIM)), rng.random((9, APP_DIM))
+    a[3, : APP_DIM // 2] = np.nan                         # one half unknown
+    b[5] = np.nan                                          # no colour at all
+    rows, cols = np.nonzero(rng.random((12, 9)) < 0.5)
+    dense = similarity(a, b)[rows, cols]
+    pairs = similarity_pairs(a, b, rows, cols)
+    assert np.isnan(pairs).sum() == np.isnan(dense).sum() > 0
+    np.testing.assert_allclose(pairs, dense, rtol=1e-13, atol=0)

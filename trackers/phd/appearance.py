@@ -51,34 +51,34 @@ def box_features(image: np.ndarray, centres: np.ndarray, levels: int = LEVELS) -
     return out
 
 
-def similarity(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """(A, B) Bhattacharyya coefficients between features ``a (A, D)`` and ``b (B, D)``,
-    averaged over the halves both have; NaN where either side has no half."""
-    a = np.asarray(a, dtype=np.float64)
-    b = np.asarray(b, dtype=np.float64)
-    d = a.shape[1] // N_HALVES
-    sa = np.sqrt(a).reshape(len(a), N_HALVES, d)
-    sb = np.sqrt(b).reshape(len(b), N_HALVES, d)
-    rho = np.einsum("ahd,bhd->abh", np.nan_to_num(sa), np.nan_to_num(sb))
-    ok = np.isfinite(sa[:, :, 0])[:, None, :] & np.isfinite(sb[:, :, 0])[None, :, :]
+def _root_halves(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """sqrt of features ``x (n, D)`` per half, ``(n, halves, D/halves)`` with NaN as 0, and
+    which halves are known ``(n, halves)``."""
+    x = np.asarray(x, dtype=np.float64)
+    s = np.sqrt(x).reshape(len(x), N_HALVES, x.shape[1] // N_HALVES)
+    return np.nan_to_num(s), np.isfinite(s[:, :, 0])
+
+
+def _mean_over_halves(rho: np.ndarray, ok: np.ndarray) -> np.ndarray:
     n = ok.sum(axis=-1)
     with np.errstate(invalid="ignore", divide="ignore"):
         return np.where(n > 0, np.sum(np.where(ok, rho, 0.0), axis=-1) / n, np.nan)
+
+
+def similarity(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(A, B) Bhattacharyya coefficients between features ``a (A, D)`` and ``b (B, D)``,
+    averaged over the halves both have; NaN where either side has no half."""
+    sa, oka = _root_halves(a)
+    sb, okb = _root_halves(b)
+    return _mean_over_halves(np.einsum("ahd,bhd->abh", sa, sb), oka[:, None, :] & okb[None, :, :])
 
 
 def similarity_pairs(a: np.ndarray, b: np.ndarray, rows: np.ndarray,
                      cols: np.ndarray) -> np.ndarray:
     """(P,) :func:`similarity` of the pairs ``(a[rows], b[cols])`` only (no (A, B) arrays)."""
-    a = np.asarray(a, dtype=np.float64)[rows]
-    b = np.asarray(b, dtype=np.float64)[cols]
-    d = a.shape[1] // N_HALVES
-    sa = np.sqrt(a).reshape(len(a), N_HALVES, d)
-    sb = np.sqrt(b).reshape(len(b), N_HALVES, d)
-    rho = np.einsum("phd,phd->ph", np.nan_to_num(sa), np.nan_to_num(sb))
-    ok = np.isfinite(sa[:, :, 0]) & np.isfinite(sb[:, :, 0])
-    n = ok.sum(axis=-1)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return np.where(n > 0, np.sum(np.where(ok, rho, 0.0), axis=-1) / n, np.nan)
+    sa, oka = _root_halves(np.asarray(a, dtype=np.float64)[rows])
+    sb, okb = _root_halves(np.asarray(b, dtype=np.float64)[cols])
+    return _mean_over_halves(np.einsum("phd,phd->ph", sa, sb), oka & okb)
 
 
 class AppearanceModel:
