@@ -45,9 +45,11 @@ centre, as plain K-means does; with more, each particle looks only at the centre
 grid of the centres, :func:`._kmeans_kernels.assign`), and the result is still *exact* — the same
 labels, ties to the lowest index included, the same d² floats: every centre's inverse variances
 are at least m (their minimum), so a centre at Euclidean distance e in the position plane scaled
-by sqrt(m) has d² >= e², and the grid's rings around the particle are searched until the best
-d² found beats every ring not yet visited (starting from the particle's previous centre, so a
-late iteration where most centres stay put costs about one distance per particle).
+by sqrt(m) has d² >= e², so a particle scans its previous centre's neighbours (the centres of
+its 3 × 3 block of grid cells, by distance) until the triangle inequality rules out the rest,
+and searches the grid's rings around itself only when that list ends too soon.  A late
+iteration where most centres stay put costs about one distance per particle, and nothing is
+O(K²) in time or memory (a 2,000-detection storm's K-means: 4.2 s → 0.33 s a frame).
 """
 
 from __future__ import annotations
