@@ -652,7 +652,7 @@ def test_sparse_matching_finds_the_dense_optimum():
         allowed = rng.random((T, M)) < rng.uniform(0.05, 0.7)
         r1, c1 = max_weight_matching(w, allowed)
         er, ec = np.nonzero(allowed)
-        r2, c2 = sparse_max_weight_matching(er, ec, w[er, ec], T, M)
+        r2, c2 = sparse_max_weight_matching(er, ec, w[er, ec])
         assert len(set(r2.tolist())) == len(r2) and len(set(c2.tolist())) == len(c2)
         assert np.all(allowed[r2, c2]) and np.all(w[r2, c2] > 0) and np.all(np.diff(r2) > 0)
         assert w[r2, c2].sum() == pytest.approx(w[r1, c1].sum(), abs=1e-9)

@@ -27,11 +27,11 @@ Cost (issue 12): the frame loop pays for little more than building the rows.  Th
 is encoded on a worker thread while the rows are built (:class:`JpegEncoder`, one frame in flight,
 bounded wait); rows are kept per entity and sent as columns every ``flush_frames`` frames
 (:class:`~.reporters.base.Columns`: one conversion per entity and group of components for
-twenty frames instead of one ``log`` call per entity and frame; 20, not 10: a send's cost is
-mostly per call, so this halves it, and a SIGKILL still loses at most 20 frames); the flush is started without waiting for it,
-and only every ``check_flushes``-th one is waited for (bounded), so the writer builds the chunks
-while the next frames run.  None of this depends on thread timing: the same seed and input give
-the same file.
+twenty frames instead of one ``log`` call per entity and frame; 20, not 10: a send costs
+mostly per call, and a SIGKILL still loses at most 20 frames); the flush is started without
+waiting for it, and only every ``check_flushes``-th one is waited for (bounded), so the writer
+builds the chunks while the next frames run.  None of this depends on thread timing: the same
+seed and input give the same file.
 
 Files: the recording is written as ``<name>.incomplete.rrd`` and renamed to its final name
 only when the run completed; a failed or interrupted run keeps the ``.incomplete`` name (the

@@ -129,6 +129,23 @@ def grid_span(lo, hi, origin, cell, n_cells):
 # ----------------------------------------------------------------------------- birth
 
 @njit(cache=True, nogil=True)
+def _gate_d2(states, i, Z, j, std, k, r2):
+    """``Σ_d ((x_id − z_jd)/σ_kd)²`` on the observed columns (0, 1, 4, 5), or inf when it
+    exceeds ``r2`` (or is NaN).  The position terms are tested first: adding squares cannot
+    bring a sum back under ``r2`` (rounding is monotone), so the decision and the floats are
+    those of the whole sum."""
+    q0 = (states[i, 0] - Z[j, 0]) / std[k, 0]
+    q1 = (states[i, 1] - Z[j, 1]) / std[k, 1]
+    d2 = q0 * q0 + q1 * q1
+    if not d2 <= r2:
+        return np.inf
+    q2 = (states[i, 4] - Z[j, 2]) / std[k, 2]
+    q3 = (states[i, 5] - Z[j, 3]) / std[k, 3]
+    d2 = d2 + q2 * q2 + q3 * q3
+    return d2 if d2 <= r2 else np.inf
+
+
+@njit(cache=True, nogil=True)
 def mass_near_kernel(states, w, Z, std_z, r2, cell_x, cell_y):
     """M(z) (N_z,): ``Σ w_i`` over the particles with ``Σ_d ((x_id − z_d)/σ_zd)² <= r2``
     on the observed columns (0, 1, 4, 5) of ``states`` (N, 6), ``std_z`` (N_z, 4) per detection.
@@ -151,14 +168,7 @@ def mass_near_kernel(states, w, Z, std_z, r2, cell_x, cell_y):
         for ci in range(i0, i1 + 1):
             for p in range(starts[ci * nj + j0], starts[ci * nj + j1 + 1]):
                 i = order[p]
-                q0 = (states[i, 0] - Z[j, 0]) / std_z[j, 0]
-                q1 = (states[i, 1] - Z[j, 1]) / std_z[j, 1]
-                d2 = q0 * q0 + q1 * q1
-                if not d2 <= r2:              # adding squares cannot bring it back (rounding
-                    continue                  # is monotone): the same test, sooner
-                q2 = (states[i, 4] - Z[j, 2]) / std_z[j, 2]
-                q3 = (states[i, 5] - Z[j, 3]) / std_z[j, 3]
-                if d2 + q2 * q2 + q3 * q3 <= r2:
+                if _gate_d2(states, i, Z, j, std_z, j, r2) <= r2:
                     s += w[i]
         out[j] = s
     return True, out
@@ -265,14 +275,7 @@ def gauss_update(states, lw, Z, std, log_norm, by_det, log_kappa, log_pd, log_pm
             for p in range(starts[ci * nj + j0], starts[ci * nj + j1 + 1]):
                 i = order[p]
                 k = j if by_det else i
-                q0 = (states[i, 0] - Z[j, 0]) / std[k, 0]
-                q1 = (states[i, 1] - Z[j, 1]) / std[k, 1]
-                d2 = q0 * q0 + q1 * q1
-                if not d2 <= r2:              # outside on position alone (as mass_near_kernel)
-                    continue
-                q2 = (states[i, 4] - Z[j, 2]) / std[k, 2]
-                q3 = (states[i, 5] - Z[j, 3]) / std[k, 3]
-                d2 = d2 + q2 * q2 + q3 * q3
+                d2 = _gate_d2(states, i, Z, j, std, k, r2)
                 if not d2 <= r2:
                     continue
                 log_psi = log_pd + (-0.5 * d2 - log_norm[k] - _HALF_LOG_2PI_4)

@@ -107,7 +107,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import cached_property
 
 import numpy as np
@@ -116,6 +116,7 @@ from ..types import cxcywh_to_xywh
 from ..params import param
 from .appearance import DIM as APP_DIM, AppearanceModel, similarity, similarity_pairs
 from .filter import STATE_DIM, obs_std
+from .gating import GridIndex, expand_runs
 
 #: Observable components of the state (y1, y2, w, h), maggio2007 §2 ``z = (y, w, h)``.
 OBS_INDEX = np.array([0, 1, 4, 5])
@@ -298,22 +299,30 @@ class EdgeScores:
     allowed: np.ndarray
 
 
-def score_edges(tail_states: np.ndarray, v: np.ndarray, b: np.ndarray, c: np.ndarray,
-                gaps: np.ndarray, new_states: np.ndarray, params: AssocParams) -> EdgeScores:
-    """Gains and weights of every (tail, new vertex) edge, vectorised over all pairs."""
-    T, M = len(tail_states), len(new_states)
+def _edge_model(tail_states: np.ndarray, v: np.ndarray, b: np.ndarray, c: np.ndarray,
+                gaps: np.ndarray, params: AssocParams):
+    """Each tail's predicted new vertex at its gap: ``mean, var (T, 4)``, ``log_det (T,)``
+    (of ``2π var``), and ``floor (T,)``, the log-density at the gate of the gap-K edge."""
+    T = len(tail_states)
     gaps = np.asarray(gaps, dtype=np.float64)
     both = np.stack([gaps, np.full(T, float(params.depth))], axis=1)  # (T, 2): gap i, gap K
     mean, var = propagate(tail_states, v, b, c, both, params)
     log_det = np.sum(np.log(2.0 * np.pi * var), axis=-1)  # (T, 2)
+    floor = -0.5 * params.gate_d2 - 0.5 * log_det[:, 1]
+    return mean[:, 0, :], var[:, 0, :], log_det[:, 0], floor
+
+
+def score_edges(tail_states: np.ndarray, v: np.ndarray, b: np.ndarray, c: np.ndarray,
+                gaps: np.ndarray, new_states: np.ndarray, params: AssocParams) -> EdgeScores:
+    """Gains and weights of every (tail, new vertex) edge, vectorised over all pairs."""
+    T, M = len(tail_states), len(new_states)
+    mean, var, log_det, floor = _edge_model(tail_states, v, b, c, gaps, params)
     z = new_states[:, OBS_INDEX]
-    res = z[None, :, :] - mean[:, None, 0, :]
-    d2 = np.sum(res ** 2 / var[:, None, 0, :], axis=-1).reshape(T, M)
-    gain = -0.5 * d2 - 0.5 * log_det[:, 0:1]
-    g2 = params.gate_d2
-    floor = -0.5 * g2 - 0.5 * log_det[:, 1]
+    res = z[None, :, :] - mean[:, None, :]
+    d2 = np.sum(res ** 2 / var[:, None, :], axis=-1).reshape(T, M)
+    gain = -0.5 * d2 - 0.5 * log_det[:, None]
     weight = gain - floor[:, None]
-    return EdgeScores(gain=gain, d2=d2, floor=floor, weight=weight, allowed=d2 <= g2)
+    return EdgeScores(gain=gain, d2=d2, floor=floor, weight=weight, allowed=d2 <= params.gate_d2)
 
 
 def propagate_damped(tail_states: np.ndarray, v: np.ndarray, b: np.ndarray, c: np.ndarray,
@@ -365,7 +374,7 @@ def score_relinks(lost_states: np.ndarray, v: np.ndarray, b: np.ndarray, c: np.n
     gap (wide prediction) or a small image makes harder.  Without the area, as in
     :func:`score_edges`: the gain above the floor of the widest re-link (gap
     ``relink_depth``)."""
-    L, C = len(lost_states), len(first_states)
+    L = len(lost_states)
     gaps = first_frames[None, :].astype(np.float64) - lost_frames[:, None]  # (L, C)
     g = np.clip(gaps, 1.0, None)
     mean, var = propagate_damped(lost_states, v, b, c, g, params)  # (L, C, 4)
@@ -431,53 +440,40 @@ def score_edge_pairs(tail_states: np.ndarray, v: np.ndarray, b: np.ndarray, c: n
                      gaps: np.ndarray, new_states: np.ndarray,
                      params: AssocParams) -> EdgePairs:
     """:func:`score_edges` on the pairs inside the gate only, the same value for each pair.
-    Candidates come from a k-d tree on the new vertices' positions: a pair can pass the gate
-    ``d2 <= gate_d2`` only if each position term does, i.e. inside the box
-    ``|z − ŷ| <= sqrt(gate_d2 · var)`` around the tail's prediction."""
-    from scipy.spatial import cKDTree
-
-    T = len(tail_states)
-    gaps = np.asarray(gaps, dtype=np.float64)
-    both = np.stack([gaps, np.full(T, float(params.depth))], axis=1)
-    mean, var = propagate(tail_states, v, b, c, both, params)
-    log_det = np.sum(np.log(2.0 * np.pi * var), axis=-1)
+    Candidates come from a grid on the new vertices' positions (:class:`.gating.GridIndex`,
+    as the update's gate): a pair can pass the gate ``d2 <= gate_d2`` only if each position
+    term does, i.e. inside the box ``|z − ŷ| <= sqrt(gate_d2 · var)`` around the tail's
+    prediction.  Pairs are ordered by tail, then vertex (as ``np.nonzero`` of the dense gate)."""
+    mean, var, log_det, floor = _edge_model(tail_states, v, b, c, gaps, params)
     g2 = params.gate_d2
-    floor = -0.5 * g2 - 0.5 * log_det[:, 1]
     z = new_states[:, OBS_INDEX]
-    half = np.sqrt(g2 * var[:, 0, :2]) * (1.0 + 1e-9)       # (T, 2) gate box half-widths
-    ok = np.all(np.isfinite(mean[:, 0, :2]), axis=1) & np.all(np.isfinite(half), axis=1)
-    zf = np.all(np.isfinite(z[:, :2]), axis=1)
-    rows_l, cols_l = [], []
-    if ok.any() and zf.any():
-        tree = cKDTree(z[zf, :2])
-        zi = np.flatnonzero(zf)
-        ti = np.flatnonzero(ok)
-        found = tree.query_ball_point(mean[ti, 0, :2], r=np.max(half[ti], axis=1), p=np.inf)
-        counts = np.fromiter((len(f) for f in found), dtype=np.int64, count=len(found))
-        if counts.sum():
-            rows_l = np.repeat(ti, counts)
-            cols_l = zi[np.concatenate([np.asarray(f, dtype=np.int64) for f in found
-                                        if len(f)])]
-    rows = np.asarray(rows_l, dtype=np.int64)
-    cols = np.asarray(cols_l, dtype=np.int64)
-    order = np.lexsort((cols, rows))                        # by tail, then vertex
-    rows, cols = rows[order], cols[order]
-    res = z[cols] - mean[rows, 0, :]
-    d2 = np.sum(res ** 2 / var[rows, 0, :], axis=-1)
+    half = np.sqrt(g2 * var[:, :2]) * (1.0 + 1e-9)            # (T, 2) gate box half-widths
+    ti = np.flatnonzero(np.all(np.isfinite(mean[:, :2]) & np.isfinite(half), axis=1))
+    zi = np.flatnonzero(np.all(np.isfinite(z[:, :2]), axis=1))
+    rows = cols = np.zeros(0, dtype=np.int64)
+    if len(ti) and len(zi):
+        index = GridIndex(z[zi, :2], 2.0 * np.median(half[ti], axis=0) + 1e-9)
+        owner, start, stop = index.runs(mean[ti, :2] - half[ti], mean[ti, :2] + half[ti])
+        rows = ti[np.repeat(owner, stop - start)]
+        cols = zi[index.order[expand_runs(start, stop)]]
+        order = np.lexsort((cols, rows))
+        rows, cols = rows[order].astype(np.int64), cols[order].astype(np.int64)
+    res = z[cols] - mean[rows]
+    d2 = np.sum(res ** 2 / var[rows], axis=-1)
     keep = d2 <= g2
     rows, cols, d2 = rows[keep], cols[keep], d2[keep]
-    gain = -0.5 * d2 - 0.5 * log_det[rows, 0]
+    gain = -0.5 * d2 - 0.5 * log_det[rows]
     return EdgePairs(rows=rows, cols=cols, gain=gain, d2=d2, floor=floor,
                      weight=gain - floor[rows])
 
 
-def sparse_max_weight_matching(rows: np.ndarray, cols: np.ndarray, weights: np.ndarray,
-                               n_rows: int, n_cols: int) -> tuple[np.ndarray, np.ndarray]:
+def sparse_max_weight_matching(rows: np.ndarray, cols: np.ndarray,
+                               weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """:func:`max_weight_matching` on a sparse graph: edges ``(rows, cols)`` with ``weights``
     (P,).  Solved as a minimum-cost matching that covers every row (scipy's sparse LAPJVsp):
     each row also gets a private dummy column of cost C and each edge costs ``C − w``, so a
     matching costs ``C · rows − Σ w`` over its real edges and the cheapest is the heaviest.
-    Time and memory grow with the edges, not ``n_rows × n_cols``.  Returns ``rows, cols``
+    Time and memory grow with the edges, not rows × columns.  Returns ``rows, cols``
     sorted by row."""
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import min_weight_full_bipartite_matching
@@ -737,17 +733,15 @@ class GraphAssociator:
                 if use_app:
                     llr = self._app_model.llr(similarity(self._app, feats),
                                               self._app_n[:, None])
-                    sc = EdgeScores(gain=sc.gain, d2=sc.d2, floor=sc.floor,
-                                    weight=sc.weight + p.app_weight * llr, allowed=sc.allowed)
+                    sc = replace(sc, weight=sc.weight + p.app_weight * llr)
                 rows, cols = max_weight_matching(sc.weight, sc.allowed)
             else:   # a storm of estimates: the gated pairs only (DENSE_MAX_PAIRS)
                 ep = score_edge_pairs(self._tail, v, b, c, gaps, new, p)
                 if use_app:
                     llr = self._app_model.llr(similarity_pairs(self._app, feats, ep.rows,
                                                                ep.cols), self._app_n[ep.rows])
-                    ep = EdgePairs(rows=ep.rows, cols=ep.cols, gain=ep.gain, d2=ep.d2,
-                                   floor=ep.floor, weight=ep.weight + p.app_weight * llr)
-                rows, cols = sparse_max_weight_matching(ep.rows, ep.cols, ep.weight, T, M)
+                    ep = replace(ep, weight=ep.weight + p.app_weight * llr)
+                rows, cols = sparse_max_weight_matching(ep.rows, ep.cols, ep.weight)
         else:
             rows = cols = np.zeros(0, dtype=np.int64)
 

@@ -166,7 +166,7 @@ class GridIndex:
         return owner[keep], start[keep].astype(np.intp), stop[keep].astype(np.intp)
 
 
-def _expand(start: np.ndarray, stop: np.ndarray) -> np.ndarray:
+def expand_runs(start: np.ndarray, stop: np.ndarray) -> np.ndarray:
     """Concatenation of ``arange(start[r], stop[r])`` over runs r, vectorised."""
     lens = stop - start
     total = int(lens.sum())
@@ -244,7 +244,7 @@ def gate_pairs(obs: np.ndarray, Z: np.ndarray, r2: float, *, std_z: Optional[np.
         if r_hi == r_lo:
             continue
         o, s, e = owner[r_lo:r_hi], start[r_lo:r_hi], stop[r_lo:r_hi]
-        rows = index.order[_expand(s, e)]
+        rows = index.order[expand_runs(s, e)]
         cols = np.repeat(o, e - s)
         q = xo[rows]
         q -= zz[cols]

@@ -186,13 +186,7 @@ class Columns:
             # the archetype returns its columns in its own field order: match them by name
             for col in archetype.columns(**fields).partition(lengths):
                 parts[str(col.component_descriptor().component).rpartition(":")[2]] = col
-        if set(parts) == set(buf["fields"]):
-            columns = [parts[name] for name in buf["fields"]]
-        else:                            # a component named otherwise: one field at a time
-            columns = []
-            for name, values in buf["fields"].items():
-                data, lengths = _column(values)
-                columns.extend(archetype.columns(**{name: data}).partition(lengths))
+        columns = [parts[name] for name in buf["fields"]]
         key = (tuple(buf["frame"]), tuple(buf["stage"]), tuple(buf["seconds"]))
         indexes = None if times is None else times.get(key)
         if indexes is None:
