@@ -204,6 +204,8 @@ def run(source, trackers: Mapping[str, Tracker] | Sequence[Tracker], *,
         raise InputError("no tracker to run")
     need_det = any(t.needs_detections for t in lanes.values())
     det_name = resolve_detector_name(source, detector) if need_det else None
+    if not getattr(source, "has_frames", True):
+        _check_frameless(source, lanes, det_name)
     det_fn = None
     if det_name is not None:
         det_fn = make_detector(det_name, det_table=getattr(source, "det", None),
@@ -291,6 +293,19 @@ def run(source, trackers: Mapping[str, Tracker] | Sequence[Tracker], *,
     result = RunResult(outcome, seconds, kept if keep_rows else {})
     result.scores = dict(outcome.scores)
     return result
+
+
+def _check_frameless(source, lanes: Mapping[str, Tracker], det_name: Optional[str]) -> None:
+    """A source without frames (blank stand-ins of the declared size) runs only trackers that
+    work from detections, on its detections file: anything else is refused in one line."""
+    where = getattr(source, "location", "") or getattr(source, "name", "the source")
+    for name, t in lanes.items():
+        if t.needs_image and not getattr(t, "image_optional", False):
+            raise InputError(f"{where}: no frames (img1/ missing, detections only): tracker "
+                             f"{t.name} needs pixels; run phd, mt or passthrough on it")
+    if det_name is not None and det_name != "file":
+        raise InputError(f"{where}: no frames (img1/ missing, detections only): detector "
+                         f"{det_name!r} needs pixels; use the detections file (--detector file)")
 
 
 def score_rows(gt_table, rows: Rows, frames: int, start: int = 1) -> dict:

@@ -18,7 +18,7 @@ import cv2
 import numpy as np
 
 from ..errors import InputError
-from ..types import Frame
+from ..types import Frame, blank_image
 from .motio import MotTable, read_mot
 
 IMAGE_EXTS = (".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff", ".webp")
@@ -55,6 +55,8 @@ class Source:
     kind: str = "source"
     location: str = ""
     extra: dict = field(default_factory=dict)
+    #: false for a source whose frames are blank stand-ins (a detections-only MOT folder)
+    has_frames = True
 
     def frames(self, limit: Optional[int] = None) -> Iterator[Frame]:  # pragma: no cover
         raise NotImplementedError
@@ -124,7 +126,13 @@ def _check_rows_within(table: Optional[MotTable], length: int) -> None:
 
 class MOTFolderSource(Source):
     """A MOTChallenge sequence: ``seqinfo.ini``, ``img1/000001.jpg ...``, optional
-    ``gt/gt.txt`` and ``det/det.txt``."""
+    ``gt/gt.txt`` and ``det/det.txt``.
+
+    A folder with ``seqinfo.ini`` and ``det/det.txt`` but no image folder is a
+    *detections-only* sequence (MOT15's KITTI-13 and TUD-Stadtmitte as shipped with their
+    detections): its frames are blank images of the declared size
+    (:func:`~trackers.types.blank_image`, ``Frame.has_pixels`` false), ``has_frames`` is false,
+    and trackers that need pixels refuse it (:func:`~trackers.pipeline.run`)."""
 
     def __init__(self, root: str | os.PathLike):
         root = Path(root)
@@ -146,9 +154,13 @@ class MOTFolderSource(Source):
             raise InputError(f"{ini}: malformed seqinfo.ini ({e.__class__.__name__}: {e})") from None
         if length <= 0 or fps <= 0:
             raise InputError(f"{ini}: seqLength and frameRate must be positive")
-        if not self.im_dir.is_dir():
-            raise InputError(f"{self.im_dir}: image folder missing")
         gt_path, det_path = root / "gt" / "gt.txt", root / "det" / "det.txt"
+        self.has_frames = self.im_dir.is_dir()
+        if not self.has_frames and not det_path.is_file():
+            raise InputError(f"{self.im_dir}: image folder missing (a folder without frames "
+                             f"needs det/det.txt to be run on its detections)")
+        if not self.has_frames and (width <= 0 or height <= 0):
+            raise InputError(f"{ini}: a folder without frames needs imWidth and imHeight")
         gt = read_mot(gt_path, "gt") if gt_path.is_file() else None
         det = read_mot(det_path, "det") if det_path.is_file() else None
         _check_rows_within(gt, length)
@@ -157,7 +169,8 @@ class MOTFolderSource(Source):
             first = _read_image(self._path(1), 1)
             height, width = first.shape[:2]
         super().__init__(name=name, fps=fps, length=length, width=width, height=height, gt=gt,
-                         det=det, kind="mot", location=str(root))
+                         det=det, kind="mot", location=str(root),
+                         extra={} if self.has_frames else {"frames": "none (detections only)"})
 
     def _path(self, index: int) -> Path:
         return self.im_dir / f"{index:06d}{self.im_ext}"
@@ -165,8 +178,12 @@ class MOTFolderSource(Source):
     def frames(self, limit: Optional[int] = None, start: int = 1) -> Iterator[Frame]:
         """Frames ``start .. start + limit - 1`` (all from ``start`` when ``limit`` is None)."""
         n = self.length if limit is None else min(start - 1 + limit, self.length)
+        blank = None if self.has_frames else blank_image(self.height, self.width)
         for k in range(max(1, start), n + 1):
-            yield _read_frame(self._path(k), k, (k - 1) / self.fps, (self.width, self.height))
+            if blank is not None:
+                yield Frame(k, (k - 1) / self.fps, blank)
+            else:
+                yield _read_frame(self._path(k), k, (k - 1) / self.fps, (self.width, self.height))
 
 
 class VideoFileSource(Source):

@@ -316,6 +316,8 @@ class PHDTracker(_AssociatingTracker):
     #: the practical preset's appearance cue reads the pixels of the estimates' boxes (when a
     #: frame has none -- a blank stand-in -- the association runs on motion alone)
     needs_image = True
+    #: ... but it runs on blank frames too (a detections-only sequence): the cue switches off
+    image_optional = True
     Params = PHDTrackerParams
 
     def __init__(self, params: Optional[PHDTrackerParams] = None, *,
