@@ -181,12 +181,20 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--json", action="store_true", help="print the scores as JSON")
     c.add_argument("--quiet", action="store_true")
 
-    e = sub.add_parser("eval", help="score a MOT tracks file against ground truth",
+    e = sub.add_parser("eval", help="score MOT tracks files against ground truth (one "
+                                    "sequence, or a folder of them with a COMBINED row)",
                        description="Score TRACKS (MOT text) against ground truth: CLEAR-MOT, "
-                                   "VACE, identity, HOTA, OSPA/GOSPA, mean error.")
-    e.add_argument("tracks", type=Path, help="tracks file (frame,id,x,y,w,h,...)")
+                                   "VACE, identity, HOTA, OSPA/GOSPA, mean error.  With a "
+                                   "folder of tracks files (SEQ.txt, or a `pfscope batch` "
+                                   "output: SEQ-LANE-seedS.txt) and --gt a folder of "
+                                   "MOTChallenge sequences, one row per sequence and a "
+                                   "COMBINED row (counts summed over the sequences, as "
+                                   "TrackEval and MOTChallenge do), per tracker and seed.")
+    e.add_argument("tracks", type=Path, help="tracks file (frame,id,x,y,w,h,...), or a folder "
+                                             "of them")
     e.add_argument("--gt", type=Path, required=True,
-                   help="gt.txt, or a MOTChallenge folder (uses gt/gt.txt and seqinfo.ini)")
+                   help="gt.txt, or a MOTChallenge folder (uses gt/gt.txt and seqinfo.ini), "
+                        "or (with a folder of tracks) a folder of MOTChallenge sequences")
     e.add_argument("--iou", type=_number(float, low=0, low_open=True, high=1,
                                          what="an IoU in (0, 1]"),
                    default=0.5, help="IoU needed for a match (MOT15: 0.5)")
@@ -558,6 +566,8 @@ def cmd_eval(args) -> int:
     from pfscope.trackers.data.sources import MOTFolderSource
     from pfscope.trackers.eval import evaluate
 
+    if args.tracks.is_dir():
+        return _eval_folder(args)
     frames = None
     if args.gt.is_dir():
         seq = MOTFolderSource(args.gt)
@@ -582,6 +592,69 @@ def cmd_eval(args) -> int:
     scores = evaluate(gt, tracks, iou_threshold=args.iou, frames=frames,
                       convention=args.convention, **kw)
     _print_scores({args.tracks.stem: scores}, args.json)
+    return 0
+
+
+def _eval_folder(args) -> int:
+    """``pfscope eval TRACKS_DIR --gt SEQS_DIR``: every tracks file matched to its sequence
+    (``SEQ.txt`` or ``SEQ-<run>.txt``), one table per run (tracker, seed) with a row per
+    sequence and the COMBINED row."""
+    import json
+
+    from pfscope.trackers.data.motio import read_mot
+    from pfscope.trackers.data.sources import MOTFolderSource
+    from pfscope.trackers.eval import combine, evaluate, format_table
+
+    if not args.gt.is_dir():
+        raise InputError(f"{args.gt}: with a folder of tracks files, --gt must be a folder of "
+                         f"MOTChallenge sequences")
+    seqs = sorted(p for p in args.gt.iterdir() if (p / "gt" / "gt.txt").is_file())
+    if (args.gt / "gt" / "gt.txt").is_file():
+        seqs = [args.gt]
+    if not seqs:
+        raise InputError(f"{args.gt}: no sequence with gt/gt.txt in this folder")
+    files = sorted(p for p in args.tracks.iterdir() if p.suffix == ".txt" and p.is_file())
+    runs: dict[str, dict[str, Path]] = {}
+    for f in files:
+        # the longest sequence name the file's stem starts with (SEQ or SEQ-<run>)
+        match = [s for s in seqs if f.stem == s.name or f.stem.startswith(s.name + "-")]
+        if not match:
+            continue
+        seq = max(match, key=lambda s: len(s.name))
+        run_name = f.stem[len(seq.name) + 1:] or "tracks"
+        runs.setdefault(run_name, {})[seq.name] = f
+    if not runs:
+        raise InputError(f"{args.tracks}: no tracks file named after a sequence of {args.gt} "
+                         f"(expected SEQ.txt or SEQ-<run>.txt for SEQ in "
+                         f"{', '.join(s.name for s in seqs[:5])})")
+    kw = {k: v for k, v in (("ospa_c", args.ospa_c), ("ospa_p", args.ospa_p)) if v is not None}
+    by_name = {s.name: s for s in seqs}
+    results: dict[str, dict] = {}
+    for run_name, per_seq in sorted(runs.items()):
+        table: dict[str, dict] = {}
+        for name in sorted(per_seq):
+            src = MOTFolderSource(by_name[name])
+            frames = range(1, src.length + 1)
+            if args.frames is not None:
+                frames = range(args.frames[0], min(args.frames[1], src.length) + 1)
+            table[name] = evaluate(src.gt, read_mot(per_seq[name], "tracks"),
+                                   iou_threshold=args.iou, frames=frames,
+                                   convention=args.convention, **kw)
+        missing = sorted(set(by_name) - set(per_seq))
+        if missing:
+            print(f"pfscope: warning: {run_name}: no tracks for {', '.join(missing)}; the "
+                  f"COMBINED row covers the {len(per_seq)} sequences it has", file=sys.stderr)
+        table["COMBINED"] = combine(list(table.values()))
+        results[run_name] = {k: {m: v for m, v in sc.items() if not m.startswith("_")}
+                             for k, sc in table.items()}
+    if args.json:
+        print(json.dumps(results, indent=2, sort_keys=True, default=float))
+        return 0
+    cols = ("MOTA", "IDF1", "HOTA", "MOTP", "IDSW", "FP", "FN", "OSPA")
+    for run_name, table in results.items():
+        print(f"== {run_name}")
+        print(format_table(table, cols))
+        print()
     return 0
 
 

@@ -4,6 +4,7 @@
 - :func:`evaluate` scores a whole tracks table against a ground-truth table.
 - :class:`OnlineEvaluator` scores frame by frame for the recording (OSPA, cardinality, FP, FN,
   ID switches, and the indices of the boxes that are misses, false positives and switches).
+- :func:`combine` scores several sequences as one (the COMBINED row).
 - :func:`format_table` prints the scores of several trackers side by side.
 
 Everything is computed here with numpy/scipy (TrackEval cannot be a dependency: every release
@@ -16,6 +17,7 @@ track box, ``"mot16"`` removes the track boxes on distractors first (TrackEval's
 preprocessing); by default the gt's layout decides (MOT16 classes and visibilities: mot16).
 """
 
+from .combine import combine
 from .clear import ClearMatcher, detection_match
 from .conventions import CONVENTIONS, check_convention, describe_convention, detect_convention
 from .hota import ALPHAS, hota_scores
@@ -27,7 +29,7 @@ from .sequence import evaluate
 from .table import DEFAULT_COLUMNS, format_table
 
 __all__ = [
-    "evaluate", "format_table", "OnlineEvaluator", "FrameMetrics", "DEFAULT_COLUMNS",
+    "evaluate", "combine", "format_table", "OnlineEvaluator", "FrameMetrics", "DEFAULT_COLUMNS",
     "ospa", "gospa", "DEFAULT_C", "DEFAULT_P", "DEFAULT_ALPHA", "box_iou", "box_centers",
     "ClearMatcher", "detection_match", "identity_scores", "hota_scores", "ALPHAS",
     "CONVENTIONS", "check_convention", "detect_convention", "describe_convention",

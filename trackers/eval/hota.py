@@ -27,7 +27,9 @@ ALPHAS = np.arange(0.05, 0.99, 0.05)
 def hota_scores(gt_ids: Sequence[np.ndarray], track_ids: Sequence[np.ndarray],
                 ious: Sequence[np.ndarray], n_gt: int, n_tr: int,
                 alphas: np.ndarray = ALPHAS) -> dict[str, float]:
-    """HOTA, DetA, AssA, DetRe, DetPr, AssRe, AssPr, LocA (means over ``alphas``)."""
+    """HOTA, DetA, AssA, DetRe, DetPr, AssRe, AssPr, LocA (means over ``alphas``), and
+    ``_hota_alpha``: the per-alpha TP, FN, FP and AssA lists that :func:`.combine.combine`
+    sums over sequences."""
     alphas = np.asarray(alphas, dtype=float)
     na = len(alphas)
     gt_count = np.zeros((n_gt, 1))
@@ -82,4 +84,7 @@ def hota_scores(gt_ids: Sequence[np.ndarray], track_ids: Sequence[np.ndarray],
     return {"HOTA": float(hota.mean()), "DetA": float(det_a.mean()), "AssA": float(ass_a.mean()),
             "DetRe": float(det_re.mean()), "DetPr": float(det_pr.mean()),
             "AssRe": float(ass_re.mean()), "AssPr": float(ass_pr.mean()),
-            "LocA": float(loc_a.mean())}
+            "LocA": float(loc_a.mean()),
+            # per-alpha counts, for combining sequences as TrackEval does (.combine)
+            "_hota_alpha": {"TP": tp.tolist(), "FN": fn.tolist(), "FP": fp.tolist(),
+                            "AssA": ass_a.tolist()}}
