@@ -28,19 +28,19 @@ SourceLike = Union[str, Path, None, Any]
 def open_source(source: SourceLike, *, frames: Optional[int] = None, start: int = 1,
                 fps: Optional[float] = None, synthetic_seed: int = 0, **scene):
     """A :class:`~pfscope.trackers.data.sources.Source` from a path, ``"synthetic"`` / None (the
-    built-in scene; ``scene`` are :class:`SceneConfig` fields), or a Source itself."""
+    built-in scene, ``demo_config``; ``scene`` are :class:`SceneConfig` fields), or a Source itself."""
     from pfscope.trackers.data.sources import Source
     from pfscope.trackers.data.sources import open_source as _open
 
     if isinstance(source, Source):
         return source
     if source is None or str(source) == "synthetic":
-        from pfscope.trackers.data.synthetic import SceneConfig
+        from pfscope.trackers.data.synthetic import demo_config
 
         kw = dict(scene, seed=synthetic_seed)
         if frames is not None:
             kw["frames"] = start - 1 + frames
-        return _open(None, synthetic_config=SceneConfig(**kw))
+        return _open(None, synthetic_config=demo_config(**kw))
     return _open(source, fps=fps)
 
 

@@ -71,7 +71,7 @@ def _frame_range(text: str) -> tuple[int, int]:
 
 
 def _synth_config(args, frames: Optional[int]):
-    from pfscope.trackers.data.synthetic import SceneConfig
+    from pfscope.trackers.data.synthetic import demo_config
 
     kw = {"seed": args.seed}
     for name in ("targets", "clutter"):
@@ -80,7 +80,7 @@ def _synth_config(args, frames: Optional[int]):
             kw[name] = v
     if frames is not None:
         kw["frames"] = frames
-    return SceneConfig(**kw)
+    return demo_config(**kw)
 
 
 def _frames_or_range(text: str):
@@ -873,7 +873,7 @@ def cmd_tune(args) -> int:
         frames = (1, frames)
     synth = None
     if synthetic:
-        from pfscope.trackers.data.synthetic import SceneConfig
+        from pfscope.trackers.data.synthetic import demo_config
 
         kw = {"seed": args.seed}
         for name in ("targets", "clutter"):
@@ -882,8 +882,8 @@ def cmd_tune(args) -> int:
         if frames is not None:
             kw["frames"] = max(frames[1], args.holdout[1]) if args.holdout else 2 * frames[1]
         elif args.holdout is not None:
-            kw["frames"] = max(SceneConfig().frames, args.holdout[1])
-        synth = tuple(asdict(SceneConfig(**kw)).items())
+            kw["frames"] = max(demo_config().frames, args.holdout[1])
+        synth = tuple(asdict(demo_config(**kw)).items())
     spec = T.SourceSpec(None if synthetic else str(args.source), args.fps, synth)
     source = spec.open()
     if source.gt is None:

@@ -252,9 +252,9 @@ class SyntheticSource(Source):
     """The built-in synthetic scene (:mod:`trackers.data.synthetic`), rendered on the fly."""
 
     def __init__(self, config=None):
-        from .synthetic import SceneConfig, SyntheticScene
+        from .synthetic import SyntheticScene, demo_config
 
-        self.scene = SyntheticScene(config or SceneConfig())
+        self.scene = SyntheticScene(config or demo_config())
         c = self.scene.config
         super().__init__(name=f"synthetic-seed{c.seed}", fps=c.fps, length=c.frames,
                          width=c.width, height=c.height, gt=self.scene.gt, det=self.scene.det,
