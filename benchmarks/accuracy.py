@@ -13,8 +13,9 @@ the seeds) is in the JSON.
 
 ``--bytetrack`` adds ByteTrack on the same detections as a reference (``supervision==0.26.1``,
 ``sv.ByteTrack()`` with its defaults, scores divided by the sequence's largest score when it
-exceeds 1): install it beside pfscope with ``pip install --no-deps supervision==0.26.1`` (its
-own dependencies would replace opencv-python-headless with opencv-python 5, which has no HOG).
+exceeds 1): install it beside pfscope without its OpenCV (``pip install --no-deps
+supervision==0.26.1 && pip install defusedxml matplotlib pillow pyyaml requests tqdm``; its
+``opencv-python`` dependency would shadow opencv-python-headless with OpenCV 5, which has no HOG).
 
 The development set is every sequence with ``det/det.txt`` and ``gt/gt.txt`` under
 ``$PFSCOPE_DATA`` (default ``../shared/data``): PETS09-S2L1, PETS09-S3MF1 (frames), KITTI-13,

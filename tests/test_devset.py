@@ -50,7 +50,7 @@ def test_frameless_folder_runs_detection_trackers_and_refuses_pixel_ones(tmp_pat
     full = _seq(tmp_path, "full", seed=3, frames=25)
     root = _seq(tmp_path, "detonly", seed=3, frames=25, frameless=True)
     src = open_source(root)
-    assert not src.has_frames and src.describe()["frames"].startswith("none")
+    assert not src.has_frames and src.describe()["pixels"].startswith("none")
     frame = next(iter(src.frames(1)))
     assert (frame.width, frame.height) == (src.width, src.height) and not frame.has_pixels
 

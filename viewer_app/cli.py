@@ -506,8 +506,13 @@ def _open(args):
     synthetic = args.source in (None, "synthetic")
     if not synthetic and (args.targets is not None or args.clutter is not None):
         raise InputError("--targets/--clutter only apply to the synthetic scene")
-    return open_source(args.source, fps=args.fps,
-                       synthetic_config=_synth_config(args, args.frames) if synthetic else None)
+    src = open_source(args.source, fps=args.fps,
+                      synthetic_config=_synth_config(args, args.frames) if synthetic else None)
+    if not getattr(src, "has_frames", True) and not getattr(args, "quiet", False):
+        print(f"pfscope: {src.name} has no frames (no {getattr(src, 'im_dir', 'img1').name}/): "
+              f"running on its detections with blank {src.width}x{src.height} frames; cues "
+              f"that read pixels (PHD-MT's colour) are off", file=sys.stderr)
+    return src
 
 
 def _print_scores(scores: dict, as_json: bool) -> None:

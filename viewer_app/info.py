@@ -145,7 +145,8 @@ def print_info(info: dict, out=None, params: bool = True) -> None:
         size = f"{src.get('width')}x{src.get('height')}" if src.get("width") else "?"
         p(f"source:    {src.get('name')} ({src.get('kind')}, {src.get('location')}), {size}, "
           f"{_fmt(src.get('fps'))} fps, {src.get('length')} frames, "
-          f"gt: {'yes' if src.get('has_gt') else 'no'}, det: {'yes' if src.get('has_det') else 'no'}")
+          f"gt: {'yes' if src.get('has_gt') else 'no'}, det: {'yes' if src.get('has_det') else 'no'}"
+          + (f", pixels: {src['pixels']} (cues that read pixels off)" if src.get("pixels") else ""))
     if run:
         p(f"run:       lanes {_fmt(run.get('lanes'))}; detector {run.get('detector')}; level "
           f"{run.get('level')}; seed {run.get('seed')}; preset {run.get('preset')}; first frame "

@@ -170,7 +170,7 @@ class MOTFolderSource(Source):
             height, width = first.shape[:2]
         super().__init__(name=name, fps=fps, length=length, width=width, height=height, gt=gt,
                          det=det, kind="mot", location=str(root),
-                         extra={} if self.has_frames else {"frames": "none (detections only)"})
+                         extra={} if self.has_frames else {"pixels": "none (detections only: blank frames)"})
 
     def _path(self, index: int) -> Path:
         return self.im_dir / f"{index:06d}{self.im_ext}"
