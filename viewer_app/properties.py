@@ -8,7 +8,7 @@ typed fields, nested dicts flattened to dotted names:
 - ``source``: the source's ``describe()`` (kind, name, location, fps, length, size, scene.* ...);
 - ``tracker.<lane>``: the lane's tracker name, preset and every parameter
   (``params.filter.likelihood.p_miss`` ...);
-- ``versions``: pfscope, rerun-sdk, numpy, scipy, opencv, python;
+- ``versions``: pfscope, rerun-sdk, numpy, scipy, opencv, numba, llvmlite, torch, python;
 - ``scores.<lane>``: the sequence scores (MOTA, IDF1, HOTA, OSPA ...), written when the run ends;
 - ``events.<lane>``: how many of each event the failure index holds.
 
