@@ -400,7 +400,7 @@ def _add_tune_parser(sub, TRACKERS, DETECTORS, LEVELS) -> None:
                     help="trials (default 30; the first is the starting values)")
     tn.add_argument("--metric", choices=["hota", "idf1", "mota"], default="hota",
                     help="objective maximised on the tuned-on frames (default hota)")
-    tn.add_argument("--frames", type=_frames_or_range, default=None, metavar="FIRST:LAST",
+    tn.add_argument("--frames", type=FRAMES, default=None, metavar="N|FIRST:LAST",
                     help="frames to tune on: FIRST:LAST, or N for 1:N (default: the first "
                          "half of the sequence)")
     tn.add_argument("--holdout", type=STRICT_RANGE, default=None, metavar="FIRST:LAST",
