@@ -1,17 +1,9 @@
-"""The ``pfscope`` command line.
+"""The ``pfscope`` command line: one subcommand per task (record, compare, eval, trackers,
+repair, info, view, snapshot, batch, tune, synth, train-dbn, train-classifier).
 
-    pfscope record [SOURCE] [--tracker phd|mt|passthrough] [--out FILE.rrd] [--frames N]
-                   [--seed S] [--detector file|hog|haar|bgsub] [--level tracks|clusters|particles]
-                   [--tracks-out FILE.txt] [--force] [--spawn | --serve]
-    pfscope synth --out DIR [--frames N --targets K --clutter R --seed S]
-    pfscope eval TRACKS.txt --gt GT.txt|SEQUENCE_DIR [--json]
-    pfscope compare [SOURCE] --trackers "phd,phd[p_miss=0.2],mt" [--frames N|FIRST:LAST]
-    pfscope info FILE.rrd [--json]      pfscope view FILE.rrd
-    pfscope snapshot FILE.rrd --frame N [--tab NAME] --out shot.png
-    pfscope batch --sources A,B --trackers phd,mt [--seeds 0,1] --out DIR   (or SPEC.toml)
-    pfscope tune SEQUENCE [--tracker phd] [--trials N] [--metric hota|idf1|mota]
-                 [--frames A:B] [--holdout A:B] [--jobs J] [--seed S] [--out best.toml]
-    record / compare / batch / tune take --params FILE.toml (what tune writes)
+The parsers below are the documentation's source: ``python -m pfscope.viewer_app.docgen``
+writes the README's synopsis and ``docs/cli.md`` from them (tests/test_docs.py checks both).
+Every command reads ``--frames`` as ``N`` or ``FIRST:LAST`` (:func:`parse_frames`).
 
 Bad input ends with one line on stderr naming the file/line/frame and exit status 2.
 """
