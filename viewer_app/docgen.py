@@ -129,7 +129,9 @@ def _default(a: argparse.Action) -> str:
 
 
 def _cell(text: str) -> str:
-    return " ".join(str(text).split()).replace("|", "\\|")
+    """One line of markdown table text: ``|`` escaped, ``<source>`` kept from reading as HTML."""
+    return (" ".join(str(text).split()).replace("|", "\\|")
+            .replace("<", "&lt;").replace(">", "&gt;"))
 
 
 def reference(ap: Optional[argparse.ArgumentParser] = None) -> str:
