@@ -448,7 +448,7 @@ def test_train_classifier_command_trains_holds_out_and_writes_a_usable_model(tmp
     ap = argparse.ArgumentParser(prog="pfscope")
     add_parser(ap.add_subparsers(dest="command"))
     out = tmp_path / "clf.npz"
-    args = ap.parse_args(["train-classifier", "synthetic", "--frames", "1-40", "--stride", "4",
+    args = ap.parse_args(["train-classifier", "synthetic", "--frames", "1:40", "--stride", "4",
                           "--out", str(out), "--quiet"])
     assert cmd_train_classifier(args) == 0
     text = capsys.readouterr().out
@@ -462,7 +462,7 @@ def test_train_classifier_command_trains_holds_out_and_writes_a_usable_model(tmp
     assert res.frames == 4
     with pytest.raises(InputError, match="exists"):
         cmd_train_classifier(args)
-    bad = ap.parse_args(["train-classifier", "synthetic", "--frames", "9-3", "--out",
+    bad = ap.parse_args(["train-classifier", "synthetic", "--frames", "1:99999", "--out",
                          str(tmp_path / "b.npz")])
     with pytest.raises(InputError, match="--frames"):
         cmd_train_classifier(bad)

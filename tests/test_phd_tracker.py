@@ -130,7 +130,7 @@ def test_low_levels_build_no_cloud_payloads(cluttered, level):
 
 
 def test_unknown_option_is_refused():
-    with pytest.raises(ValueError, match="unknown option 'rhoo'"):
+    with pytest.raises(ValueError, match="unknown parameter 'rhoo'"):
         make_tracker("phd", rhoo=3)
 
 

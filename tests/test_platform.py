@@ -241,7 +241,7 @@ def test_set_options_route_per_tracker_in_compare(tmp_path, capsys):
     rc = main(["record", "synthetic", "--frames", "3", "--set", "p_mis=0.3",
                "--out", str(tmp_path / "d.rrd"), "--quiet"])
     err = capsys.readouterr().err
-    assert rc == 2 and "unknown option 'p_mis'" in err
+    assert rc == 2 and "unknown parameter 'p_mis' (did you mean 'p_miss'?)" in err
 
 
 def test_trackers_command_lists_papers_stages_and_parameters(capsys):

@@ -4,4 +4,4 @@ The engine never imports rerun: trackers report their stages to an
 :class:`trackers.observer.Observer`, and ``viewer_app`` turns that into a recording.
 """
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"

@@ -23,6 +23,7 @@ from typing import Any, Optional, Protocol, TypeVar, runtime_checkable
 
 import numpy as np
 
+from .errors import did_you_mean
 from .params import describe, to_dict, with_options
 from .report import Stage
 from .types import Detections, Frame, TrackSet
@@ -143,7 +144,8 @@ def registry() -> dict[str, TrackerInfo]:
 def tracker_info(name: str) -> TrackerInfo:
     reg = registry()
     if name not in reg:
-        raise ValueError(f"unknown tracker {name!r}; choose one of {', '.join(reg)}")
+        raise ValueError(f"unknown tracker {name!r}{did_you_mean(name, reg)}; choose one of "
+                         f"{', '.join(reg)}")
     return reg[name]
 
 
@@ -156,7 +158,8 @@ def make_params(name: str, preset: Optional[str] = None, options: Optional[dict]
     elif preset in info.presets:
         base = info.presets[preset]
     else:
-        raise ValueError(f"tracker {name!r} has no preset {preset!r}; choose one of "
+        raise ValueError(f"tracker {name!r} has no preset {preset!r}"
+                         f"{did_you_mean(preset, info.presets)}; choose one of "
                          f"{', '.join(info.presets)}")
     return with_options(base, dict(options or {}))
 

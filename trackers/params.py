@@ -35,6 +35,8 @@ from dataclasses import field, fields, is_dataclass, replace
 from pathlib import Path
 from typing import Any, Iterator, Optional
 
+from .errors import did_you_mean
+
 
 def param(default: Any, doc: str, *, paper: str | None = None) -> Any:
     """A dataclass field with its documentation (``metadata['doc']``) and, when the value comes
@@ -112,8 +114,9 @@ def with_options(obj: Any, options: dict[str, Any]) -> Any:
         else:
             targets = [n for n in known if n.rsplit(".", 1)[-1] == key]
         if not targets:
-            names = sorted({n.rsplit(".", 1)[-1] for n in known})
-            raise ValueError(f"unknown option {key!r}; known: {', '.join(names)}")
+            names = sorted({n.rsplit(".", 1)[-1] for n in known} | set(known))
+            raise ValueError(f"unknown parameter {key!r}{did_you_mean(key, names)}; "
+                             f"`pfscope trackers` lists all {len(known)}")
         for target in targets:
             obj = _set(obj, target.split("."), value, key)
     return obj
@@ -237,8 +240,9 @@ def apply_file_options(obj: Any, options: dict, where: Any) -> Any:
     for key, value in options.items():
         targets = [key] if key in known else [n for n in known if n.rsplit(".", 1)[-1] == key]
         if not targets:
-            raise ValueError(f"{where}: unknown parameter {key!r} (`pfscope trackers` lists "
-                             f"them)")
+            names = sorted({n.rsplit(".", 1)[-1] for n in known} | set(known))
+            raise ValueError(f"{where}: unknown parameter {key!r}{did_you_mean(key, names)}; "
+                             f"`pfscope trackers` lists them")
         for t in targets:
             cur = current[t]
             ok = (isinstance(value, str) or

@@ -25,6 +25,29 @@ from typing import Any, Iterator, Optional, Sequence, Union
 SourceLike = Union[str, Path, None, Any]
 
 
+def _api_words(e: BaseException, fn) -> BaseException:
+    """The same one-line error in the words of a Python caller: a command-line flag that is a
+    keyword of ``fn`` becomes the keyword (``--force`` → ``force=True``, ``--tracks-out`` →
+    ``tracks_out``).  The engine's messages speak the CLI's words, as most users type them."""
+    import inspect
+    import re
+
+    from pfscope.trackers.errors import InputError
+
+    if not isinstance(e, InputError):
+        return e
+    keywords = set(inspect.signature(fn).parameters)
+
+    def word(m: "re.Match") -> str:
+        name = m.group(1).replace("-", "_")
+        if name not in keywords:
+            return m.group(0)
+        return f"{name}=True" if name in ("force", "timing") else name
+
+    msg = re.sub(r"(?<![\w-])--([a-z][a-z0-9-]*)", word, str(e))
+    return e if msg == str(e) else type(e)(msg)
+
+
 def open_source(source: SourceLike, *, frames: Optional[int] = None, start: int = 1,
                 fps: Optional[float] = None, synthetic_seed: int = 0, **scene):
     """A :class:`~pfscope.trackers.data.sources.Source` from a path, ``"synthetic"`` / None (the
@@ -96,7 +119,13 @@ def record(source: SourceLike = None, tracker: Union[str, Sequence[str]] = "phd"
                          force=force, tracks_out=Path(tracks_out) if tracks_out else None,
                          preset=preset, timing=timing,
                          tracker_options={k: v for k, v in params.items()})
-    res = _record(src, Path(out), opts, trackers=lanes, progress=progress, stop=stop)
+    try:
+        res = _record(src, Path(out), opts, trackers=lanes, progress=progress, stop=stop)
+    except Exception as e:
+        new = _api_words(e, record)
+        if new is e:
+            raise
+        raise new from None
     return RecordResult(out=res.out, tracks_out=res.tracks_out, frames=res.frames,
                         start=res.start, seconds=res.seconds, bytes=res.bytes,
                         interrupted=res.interrupted, lanes=res.lanes, scores=res.scores)
@@ -149,7 +178,7 @@ def stream(source: SourceLike = None, tracker: str = "phd", *, frames: Optional[
         p = make_params(lane.tracker, preset,
                         {**_options_for(lane.tracker, params, 1), **lane.options})
     except ValueError as e:
-        raise InputError(str(e)) from None
+        raise _api_words(InputError(str(e)), stream) from None
     trk = info.cls(p, rng=np.random.default_rng(seed))
     det_opts = {"min_score": min_score} if (detector or "file") == "file" else {}
     q: "queue.Queue" = queue.Queue(maxsize=1)

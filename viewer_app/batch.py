@@ -160,17 +160,13 @@ def _parse_frames(v) -> tuple[int, Optional[int]]:
         return 1, None
     if isinstance(v, tuple):
         return v[0], v[1] - v[0] + 1
-    text = str(v)
-    if ":" in text:
-        a, _, b = text.partition(":")
-        lo, hi = int(a), int(b)
-        if lo < 1 or hi < lo:
-            raise InputError(f"frames {text!r}: expected 1 <= FIRST <= LAST")
-        return lo, hi - lo + 1
-    n = int(text)
-    if n < 1:
-        raise InputError(f"frames {text!r}: must be >= 1")
-    return 1, n
+    from .cli import parse_frames  # --frames N|FIRST:LAST, as every command reads it
+
+    try:
+        f = parse_frames(str(v))
+    except ValueError as e:
+        raise InputError(f"frames {e}") from None
+    return (1, f) if isinstance(f, int) else (f[0], f[1] - f[0] + 1)
 
 
 def plan(args) -> tuple[list[Job], Path, int]:
@@ -496,7 +492,8 @@ def add_batch_parser(sub, add_tracker_options) -> None:
     b.add_argument("--trackers", default=None,
                    help="comma-separated trackers or variants, e.g. \"phd,phd[p_miss=0.2],mt\"")
     b.add_argument("--seeds", default=None, help="comma-separated seeds (default 0)")
-    b.add_argument("--frames", default=None, help="N or FIRST:LAST (default: all)")
+    b.add_argument("--frames", default=None, metavar="N|FIRST:LAST",
+                   help="N or FIRST:LAST (default: all)")
     b.add_argument("--level", default=None, choices=["tracks", "clusters", "particles"],
                    help="recording level (default tracks)")
     b.add_argument("--detector", default=None)

@@ -1,17 +1,9 @@
-"""The ``pfscope`` command line.
+"""The ``pfscope`` command line: one subcommand per task (record, compare, eval, trackers,
+repair, info, view, snapshot, batch, tune, synth, train-dbn, train-classifier).
 
-    pfscope record [SOURCE] [--tracker phd|mt|passthrough] [--out FILE.rrd] [--frames N]
-                   [--seed S] [--detector file|hog|haar|bgsub] [--level tracks|clusters|particles]
-                   [--tracks-out FILE.txt] [--force] [--spawn | --serve]
-    pfscope synth --out DIR [--frames N --targets K --clutter R --seed S]
-    pfscope eval TRACKS.txt --gt GT.txt|SEQUENCE_DIR [--json]
-    pfscope compare [SOURCE] --trackers "phd,phd[p_miss=0.2],mt" [--frames N|FIRST:LAST]
-    pfscope info FILE.rrd [--json]      pfscope view FILE.rrd
-    pfscope snapshot FILE.rrd --frame N [--tab NAME] --out shot.png
-    pfscope batch --sources A,B --trackers phd,mt [--seeds 0,1] --out DIR   (or SPEC.toml)
-    pfscope tune SEQUENCE [--tracker phd] [--trials N] [--metric hota|idf1|mota]
-                 [--frames A:B] [--holdout A:B] [--jobs J] [--seed S] [--out best.toml]
-    record / compare / batch / tune take --params FILE.toml (what tune writes)
+The parsers below are the documentation's source: ``python -m pfscope.viewer_app.docgen``
+writes the README's synopsis and ``docs/cli.md`` from them (tests/test_docs.py checks both).
+Every command reads ``--frames`` as ``N`` or ``FIRST:LAST`` (:func:`parse_frames`).
 
 Bad input ends with one line on stderr naming the file/line/frame and exit status 2.
 """
@@ -59,14 +51,71 @@ POSITIVE = _number(float, low=0, low_open=True, what="a positive number")
 NONNEG = _number(float, low=0, what="a non-negative number")
 
 
-def _frame_range(text: str) -> tuple[int, int]:
+FRAMES_HELP = "N (the first N frames) or FIRST:LAST (e.g. 380:450; the video's own numbers)"
+
+
+def parse_frames(text: str, *, ranges: bool = True):
+    """``--frames`` everywhere: ``N`` (frames 1..N) or, with ``ranges``, ``FIRST:LAST``.  The
+    dash form ``A-B`` is refused with the right example.  Raises ValueError (one line)."""
+    text = str(text).strip()
     a, sep, b = text.partition(":")
+    if not sep:
+        lo_s, dash, hi_s = text.partition("-")
+        if dash and lo_s.isdigit() and hi_s.isdigit():
+            raise ValueError(f"{text!r}: write FIRST:LAST, e.g. {lo_s}:{hi_s}")
+        try:
+            n = int(text)
+        except ValueError:
+            raise ValueError(f"{text!r}: expected N" + (" or FIRST:LAST, e.g. 401:795"
+                                                      if ranges else "")) from None
+        if n < 1:
+            raise ValueError(f"{text!r}: must be >= 1")
+        return n
+    if not ranges:
+        raise ValueError(f"{text!r}: expected a number of frames N")
     try:
         lo, hi = int(a), int(b)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r}: expected FIRST:LAST, e.g. 401:795") from None
-    if not sep or lo < 1 or hi < lo:
-        raise argparse.ArgumentTypeError(f"{text!r}: expected 1 <= FIRST <= LAST")
+        raise ValueError(f"{text!r}: expected FIRST:LAST, e.g. 401:795") from None
+    if lo < 1 or hi < lo:
+        raise ValueError(f"{text!r}: expected 1 <= FIRST <= LAST")
+    return lo, hi
+
+
+def _argtype(parse, name: str):
+    def f(text: str):
+        try:
+            return parse(text)
+        except ValueError as e:
+            raise argparse.ArgumentTypeError(str(e)) from None
+
+    f.__name__ = name
+    return f
+
+
+def _frame_range(text: str) -> tuple[int, int]:
+    """FIRST:LAST, or N for 1:N."""
+    v = parse_frames(text)
+    return (1, v) if isinstance(v, int) else v
+
+
+def _strict_range(text: str) -> tuple[int, int]:
+    if ":" not in str(text):
+        parse_frames(text)  # the dash form gets its example
+        raise ValueError(f"{text!r}: expected FIRST:LAST, e.g. 401:795")
+    return _frame_range(text)
+
+
+def frames_within(frames, length, source) -> tuple[int, int]:
+    """The (FIRST, LAST) a training command runs on: ``--frames`` as parsed (N or a range),
+    checked against the source's length; all of it when not given."""
+    if frames is None:
+        if not length:
+            raise InputError(f"{source}: length unknown, give --frames FIRST:LAST")
+        return 1, int(length)
+    lo, hi = (1, frames) if isinstance(frames, int) else frames
+    if length and hi > length:
+        raise InputError(f"--frames {lo}:{hi}: {source} has {length} frames")
     return lo, hi
 
 
@@ -83,14 +132,16 @@ def _synth_config(args, frames: Optional[int]):
     return demo_config(**kw)
 
 
-def _frames_or_range(text: str):
-    """``N`` (the first N frames) or ``FIRST:LAST`` (frame indices stay the video's)."""
-    return _frame_range(text) if ":" in text else POSITIVE_INT(text)
+FRAME_RANGE = _argtype(_frame_range, "N or FIRST:LAST")
+STRICT_RANGE = _argtype(_strict_range, "FIRST:LAST")
+FRAMES = _argtype(parse_frames, "N or FIRST:LAST")
+FRAME_COUNT = _argtype(lambda t: parse_frames(t, ranges=False), "N")
+_frames_or_range = FRAMES
 
 
 def _add_synth_options(p: argparse.ArgumentParser, *, frames_help: str,
                        ranges: bool = False) -> None:
-    p.add_argument("--frames", type=_frames_or_range if ranges else POSITIVE_INT, default=None,
+    p.add_argument("--frames", type=FRAMES if ranges else FRAME_COUNT, default=None,
                    help=frames_help + (" or FIRST:LAST (e.g. 380:450)" if ranges else ""))
     p.add_argument("--targets", type=POSITIVE_INT, default=None,
                    help="synthetic scene: number of people (default 6)")
@@ -98,6 +149,21 @@ def _add_synth_options(p: argparse.ArgumentParser, *, frames_help: str,
                    help="synthetic scene: mean false detections per frame (default 2)")
     p.add_argument("--seed", type=NONNEG_INT, default=0,
                    help="random seed (scene and tracker)")
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with a "did you mean" for a mistyped choice: a subcommand, ``--tracker``,
+    ``--detector``, ``--level`` ..."""
+
+    def _check_value(self, action, value):
+        if action.choices is not None and value not in action.choices:
+            from pfscope.trackers.errors import did_you_mean
+
+            choices = ", ".join(map(str, action.choices))
+            raise argparse.ArgumentError(action, f"invalid choice: {value!r}"
+                                                 f"{did_you_mean(value, action.choices)}; "
+                                                 f"choose from {choices}")
+        super()._check_value(action, value)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -108,9 +174,12 @@ def build_parser() -> argparse.ArgumentParser:
     TRACKERS = registry()
     tracker_help = "; ".join(f"{n}: {i.summary}" for n, i in TRACKERS.items())
 
-    ap = argparse.ArgumentParser(prog="pfscope", description=(
+    from pfscope.trackers import __version__
+
+    ap = _Parser(prog="pfscope", description=(
         "Particle-filter multi-target tracking that shows its work: run a tracker and "
         "record every stage to a Rerun .rrd file."))
+    ap.add_argument("--version", action="version", version=f"pfscope {__version__}")
     sub = ap.add_subparsers(dest="command", required=True)
 
     r = sub.add_parser("record", help="run a tracker and write a Rerun recording",
@@ -206,7 +275,7 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--ospa-c", type=POSITIVE, default=None, help="OSPA cut-off in pixels")
     e.add_argument("--ospa-p", type=_number(float, low=1, what="an order >= 1"), default=None,
                    help="OSPA order")
-    e.add_argument("--frames", type=_frame_range, default=None, metavar="FIRST:LAST",
+    e.add_argument("--frames", type=FRAME_RANGE, default=None, metavar="N|FIRST:LAST",
                    help="score only these frames (e.g. 401:795)")
     e.add_argument("--json", action="store_true", help="print the scores as JSON")
 
@@ -279,8 +348,8 @@ def build_parser() -> argparse.ArgumentParser:
                                     "--set model=MODEL.pt")
     td.add_argument("source", help="MOTChallenge folder with gt/gt.txt, or 'synthetic'")
     td.add_argument("--out", type=Path, required=True, help="model file to write (MODEL.pt)")
-    td.add_argument("--frames", default=None, metavar="A-B",
-                    help="frame range to train on, e.g. 1-400 (default: all)")
+    td.add_argument("--frames", type=FRAMES, default=None, metavar="N|FIRST:LAST",
+                    help="frames to train on, e.g. 1:400 (default: all)")
     td.add_argument("--holdout", type=float, default=0.2,
                     help="fraction of the range, at its end, held out for scoring (default 0.2)")
     td.add_argument("--stride", type=int, default=2, help="sample every N-th frame (default 2)")
@@ -331,10 +400,10 @@ def _add_tune_parser(sub, TRACKERS, DETECTORS, LEVELS) -> None:
                     help="trials (default 30; the first is the starting values)")
     tn.add_argument("--metric", choices=["hota", "idf1", "mota"], default="hota",
                     help="objective maximised on the tuned-on frames (default hota)")
-    tn.add_argument("--frames", type=_frames_or_range, default=None, metavar="FIRST:LAST",
+    tn.add_argument("--frames", type=FRAMES, default=None, metavar="N|FIRST:LAST",
                     help="frames to tune on: FIRST:LAST, or N for 1:N (default: the first "
                          "half of the sequence)")
-    tn.add_argument("--holdout", type=_frame_range, default=None, metavar="FIRST:LAST",
+    tn.add_argument("--holdout", type=STRICT_RANGE, default=None, metavar="FIRST:LAST",
                     help="held-out frames, scored apart (default: the rest of the sequence; "
                          "the synthetic scene is made twice as long as --frames)")
     tn.add_argument("--jobs", type=POSITIVE_INT, default=None,
@@ -437,8 +506,11 @@ def _single_tracker_params(args) -> tuple[str, object, dict]:
         except ValueError as e:
             raise InputError(f"{pf.path}: tracker: {e}") from None
         if pf.preset not in presets:
+            from pfscope.trackers.errors import did_you_mean
+
             raise InputError(f"{pf.path}: preset: tracker {tracker!r} has no preset "
-                             f"{pf.preset!r}; choose one of {', '.join(presets)}")
+                             f"{pf.preset!r}{did_you_mean(pf.preset, presets)}; choose one of "
+                             f"{', '.join(presets)}")
     options: dict = {}
     if pf is not None:
         _check_params_file(pf, tracker, preset)
@@ -735,7 +807,10 @@ def cmd_trackers(args) -> int:
 
     reg = registry()
     if args.name is not None and args.name not in reg:
-        raise InputError(f"unknown tracker {args.name!r}; choose one of {', '.join(reg)}")
+        from pfscope.trackers.errors import did_you_mean
+
+        raise InputError(f"unknown tracker {args.name!r}{did_you_mean(args.name, reg)}; "
+                         f"choose one of {', '.join(reg)}")
     infos = [reg[args.name]] if args.name else list(reg.values())
     if args.json:
         print(json.dumps([{"name": i.name, "paper": i.paper, "summary": i.summary,
@@ -793,19 +868,7 @@ def cmd_train_dbn(args) -> int:
         raise InputError(f"--holdout must be in [0, 1), got {args.holdout}")
     src = open_source(args.source)
     length = getattr(src, "length", None)
-    if args.frames:
-        a, sep, b = args.frames.partition("-")
-        try:
-            lo, hi = int(a), int(b)
-        except ValueError:
-            raise InputError(f"--frames {args.frames!r}: expected A-B, e.g. 1-400") from None
-        if not sep or lo < 1 or hi < lo or (length and hi > length):
-            raise InputError(f"--frames {args.frames!r}: need 1 <= A <= B"
-                             + (f" <= {length}" if length else ""))
-    else:
-        if not length:
-            raise InputError(f"{args.source}: length unknown, give --frames A-B")
-        lo, hi = 1, int(length)
+    lo, hi = frames_within(args.frames, length, args.source)
     from pfscope.trackers.dbn.model import collect_samples, train_dbn  # torch, on demand
 
     t0 = time.perf_counter()

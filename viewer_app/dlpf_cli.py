@@ -25,13 +25,15 @@ def add_parser(sub) -> argparse.ArgumentParser:
                     "--holdout fraction of the frames is held out and the accuracy and ROC AUC "
                     "there are reported.  Use the model with "
                     "'pfscope record SOURCE --tracker dlpf --classifier MODEL'.  Never evaluate "
-                    "on the frames it was trained on (PETS09-S2L1: train on 1-400, report on "
+                    "on the frames it was trained on (PETS09-S2L1: train on 1:400, report on "
                     "401-795).")
     p.add_argument("source", help="sequence with ground truth (MOT layout: img1/, gt/gt.txt)")
     p.add_argument("--out", type=Path, required=True, help="model file to write (.npz)")
-    p.add_argument("--frames", default=None, metavar="A-B",
-                   help="frames to train on (held-out split included); default: the first half "
-                        "of the sequence")
+    from .cli import FRAMES
+
+    p.add_argument("--frames", type=FRAMES, default=None, metavar="N|FIRST:LAST",
+                   help="frames to train on, e.g. 1:400 (held-out split included); default: "
+                        "the first half of the sequence")
     p.add_argument("--holdout", type=float, default=0.2,
                    help="fraction of the frames (the last ones) held out for the reported "
                         "accuracy (default 0.2; 0: none)")
@@ -50,20 +52,13 @@ def add_parser(sub) -> argparse.ArgumentParser:
     return p
 
 
-def _frame_range(spec, length):
-    if spec:
-        a, sep, b = spec.partition("-")
-        try:
-            lo, hi = int(a), int(b)
-        except ValueError:
-            raise InputError(f"--frames {spec!r}: expected A-B, e.g. 1-400") from None
-        if not sep or lo < 1 or hi < lo or (length and hi > length):
-            raise InputError(f"--frames {spec!r}: need 1 <= A <= B"
-                             + (f" <= {length}" if length else ""))
-        return lo, hi
-    if not length:
-        raise InputError("source length unknown, give --frames A-B")
-    return 1, max(1, int(length) // 2)
+def _frame_range(frames, length):
+    """``--frames`` as parsed (N or (FIRST, LAST)); default: the first half of the sequence."""
+    if frames is None and length:
+        return 1, max(1, int(length) // 2)
+    from .cli import frames_within
+
+    return frames_within(frames, length, "source")
 
 
 def cmd_train_classifier(args) -> int:

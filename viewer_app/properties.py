@@ -8,7 +8,7 @@ typed fields, nested dicts flattened to dotted names:
 - ``source``: the source's ``describe()`` (kind, name, location, fps, length, size, scene.* ...);
 - ``tracker.<lane>``: the lane's tracker name, preset and every parameter
   (``params.filter.likelihood.p_miss`` ...);
-- ``versions``: pfscope, rerun-sdk, numpy, scipy, opencv, python;
+- ``versions``: pfscope, rerun-sdk, numpy, scipy, opencv, numba, llvmlite, torch, python;
 - ``scores.<lane>``: the sequence scores (MOTA, IDF1, HOTA, OSPA ...), written when the run ends;
 - ``events.<lane>``: how many of each event the failure index holds.
 
@@ -87,7 +87,8 @@ def about_markdown(title: str, views: Iterable[tuple[str, Iterable[str]]],
                   "and ID switches; **OSPA**: the per-frame OSPA distance (px)."]
     lines += ["- **All series**: every series of the recording.", "",
               "## Colours", "",
-              "- Tracks: one colour per track id (hues from orange through green to blue), "
+              "- Tracks: one colour per track id (hues from orange through yellow and green to light "
+              "blue and lavender), "
               "labelled with the id, with a trail of recent centres (a trail restarts where its "
               "track jumps, e.g. an id taken over by another person). Blues are lightened so "
               "their id labels read.",

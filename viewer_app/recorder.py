@@ -137,12 +137,26 @@ def recording_id_for(config: dict) -> str:
     return str(uuid.uuid5(uuid.NAMESPACE_URL, "pfscope:" + repr(sorted(config.items()))))
 
 
+#: the installed distributions whose version can change a run's tracks or its recording
+#: (numba compiles the PHD kernels, torch runs DBN-PHD's network); read from their metadata,
+#: so recording a run never imports torch
+RESULT_SHAPING = ("numba", "llvmlite", "torch")
+
+
 def versions() -> dict:
+    from importlib import metadata
+
     import scipy
 
-    return {"pfscope": __version__, "rerun-sdk": rr.__version__, "numpy": np.__version__,
-            "scipy": scipy.__version__, "opencv": cv2.__version__,
-            "python": platform.python_version()}
+    out = {"pfscope": __version__, "rerun-sdk": rr.__version__, "numpy": np.__version__,
+           "scipy": scipy.__version__, "opencv": cv2.__version__,
+           "python": platform.python_version()}
+    for dist in RESULT_SHAPING:
+        try:
+            out[dist] = metadata.version(dist)
+        except metadata.PackageNotFoundError:
+            out[dist] = "not installed"
+    return out
 
 
 def _frame_size(source) -> Optional[tuple[int, int]]:

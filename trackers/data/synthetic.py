@@ -651,7 +651,7 @@ def _noisy(rng: np.random.Generator, boxes: np.ndarray, rel: float) -> np.ndarra
 def write_sequence(out_dir, config: SceneConfig, *,
                    progress: Optional[Callable[[int, int], None]] = None) -> Path:
     """Write the scene as a MOTChallenge folder: ``img1/000001.jpg ...``, ``seqinfo.ini``,
-    ``gt/gt.txt``, ``det/det.txt``.  Refuses an existing non-empty ``out_dir``.  Everything is
+    ``gt/gt.txt``, ``det/det.txt``; ``seqinfo.ini`` names the sequence after the folder.  Refuses an existing non-empty ``out_dir``.  Everything is
     written into a hidden sibling folder that is renamed to ``out_dir`` at the end, so a
     half-written sequence never looks complete.  ``progress(i, n)`` is called per frame."""
     out = Path(out_dir)
@@ -682,6 +682,7 @@ def write_sequence(out_dir, config: SceneConfig, *,
         write_mot(tmp / "det" / "det.txt", "det", d.frame, d.id, d.boxes, d.score)
         info = scene.seqinfo()
         info["frameRate"] = f"{config.fps:g}"
+        info["name"] = out.resolve().name  # the folder's name, as in a MOTChallenge sequence
         (tmp / "seqinfo.ini").write_text(
             "[Sequence]\n" + "".join(f"{k}={v}\n" for k, v in info.items()))
         os.replace(tmp, out)  # atomic; replaces only an empty folder

@@ -14,7 +14,7 @@ This file is installed as the top-level ``pfscope`` package (pyproject maps it f
 
 from __future__ import annotations
 
-__version__ = "0.1.0"
+from pfscope.trackers import __version__  # the one version string (pyproject.toml repeats it)
 __all__ = ["record", "stream", "RecordResult", "FrameResult", "__version__"]
 
 

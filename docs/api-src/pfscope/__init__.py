@@ -1,0 +1,1 @@
+../../../viewer_app/_pfscope/__init__.py
