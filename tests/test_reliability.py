@@ -188,11 +188,13 @@ def test_spawn_without_display_warns_and_writes_the_file(tmp_path):
 
 # ----------------------------------------------------------------------------- crash-safe, reproducible
 
-def test_sigkill_leaves_readable_partial_files_and_repair_makes_them_whole(tmp_path):
+def test_sigkill_leaves_readable_partial_files_and_repair_makes_them_whole(tmp_path, pets):
+    # a real sequence: people from the first frames, so the tracks file has rows to keep (a
+    # 100,000-frame synthetic scene spreads its 6 people over the whole of it)
     out, tracks = tmp_path / "run.rrd", tmp_path / "t.txt"
     env = dict(os.environ, RERUN_ANALYTICS="0")
     proc = subprocess.Popen([sys.executable, "-m", "pfscope.viewer_app.cli", "record",
-                             "--frames", "100000", "--out", str(out), "--tracks-out",
+                             str(pets), "--out", str(out), "--tracks-out",
                              str(tracks), "--quiet"], cwd=REPO, env=env,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     partial = tmp_path / "run.incomplete.rrd"
