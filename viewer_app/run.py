@@ -14,6 +14,7 @@ Safety rules the code keeps:
 
 from __future__ import annotations
 
+import collections
 import os
 import signal
 import sys
@@ -125,21 +126,58 @@ def display_available() -> bool:
 
 
 class Progress:
-    """A one-line progress bar on stderr (a line every ~10 % when stderr is not a terminal)."""
+    """A one-line progress bar on stderr (a line every ~10 % when stderr is not a terminal).
 
-    def __init__(self, total: Optional[int], label: str, stream=None, enabled: bool = True):
+    The fps shown is the *recent* rate: frames over the last ``window`` seconds (at least the
+    last two frame times; before that, since :meth:`start`), so a slow first frame or a busy
+    minute does not colour the rest of the run; the ETA is the frames left at that rate.  The
+    clock starts at :meth:`start` (the pipeline's ``begin``, after the kernels are ready), or
+    at the first :meth:`update` if nobody called it.  ``clock`` is injectable for tests."""
+
+    def __init__(self, total: Optional[int], label: str, stream=None, enabled: bool = True,
+                 clock: Callable[[], float] = time.perf_counter, window: float = 2.0):
         self.total, self.label, self.enabled = total, label, enabled
         self.stream = stream or sys.stderr
         self.tty = hasattr(self.stream, "isatty") and self.stream.isatty()
-        self.t0 = time.perf_counter()
-        self._last_draw = 0.0
+        self.clock, self.window = clock, window
+        self.t0: Optional[float] = None
+        self._marks: collections.deque = collections.deque()   # (time, frames done)
+        self._last_draw = -float("inf")
         self._last_decile = -1
+
+    def start(self) -> None:
+        """Frames start now: the rate's zero point."""
+        self.t0 = self.clock()
+        self._marks.clear()
+        self._marks.append((self.t0, 0))
+
+    def rate(self) -> float:
+        """Frames per second over the recent window (0 before the first frame)."""
+        if len(self._marks) < 2:
+            return 0.0
+        (t_a, n_a), (t_b, n_b) = self._marks[0], self._marks[-1]
+        return (n_b - n_a) / max(t_b - t_a, 1e-9)
+
+    def eta(self, done: int) -> Optional[float]:
+        r = self.rate()
+        return (self.total - done) / r if self.total and r > 0 else None
+
+    def _mark(self, now: float, done: int) -> None:
+        if self.t0 is None:        # no start(): the rate counts from this first update
+            self.t0 = now
+            self._marks.append((now, done))
+            return
+        self._marks.append((now, done))
+        # keep the marks of the last `window` seconds, and at least two frame intervals
+        while len(self._marks) > 3 and now - self._marks[1][0] >= self.window:
+            self._marks.popleft()
 
     def update(self, done: int) -> None:
         if not self.enabled:
             return
-        now = time.perf_counter()
-        rate = done / max(now - self.t0, 1e-9)
+        now = self.clock()
+        self._mark(now, done)
+        rate = self.rate()
         if self.tty:
             if now - self._last_draw < 0.1 and done != self.total:
                 return
@@ -147,8 +185,9 @@ class Progress:
             if self.total:
                 frac = min(done / self.total, 1.0)
                 bar = "#" * int(frac * 30)
-                eta = (self.total - done) / rate if rate > 0 else 0
-                msg = f"\r{self.label} [{bar:<30}] {done}/{self.total} {rate:5.1f} fps ETA {eta:4.0f}s"
+                eta = self.eta(done)
+                msg = (f"\r{self.label} [{bar:<30}] {done}/{self.total} {rate:5.1f} fps "
+                       f"ETA {eta if eta is not None else 0:4.0f}s")
             else:
                 msg = f"\r{self.label} {done} frames {rate:5.1f} fps"
             self.stream.write(msg)
@@ -168,11 +207,14 @@ class Progress:
 
 
 class ProgressHook(BaseHook):
-    """The progress bar as a pipeline hook."""
+    """The progress bar as a pipeline hook (its clock starts when the pipeline begins)."""
 
     def __init__(self, bar: Progress):
         self.bar = bar
         self.done = 0
+
+    def begin(self, info) -> None:
+        self.bar.start()
 
     def on_frame(self, report) -> None:
         self.done += 1
