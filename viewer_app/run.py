@@ -206,6 +206,55 @@ class Progress:
             self.stream.flush()
 
 
+SPINNER = "|/-\\"
+
+
+def prepare_kernels(trackers, *, enabled: bool = True, stream=None, delay: float = 1.0) -> float:
+    """Compile (first run after an install) or load (later runs) the numba kernels that
+    ``trackers`` call, before the first frame, so the frame counter and its fps start with the
+    frames.  When it takes longer than ``delay`` seconds, ONE line says so with a spinner and
+    the seconds so far (a terminal), or once with its total (a log).  Returns the seconds."""
+    from pfscope.trackers.warmup import compile_kernels, uses_kernels
+
+    if not any(uses_kernels(t) for t in trackers):
+        return 0.0
+    stream = stream or sys.stderr
+    tty = hasattr(stream, "isatty") and stream.isatty()
+    msg = "pfscope: compiling numba kernels (first run after an install; cached afterwards)"
+    done = threading.Event()
+    shown: list = []
+    t0 = time.perf_counter()
+
+    def spin():
+        if done.wait(delay) or not enabled:
+            return
+        shown.append(True)
+        i = 0
+        while True:
+            if tty:
+                stream.write(f"\r{msg} {SPINNER[i % 4]} {time.perf_counter() - t0:4.0f} s")
+                stream.flush()
+            elif i == 0:
+                stream.write(f"{msg} ...")
+                stream.flush()
+            i += 1
+            if done.wait(0.1):
+                return
+
+    th = threading.Thread(target=spin, name="pfscope-compile-spinner", daemon=True)
+    th.start()
+    try:
+        compile_kernels()
+    finally:
+        done.set()
+        th.join()
+    secs = time.perf_counter() - t0
+    if shown:
+        stream.write(f"\r{msg}: done in {secs:.1f} s\n" if tty else f" done in {secs:.1f} s\n")
+        stream.flush()
+    return secs
+
+
 class ProgressHook(BaseHook):
     """The progress bar as a pipeline hook (its clock starts when the pipeline begins)."""
 
@@ -341,6 +390,7 @@ def _record_locked(source, out, opts, lanes, infos, params, tracks_out, live, pr
                                        enabled=progress)))
     if on_frame is not None:
         hooks.append(_CallbackHook(on_frame))
+    prepare_kernels(built.values(), enabled=progress)
     with StopFlag(stop) as flag:
         try:
             res = run_pipeline(source, built, frames=opts.frames, start=opts.start,
