@@ -18,6 +18,7 @@ import numpy as np
 
 #: trackers whose step calls the numba kernels (PHD filter + K-means, or resampling)
 KERNEL_TRACKERS = frozenset({"phd", "dbn-phd", "phd-bgsub", "dlpf"})
+_ready: frozenset = frozenset()       # the preset tuples already warmed in this process
 
 
 def uses_kernels(tracker) -> bool:
@@ -26,7 +27,11 @@ def uses_kernels(tracker) -> bool:
 
 def compile_kernels(presets=("practical", "paper")) -> float:
     """Call every kernel once on made-up data (a compile on the first run after an install,
-    a load from numba's cache afterwards); returns the seconds it took."""
+    a load from numba's cache afterwards); returns the seconds it took.  Once per process:
+    later calls return 0 at once (the kernels stay compiled in the process)."""
+    global _ready
+    if presets in _ready:
+        return 0.0
     from .api import make_params
     from .phd.tracker import PHDTracker
     from .smc.resampling import resample_indices
@@ -46,6 +51,7 @@ def compile_kernels(presets=("practical", "paper")) -> float:
             dets = Detections(np.vstack([boxes, clutter]), np.linspace(0.2, 1.0, 11))
             tr.step(Frame(k + 1, k / 25.0, image), dets)
     resample_indices(np.log(np.full(16, 1 / 16)), 16, rng, "systematic")
+    _ready = _ready | {presets}
     return time.perf_counter() - t0
 
 
