@@ -29,7 +29,12 @@ Sections (all by default; ``--only`` picks some):
                live tracks, cluster estimates and k-means(round mass) and of each Stone Soup
                lane's k-means(round mass), at 4, 16, 64 targets (``--ss-targets``), 60 frames
                (``--ss-frames``), frames after a warm-up (``--ss-warmup``), mean ± std over
-               seeds (``--ss-seeds``).
+               seeds (``--ss-seeds``);
+``endtoend``   (only with ``--only``) what a user meets: pfscope's whole PHD-MT step
+               (``--e2e-preset``, default practical) vs Stone Soup's SMC-PHD + extraction at
+               ``--ss-targets``, one seed, with PHD-MT's per-stage split; fresh-process
+               ``pfscope record`` with an empty numba cache (cold) vs filled (warm); a
+               5-frame DBN-PHD run's wall time.
 
 Every run goes through the engine's one frame loop (``pfscope.trackers.pipeline.run``) at
 ``level=None`` without a recorder (``recording`` adds the app's recorder on purpose). Stage
@@ -484,11 +489,14 @@ def ss_run(T: int, frames: int, seed: int, lanes, preset: str) -> dict:
 
         def on_frame(self, report):
             g = gts[-1]                      # the PHD-MT collector (first hook) stored it
-            self.rows.append({k: {"secs": report.step_seconds[k], "mass": lane.mass,
-                                  "n_update": lane.n_update,
-                                  "parts": C.ospa_parts(_extract(lane.states, lane.mass,
-                                                                 rng(k)), g, OSPA_C)}
-                              for k, lane in self.ss.items()})
+            row = {}
+            for k, lane in self.ss.items():
+                t = time.perf_counter()
+                est = _extract(lane.states, lane.mass, rng(k))   # Stone Soup's estimates
+                row[k] = {"secs": report.step_seconds[k], "mass": lane.mass,
+                          "extract_secs": time.perf_counter() - t, "n_update": lane.n_update,
+                          "parts": C.ospa_parts(est, g, OSPA_C)}
+            self.rows.append(row)
 
     class TracksFile(BaseHook):
         """The rows PHD-MT writes to its tracks file, by frame (bounded-lag and ``finish``)."""
@@ -667,9 +675,106 @@ def bench_stonesoup(args) -> dict:
             "rows": list(results.values())}
 
 
+# ----------------------------------------------------------------------------- end to end
+
+def _first_run(cmd: list, cache: str, cwd: str) -> float:
+    """Wall seconds of ``cmd`` (a fresh process) with numba's cache in ``cache``."""
+    import subprocess
+
+    env = {**os.environ, "NUMBA_CACHE_DIR": cache}
+    t = time.perf_counter()
+    p = subprocess.run(cmd, cwd=cwd, env=env, capture_output=True, text=True, timeout=1800)
+    secs = time.perf_counter() - t
+    if p.returncode != 0:
+        raise RuntimeError(f"{' '.join(cmd)} failed ({p.returncode}): {p.stderr[-500:]}")
+    return secs
+
+
+def bench_endtoend(args) -> dict:
+    """What a user meets: (1) pfscope's whole ``PHDTracker.step`` (filter, K-means,
+    association; ``--e2e-preset``) next to Stone Soup's SMC-PHD step plus its extraction
+    (k-means of round(mass) centres, ``_extract``) on the same detections, one seed, in one
+    pipeline run; (2) ``pfscope record`` (the built-in scene, 150 frames) in a fresh process
+    with an empty numba cache (cold: the first run after an install) and again with it
+    filled (warm); (3) the start of a 5-frame DBN-PHD run (warm)."""
+    import _stonesoup as S
+
+    out: dict = {}
+    why = S.available()
+    if why is not None:
+        print(f"\n{why}")
+        out["stonesoup"] = {"skipped": why}
+    else:
+        frames, warm, preset = args.e2e_frames, args.ss_warmup, args.e2e_preset
+        print(f"\n=== end to end: pfscope PHD-MT whole step (preset {preset}: filter + K-means "
+              f"+ association) vs Stone Soup {S.version()} SMC-PHD + extraction (k-means of "
+              f"round(mass) centres), same detections (p_D 0.9, Poisson clutter 5/frame), same "
+              f"particles in every update, seed {args.seed}, {frames} frames, medians over "
+              f"frames {warm + 1}..{frames} ===")
+        rows, res = [], []
+        for T in args.ss_targets:
+            r = ss_run(T, frames, args.seed, ["nonoise"], preset)
+            hook, ssr = r["hook"], r["ss_rows"]
+            pf = C.median(hook.step[warm:]) * 1e3
+            filt = C.median([sum(st.get(s_, 0.0) for s_ in PHD_STAGES[:4])
+                             for st in hook.stages][warm:]) * 1e3
+            ss_f = C.median(row["ss_nonoise"]["secs"] for row in ssr[warm:]) * 1e3
+            ss_fe = C.median(row["ss_nonoise"]["secs"] + row["ss_nonoise"]["extract_secs"]
+                             for row in ssr[warm:]) * 1e3
+            d = {"targets": T, "pfscope_phdmt_ms": pf, "pfscope_filter_ms": filt,
+                 "ss_filter_ms": ss_f, "ss_filter_extract_ms": ss_fe,
+                 "ratio": ss_fe / pf, "ratio_filter_only": ss_f / filt}
+            # the split as means over the frames (medians of parts do not add up to the
+            # median of the whole); other = the step outside the six stage clocks
+            d["stages_ms"] = {st_: float(np.mean([st.get(st_, 0.0) for st in hook.stages[warm:]]))
+                              * 1e3 for st_ in PHD_STAGES}
+            d["step_mean_ms"] = float(np.mean(hook.step[warm:])) * 1e3
+            d["other_ms"] = d["step_mean_ms"] - sum(d["stages_ms"].values())
+            d["particles_in_update"] = C.median(in_update(hook, lambda e: e["n"])[warm:])
+            res.append(d)
+            rows.append([T, ms(pf), ms(ss_fe), f"{d['ratio']:.1f}x", ms(filt), ms(ss_f),
+                         f"{d['ratio_filter_only']:.1f}x"])
+            print(f"  {T} targets: {r['wall']:.1f} s", file=sys.stderr)
+        print(C.table(["targets", "pfscope PHD-MT ms", "Stone Soup SMC-PHD + extraction ms",
+                       "ratio", "pfscope filter ms", "Stone Soup filter ms", "filter ratio"],
+                      rows))
+        print("\nwhere PHD-MT's step goes (ms per frame, MEANS over the same frames, so the "
+              "parts add up to the step; other = the step outside the six stage clocks: stage "
+              "data, input conversion):")
+        print(C.table(["targets", "particles in update", *PHD_STAGES, "other", "step (mean)"],
+                      [[d["targets"], f"{d['particles_in_update']:,.0f}",
+                        *(ms(d["stages_ms"][st_]) for st_ in PHD_STAGES), ms(d["other_ms"]),
+                        ms(d["step_mean_ms"])] for d in res]))
+        out["stonesoup"] = {"preset": preset, "frames": frames, "warmup": warm,
+                            "stonesoup_version": S.version(), "rows": res}
+
+    # first run after an install vs a warm run, each a fresh process
+    exe = str(Path(sys.executable).with_name("pfscope"))
+    with tempfile.TemporaryDirectory(prefix="pfscope-e2e-") as tmp:
+        cache = str(Path(tmp) / "numba-cache")
+        cmd = [exe, "record", "--force", "--out", "synthetic.rrd"]
+        cold = _first_run(cmd, cache, tmp)
+        warm_s = [_first_run(cmd, cache, tmp) for _ in range(args.e2e_warm_repeat)]
+        warm_run = C.median(warm_s)
+        dbn = _first_run([exe, "record", "--tracker", "dbn-phd", "--frames", "5", "--force",
+                          "--out", "dbn.rrd"], cache, tmp)
+    print(f"\n=== first run: `pfscope record` (built-in scene, 150 frames), a fresh process "
+          f"each ===")
+    print(C.table(["run", "seconds"], [["cold (empty numba cache)", f"{cold:.1f}"],
+                                       ["warm (median of "
+                                        f"{len(warm_s)})", f"{warm_run:.1f}"],
+                                       ["cold / warm", f"{cold / warm_run:.2f}x"],
+                                       ["dbn-phd, 5 frames (warm)", f"{dbn:.1f}"]]))
+    out["first_run"] = {"cold_s": cold, "warm_s": warm_s, "ratio": cold / warm_run,
+                        "dbn_phd_5_frames_s": dbn, "loadavg": list(os.getloadavg())}
+    return out
+
+
 # ----------------------------------------------------------------------------- main
 
 SECTIONS = ("stages", "scaling", "recording", "memory", "stonesoup")
+#: every section; ``endtoend`` (fresh processes, a cold numba compile: minutes) only by --only
+ALL_SECTIONS = SECTIONS + ("endtoend",)
 
 
 def parse_args(argv=None):
@@ -679,7 +784,7 @@ def parse_args(argv=None):
                     help="a short run (a minute or two): fewer frames, targets 4/16/64, one "
                          "recording repeat, 1,000-frame memory run, one seed")
     ap.add_argument("--out", help="write every number as JSON to this file")
-    ap.add_argument("--only", nargs="+", choices=SECTIONS, help="run only these sections")
+    ap.add_argument("--only", nargs="+", choices=ALL_SECTIONS, help="run only these sections")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--trackers", nargs="+", metavar="NAME",
                     help="the stages section times only these trackers (default: every "
@@ -703,20 +808,29 @@ def parse_args(argv=None):
                          "oracle-birth (oracle + the scene's true births), noise (pfscope's "
                          "κ(z), Stone Soup's default noise draw) (default: nonoise oracle "
                          "oracle-birth)")
+    e2e = ap.add_argument_group("endtoend section")
+    e2e.add_argument("--e2e-preset", default="practical",
+                     help="PHD-MT preset of the end-to-end table (default: practical)")
+    e2e.add_argument("--e2e-frames", type=int, metavar="N",
+                     help="frames per run (full: 60; quick: 40)")
+    e2e.add_argument("--e2e-warm-repeat", type=int, metavar="N",
+                     help="warm first runs, median (full: 3; quick: 1)")
     ap.add_argument("--tiny", action="store_true", help=argparse.SUPPRESS)  # the smoke test
     ap.add_argument("--memory-child", nargs=2, type=int, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     full = dict(stage_frames=60, scale_frames=30, targets=[4, 16, 64, 256], rec_frames=100,
                 rec_repeat=3, mem_frames=10_000, mem_every=1_000, ss_frames=60, ss_warmup=10,
                 ss_targets=[4, 16, 64], ss_seeds=[0, 1, 2],
-                ss_lanes=["nonoise", "oracle", "oracle-birth"])
+                ss_lanes=["nonoise", "oracle", "oracle-birth"], e2e_frames=60,
+                e2e_warm_repeat=3)
     quick = dict(stage_frames=15, scale_frames=12, targets=[4, 16, 64], rec_frames=25,
                  rec_repeat=1, mem_frames=1_000, mem_every=100, ss_frames=60, ss_warmup=10,
                  ss_targets=[4, 16], ss_seeds=[0],
-                 ss_lanes=["nonoise", "oracle", "oracle-birth"])
+                 ss_lanes=["nonoise", "oracle", "oracle-birth"], e2e_frames=40,
+                 e2e_warm_repeat=1)
     tiny = dict(stage_frames=7, scale_frames=7, targets=[4, 8], rec_frames=4, rec_repeat=1,
                 mem_frames=30, mem_every=10, ss_frames=8, ss_warmup=2, ss_targets=[4],
-                ss_seeds=[0], ss_lanes=list(SS_LANES))
+                ss_seeds=[0], ss_lanes=list(SS_LANES), e2e_frames=8, e2e_warm_repeat=1)
     for k, v in (tiny if args.tiny else quick if args.quick else full).items():
         if getattr(args, k, None) is None:
             setattr(args, k, v)
@@ -747,9 +861,9 @@ def main(argv=None) -> int:
     # warm-up: imports, first-call costs
     run_phd_scene(4, 3, args.seed, preset=args.preset)
     funcs = {"stages": bench_stages, "scaling": bench_scaling, "recording": bench_recording,
-             "memory": bench_memory, "stonesoup": bench_stonesoup}
+             "memory": bench_memory, "stonesoup": bench_stonesoup, "endtoend": bench_endtoend}
     t0 = time.perf_counter()
-    for name in SECTIONS:
+    for name in ALL_SECTIONS:
         if name in sections:
             t = time.perf_counter()
             payload["sections"][name] = funcs[name](args)

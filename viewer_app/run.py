@@ -14,6 +14,7 @@ Safety rules the code keeps:
 
 from __future__ import annotations
 
+import collections
 import os
 import signal
 import sys
@@ -125,21 +126,58 @@ def display_available() -> bool:
 
 
 class Progress:
-    """A one-line progress bar on stderr (a line every ~10 % when stderr is not a terminal)."""
+    """A one-line progress bar on stderr (a line every ~10 % when stderr is not a terminal).
 
-    def __init__(self, total: Optional[int], label: str, stream=None, enabled: bool = True):
+    The fps shown is the *recent* rate: frames over the last ``window`` seconds (at least the
+    last two frame times; before that, since :meth:`start`), so a slow first frame or a busy
+    minute does not colour the rest of the run; the ETA is the frames left at that rate.  The
+    clock starts at :meth:`start` (the pipeline's ``begin``, after the kernels are ready), or
+    at the first :meth:`update` if nobody called it.  ``clock`` is injectable for tests."""
+
+    def __init__(self, total: Optional[int], label: str, stream=None, enabled: bool = True,
+                 clock: Callable[[], float] = time.perf_counter, window: float = 2.0):
         self.total, self.label, self.enabled = total, label, enabled
         self.stream = stream or sys.stderr
         self.tty = hasattr(self.stream, "isatty") and self.stream.isatty()
-        self.t0 = time.perf_counter()
-        self._last_draw = 0.0
+        self.clock, self.window = clock, window
+        self.t0: Optional[float] = None
+        self._marks: collections.deque = collections.deque()   # (time, frames done)
+        self._last_draw = -float("inf")
         self._last_decile = -1
+
+    def start(self) -> None:
+        """Frames start now: the rate's zero point."""
+        self.t0 = self.clock()
+        self._marks.clear()
+        self._marks.append((self.t0, 0))
+
+    def rate(self) -> float:
+        """Frames per second over the recent window (0 before the first frame)."""
+        if len(self._marks) < 2:
+            return 0.0
+        (t_a, n_a), (t_b, n_b) = self._marks[0], self._marks[-1]
+        return (n_b - n_a) / max(t_b - t_a, 1e-9)
+
+    def eta(self, done: int) -> Optional[float]:
+        r = self.rate()
+        return (self.total - done) / r if self.total and r > 0 else None
+
+    def _mark(self, now: float, done: int) -> None:
+        if self.t0 is None:        # no start(): the rate counts from this first update
+            self.t0 = now
+            self._marks.append((now, done))
+            return
+        self._marks.append((now, done))
+        # keep the marks of the last `window` seconds, and at least two frame intervals
+        while len(self._marks) > 3 and now - self._marks[1][0] >= self.window:
+            self._marks.popleft()
 
     def update(self, done: int) -> None:
         if not self.enabled:
             return
-        now = time.perf_counter()
-        rate = done / max(now - self.t0, 1e-9)
+        now = self.clock()
+        self._mark(now, done)
+        rate = self.rate()
         if self.tty:
             if now - self._last_draw < 0.1 and done != self.total:
                 return
@@ -147,8 +185,9 @@ class Progress:
             if self.total:
                 frac = min(done / self.total, 1.0)
                 bar = "#" * int(frac * 30)
-                eta = (self.total - done) / rate if rate > 0 else 0
-                msg = f"\r{self.label} [{bar:<30}] {done}/{self.total} {rate:5.1f} fps ETA {eta:4.0f}s"
+                eta = self.eta(done)
+                msg = (f"\r{self.label} [{bar:<30}] {done}/{self.total} {rate:5.1f} fps "
+                       f"ETA {eta if eta is not None else 0:4.0f}s")
             else:
                 msg = f"\r{self.label} {done} frames {rate:5.1f} fps"
             self.stream.write(msg)
@@ -167,12 +206,64 @@ class Progress:
             self.stream.flush()
 
 
+SPINNER = "|/-\\"
+
+
+def prepare_kernels(trackers, *, enabled: bool = True, stream=None, delay: float = 1.0) -> float:
+    """Compile (first run after an install) or load (later runs) the numba kernels that
+    ``trackers`` call, before the first frame, so the frame counter and its fps start with the
+    frames.  When it takes longer than ``delay`` seconds, ONE line says so with a spinner and
+    the seconds so far (a terminal), or once with its total (a log).  Returns the seconds."""
+    from pfscope.trackers.warmup import compile_kernels, uses_kernels
+
+    if not any(uses_kernels(t) for t in trackers):
+        return 0.0
+    stream = stream or sys.stderr
+    tty = hasattr(stream, "isatty") and stream.isatty()
+    msg = "pfscope: compiling numba kernels (first run after an install; cached afterwards)"
+    done = threading.Event()
+    shown: list = []
+    t0 = time.perf_counter()
+
+    def spin():
+        if done.wait(delay) or not enabled:
+            return
+        shown.append(True)
+        i = 0
+        while True:
+            if tty:
+                stream.write(f"\r{msg} {SPINNER[i % 4]} {time.perf_counter() - t0:4.0f} s")
+                stream.flush()
+            elif i == 0:
+                stream.write(f"{msg} ...")
+                stream.flush()
+            i += 1
+            if done.wait(0.1):
+                return
+
+    th = threading.Thread(target=spin, name="pfscope-compile-spinner", daemon=True)
+    th.start()
+    try:
+        compile_kernels()
+    finally:
+        done.set()
+        th.join()
+    secs = time.perf_counter() - t0
+    if shown:
+        stream.write(f"\r{msg}: done in {secs:.1f} s\n" if tty else f" done in {secs:.1f} s\n")
+        stream.flush()
+    return secs
+
+
 class ProgressHook(BaseHook):
-    """The progress bar as a pipeline hook."""
+    """The progress bar as a pipeline hook (its clock starts when the pipeline begins)."""
 
     def __init__(self, bar: Progress):
         self.bar = bar
         self.done = 0
+
+    def begin(self, info) -> None:
+        self.bar.start()
 
     def on_frame(self, report) -> None:
         self.done += 1
@@ -299,6 +390,7 @@ def _record_locked(source, out, opts, lanes, infos, params, tracks_out, live, pr
                                        enabled=progress)))
     if on_frame is not None:
         hooks.append(_CallbackHook(on_frame))
+    prepare_kernels(built.values(), enabled=progress)
     with StopFlag(stop) as flag:
         try:
             res = run_pipeline(source, built, frames=opts.frames, start=opts.start,

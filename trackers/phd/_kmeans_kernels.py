@@ -186,11 +186,21 @@ def _neighbours(cs, x0, y0, g, ni, nj, order, starts):
                                     nbd[q] = d
                                     q += 1
             if sweep == 1 and count[c + 1] - count[c] > 1:
+                # stable insertion sort of the (short: <= _MAX_NEIGHBOURS) list by distance:
+                # the order of a stable argsort, without compiling numba's mergesort and its
+                # fancy-index assignment (whose error message pulls in the string machinery:
+                # half the first run's compile time, issue 22)
                 lo = count[c]
-                hi = count[c + 1]
-                srt = np.argsort(nbd[lo:hi], kind="mergesort")
-                nb[lo:hi] = nb[lo:hi][srt]
-                nbd[lo:hi] = nbd[lo:hi][srt]
+                for a in range(lo + 1, count[c + 1]):
+                    d = nbd[a]
+                    e = nb[a]
+                    b = a - 1
+                    while b >= lo and nbd[b] > d:
+                        nbd[b + 1] = nbd[b]
+                        nb[b + 1] = nb[b]
+                        b -= 1
+                    nbd[b + 1] = d
+                    nb[b + 1] = e
     return count, nb, nbd, cover
 
 

@@ -1,0 +1,123 @@
+"""The progress line shows the recent frame rate (issue 22), on a fake clock."""
+
+import io
+
+from pfscope.viewer_app.run import Progress
+
+
+class FakeClock:
+    def __init__(self):
+        self.t = 0.0
+
+    def __call__(self):
+        return self.t
+
+
+def _run(bar, clock, durations):
+    done = 0
+    for d in durations:
+        clock.t += d
+        done += 1
+        bar.update(done)
+    return done
+
+
+def test_rate_is_recent_not_cumulative():
+    clock = FakeClock()
+    out = io.StringIO()
+    bar = Progress(300, "t", stream=out, clock=clock, window=2.0)
+    clock.t = 100.0
+    bar.start()
+    # a 30-second first frame (a compile, a cold disk), then 50 frames a second
+    _run(bar, clock, [30.0] + [0.02] * 200)
+    assert abs(bar.rate() - 50.0) < 1.0          # cumulative would be 201 / 34 s ≈ 5.9 fps
+    assert abs(bar.eta(201) - 99 / 50.0) < 0.1   # the ETA follows the recent rate
+    # the machine slows to 10 frames a second: the rate follows within the window
+    _run(bar, clock, [0.1] * 40)
+    assert abs(bar.rate() - 10.0) < 0.5
+
+
+def test_clock_starts_at_start_not_at_construction():
+    clock = FakeClock()
+    out = io.StringIO()
+    bar = Progress(10, "t", stream=out, clock=clock)
+    clock.t = 60.0                                # set-up before the frames (kernels, files)
+    bar.start()
+    clock.t += 0.5
+    bar.update(1)
+    assert abs(bar.rate() - 2.0) < 1e-9           # 1 frame in 0.5 s, not in 60.5 s
+
+
+def test_lines_show_the_recent_rate():
+    clock = FakeClock()
+    out = io.StringIO()                           # not a terminal: a line every 10 %
+    bar = Progress(100, "lane", stream=out, clock=clock)
+    bar.start()
+    _run(bar, clock, [20.0] + [0.04] * 99)
+    last = out.getvalue().strip().splitlines()[-1]
+    assert last == "lane: 100/100 frames, 25.0 fps"
+
+
+def test_rate_zero_before_frames():
+    bar = Progress(10, "t", stream=io.StringIO(), clock=FakeClock())
+    bar.start()
+    assert bar.rate() == 0.0 and bar.eta(0) is None
+
+
+class _Lane:
+    def __init__(self, name):
+        self.name = name
+
+
+def test_compile_says_so_in_one_line(monkeypatch):
+    import time
+
+    import pfscope.trackers.warmup as W
+    from pfscope.viewer_app.run import prepare_kernels
+
+    calls = []
+    monkeypatch.setattr(W, "compile_kernels", lambda: (calls.append(1), time.sleep(0.3)))
+    out = io.StringIO()                            # a log: the line once, with its total
+    secs = prepare_kernels([_Lane("phd")], stream=out, delay=0.05)
+    text = out.getvalue()
+    assert calls and secs >= 0.3
+    assert text.count("\n") == 1 and text.startswith("pfscope: compiling numba kernels")
+    assert "done in 0." in text
+
+    out = io.StringIO()                            # fast (kernels cached): nothing printed
+    prepare_kernels([_Lane("phd")], stream=out, delay=5.0)
+    assert out.getvalue() == ""
+
+    calls.clear()                                  # no kernel tracker: no compile at all
+    assert prepare_kernels([_Lane("mt")], stream=io.StringIO()) == 0.0 and not calls
+
+
+def _signatures():
+    from numba.core.registry import CPUDispatcher
+
+    import pfscope.trackers.phd._kernels as K
+    import pfscope.trackers.phd._kmeans_kernels as KM
+    import pfscope.trackers.smc.resampling as R
+
+    return {f"{m.__name__}.{n}": set(map(str, d.signatures))
+            for m in (K, KM, R) for n, d in vars(m).items() if isinstance(d, CPUDispatcher)}
+
+
+def test_compile_kernels_covers_a_run():
+    """After the warm-up, a PHD-MT run (practical and paper) needs no kernel signature that
+    the warm-up did not compile or load (so nothing compiles silently inside frame 1)."""
+    import numpy as np
+
+    from pfscope.trackers.api import make_params, tracker_info
+    from pfscope.trackers.data.sources import open_source
+    from pfscope.trackers.pipeline import run
+    from pfscope.trackers.warmup import compile_kernels
+
+    compile_kernels()
+    before = _signatures()
+    assert sum(map(len, before.values())) >= 6
+    for preset in ("practical", "paper"):
+        tr = tracker_info("phd").cls(make_params("phd", preset, {}),
+                                     rng=np.random.default_rng(0))
+        run(open_source(None), {"phd": tr}, frames=20)
+    assert _signatures() == before
