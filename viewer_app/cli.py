@@ -243,6 +243,26 @@ def build_parser() -> argparse.ArgumentParser:
     sn.add_argument("--out", type=Path, required=True, help="PNG to write")
     sn.add_argument("--keep-panels", action="store_true",
                     help="keep the viewer's side and time panels in the picture")
+    sn.add_argument("--stage", default=None, metavar="NAME",
+                    help="picture the frame at this stage (predict, birth, update ...; "
+                         "LANE:STAGE in a compare recording); shows the All stages tab unless "
+                         "--tab is given")
+    sn.add_argument("--frames", type=_frame_range, default=None, metavar="A:B",
+                    help="one picture per frame A..B, numbered OUT-000080.png ...")
+
+    ex = sub.add_parser("export", help="an annotated video (mp4, or gif) of a recording, drawn "
+                                       "without the viewer",
+                        description="Draw each recorded frame with the chosen tab's content "
+                                    "(boxes, ids, trails, particles, edges) with OpenCV and write "
+                                    "a video: one video frame per recorded frame.")
+    ex.add_argument("file", type=Path, help="a .rrd recording")
+    ex.add_argument("--out", type=Path, required=True, help="x.mp4 (or .avi, .gif)")
+    ex.add_argument("--tab", default=None,
+                    help="video tab to draw, by title (default: the first; see pfscope info)")
+    ex.add_argument("--frames", type=_frame_range, default=None, metavar="A:B",
+                    help="only frames A..B")
+    ex.add_argument("--force", action="store_true", help="overwrite OUT")
+    ex.add_argument("--quiet", action="store_true", help="no progress")
 
     from .batch import add_batch_parser
     add_batch_parser(sub, _add_tracker_options)
@@ -953,6 +973,9 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         if args.command == "view":
             from .info import cmd_view
             return cmd_view(args)
+        if args.command == "export":
+            from .export import cmd_export
+            return cmd_export(args)
         if args.command == "snapshot":
             from .snapshot import cmd_snapshot
             return cmd_snapshot(args)

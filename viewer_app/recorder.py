@@ -64,6 +64,8 @@ from pfscope.trackers.pipeline import BaseHook, FrameReport, Outcome, RunInfo
 from .blueprint import compare_blueprint, default_blueprint
 from .properties import about_markdown, any_values
 from .reporters import Reporter, layout_for
+from .tabs import compare_tabs, single_tabs
+from .tabs import to_property as tabs_property
 from .reporters.base import SERIES_PALETTE, Columns, TimedStream, annotation_context
 
 
@@ -245,12 +247,17 @@ class RerunRecorder(BaseHook):
                                           metrics=info.has_gt)
             about = about_markdown(f"{names[0]} on {getattr(info.source, 'name', 'source')}",
                                    layout.views, plots, has_gt=info.has_gt)
+            tabs = single_tabs(layout.views)
         else:
-            blueprint = compare_blueprint(names, size=_frame_size(info.source))
+            lane_views = [layout_for(info.trackers[n].name).views for n in names]
+            blueprint = compare_blueprint(names, size=_frame_size(info.source),
+                                          lane_views=lane_views)
+            tabs = compare_tabs(list(zip(names, lane_views)))
             about = about_markdown(f"{' vs '.join(names)} on "
                                    f"{getattr(info.source, 'name', 'source')}",
-                                   [(n, [f"{n}/video/tracks/**", f"{n}/video/metrics/**"])
-                                    for n in names],
+                                   [(f"{v['lane']}: {t['title']}",
+                                     [e for e in v["entities"] if e.startswith(v["lane"])])
+                                    for t in tabs for v in t["lanes"]],
                                    [("OSPA, ID switches, FP, misses, estimated targets",
                                      [f"{n}/plots/metrics/**" for n in names])],
                                    lanes=names, has_gt=info.has_gt)
@@ -275,6 +282,7 @@ class RerunRecorder(BaseHook):
         else:
             rec.send_property("config", any_values(self.config))
         rec.send_property("versions", rr.AnyValues(**versions()))
+        rec.send_property("tabs", any_values(tabs_property(tabs)))
         rec.log("/", annotation_context(), static=True)
         rec.log("about", rr.TextDocument(about, media_type=rr.MediaType.MARKDOWN), static=True)
         if info.has_gt:
@@ -466,8 +474,10 @@ class RerunRecorder(BaseHook):
         for ev in events:
             rec.set_time("frame", sequence=ev.frame)
             rec.set_time("stage", sequence=ev.frame * self.stride + self.slots[(lane, "output")])
-            rec.log(f"{self._root(lane)}events", rr.TextLog(
-                ev.message, level="WARN" if ev.kind in ("id_switch", "lost_track") else "INFO"))
+            rec.log(f"{self._root(lane)}events", rr.TextLog(ev.short, level=ev.severity),
+                    rr.AnyValues(kind=ev.kind, track_ids=" ".join(map(str, ev.track_ids)),
+                                 gt_ids=" ".join(map(str, ev.gt_ids)),
+                                 last_frame=ev.last_frame, message=ev.message))
         rec.set_time("frame", sequence=now)
         self._stage(now, lane, "output")
 

@@ -92,62 +92,207 @@ def _collapse_panels(bp: dict) -> dict:
     return bp
 
 
+def _collapse_top(bp: dict) -> dict:
+    """The top bar (its "software rasterizer" warning) collapsed too."""
+    bp.setdefault("/top_panel", {}).setdefault("PanelBlueprint", {})["state"] = "Collapsed"
+    return bp
+
+
+def stage_slots(rrd: Path) -> tuple[int, dict[str, int]]:
+    """(slots per frame, stage name -> its slot within a frame) of a recording, from its run
+    properties and the trackers' declared stage lists (the recorder's layout: ``input``, then
+    each lane's stages and its ``output``).  In a compare recording a stage name is
+    ``LANE:STAGE`` (a bare name picks the first lane that has it)."""
+    from pfscope.trackers.api import registry
+
+    from .properties import read_properties
+
+    props = read_properties(rrd)
+    lanes = {g.split(".", 1)[1]: v for g, v in props.items() if g.startswith("tracker.")}
+    order = (props.get("run") or {}).get("lanes") or list(lanes)
+    if isinstance(order, str):
+        order = [x.strip() for x in order.split(",")]
+    reg = registry()
+    slots: dict[str, int] = {"input": 0}
+    n = 1
+    for lane in order:
+        name = (lanes.get(lane) or {}).get("tracker", lane)
+        cls = reg.get(name)
+        if cls is None:
+            raise InputError(f"{rrd}: tracker {name!r} of lane {lane!r} is not known here")
+        for st in tuple(cls.stages) + ("output",):
+            slots[f"{lane}:{st}"] = n
+            slots.setdefault(st, n)
+            n += 1
+    return n, slots
+
+
+class _Viewer:
+    """Rerun's headless viewer, started by us: listening on 127.0.0.1 only, its logs (Rust
+    tracing with terminal colours) kept in a file instead of our stderr (shown, last lines
+    only, when it fails), bounded waits."""
+
+    def __init__(self, timeout: float):
+        import subprocess
+        import tempfile
+
+        from rerun.experimental import ViewerClient
+
+        from .info import viewer_command
+
+        self.port = _free_port()
+        self.log = tempfile.NamedTemporaryFile(prefix="pfscope-viewer-", suffix=".log",
+                                               delete=False)
+        env = {**os.environ, "RERUN_APP_ONLY": "true", "RERUN_ANALYTICS": "0",
+               "NO_COLOR": "1", "RUST_LOG": os.environ.get("PFSCOPE_VIEWER_LOG", "warn")}
+        cmd = viewer_command() + ["--headless", "--bind", "127.0.0.1", "--port", str(self.port),
+                                  "--hide-welcome-screen", "--memory-limit", "75%"]
+        try:
+            # its own process group: the `rerun` on PATH may be a wrapper that starts the
+            # viewer binary as a child; the group is ended as one
+            self.proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=self.log,
+                                         stderr=subprocess.STDOUT, env=env,
+                                         start_new_session=True)
+        except OSError as e:
+            raise RunFailed(f"the headless viewer did not start ({e}); {VULKAN_HINT}") from None
+        url = f"rerun+http://127.0.0.1:{self.port}/proxy"
+        deadline = time.monotonic() + timeout
+        last: Optional[Exception] = None
+        while time.monotonic() < deadline:
+            if self.proc.poll() is not None:
+                self.close()
+                raise RunFailed(f"the headless viewer exited ({self.tail()}); {VULKAN_HINT}")
+            try:
+                with socket.create_connection(("127.0.0.1", self.port), timeout=0.5):
+                    pass
+                self.client = ViewerClient(url)
+                return
+            except Exception as e:  # noqa: BLE001 - not listening yet
+                last = e
+                time.sleep(0.2)
+        self.close()
+        raise RunFailed(f"the headless viewer did not answer within {timeout:.0f} s "
+                        f"({type(last).__name__ if last else 'no reply'}); {VULKAN_HINT}")
+
+    def tail(self) -> str:
+        try:
+            lines = [ln for ln in Path(self.log.name).read_text(errors="replace").splitlines()
+                     if ln.strip()]
+        except OSError:
+            return "no log"
+        return lines[-1][:200] if lines else "no log"
+
+    def close(self) -> None:
+        import signal
+
+        for sig in (signal.SIGTERM, signal.SIGKILL):  # our own process group only
+            try:
+                os.killpg(self.proc.pid, sig)
+            except (ProcessLookupError, PermissionError):
+                break
+            try:
+                self.proc.wait(timeout=10)
+                # the wrapper ended; give its child the same moment, then make sure
+                time.sleep(0.2)
+                os.killpg(self.proc.pid, 0)
+            except ProcessLookupError:
+                break
+            except Exception:  # noqa: BLE001 - still running: the next, harder signal
+                continue
+        self.log.close()
+        try:
+            os.unlink(self.log.name)
+        except OSError:
+            pass
+
+
+def series_path(out: Path, frame: int) -> Path:
+    """``shot.png`` -> ``shot-000080.png`` (one picture per frame of a ``--frames`` series)."""
+    return out.with_name(f"{out.stem}-{frame:06d}{out.suffix or '.png'}")
+
+
 def snapshot(rrd, out, *, frame: Optional[int] = None, tab: Optional[str] = None,
-             clean: bool = True, settle: float = 1.5, timeout: float = 60.0) -> Path:
-    """Render ``rrd`` at ``frame`` (default: the last) into the PNG ``out``."""
+             clean: bool = True, settle: float = 1.5, timeout: float = 60.0,
+             stage: Optional[str] = None, frames: Optional[tuple[int, int]] = None):
+    """Render ``rrd`` at ``frame`` (default: the last) into the PNG ``out``.  ``stage``: at that
+    stage of the frame (the ``stage`` timeline: what the frame's earlier stages logged);
+    ``frames=(a, b)``: one picture per frame, ``out`` numbered (:func:`series_path`); returns
+    the path, or the list of paths for a series."""
     from .run import check_output
     from pfscope.trackers.outputs import incomplete_path
 
     rrd, out = Path(rrd), Path(out)
     if not rrd.is_file():
         raise InputError(f"{rrd}: no such recording")
-    out = check_output(out, force=True, what="picture")
+    wanted = list(range(frames[0], frames[1] + 1)) if frames else [frame]
+    outs = [series_path(out, f) for f in wanted] if frames else [out]
+    for o in outs:
+        check_output(o, force=True, what="picture")
+    slot = None
+    if stage is not None:
+        stride, slots = stage_slots(rrd)
+        if stage not in slots:
+            raise InputError(f"no stage {stage!r}; the recording's stages: "
+                             f"{', '.join(slots)}")
+        slot = slots[stage]
     problem = vulkan_problem()
     if problem:
         raise RunFailed(problem)
-    from rerun.experimental import ViewerClient
-
-    port = _free_port()
+    viewer = _Viewer(timeout)
     try:
-        viewer = ViewerClient.spawn(headless=True, port=port, hide_welcome_screen=True)
-    except Exception as e:  # noqa: BLE001 - one line for any start failure
-        raise RunFailed(f"the headless viewer did not start ({type(e).__name__}: {e}); "
-                        f"{VULKAN_HINT}") from None
-    try:
+        client = viewer.client
         try:
-            viewer.open(str(rrd.resolve()))
+            client.open(str(rrd.resolve()))
         except Exception as e:  # noqa: BLE001
-            raise RunFailed(f"the headless viewer could not open {rrd} or did not start "
+            raise RunFailed(f"the headless viewer could not open {rrd} "
                             f"({type(e).__name__}: {str(e)[:200]}); {VULKAN_HINT}") from None
-        if tab or clean:
-            info = viewer.get_blueprint()
+        if tab or clean or stage:
+            info = client.get_blueprint()
             bp = info.blueprint
-            if tab:
-                bp = select_tab(bp, tab)
+            if tab or stage:
+                bp = select_tab(bp, tab or "All stages")
             if clean:
-                bp = _collapse_panels(bp)
-            viewer.set_blueprint(bp, store_id=info.store_id)
-        if frame is not None:
-            viewer.set_time("frame", sequence=int(frame), play_state="paused")
-        else:
-            viewer.set_time(play_state="paused")
-        time.sleep(settle)  # let the frame's chunks load and the views lay out
-        tmp = incomplete_path(out)
-        viewer.save_screenshot(str(tmp))
-        os.replace(tmp, out)
+                bp = _collapse_top(_collapse_panels(bp))
+            client.set_blueprint(bp, store_id=info.store_id)
+        for f, o in zip(wanted, outs):
+            if slot is not None:
+                last = f if f is not None else _last_frame(rrd)
+                client.set_time("stage", sequence=int(last) * stride + slot,
+                                play_state="paused")
+            elif f is not None:
+                client.set_time("frame", sequence=int(f), play_state="paused")
+            else:
+                client.set_time(play_state="paused")
+            time.sleep(settle)  # let the frame's chunks load, the views lay out, toasts fade
+            tmp = incomplete_path(o)
+            client.save_screenshot(str(tmp))
+            os.replace(tmp, o)
+            settle = min(settle, 0.8)  # the next frames of a series: the data is loaded
     finally:
-        try:
-            viewer.quit(timeout=10)
-        except Exception:  # noqa: BLE001 - teardown best effort
-            pass
-    return out
+        viewer.close()
+    return outs if frames else outs[0]
+
+
+def _last_frame(rrd: Path) -> int:
+    from .info import recording_info
+
+    last = recording_info(rrd)["frames"]["last"]
+    if last is None:
+        raise InputError(f"{rrd}: no recorded frames")
+    return int(last)
 
 
 def cmd_snapshot(args) -> int:
-    out = snapshot(args.file, args.out, frame=args.frame, tab=args.tab,
-                   clean=not args.keep_panels)
-    print(f"wrote {out}")
+    if args.frames and args.frame:
+        raise InputError("give --frame N or --frames A:B, not both")
+    got = snapshot(args.file, args.out, frame=args.frame, tab=args.tab,
+                   clean=not args.keep_panels, stage=args.stage, frames=args.frames)
+    if isinstance(got, list):
+        print(f"wrote {len(got)} pictures: {got[0]} .. {got[-1]}")
+    else:
+        print(f"wrote {got}")
     return 0
 
 
-__all__ = ["snapshot", "select_tab", "tab_names", "vulkan_problem", "cmd_snapshot"]
+__all__ = ["snapshot", "select_tab", "tab_names", "vulkan_problem", "cmd_snapshot",
+           "stage_slots", "series_path"]
