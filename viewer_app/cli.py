@@ -149,7 +149,11 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--force", action="store_true", help="overwrite existing output files")
     live = r.add_mutually_exclusive_group()
     live.add_argument("--spawn", action="store_true", help="also stream to a native viewer")
-    live.add_argument("--serve", action="store_true", help="also serve a web viewer")
+    live.add_argument("--serve", action="store_true",
+                      help="also serve a web viewer (127.0.0.1), and keep serving the finished "
+                           "file after the run until Ctrl-C, also without a terminal")
+    r.add_argument("--serve-exit", action="store_true",
+                   help="with --serve: stop serving when the run ends")
     r.add_argument("--timing", action="store_true",
                    help="also record each step's wall time (plots/timing; the recording then "
                         "differs from run to run)")
@@ -232,6 +236,11 @@ def build_parser() -> argparse.ArgumentParser:
                         description="Open FILE.rrd in the native Rerun viewer; without a display "
                                     "say in one line how to see it.")
     vw.add_argument("file", type=Path)
+    vw.add_argument("--web", action="store_true",
+                    help="serve the file to a browser (Rerun's web viewer on 127.0.0.1) and "
+                         "print the URL; Ctrl-C stops")
+    vw.add_argument("--web-port", type=POSITIVE_INT, default=None,
+                    help="HTTP port of the web viewer (default: a free one)")
 
     sn = sub.add_parser("snapshot", help="a PNG of a recording at one frame (headless viewer)",
                         description="Render FILE.rrd at --frame with Rerun's headless viewer "
@@ -664,8 +673,15 @@ def cmd_record(args) -> int:
               f"IDF1 {sc['IDF1']:.3f}  HOTA {sc['HOTA']:.3f}  IDSW {int(sc['IDSW'])}  "
               f"OSPA {sc['OSPA']:.1f} px  [{str(sc.get('convention', '?')).upper()} convention]")
     print(f"open it with:  rerun {res.out}")
-    if args.serve and sys.stdin.isatty():
-        input("web viewer running; press Enter to stop\n")
+    if args.serve and not args.serve_exit and res.serve_url:
+        from .serve import WebServer
+
+        # the run's own gRPC server closed with the recording: the finished file is served
+        # on the same port, so the page already open keeps working
+        server = WebServer(res.out, web=False, grpc_port=res.grpc_port)
+        print(f"still serving {res.out} at {res.serve_url} until Ctrl-C "
+              f"(--serve-exit: stop when the run ends)", flush=True)
+        server.wait()
     return EXIT_INTERRUPTED if res.interrupted else 0
 
 

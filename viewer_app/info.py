@@ -232,9 +232,13 @@ def cmd_view(args) -> int:
     path = Path(args.file)
     if not path.is_file():
         raise InputError(f"{path}: no such recording")
+    if getattr(args, "web", False):
+        from .serve import cmd_view_web
+
+        return cmd_view_web(path, web_port=getattr(args, "web_port", None))
     if not display_available():
-        print(f"pfscope view: no display here; copy {path} to a machine with one and run "
-              f"'rerun {path.name}' (pip install rerun-sdk==0.41.*), or take a picture with "
+        print(f"pfscope view: no display here; serve it to a browser (Rerun's web viewer) "
+              f"with 'pfscope view {path} --web', or take a picture with "
               f"'pfscope snapshot {path} --frame N --out shot.png'")
         return 0
     cmd = viewer_command() + [str(path)]

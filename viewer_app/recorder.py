@@ -216,6 +216,8 @@ class RerunRecorder(BaseHook):
         # the last frame whose picture is still being encoded: (frame, seconds, source bytes)
         self._picture: Optional[tuple[int, float, Optional[bytes]]] = None
         self.live, self.web_port, self.announce = live, web_port, announce
+        self.grpc_port: Optional[int] = None
+        self.serve_url: Optional[str] = None
         # Wall-clock step times differ run to run: recorded only when asked, so that the same
         # seed and input give the same recording.
         self.timing = timing
@@ -269,11 +271,16 @@ class RerunRecorder(BaseHook):
             rec.set_sinks(rr.FileSink(str(self.partial)), rr.GrpcSink(),
                           default_blueprint=blueprint)
         elif self.live == "serve":
-            grpc = rr.GrpcServerSink()
+            # localhost only; the gRPC port is kept so that, after the run, a server of the
+            # finished file can take it over under the same URL (record --serve)
+            from .serve import free_port, viewer_url
+
+            self.grpc_port = self.grpc_port or free_port()
+            grpc = rr.GrpcServerSink(bind_ip="127.0.0.1", port=self.grpc_port)
             rec.set_sinks(rr.FileSink(str(self.partial)), grpc, default_blueprint=blueprint)
             rr.serve_web_viewer(web_port=self.web_port, connect_to=grpc.uri, open_browser=False)
-            uri = grpc.uri.replace("0.0.0.0", "127.0.0.1")
-            self.announce(f"web viewer: http://127.0.0.1:{self.web_port}/?url={uri}")
+            self.serve_url = viewer_url(self.web_port, self.grpc_port)
+            self.announce(f"web viewer: {self.serve_url}")
         src = getattr(info.source, "name", "source")
         rec.send_recording_name(f"{src} · {' vs '.join(names)}")
         if self.properties:

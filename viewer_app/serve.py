@@ -1,0 +1,151 @@
+"""Serving a recording to a browser: Rerun's web viewer over HTTP plus a gRPC server holding the
+file, both on 127.0.0.1 only (``pfscope view FILE.rrd --web``; ``record --serve`` after its run).
+
+The servers are Rerun's own (``rerun --serve-web`` / ``--serve-grpc``), started as a child in its
+own process group with its logs in a file (shown, last line only, when it fails), and ended as
+one group on Ctrl-C, SIGTERM or :meth:`WebServer.close`.  Start-up waits are bounded.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import subprocess
+import tempfile
+import time
+import urllib.parse
+import urllib.request
+from pathlib import Path
+from typing import Optional
+
+from pfscope.trackers.errors import InputError, RunFailed
+
+HOST = "127.0.0.1"
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind((HOST, 0))
+        return s.getsockname()[1]
+
+
+def viewer_url(web_port: int, grpc_port: int) -> str:
+    """The browser URL of the web viewer connected to the gRPC server."""
+    proxy = urllib.parse.quote(f"rerun+http://{HOST}:{grpc_port}/proxy", safe="")
+    return f"http://{HOST}:{web_port}/?url={proxy}"
+
+
+class WebServer:
+    """``rerun`` serving ``rrd``: with ``web=True`` the web viewer on ``web_port`` and the gRPC
+    server on ``grpc_port``; with ``web=False`` the gRPC server only (a web viewer already
+    running elsewhere connects to it)."""
+
+    def __init__(self, rrd: Path, *, web: bool = True, web_port: Optional[int] = None,
+                 grpc_port: Optional[int] = None, timeout: float = 30.0):
+        from .info import viewer_command
+
+        self.rrd = Path(rrd)
+        if not self.rrd.is_file():
+            raise InputError(f"{rrd}: no such recording")
+        self.web_port = web_port or free_port()
+        self.grpc_port = grpc_port or free_port()
+        self.log = tempfile.NamedTemporaryFile(prefix="pfscope-serve-", suffix=".log",
+                                               delete=False)
+        cmd = viewer_command() + (["--serve-web", "--web-viewer-port", str(self.web_port)]
+                                  if web else ["--serve-grpc"]) + [
+            "--bind", HOST, "--port", str(self.grpc_port), str(self.rrd.resolve())]
+        env = {**os.environ, "RERUN_ANALYTICS": "0", "NO_COLOR": "1"}
+        try:
+            self.proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=self.log,
+                                         stderr=subprocess.STDOUT, env=env,
+                                         start_new_session=True)
+        except OSError as e:
+            raise RunFailed(f"could not start the Rerun server ({e})") from None
+        self.url = viewer_url(self.web_port, self.grpc_port) if web else \
+            f"rerun+http://{HOST}:{self.grpc_port}/proxy"
+        self._wait(timeout, web)
+
+    def _wait(self, timeout: float, web: bool) -> None:
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if self.proc.poll() is not None:
+                self.close()
+                raise RunFailed(f"the Rerun server exited ({self.tail()})")
+            try:
+                if web:
+                    with urllib.request.urlopen(f"http://{HOST}:{self.web_port}/",
+                                                timeout=1) as r:
+                        if r.status == 200:
+                            return
+                else:
+                    with socket.create_connection((HOST, self.grpc_port), timeout=0.5):
+                        return
+            except OSError:
+                time.sleep(0.2)
+        self.close()
+        raise RunFailed(f"the Rerun server did not answer within {timeout:.0f} s ({self.tail()})")
+
+    def tail(self) -> str:
+        try:
+            lines = [ln for ln in Path(self.log.name).read_text(errors="replace").splitlines()
+                     if ln.strip()]
+        except OSError:
+            return "no log"
+        return lines[-1][:200] if lines else "no log"
+
+    def wait(self) -> int:
+        """Until Ctrl-C / SIGTERM (or the server ends): 0 when stopped by a signal."""
+        stop = {"sig": None}
+
+        def on_term(signum, frame):  # SIGTERM stops it like Ctrl-C
+            stop["sig"] = signum
+            raise KeyboardInterrupt
+
+        # both handled here: a process started in the background without a terminal
+        # inherits SIGINT ignored, and Ctrl-C / kill -INT must still stop it
+        old = {sig: signal.signal(sig, on_term) for sig in (signal.SIGTERM, signal.SIGINT)}
+        try:
+            while self.proc.poll() is None:
+                time.sleep(0.5)
+            return 1
+        except KeyboardInterrupt:
+            return 0
+        finally:
+            for sig, handler in old.items():
+                signal.signal(sig, handler)
+            self.close()
+
+    def close(self) -> None:
+        for sig in (signal.SIGTERM, signal.SIGKILL):  # our own process group only
+            try:
+                os.killpg(self.proc.pid, sig)
+            except (ProcessLookupError, PermissionError):
+                break
+            try:
+                self.proc.wait(timeout=10)
+                time.sleep(0.2)
+                os.killpg(self.proc.pid, 0)  # anything of the group left?
+            except ProcessLookupError:
+                break
+            except Exception:  # noqa: BLE001 - still there: the harder signal
+                continue
+        try:
+            self.log.close()
+            os.unlink(self.log.name)
+        except OSError:
+            pass
+
+
+def cmd_view_web(path: Path, web_port: Optional[int] = None) -> int:
+    import sys
+
+    server = WebServer(path, web=True, web_port=web_port)
+    print(f"serving {path} at {server.url}  (Ctrl-C to stop)", flush=True)
+    try:
+        return server.wait()
+    finally:
+        sys.stdout.flush()
+
+
+__all__ = ["WebServer", "viewer_url", "free_port", "cmd_view_web"]
