@@ -130,8 +130,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "otherwise HOG people")
     r.add_argument("--min-score", type=float, default=float("-inf"),
                    help="drop file detections scoring below this")
-    r.add_argument("--level", choices=list(LEVELS), default="clusters",
-                   help="how much to record: tracks < clusters < particles (default clusters)")
+    r.add_argument("--level", choices=list(LEVELS), default="particles",
+                   help="how much to record: tracks < clusters < particles (default particles: "
+                        "the clouds, each thinned to --max-points)")
     r.add_argument("--max-points", type=POSITIVE_INT, default=3000,
                    help="decimate each particle cloud to at most this many points per frame")
     r.add_argument("--video", choices=["encode", "source", "auto"], default="encode",

@@ -237,7 +237,7 @@ def cmd_view(args) -> int:
 
         return cmd_view_web(path, web_port=getattr(args, "web_port", None))
     if not display_available():
-        print(f"pfscope view: no display here; serve it to a browser (Rerun's web viewer) "
+        print(f"pfscope view: no display here; serve it to a browser (rerun's web viewer) "
               f"with 'pfscope view {path} --web', or take a picture with "
               f"'pfscope snapshot {path} --frame N --out shot.png'")
         return 0

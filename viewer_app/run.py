@@ -76,7 +76,7 @@ class RecordOptions:
     tracker: str = "phd"
     detector: Optional[str] = None  # None: 'file' when the source has detections, else 'hog'
     min_score: float = float("-inf")
-    level: str = "clusters"
+    level: str = "particles"
     max_points: int = 3000
     frames: Optional[int] = None
     start: int = 1                     # first frame (frame indices stay the video's)

@@ -16,10 +16,11 @@ LAYOUT = TrackerLayout(
            # the cloud after the update only: the one before (equal weights, all teal) drawn
            # with it covered it ("All stages" still shows both)
            ("Update", ("dbn/particles/after", "dbn/update/**")),
-           ("Birth", ("dbn/particles/birth", "dbn/blobs/accepted")),
+           # the survivors by weight, the newborn in white, the blobs that spawned them
+           ("Birth", ("dbn/particles/predicted", "dbn/particles/birth", "dbn/blobs/accepted")),
            ("Resampled", ("dbn/particles/resampled", "tracks/**")),
            ("Clusters", ("dbn/clusters/**",)),
-           ("Association", ("assoc/**", "tracks/**"))),
+           ("Association", ("assoc/**", "tracks/trails"))),
     plots=(("N̂_k vs true count", ("dbn/n_hat", "metrics/cardinality/true", "tracks/count")),
            ("Blobs", ("dbn/blobs/count", "dbn/blobs/rejected", "dbn/clusters/kept")),
            ("Particles", ("dbn/particles/count", "dbn/birth/count", "dbn/particles/scored")),

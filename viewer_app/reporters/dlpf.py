@@ -9,7 +9,9 @@ LAYOUT = TrackerLayout(
            ("Parents", ("dlpf/parents/free", "dlpf/parents/owned", "dlpf/classify/hits")),
            ("Classifier", ("dlpf/classify/**", "dlpf/confirm/**")),
            ("Children", ("dlpf/children", "dlpf/children/map", "tracks/**"))),
-    plots=(("Windows / frame", ("dlpf/classify/windows", "dlpf/classify/hits")),
+    # hits (0-2 a frame) on their own axis, not under the hundreds of windows
+    plots=(("Windows / frame", ("dlpf/classify/windows",)),
+           ("Hits / frame", ("dlpf/classify/hits", "dlpf/confirm/candidates")),
            ("Particles", ("dlpf/parents/free", "dlpf/children/count")),
            ("Tracks", ("dlpf/tracks", "tracks/count", "dlpf/confirm/candidates")),
            ("Bhattacharyya", ("dlpf/bhattacharyya/**",)),

@@ -3,7 +3,7 @@
 from .base import TrackerLayout
 
 LAYOUT = TrackerLayout(
-    views=(("Association", ("assoc/**", "tracks/**")), ("Tracks", ("tracks/**",))),
+    views=(("Association", ("assoc/**", "tracks/trails")), ("Tracks", ("tracks/**",))),
     plots=(("Counts", ("tracks/count", "detections/count", "assoc/**")),
            ("Step ms", ("timing/**",))),
 )
