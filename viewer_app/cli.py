@@ -249,7 +249,8 @@ def build_parser() -> argparse.ArgumentParser:
     sn.add_argument("file", type=Path)
     sn.add_argument("--frame", type=POSITIVE_INT, default=None, help="frame (default: the last)")
     sn.add_argument("--tab", default=None,
-                    help="video tab to show, by title (e.g. Particles, Association)")
+                    help="video tab to show, by title (e.g. Particles, Association); 'all': "
+                         "one picture per video tab, OUT-<tab>.png")
     sn.add_argument("--out", type=Path, required=True, help="PNG to write")
     sn.add_argument("--keep-panels", action="store_true",
                     help="keep the viewer's side and time panels in the picture")

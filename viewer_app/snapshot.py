@@ -246,15 +246,24 @@ def snapshot(rrd, out, *, frame: Optional[int] = None, tab: Optional[str] = None
         except Exception as e:  # noqa: BLE001
             raise RunFailed(f"the headless viewer could not open {rrd} "
                             f"({type(e).__name__}: {str(e)[:200]}); {VULKAN_HINT}") from None
-        if tab or clean or stage:
-            info = client.get_blueprint()
-            bp = info.blueprint
-            if tab or stage:
-                bp = select_tab(bp, tab or "All stages")
-            if clean:
-                bp = _collapse_top(_collapse_panels(bp))
-            client.set_blueprint(bp, store_id=info.store_id)
-        for f, o in zip(wanted, outs):
+        info = client.get_blueprint()
+        if tab and tab.lower() == "all":  # every video tab, one picture each
+            titles = video_tabs(info.blueprint)
+            jobs = [(t, f, tab_path(o, t)) for t in titles for f, o in zip(wanted, outs)]
+        else:
+            jobs = [(tab or ("All stages" if stage else None), f, o)
+                    for f, o in zip(wanted, outs)]
+        shown = object()
+        for t, f, o in jobs:
+            if t != shown and (t or clean):
+                bp = info.blueprint
+                if t:
+                    bp = select_tab(bp, t)
+                if clean:
+                    bp = _collapse_top(_collapse_panels(bp))
+                client.set_blueprint(bp, store_id=info.store_id)
+                shown = t
+                settle = max(settle, 1.0)
             if slot is not None:
                 last = f if f is not None else _last_frame(rrd)
                 client.set_time("stage", sequence=int(last) * stride + slot,
@@ -265,12 +274,46 @@ def snapshot(rrd, out, *, frame: Optional[int] = None, tab: Optional[str] = None
                 client.set_time(play_state="paused")
             time.sleep(settle)  # let the frame's chunks load, the views lay out, toasts fade
             tmp = incomplete_path(o)
-            client.save_screenshot(str(tmp))
+            for attempt in (1, 2):  # a busy machine can miss the viewer's deadline once
+                try:
+                    client.save_screenshot(str(tmp))
+                    break
+                except Exception as e:  # noqa: BLE001 - one line, never a traceback
+                    if attempt == 2:
+                        raise RunFailed(f"the headless viewer did not take the picture "
+                                        f"{o.name} ({type(e).__name__}: {str(e)[:120]})"
+                                        ) from None
+                    time.sleep(settle)
             os.replace(tmp, o)
             settle = min(settle, 0.8)  # the next frames of a series: the data is loaded
     finally:
         viewer.close()
+    if len(jobs) > 1:
+        return [o for _, _, o in jobs]
     return outs if frames else outs[0]
+
+
+def video_tabs(bp: dict) -> list[str]:
+    """The titles of the blueprint's 2D (video) views, in their tab order."""
+    names = {k: v.get("ViewBlueprint", {}).get("display_name", "")
+             for k, v in bp.items() if isinstance(v, dict) and "ViewBlueprint" in v
+             and v["ViewBlueprint"].get("class_identifier") == "2D"}
+    order = []
+    for key, val in bp.items():
+        cb = val.get("ContainerBlueprint") if isinstance(val, dict) else None
+        for c in (cb or {}).get("contents") or []:
+            k = "/" + c.lstrip("/")
+            if k in names and names[k] not in order:
+                order.append(names[k])
+    return order or sorted(set(names.values()))
+
+
+def tab_path(out: Path, title: str) -> Path:
+    """``shot.png`` + "Birth & update" -> ``shot-birth-update.png``."""
+    import re
+
+    slug = re.sub(r"[^a-z0-9]+", "-", title.lower()).strip("-") or "tab"
+    return out.with_name(f"{out.stem}-{slug}{out.suffix or '.png'}")
 
 
 def _last_frame(rrd: Path) -> int:
@@ -285,7 +328,7 @@ def _last_frame(rrd: Path) -> int:
 def cmd_snapshot(args) -> int:
     if args.frames and args.frame:
         raise InputError("give --frame N or --frames A:B, not both")
-    got = snapshot(args.file, args.out, frame=args.frame, tab=args.tab,
+    got = snapshot(args.file, args.out, frame=args.frame, tab=args.tab,  # "all": every tab
                    clean=not args.keep_panels, stage=args.stage, frames=args.frames)
     if isinstance(got, list):
         print(f"wrote {len(got)} pictures: {got[0]} .. {got[-1]}")
