@@ -154,8 +154,10 @@ def test_info_json_lists_the_tabs_with_titles_and_entities(tmp_path, capsys):
     assert "video/phd/particles/updated" in part["entities"]
     # the README's table comes from the same layouts
     table = readme_table(["phd"])
+    notes = dict(layout_for("phd").notes)
     for title, paths in views:
-        assert f"| phd | {title} | " + ", ".join(f"`{p}`" for p in paths) in table
+        assert f"| phd | {title} | {notes[title]} | " + ", ".join(f"`{p}`" for p in paths) \
+            in table
 
 
 def test_compare_has_a_tab_per_stage_with_every_lane(tmp_path, capsys):

@@ -66,13 +66,15 @@ def readme_table(trackers: Optional[Sequence[str]] = None) -> str:
     from .reporters import layout_for
 
     names = list(trackers or ("phd", "mt", "dlpf", "dbn-phd"))
-    rows = ["| tracker | tab | shows (over the frame, detections and ground truth) |",
-            "|---|---|---|"]
+    rows = ["| tracker | tab | what it shows | entities (under `video/`) |",
+            "|---|---|---|---|"]
     for name in names:
-        for title, paths in layout_for(name).views:
+        layout = layout_for(name)
+        notes = dict(layout.notes)
+        for title, paths in layout.views:
             shown = ", ".join(f"`{p}`" for p in paths)
-            rows.append(f"| {name} | {title} | {shown} |")
-        rows.append(f"| {name} | {ALL_STAGES} | everything under `video/` |")
+            rows.append(f"| {name} | {title} | {notes.get(title, '')} | {shown} |")
+        rows.append(f"| {name} | {ALL_STAGES} | every stage at once | `**` |")
     return "\n".join(rows)
 
 

@@ -108,6 +108,8 @@ class TrackerLayout:
     plots: tuple[tuple[str, tuple[str, ...]], ...] = (("Counts", ("tracks/count",
                                                                   "detections/count")),
                                                       ("Step ms", ("timing/**",)))
+    #: tab title -> one sentence on what the tab shows (the README's tab table)
+    notes: tuple[tuple[str, str], ...] = ()
 
 
 def _fmt(v: float) -> str:

@@ -17,6 +17,15 @@ LAYOUT = TrackerLayout(
            # the graph: this frame's vertices (thin, in their track's colour, tentative tracks
            # too), the chosen edges with their gain log f, candidate edges grey, recent trails
            ("Association", ("assoc/**", "tracks/trails"))),
+    notes=(("Tracks", "confirmed tracks (thick, id labels, trails) and their errors"),
+           ("Particles", "the cloud after the update, colour = weight rank; detections with the "
+                         "mass each won; the tracks"),
+           ("Birth", "survivors by predicted weight, newborn particles pink, the detections "
+                     "that spawned them"),
+           ("Clusters", "K-means clusters: kept ones in the colour of the track that took "
+                        "them, untaken light grey, dropped dark grey"),
+           ("Association", "this frame's vertices, chosen edges labelled with their gain "
+                           "log f, candidate edges grey, trails")),
     plots=(("PHD mass", ("phd/mass", "phd/clusters/kept", "tracks/count", "detections/count")),
            ("Particles", ("phd/particles/count", "phd/birth/count")),
            ("Step ms", ("timing/**",))),
