@@ -62,25 +62,43 @@ def tab_names(bp: dict) -> list[str]:
     return sorted(set(_view_names(bp).values()))
 
 
-def select_tab(bp: dict, tab: str) -> dict:
-    """The blueprint with the view titled ``tab`` (case-insensitive) active in its tab group."""
-    views = _view_names(bp)
-    match = [k for k, n in views.items() if n.lower() == tab.lower()]
-    if not match:
-        raise InputError(f"no tab {tab!r}; the recording's tabs: "
-                         f"{', '.join(sorted(set(views.values())))}")
-    view = match[0]
-    found = False
+def _tab_children(bp: dict) -> list[tuple[str, str, str]]:
+    """(tabs container key, child key, title) of every child of a Tabs container that is a 2D
+    view or a container of 2D views (compare: a stage's grid of lane views)."""
+    def entry(key):
+        return bp.get("/" + key.lstrip("/")) or {}
+
+    def is_2d(key):
+        vb = entry(key).get("ViewBlueprint")
+        if vb:
+            return vb.get("class_identifier") == "2D"
+        cb = entry(key).get("ContainerBlueprint")
+        return bool(cb) and bool(cb.get("contents")) and all(is_2d(c) for c in cb["contents"])
+
+    out = []
     for key, val in bp.items():
         cb = val.get("ContainerBlueprint") if isinstance(val, dict) else None
-        contents = cb.get("contents") or [] if cb else []
-        # contents name views with or without the leading "/"
-        hits = [c for c in contents if c.lstrip("/") == view.lstrip("/")]
-        if cb and cb.get("container_kind") == "Tabs" and hits:
-            cb["active_tab"] = hits[0]
-            found = True
-    if not found:
-        raise InputError(f"tab {tab!r} is not inside a tab group")
+        if not cb or cb.get("container_kind") != "Tabs":
+            continue
+        for c in cb.get("contents") or []:
+            if is_2d(c):
+                e = entry(c)
+                title = (e.get("ViewBlueprint") or e.get("ContainerBlueprint") or {}).get(
+                    "display_name", "")
+                out.append((key, c, title))
+    return out
+
+
+def select_tab(bp: dict, tab: str) -> dict:
+    """The blueprint with the video tab titled ``tab`` (case-insensitive: a 2D view, or in a
+    compare recording a stage's grid of lanes) active in its tab group."""
+    kids = _tab_children(bp)
+    match = [(k, c) for k, c, t in kids if t.lower() == tab.lower()]
+    if not match:
+        raise InputError(f"no tab {tab!r}; the recording's tabs: "
+                         f"{', '.join(dict.fromkeys(t for _, _, t in kids))}")
+    for key, child in match:
+        bp[key]["ContainerBlueprint"]["active_tab"] = child
     return bp
 
 
@@ -294,18 +312,8 @@ def snapshot(rrd, out, *, frame: Optional[int] = None, tab: Optional[str] = None
 
 
 def video_tabs(bp: dict) -> list[str]:
-    """The titles of the blueprint's 2D (video) views, in their tab order."""
-    names = {k: v.get("ViewBlueprint", {}).get("display_name", "")
-             for k, v in bp.items() if isinstance(v, dict) and "ViewBlueprint" in v
-             and v["ViewBlueprint"].get("class_identifier") == "2D"}
-    order = []
-    for key, val in bp.items():
-        cb = val.get("ContainerBlueprint") if isinstance(val, dict) else None
-        for c in (cb or {}).get("contents") or []:
-            k = "/" + c.lstrip("/")
-            if k in names and names[k] not in order:
-                order.append(names[k])
-    return order or sorted(set(names.values()))
+    """The titles of the blueprint's video tabs, in their tab order."""
+    return list(dict.fromkeys(t for _, _, t in _tab_children(bp)))
 
 
 def tab_path(out: Path, title: str) -> Path:
