@@ -235,12 +235,18 @@ def draw_entity(img: np.ndarray, kind: str, row: dict, roles: dict,
         n = len(strips)
         rgba = _colors_for(row, "LineStrips2D", n, roles)
         t = _thickness(row, "LineStrips2D")
+        labels = row.get("LineStrips2D:labels") or []
+        show = row.get("LineStrips2D:show_labels")
+        show = bool(show[0]) if isinstance(show, list) and show else bool(show) \
+            if show is not None else True
         layer = img.copy()
         for i, s in enumerate(strips):
             pts = np.round(np.asarray(s, dtype=np.float32).reshape(-1, 2)).astype(np.int32)
+            col = tuple(int(v) for v in rgba[i][[2, 1, 0]])
             if len(pts) >= 2:
-                cv2.polylines(layer, [pts], False, tuple(int(v) for v in rgba[i][[2, 1, 0]]),
-                              t, cv2.LINE_AA)
+                cv2.polylines(layer, [pts], False, col, t, cv2.LINE_AA)
+            if show and i < len(labels) and labels[i] and len(pts):
+                _label(layer, str(labels[i]), tuple(int(v) for v in pts[-1]), col)
         a = float(rgba[:, 3].mean()) / 255.0 if n else 1.0
         mask = np.any(layer != img, axis=2)
         _blend_overlay(img, layer, mask, a)
