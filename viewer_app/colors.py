@@ -225,7 +225,7 @@ class TrackPalette:
     apart as the palette allows whatever their numbers.  Deterministic: the same sequence of
     calls gives the same colours.  ``frame`` is the current frame (the reporter sets it)."""
 
-    def __init__(self, live_frames: int = 30):
+    def __init__(self, live_frames: int = 10):
         self.live_frames = int(live_frames)
         self.frame = 0
         self._pal = palette()
@@ -247,11 +247,19 @@ class TrackPalette:
             self._seen[tid] = self.frame  # live from now: the next new id avoids it too
         return k
 
-    def colors(self, ids, alpha: int = 255) -> np.ndarray:
-        """(N,) ids -> (N,4) uint8; the ids are marked as seen at :attr:`frame`."""
+    def colors(self, ids, alpha: int = 255, register: bool = True) -> np.ndarray:
+        """(N,) ids -> (N,4) uint8; the ids are marked as seen at :attr:`frame`.  With
+        ``register=False`` (ids that may never become tracks: tentative vertices) an id
+        without a colour yet gets the stateless :func:`id_colors` and takes no palette slot."""
         ids = np.asarray(ids, dtype=np.int64).reshape(-1)
         if len(ids) == 0:
             return np.zeros((0, 4), dtype=np.uint8)
+        if not register:
+            out = id_colors(ids, alpha)
+            known = np.array([t in self._index for t in ids.tolist()], dtype=bool)
+            if known.any():
+                out[known] = self.colors(ids[known], alpha)
+            return out
         uniq, inv = np.unique(ids, return_inverse=True)
         for t in uniq.tolist():  # alive now (those with a colour count as live for the new)
             if t in self._index:

@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import fnmatch
 import os
-import sys
 from pathlib import Path
 from typing import Optional
 
@@ -72,8 +71,6 @@ class Recording:
     """The rows of a recording's video and of the chosen entities, read once."""
 
     def __init__(self, path: Path, patterns: list[str]):
-        import rerun as rr
-
         from .info import _open
 
         self.path = path
@@ -83,7 +80,6 @@ class Recording:
         self.rows: dict[str, list] = {}
         self.transforms: dict[str, tuple[float, float]] = {}
         chunks, _ = _open(path)
-        del rr
         for ch in chunks:
             ent = ch.entity_path
             want = ent == "/video" or _matches(ent, patterns)

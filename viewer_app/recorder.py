@@ -356,7 +356,7 @@ class RerunRecorder(BaseHook):
             base.role_boxes("gt", r.gt.boxes, "gt", labels=[f"gt {i}" for i in r.gt.ids])
         for name, res in r.results.items():
             rep = self.reporters[name]
-            rep.frame_stages(res.stages)
+            rep.frame_stages(res.stages, res.tracks.ids)
             for stage in res.stages:
                 self._stage(k, name, stage.name)
                 rep.stage(stage)

@@ -36,6 +36,34 @@ def viewer_url(web_port: int, grpc_port: int) -> str:
     return f"http://{HOST}:{web_port}/?url={proxy}"
 
 
+def log_tail(path: str) -> str:
+    """The last non-empty line of a child's log file (what a one-line error quotes)."""
+    try:
+        lines = [ln for ln in Path(path).read_text(errors="replace").splitlines() if ln.strip()]
+    except OSError:
+        return "no log"
+    return lines[-1][:200] if lines else "no log"
+
+
+def end_group(proc: subprocess.Popen) -> None:
+    """End a child started with ``start_new_session=True`` and everything of its process group
+    (``rerun`` on PATH may be a wrapper that starts the binary as its child): SIGTERM, then
+    SIGKILL; bounded waits."""
+    for sig in (signal.SIGTERM, signal.SIGKILL):  # our own process group only
+        try:
+            os.killpg(proc.pid, sig)
+        except (ProcessLookupError, PermissionError):
+            break
+        try:
+            proc.wait(timeout=10)
+            time.sleep(0.2)
+            os.killpg(proc.pid, 0)  # anything of the group left?
+        except ProcessLookupError:
+            break
+        except Exception:  # noqa: BLE001 - still there: the harder signal
+            continue
+
+
 class WebServer:
     """``rerun`` serving ``rrd``: with ``web=True`` the web viewer on ``web_port`` and the gRPC
     server on ``grpc_port``; with ``web=False`` the gRPC server only (a web viewer already
@@ -87,12 +115,7 @@ class WebServer:
         raise RunFailed(f"the Rerun server did not answer within {timeout:.0f} s ({self.tail()})")
 
     def tail(self) -> str:
-        try:
-            lines = [ln for ln in Path(self.log.name).read_text(errors="replace").splitlines()
-                     if ln.strip()]
-        except OSError:
-            return "no log"
-        return lines[-1][:200] if lines else "no log"
+        return log_tail(self.log.name)
 
     def wait(self) -> int:
         """Until Ctrl-C / SIGTERM (or the server ends): 0 when stopped by a signal."""
@@ -117,19 +140,7 @@ class WebServer:
             self.close()
 
     def close(self) -> None:
-        for sig in (signal.SIGTERM, signal.SIGKILL):  # our own process group only
-            try:
-                os.killpg(self.proc.pid, sig)
-            except (ProcessLookupError, PermissionError):
-                break
-            try:
-                self.proc.wait(timeout=10)
-                time.sleep(0.2)
-                os.killpg(self.proc.pid, 0)  # anything of the group left?
-            except ProcessLookupError:
-                break
-            except Exception:  # noqa: BLE001 - still there: the harder signal
-                continue
+        end_group(self.proc)
         try:
             self.log.close()
             os.unlink(self.log.name)
@@ -148,4 +159,4 @@ def cmd_view_web(path: Path, web_port: Optional[int] = None) -> int:
         sys.stdout.flush()
 
 
-__all__ = ["WebServer", "viewer_url", "free_port", "cmd_view_web"]
+__all__ = ["WebServer", "viewer_url", "free_port", "cmd_view_web", "end_group", "log_tail"]

@@ -41,12 +41,6 @@ def vulkan_problem() -> Optional[str]:
     return None
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 def _view_names(bp: dict) -> dict[str, str]:
     """view entity path -> display name; the video (2D) views first, so a title shared by a
     video tab and a plot ("Particles") picks the video tab."""
@@ -158,7 +152,9 @@ class _Viewer:
 
         from .info import viewer_command
 
-        self.port = _free_port()
+        from .serve import free_port
+
+        self.port = free_port()
         self.log = tempfile.NamedTemporaryFile(prefix="pfscope-viewer-", suffix=".log",
                                                delete=False)
         env = {**os.environ, "RERUN_APP_ONLY": "true", "RERUN_ANALYTICS": "0",
@@ -193,30 +189,14 @@ class _Viewer:
                         f"({type(last).__name__ if last else 'no reply'}); {VULKAN_HINT}")
 
     def tail(self) -> str:
-        try:
-            lines = [ln for ln in Path(self.log.name).read_text(errors="replace").splitlines()
-                     if ln.strip()]
-        except OSError:
-            return "no log"
-        return lines[-1][:200] if lines else "no log"
+        from .serve import log_tail
+
+        return log_tail(self.log.name)
 
     def close(self) -> None:
-        import signal
+        from .serve import end_group
 
-        for sig in (signal.SIGTERM, signal.SIGKILL):  # our own process group only
-            try:
-                os.killpg(self.proc.pid, sig)
-            except (ProcessLookupError, PermissionError):
-                break
-            try:
-                self.proc.wait(timeout=10)
-                # the wrapper ended; give its child the same moment, then make sure
-                time.sleep(0.2)
-                os.killpg(self.proc.pid, 0)
-            except ProcessLookupError:
-                break
-            except Exception:  # noqa: BLE001 - still running: the next, harder signal
-                continue
+        end_group(self.proc)
         self.log.close()
         try:
             os.unlink(self.log.name)

@@ -314,10 +314,15 @@ class Reporter:
         for item in stage.items:
             self.item(item)
 
-    def frame_stages(self, stages) -> None:
-        """Read the frame's stages before they are drawn: the association's vertices are the
-        kept clusters in order (PHD-MT, DBN-PHD: ``assoc/vertices`` = ``clusters/kept``), so a
-        kept cluster can be drawn in the colour of the confirmed track that took it."""
+    def frame_stages(self, stages, track_ids=None) -> None:
+        """Read the frame's stages before they are drawn: ``track_ids`` (the frame's output
+        tracks) get their palette colours first, so every item of the frame shows a track in
+        the colour of its box; the association's vertices are the kept clusters in order
+        (PHD-MT, DBN-PHD: ``assoc/vertices`` = ``clusters/kept``), so a kept cluster can be
+        drawn in the colour of the confirmed track that took it."""
+        self.palette.frame = self.columns.frame
+        if track_ids is not None:
+            self.palette.colors(track_ids)
         self._cluster_track = {}
         verts, kept = None, {}
         for st in stages:
@@ -356,15 +361,15 @@ class Reporter:
         index, a class) the stateless palette."""
         if ids is None:
             return None
-        if id_kind == "track":
-            return self.palette.colors(ids, alpha)
+        if id_kind == "track":  # the frame's tracks are registered first (frame_stages)
+            return self.palette.colors(ids, alpha, register=False)
         if id_kind == "cluster":
             tids = self._track_of_clusters(path, np.asarray(ids, dtype=np.int64))
             out = np.tile(np.array(ROLES["unmatched"][1], dtype=np.uint8), (len(tids), 1))
             out[:, 3] = min(alpha, 200)
             m = tids >= 0
             if m.any():
-                out[m] = self.palette.colors(tids[m], alpha)
+                out[m] = self.palette.colors(tids[m], alpha, register=False)
             return out
         return id_colors(ids, alpha)
 
