@@ -36,6 +36,39 @@ def viewer_url(web_port: int, grpc_port: int) -> str:
     return f"http://{HOST}:{web_port}/?url={proxy}"
 
 
+def rerun_binary() -> list[str]:
+    """The viewer binary itself when the wheel ships it (``rerun_cli/rerun``: no Python wrapper
+    between us and it, so it can be tied to our lifetime), else ``rerun`` on PATH."""
+    try:
+        import rerun_cli
+
+        exe = Path(rerun_cli.__file__).with_name("rerun")
+        if exe.is_file() and os.access(exe, os.X_OK):
+            return [str(exe)]
+    except ImportError:
+        pass
+    from .info import viewer_command
+
+    return viewer_command()
+
+
+def _die_with_parent() -> None:  # pragma: no cover - runs in the child before exec
+    """Linux: the child gets SIGTERM when we die (even by SIGKILL), so no server outlives us."""
+    try:
+        import ctypes
+
+        ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
+    except Exception:  # noqa: BLE001 - not Linux: the process group is still ended by us
+        pass
+
+
+def spawn(cmd: list[str], log, env: dict) -> subprocess.Popen:
+    """Start a Rerun child: own process group, output to ``log``, ended with us."""
+    return subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT,
+                            env=env, start_new_session=True,
+                            preexec_fn=_die_with_parent if os.name == "posix" else None)
+
+
 def log_tail(path: str) -> str:
     """The last non-empty line of a child's log file (what a one-line error quotes)."""
     try:
@@ -71,8 +104,6 @@ class WebServer:
 
     def __init__(self, rrd: Path, *, web: bool = True, web_port: Optional[int] = None,
                  grpc_port: Optional[int] = None, timeout: float = 30.0):
-        from .info import viewer_command
-
         self.rrd = Path(rrd)
         if not self.rrd.is_file():
             raise InputError(f"{rrd}: no such recording")
@@ -80,14 +111,12 @@ class WebServer:
         self.grpc_port = grpc_port or free_port()
         self.log = tempfile.NamedTemporaryFile(prefix="pfscope-serve-", suffix=".log",
                                                delete=False)
-        cmd = viewer_command() + (["--serve-web", "--web-viewer-port", str(self.web_port)]
+        cmd = rerun_binary() + (["--serve-web", "--web-viewer-port", str(self.web_port)]
                                   if web else ["--serve-grpc"]) + [
             "--bind", HOST, "--port", str(self.grpc_port), str(self.rrd.resolve())]
         env = {**os.environ, "RERUN_ANALYTICS": "0", "NO_COLOR": "1"}
         try:
-            self.proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=self.log,
-                                         stderr=subprocess.STDOUT, env=env,
-                                         start_new_session=True)
+            self.proc = spawn(cmd, self.log, env)
         except OSError as e:
             raise RunFailed(f"could not start the Rerun server ({e})") from None
         self.url = viewer_url(self.web_port, self.grpc_port) if web else \

@@ -145,28 +145,22 @@ class _Viewer:
     only, when it fails), bounded waits."""
 
     def __init__(self, timeout: float):
-        import subprocess
         import tempfile
 
         from rerun.experimental import ViewerClient
 
-        from .info import viewer_command
-
-        from .serve import free_port
+        from .serve import free_port, rerun_binary, spawn
 
         self.port = free_port()
         self.log = tempfile.NamedTemporaryFile(prefix="pfscope-viewer-", suffix=".log",
                                                delete=False)
         env = {**os.environ, "RERUN_APP_ONLY": "true", "RERUN_ANALYTICS": "0",
                "NO_COLOR": "1", "RUST_LOG": os.environ.get("PFSCOPE_VIEWER_LOG", "warn")}
-        cmd = viewer_command() + ["--headless", "--bind", "127.0.0.1", "--port", str(self.port),
+        cmd = rerun_binary() + ["--headless", "--bind", "127.0.0.1", "--port", str(self.port),
                                   "--hide-welcome-screen", "--memory-limit", "75%"]
         try:
-            # its own process group: the `rerun` on PATH may be a wrapper that starts the
-            # viewer binary as a child; the group is ended as one
-            self.proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=self.log,
-                                         stderr=subprocess.STDOUT, env=env,
-                                         start_new_session=True)
+            # its own process group, ended as one, and ended with us
+            self.proc = spawn(cmd, self.log, env)
         except OSError as e:
             raise RunFailed(f"the headless viewer did not start ({e}); {VULKAN_HINT}") from None
         url = f"rerun+http://127.0.0.1:{self.port}/proxy"
