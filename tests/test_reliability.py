@@ -141,8 +141,9 @@ def test_busy_serve_port_fails_cleanly(tmp_path):
         pytest.skip("port 9090 is taken by something else here")
     s.listen()
     try:
-        r = cli("record", "--frames", "2", "--serve", "--out", tmp_path / "x.rrd", "--quiet",
-                timeout=120)
+        # --serve-exit: without it the finished file is served until Ctrl-C (issue 21)
+        r = cli("record", "--frames", "2", "--serve", "--serve-exit", "--out", tmp_path / "x.rrd",
+                "--quiet", timeout=120)
     finally:
         s.close()
     assert "Traceback" not in r.stderr

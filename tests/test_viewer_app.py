@@ -141,8 +141,13 @@ def test_recording_holds_the_events_index_at_the_right_frames(tmp_path):
     out = tmp_path / "e.rrd"
     record(_toy(tmp_path, swap_at=6), tracker="passthrough", out=out, level="tracks")
     rec = read_rrd(out)
-    rows = {t["frame"]: c["TextLog:text"][0] for t, c in rec["/events"]}
-    assert "ID switch at frame 6" in rows[6]
+    at6 = [{k.rsplit(":", 1)[-1]: v[0] for k, v in c.items()}
+           for t, c in rec["/events"] if t["frame"] == 6]
+    # a short body; the ids in their own columns; the full sentence kept beside
+    sw = [c for c in at6 if c["kind"] == "id_switch"]
+    assert sw and all(c["text"] == "id switch, frame 6" for c in sw)
+    assert {(c["gt_ids"], c["track_ids"]) for c in sw} <= {("1", "1 2"), ("2", "2 1")}
+    assert all("ID switch at frame 6" in c["message"] for c in sw)
     worst = [c["TextLog:text"][0] for _, c in rec["/events/worst_ospa"]]
     assert worst and worst[0].startswith("worst OSPA #1")
 
@@ -288,8 +293,9 @@ def test_fast_colour_paths_match_the_definitions():
         exact = C.ramp(ranks[order], 255)
         assert np.abs(colors[:, :3].astype(int) - exact[:, :3].astype(int)).max() <= 1
     ids = np.concatenate([rng.integers(0, 3000, 200), [0, 5, 1 << 17, -4]])
-    assert np.array_equal(C.id_colors(ids), C._id_colors(ids))
-    assert np.array_equal(C.id_colors(ids[:50], alpha=90), C._id_colors(ids[:50], alpha=90))
+    pal = C.palette()
+    assert np.array_equal(C.id_colors(ids)[:, :3], pal[ids % len(pal)])
+    assert np.all(C.id_colors(ids[:50], alpha=90)[:, 3] == 90)
     assert C.id_colors(np.arange(0)).shape == (0, 4)
 
 

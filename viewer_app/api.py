@@ -94,7 +94,7 @@ class RecordResult:
 
 
 def record(source: SourceLike = None, tracker: Union[str, Sequence[str]] = "phd", *,
-           out: Union[str, Path, None] = None, level: str = "clusters",
+           out: Union[str, Path, None] = None, level: str = "particles",
            frames: Optional[int] = None, start: int = 1, seed: int = 0,
            detector: Optional[str] = None, min_score: float = float("-inf"),
            preset: Optional[str] = None, tracks_out: Union[str, Path, None] = None,

@@ -7,8 +7,7 @@ from typing import Optional, Sequence
 
 import rerun.blueprint as rrb
 
-#: Overlays every 2D view shows under the tracker's own entities.
-BASE_2D = ["video", "video/detections", "video/gt"]
+from .tabs import ALL_STAGES, BASE_2D  # noqa: F401 - BASE_2D re-exported
 
 
 def _panels() -> tuple:
@@ -45,14 +44,13 @@ def default_blueprint(views: Sequence[tuple[str, Sequence[str]]] = (),
     pairs of scalar series; ``size``: the frames' (width, height), which every 2D view is framed
     on; ``metrics``: add the metric plots (there is ground truth).  The tracker's views come
     first; the last tab shows everything."""
-    tabs = []
-    for title, paths in views:
-        if "tracks/**" in paths:  # wherever tracks are shown, show their errors too
-            paths = list(paths) + ["metrics/**"]
-        contents = BASE_2D + [f"video/{p}" for p in paths]
-        tabs.append(rrb.Spatial2DView(origin="video", contents=contents, name=title,
-                                      **_bounds(size)))
-    tabs.append(rrb.Spatial2DView(origin="video", name="All stages", **_bounds(size)))
+    from .tabs import single_tabs
+
+    tabs = [rrb.Spatial2DView(origin="video", contents=t["entities"], name=t["title"],
+                              **_bounds(size))
+            if t["title"] != ALL_STAGES else
+            rrb.Spatial2DView(origin="video", name=t["title"], **_bounds(size))
+            for t in single_tabs(views)]
     series = []
     for title, paths in plots:
         series.append(rrb.TimeSeriesView(origin="plots", contents=[f"plots/{p}" for p in paths],
@@ -75,7 +73,11 @@ def _logs(log: str, events: str, about: str, event_contents=None) -> rrb.Tabs:
     """The text panes: the failure index (Events: click a row to jump to its frame), the run's
     log, and the "About" note."""
     kw = {"contents": event_contents} if event_contents else {}
+    # Rerun's text log is in time order: the severe events (ID switches, lost tracks) get
+    # their own list first, so jumping through them needs no scrolling past the rest
+    severe = rrb.archetypes.TextLogRows(filter_by_log_level=["ERROR", "WARN"])
     return rrb.Tabs(
+        rrb.TextLogView(origin=events, name="Events: severe", rows=severe, **kw),
         rrb.TextLogView(origin=events, name="Events", **kw),
         rrb.TextLogView(origin=log, name="Log"),
         rrb.TextDocumentView(origin=about, name="About"),
@@ -83,20 +85,32 @@ def _logs(log: str, events: str, about: str, event_contents=None) -> rrb.Tabs:
 
 
 def compare_blueprint(roots: Sequence[str],
-                      size: Optional[tuple[int, int]] = None) -> rrb.Blueprint:
-    """Several trackers side by side: one 2D view per tracker root over the shared video, and
-    their metrics plotted together."""
-    views = [rrb.Spatial2DView(origin="/", name=root, contents=[
-        "/video", "/video/detections", "/video/gt", f"/{root}/video/tracks/**",
-        f"/{root}/video/metrics/**"], **_bounds(size)) for root in roots]
+                      size: Optional[tuple[int, int]] = None,
+                      lane_views: Optional[Sequence[Sequence[tuple[str, Sequence[str]]]]] = None
+                      ) -> rrb.Blueprint:
+    """Several trackers side by side.  ``lane_views``: each lane's tracker views (its layout);
+    one video tab per stage title, holding that stage of every lane that has it (a grid:
+    2 lanes side by side, 3-4 lanes two by two), all on the same frame and stage; without
+    ``lane_views`` every lane shows its tracks.  Their metrics are plotted together."""
+    from .tabs import compare_tabs
+
+    if lane_views is None:
+        lane_views = [(("Tracks", ("tracks/**",)),)] * len(roots)
+    tabs = []
+    for t in compare_tabs(list(zip(roots, lane_views))):
+        views = [rrb.Spatial2DView(origin="/", name=f"{v['lane']}: {t['title']}",
+                                   contents=[f"/{e}" for e in v["entities"]], **_bounds(size))
+                 for v in t["lanes"]]
+        cols = 2 if len(views) > 2 else len(views)
+        tabs.append(rrb.Grid(*views, grid_columns=max(cols, 1), name=t["title"]))
     plots = [rrb.TimeSeriesView(origin="/", name=title, contents=[
         f"/{root}/plots/metrics/{key}" for root in roots])
         for title, key in (("OSPA", "ospa"), ("ID switches", "idsw"), ("False positives", "fp"),
                            ("Misses", "fn"), ("Estimated targets", "cardinality/estimated"))]
     return rrb.Blueprint(
-        rrb.Vertical(rrb.Horizontal(*views), rrb.Horizontal(rrb.Tabs(*plots),
-                                                            _logs("/", "/", "about", [
-                                                                f"/{r}/events/**" for r in roots])),
-                     row_shares=[3, 2]),
+        rrb.Vertical(rrb.Tabs(*tabs, name="Stages"),
+                     rrb.Horizontal(rrb.Tabs(*plots),
+                                    _logs("/", "/", "about", [f"/{r}/events/**" for r in roots])),
+                     row_shares=[4, 1]),
         *_panels(),
     )

@@ -199,8 +199,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "otherwise HOG people")
     r.add_argument("--min-score", type=float, default=float("-inf"),
                    help="drop file detections scoring below this")
-    r.add_argument("--level", choices=list(LEVELS), default="clusters",
-                   help="how much to record: tracks < clusters < particles (default clusters)")
+    r.add_argument("--level", choices=list(LEVELS), default="particles",
+                   help="how much to record: tracks < clusters < particles (default particles: "
+                        "the clouds, each thinned to --max-points)")
     r.add_argument("--max-points", type=POSITIVE_INT, default=3000,
                    help="decimate each particle cloud to at most this many points per frame")
     r.add_argument("--video", choices=["encode", "source", "auto"], default="encode",
@@ -218,7 +219,11 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--force", action="store_true", help="overwrite existing output files")
     live = r.add_mutually_exclusive_group()
     live.add_argument("--spawn", action="store_true", help="also stream to a native viewer")
-    live.add_argument("--serve", action="store_true", help="also serve a web viewer")
+    live.add_argument("--serve", action="store_true",
+                      help="also serve a web viewer (127.0.0.1), and keep serving the finished "
+                           "file after the run until Ctrl-C, also without a terminal")
+    r.add_argument("--serve-exit", action="store_true",
+                   help="with --serve: stop serving when the run ends")
     r.add_argument("--timing", action="store_true",
                    help="also record each step's wall time (plots/timing; the recording then "
                         "differs from run to run)")
@@ -309,6 +314,11 @@ def build_parser() -> argparse.ArgumentParser:
                         description="Open FILE.rrd in the native Rerun viewer; without a display "
                                     "say in one line how to see it.")
     vw.add_argument("file", type=Path)
+    vw.add_argument("--web", action="store_true",
+                    help="serve the file to a browser (Rerun's web viewer on 127.0.0.1) and "
+                         "print the URL; Ctrl-C stops")
+    vw.add_argument("--web-port", type=POSITIVE_INT, default=None,
+                    help="HTTP port of the web viewer (default: a free one)")
 
     sn = sub.add_parser("snapshot", help="a PNG of a recording at one frame (headless viewer)",
                         description="Render FILE.rrd at --frame with Rerun's headless viewer "
@@ -316,10 +326,31 @@ def build_parser() -> argparse.ArgumentParser:
     sn.add_argument("file", type=Path)
     sn.add_argument("--frame", type=POSITIVE_INT, default=None, help="frame (default: the last)")
     sn.add_argument("--tab", default=None,
-                    help="video tab to show, by title (e.g. Particles, Association)")
+                    help="video tab to show, by title (e.g. Particles, Association); 'all': "
+                         "one picture per video tab, OUT-<tab>.png")
     sn.add_argument("--out", type=Path, required=True, help="PNG to write")
     sn.add_argument("--keep-panels", action="store_true",
                     help="keep the viewer's side and time panels in the picture")
+    sn.add_argument("--stage", default=None, metavar="NAME",
+                    help="picture the frame at this stage (predict, birth, update ...; "
+                         "LANE:STAGE in a compare recording); shows the All stages tab unless "
+                         "--tab is given")
+    sn.add_argument("--frames", type=_frame_range, default=None, metavar="A:B",
+                    help="one picture per frame A..B, numbered OUT-000080.png ...")
+
+    ex = sub.add_parser("export", help="an annotated video (mp4, or gif) of a recording, drawn "
+                                       "without the viewer",
+                        description="Draw each recorded frame with the chosen tab's content "
+                                    "(boxes, ids, trails, particles, edges) with OpenCV and write "
+                                    "a video: one video frame per recorded frame.")
+    ex.add_argument("file", type=Path, help="a .rrd recording")
+    ex.add_argument("--out", type=Path, required=True, help="x.mp4 (or .avi, .gif)")
+    ex.add_argument("--tab", default=None,
+                    help="video tab to draw, by title (default: the first; see pfscope info)")
+    ex.add_argument("--frames", type=_frame_range, default=None, metavar="A:B",
+                    help="only frames A..B")
+    ex.add_argument("--force", action="store_true", help="overwrite OUT")
+    ex.add_argument("--quiet", action="store_true", help="no progress")
 
     from .batch import add_batch_parser
     add_batch_parser(sub, _add_tracker_options)
@@ -794,8 +825,15 @@ def cmd_record(args) -> int:
               f"IDF1 {sc['IDF1']:.3f}  HOTA {sc['HOTA']:.3f}  IDSW {int(sc['IDSW'])}  "
               f"OSPA {sc['OSPA']:.1f} px  [{str(sc.get('convention', '?')).upper()} convention]")
     print(f"open it with:  rerun {res.out}")
-    if args.serve and sys.stdin.isatty():
-        input("web viewer running; press Enter to stop\n")
+    if args.serve and not args.serve_exit and res.serve_url:
+        from .serve import WebServer
+
+        # the run's own gRPC server closed with the recording: the finished file is served
+        # on the same port, so the page already open keeps working
+        server = WebServer(res.out, web=False, grpc_port=res.grpc_port)
+        print(f"still serving {res.out} at {res.serve_url} until Ctrl-C "
+              f"(--serve-exit: stop when the run ends)", flush=True)
+        server.wait()
     return EXIT_INTERRUPTED if res.interrupted else 0
 
 
@@ -1094,6 +1132,9 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         if args.command == "view":
             from .info import cmd_view
             return cmd_view(args)
+        if args.command == "export":
+            from .export import cmd_export
+            return cmd_export(args)
         if args.command == "snapshot":
             from .snapshot import cmd_snapshot
             return cmd_snapshot(args)

@@ -21,14 +21,6 @@ WEIGHT_RADIUS = (0.5, 1.5)   # radius = base x (lo + (hi - lo) x rank)
 WEIGHT_ALPHA = (110, 255)    # opacity from the lightest to the heaviest
 TOP_FRACTION = 0.1           # "the heaviest tenth": the yellow end of the map
 
-#: Track colours take hues in [TRACK_HUE_MIN, TRACK_HUE_MAX] degrees (orange → green → blue),
-#: saturated; the semantic colours (misses red, false positives magenta, detections/gt grey and
-#: white, switches black) lie outside, so a track is never mistaken for a mark.
-TRACK_HUE_MIN, TRACK_HUE_MAX = 35.0, 265.0
-#: Saturation of the deepest track blues (lightened so a blue id label reads on the viewer's grey
-#: label background) and the least saturation a track colour has (greys and white are below it).
-BLUE_SATURATION = 0.45
-MIN_TRACK_SATURATION = 0.4
 
 
 def ramp(t: np.ndarray, alpha: int = 200) -> np.ndarray:
@@ -131,65 +123,172 @@ def weight_summary(weights: np.ndarray) -> dict[str, float]:
     return {"top_tenth": top / total, "ess": float(1.0 / (len(w) * np.sum(wn * wn)))}
 
 
-#: Colours of ids 0 .. len - 1, computed once and grown on demand (up to _ID_TABLE_MAX ids):
-#: a cloud of thousands of particles of a few clusters costs one lookup, not the HSV maths.
-_ID_TABLE = np.zeros((0, 4), dtype=np.uint8)
-_ID_TABLE_MAX = 1 << 16
+# -- track colours: chosen in OKLab (Ottosson 2020), a perceptual space where Euclidean distance
+# follows how different two colours look (about 0.02 is a just-noticeable difference)
+
+_M1 = np.array([[0.4122214708, 0.5363325363, 0.0514459929],
+                [0.2119034982, 0.6806995451, 0.1073969566],
+                [0.0883024619, 0.2817188376, 0.6299787005]])
+_M2 = np.array([[0.2104542553, 0.7936177850, -0.0040720468],
+                [1.9779984951, -2.4285922050, 0.4505937099],
+                [0.0259040371, 0.7827717662, -0.8086757660]])
+
+
+def srgb_to_oklab(rgb) -> np.ndarray:
+    """(..., 3) sRGB 0-255 -> (..., 3) OKLab (L in [0, 1])."""
+    c = np.asarray(rgb, dtype=np.float64) / 255.0
+    lin = np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+    return np.cbrt(lin @ _M1.T) @ _M2.T
+
+
+def oklab_to_srgb(lab) -> np.ndarray:
+    """(..., 3) OKLab -> (..., 3) sRGB 0-255 (float, unclipped: out of [0, 255] = out of gamut)."""
+    lin = (np.asarray(lab, dtype=np.float64) @ np.linalg.inv(_M2).T) ** 3 @ np.linalg.inv(_M1).T
+    return np.where(lin <= 0.0031308, 12.92 * lin,
+                    1.055 * np.clip(lin, 0, None) ** (1 / 2.4) - 0.055) * 255.0
+
+
+#: Colours no track may look like (OKLab distance >= RESERVED_DISTANCE): the semantic marks
+#: (misses red, false positives magenta, classifier hits cyan, births pink; detections,
+#: candidates, dropped in greys; ground truth white; switches black) and the heavy end of the
+#: particles' viridis (yellow).  Greys and white are also kept away by MIN_CHROMA.
+RESERVED_RGB = ((255, 30, 30), (255, 0, 190), (0, 230, 255), (255, 170, 220), (253, 231, 37),
+                (250, 250, 250),
+                (175, 175, 175), (150, 150, 150), (110, 110, 110), (0, 0, 0))
+RESERVED_DISTANCE = 0.12
+MIN_CHROMA = 0.09
+#: The candidates: OKLCh lightness x chroma x hue grid, hues outside the red-magenta band
+#: (OKLab hue of the miss red ~28 deg, of the false-positive magenta ~344 deg).
+_L_STEPS = (0.55, 0.63, 0.71, 0.79, 0.87)
+_C_STEPS = (0.09, 0.12, 0.15, 0.18, 0.21)
+_HUE_RANGE = (45.0, 300.0)
+#: How many colours the palette holds, in farthest-point order: the first k are as far apart
+#: as a greedy packing gets (8 colours >= 0.17 apart, 50 >= 0.05).
+PALETTE_SIZE = 64
+
+
+def _candidates() -> np.ndarray:
+    L, C, H = np.meshgrid(_L_STEPS, _C_STEPS, np.arange(0.0, 360.0, 3.0), indexing="ij")
+    L, C, H = L.ravel(), C.ravel(), H.ravel()
+    lab = np.stack([L, C * np.cos(np.radians(H)), C * np.sin(np.radians(H))], axis=1)
+    rgb = oklab_to_srgb(lab)
+    ok = np.all((rgb >= -0.5) & (rgb <= 255.5), axis=1)
+    ok &= (H >= _HUE_RANGE[0]) & (H <= _HUE_RANGE[1]) & (C >= MIN_CHROMA)
+    rgb = np.clip(np.round(rgb[ok]), 0, 255)
+    lab = srgb_to_oklab(rgb)
+    far = np.linalg.norm(lab[:, None] - srgb_to_oklab(np.array(RESERVED_RGB))[None],
+                         axis=2).min(axis=1) >= RESERVED_DISTANCE
+    return rgb[far].astype(np.uint8)
+
+
+def _farthest_first(rgb: np.ndarray, n: int) -> np.ndarray:
+    """``n`` of the colours in farthest-point order (deterministic: starts at the orange
+    nearest (255, 160, 60); ties take the first candidate)."""
+    lab = srgb_to_oklab(rgb)
+    first = int(np.argmin(np.linalg.norm(lab - srgb_to_oklab(np.array([255, 160, 60])), axis=1)))
+    sel = [first]
+    dmin = np.linalg.norm(lab - lab[first], axis=1)
+    for _ in range(n - 1):
+        j = int(np.argmax(dmin))
+        sel.append(j)
+        dmin = np.minimum(dmin, np.linalg.norm(lab - lab[j], axis=1))
+    return rgb[sel]
+
+
+_PALETTE: Optional[np.ndarray] = None
+
+
+def palette() -> np.ndarray:
+    """(PALETTE_SIZE, 3) uint8: the track colours, farthest-first."""
+    global _PALETTE
+    if _PALETTE is None:
+        _PALETTE = _farthest_first(_candidates(), PALETTE_SIZE)
+    return _PALETTE
 
 
 def id_colors(ids: np.ndarray, alpha: int = 255) -> np.ndarray:
-    """(N,) integer ids -> (N,4) uint8 RGBA, well separated hues (golden-ratio walk over the
-    track hue range, alternating two saturation/brightness levels; blues lightened)."""
-    global _ID_TABLE
+    """(N,) integer ids -> (N,4) uint8 RGBA without state: id k gets palette colour
+    k mod PALETTE_SIZE (consecutive ids far apart).  What a recording uses for track ids is
+    :class:`TrackPalette`, which also separates ids that are not consecutive."""
     ids = np.asarray(ids, dtype=np.int64).reshape(-1)
-    if len(ids) == 0:
-        return np.zeros((0, 4), dtype=np.uint8)
-    lo, hi = int(ids.min()), int(ids.max())
-    if lo < 0 or hi >= _ID_TABLE_MAX:
-        return _id_colors(ids, alpha)
-    if hi >= len(_ID_TABLE):
-        size = min(_ID_TABLE_MAX, max(1024, 2 * (hi + 1)))
-        _ID_TABLE = _id_colors(np.arange(size))
-    out = _ID_TABLE[ids]
-    if alpha != 255:
-        out[:, 3] = alpha
-    return out
-
-
-def _id_colors(ids: np.ndarray, alpha: int = 255) -> np.ndarray:
-    """:func:`id_colors` computed (no table)."""
-    ids = np.asarray(ids, dtype=np.int64).reshape(-1)
-    frac = (ids * 0.618033988749895) % 1.0
-    h = (TRACK_HUE_MIN + frac * (TRACK_HUE_MAX - TRACK_HUE_MIN)) / 360.0
-    s = np.where(ids % 2 == 0, 0.85, 0.7)
-    # deep blues are dark (a blue id label on the viewer's grey label background hardly reads):
-    # from azure on, desaturate towards BLUE_SATURATION, which lightens them (still saturated
-    # enough to be told from the grey/white marks: see is_track_colour)
-    s = s - np.clip((h * 360.0 - 195.0) / 45.0, 0.0, 1.0) * (s - BLUE_SATURATION)
-    v = np.where(ids % 2 == 0, 0.95, 1.0)
-    i = np.floor(h * 6).astype(int) % 6
-    f = h * 6 - np.floor(h * 6)
-    p, q, t = v * (1 - s), v * (1 - f * s), v * (1 - (1 - f) * s)
-    r = np.choose(i, [v, q, p, p, t, v])
-    g = np.choose(i, [t, v, v, q, p, p])
-    b = np.choose(i, [p, p, t, v, v, q])
+    pal = palette()
     out = np.empty((len(ids), 4), dtype=np.uint8)
-    out[:, 0], out[:, 1], out[:, 2] = (np.stack([r, g, b]) * 255).round().astype(np.uint8)
+    out[:, :3] = pal[np.mod(ids, len(pal))]
     out[:, 3] = alpha
     return out
 
 
+class TrackPalette:
+    """One colour per track id for a whole recording lane, chosen when the id is first seen:
+    the palette colour farthest (OKLab) from the colours of the ids seen in the last
+    ``live_frames`` frames (ties: palette order), so ids alive at the same time are as far
+    apart as the palette allows whatever their numbers.  Deterministic: the same sequence of
+    calls gives the same colours.  ``frame`` is the current frame (the reporter sets it)."""
+
+    def __init__(self, live_frames: int = 10):
+        self.live_frames = int(live_frames)
+        self.frame = 0
+        self._pal = palette()
+        self._lab = srgb_to_oklab(self._pal)
+        self._index: dict[int, int] = {}
+        self._seen: dict[int, int] = {}
+
+    def index_of(self, tid: int) -> int:
+        k = self._index.get(tid)
+        if k is None:
+            live = [self._index[t] for t, f in self._seen.items()
+                    if self.frame - f <= self.live_frames and t in self._index]
+            if live:
+                d = np.linalg.norm(self._lab[:, None] - self._lab[live][None], axis=2).min(1)
+                k = int(np.argmax(d))
+            else:
+                k = len(self._index) % len(self._pal)
+            self._index[tid] = k
+            self._seen[tid] = self.frame  # live from now: the next new id avoids it too
+        return k
+
+    def colors(self, ids, alpha: int = 255, register: bool = True) -> np.ndarray:
+        """(N,) ids -> (N,4) uint8; the ids are marked as seen at :attr:`frame`.  With
+        ``register=False`` (ids that may never become tracks: tentative vertices) an id
+        without a colour yet gets the stateless :func:`id_colors` and takes no palette slot."""
+        ids = np.asarray(ids, dtype=np.int64).reshape(-1)
+        if len(ids) == 0:
+            return np.zeros((0, 4), dtype=np.uint8)
+        if not register:
+            out = id_colors(ids, alpha)
+            known = np.array([t in self._index for t in ids.tolist()], dtype=bool)
+            if known.any():
+                out[known] = self.colors(ids[known], alpha)
+            return out
+        uniq, inv = np.unique(ids, return_inverse=True)
+        for t in uniq.tolist():  # alive now (those with a colour count as live for the new)
+            if t in self._index:
+                self._seen[t] = self.frame
+        ks = np.array([self.index_of(int(t)) for t in uniq.tolist()], dtype=np.int64)
+        if len(self._seen) > 4 * len(self._pal):  # bounded: forget ids long gone
+            self._seen = {t: f for t, f in self._seen.items()
+                          if self.frame - f <= self.live_frames}
+        out = np.empty((len(ids), 4), dtype=np.uint8)
+        out[:, :3] = self._pal[ks[inv]]
+        out[:, 3] = alpha
+        return out
+
+
+def min_distance(rgb) -> float:
+    """The smallest OKLab distance between any two of the (N, 3) colours."""
+    lab = srgb_to_oklab(np.asarray(rgb)[:, :3])
+    d = np.linalg.norm(lab[:, None] - lab[None], axis=2)
+    d[np.diag_indices(len(lab))] = np.inf
+    return float(d.min()) if len(lab) > 1 else float("inf")
+
+
 def is_track_colour(rgb) -> bool:
-    """Whether an RGB colour could be a track's (saturated, hue in the track range)."""
-    r, g, b = (np.asarray(rgb, dtype=np.float64)[:3] / 255.0).tolist()
-    mx, mn = max(r, g, b), min(r, g, b)
-    if mx == 0 or (mx - mn) / mx < MIN_TRACK_SATURATION:
+    """Whether an RGB colour could be a track's: chroma >= MIN_CHROMA, hue outside the
+    red-magenta band and at least RESERVED_DISTANCE from every reserved colour (OKLab)."""
+    lab = srgb_to_oklab(np.asarray(rgb, dtype=np.float64)[:3])
+    chroma = float(np.hypot(lab[1], lab[2]))
+    hue = float(np.degrees(np.arctan2(lab[2], lab[1])) % 360)
+    if chroma < MIN_CHROMA - 1e-3 or not _HUE_RANGE[0] - 1 <= hue <= _HUE_RANGE[1] + 1:
         return False
-    d = mx - mn
-    if mx == r:
-        hue = (60 * ((g - b) / d)) % 360
-    elif mx == g:
-        hue = 60 * ((b - r) / d) + 120
-    else:
-        hue = 60 * ((r - g) / d) + 240
-    return TRACK_HUE_MIN - 5 <= hue <= TRACK_HUE_MAX + 5
+    d = np.linalg.norm(srgb_to_oklab(np.array(RESERVED_RGB)) - lab, axis=1).min()
+    return bool(d >= RESERVED_DISTANCE - 1e-3)

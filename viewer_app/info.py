@@ -17,6 +17,7 @@ from typing import Any
 from pfscope.trackers.errors import InputError
 
 from .properties import PROPERTY_ROOT, read_properties
+from .tabs import from_property as tabs_from_property
 
 #: The scores ``info`` prints (all of them are in ``--json``).
 HEADLINE = ("MOTA", "MOTP", "IDF1", "HOTA", "IDSW", "FP", "FN", "OSPA")
@@ -70,8 +71,17 @@ def recording_info(path, top: int = 10) -> dict[str, Any]:
                                  if t is not None)
                 continue
             texts = rb.column("TextLog:text").to_pylist() if "TextLog:text" in names else []
-            for f, t in zip(fr, texts):
+            extra = {}
+            for key in ("kind", "track_ids", "gt_ids", "message", "last_frame", "level"):
+                col = next((n for n in names if n.rsplit(":", 1)[-1] == key), None)
+                if col is not None:
+                    extra[key] = [v[0] if isinstance(v, list) and v else v
+                                  for v in rb.column(col).to_pylist()]
+            for i, (f, t) in enumerate(zip(fr, texts)):
                 msg = t[0] if isinstance(t, list) and t else t
+                more = {k: v[i] for k, v in extra.items() if v[i] is not None}
+                if "message" in more:   # the row's body is short; the full sentence is here
+                    msg = more.pop("message")
                 if is_log:
                     last_log = (f, msg)
                     continue
@@ -80,7 +90,11 @@ def recording_info(path, top: int = 10) -> dict[str, Any]:
                     worst.setdefault(lane, []).append({"frame": f, "message": msg})
                 else:
                     lane = ent[:-len("/events")].strip("/") or "-"
-                    events.setdefault(lane, []).append({"frame": f, "message": msg})
+                    ev = {"frame": f, "message": msg, **more}
+                    for k in ("track_ids", "gt_ids"):
+                        if isinstance(ev.get(k), str):
+                            ev[k] = [int(x) for x in ev[k].split()]
+                    events.setdefault(lane, []).append(ev)
     except Exception as e:  # noqa: BLE001
         raise InputError(f"{path}: unreadable chunk ({type(e).__name__}: {e})") from None
     props = read_properties(path)
@@ -101,8 +115,10 @@ def recording_info(path, top: int = 10) -> dict[str, Any]:
                                                         else len(order), k))}
 
     lanes, scores, counts = ordered(lanes), ordered(scores), ordered(counts)
-    for lst in events.values():
-        lst.sort(key=lambda e: (e["frame"], e["message"]))
+    severity = {"ERROR": 0, "WARN": 1, "INFO": 2, "DEBUG": 3}
+    for lst in events.values():  # for jumping: the severe first, then by frame
+        lst.sort(key=lambda e: (severity.get(str(e.get("level", "INFO")), 2), e["frame"],
+                                e["message"]))
     for lst in worst.values():
         lst.sort(key=lambda e: int(e["message"].split("#")[1].split(":")[0])
                  if "#" in e["message"] else 0)
@@ -116,6 +132,7 @@ def recording_info(path, top: int = 10) -> dict[str, Any]:
                    "last": max(frames) if frames else None},
         "duration_s": (max(times) - min(times)) / 1e9 if len(times) > 1 else 0.0,
         "entities": sorted(entities),
+        "tabs": tabs_from_property(props) or [],
         "scores": scores, "event_counts": counts,
         "events": {k: v[:top] for k, v in events.items()},
         "worst_ospa": {k: v[:top] for k, v in worst.items()},
@@ -158,6 +175,9 @@ def print_info(info: dict, out=None, params: bool = True) -> None:
       f"video; {len(info['entities'])} entities")
     if info.get("ended"):
         p(f"ended:     {info['ended']}")
+    if info.get("tabs"):
+        p("tabs:      " + ", ".join(t["title"] for t in info["tabs"])
+          + "  (entities per tab: --json)")
     if info["versions"]:
         p("versions:  " + ", ".join(f"{k} {v}" for k, v in sorted(info["versions"].items())))
     for lane, cfg in info["lanes"].items():
@@ -213,9 +233,13 @@ def cmd_view(args) -> int:
     path = Path(args.file)
     if not path.is_file():
         raise InputError(f"{path}: no such recording")
+    if getattr(args, "web", False):
+        from .serve import cmd_view_web
+
+        return cmd_view_web(path, web_port=getattr(args, "web_port", None))
     if not display_available():
-        print(f"pfscope view: no display here; copy {path} to a machine with one and run "
-              f"'rerun {path.name}' (pip install rerun-sdk==0.41.*), or take a picture with "
+        print(f"pfscope view: no display here; serve it to a browser (rerun's web viewer) "
+              f"with 'pfscope view {path} --web', or take a picture with "
               f"'pfscope snapshot {path} --frame N --out shot.png'")
         return 0
     cmd = viewer_command() + [str(path)]

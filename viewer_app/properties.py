@@ -87,24 +87,37 @@ def about_markdown(title: str, views: Iterable[tuple[str, Iterable[str]]],
                   "and ID switches; **OSPA**: the per-frame OSPA distance (px)."]
     lines += ["- **All series**: every series of the recording.", "",
               "## Colours", "",
-              "- Tracks: one colour per track id (hues from orange through yellow and green to light "
-              "blue and lavender), "
-              "labelled with the id, with a trail of recent centres (a trail restarts where its "
-              "track jumps, e.g. an id taken over by another person). Blues are lightened so "
-              "their id labels read.",
+              "- Tracks: one colour per track id, the same on its box, trail, vertices, edges, "
+              "clusters and child clouds, chosen in OKLab so that ids alive at the same time "
+              "are far apart; no track colour is near red, magenta, cyan, pink, viridis yellow, "
+              "grey, white or black (those are marks). Labelled with the id, with a trail of "
+              "recent centres (a trail restarts where its track jumps).",
               "- Items with no identity (classifier windows, candidates, candidate edges): thin "
               "grey.",
               "- Detections: thin grey boxes (scores in the hidden labels: select the entity "
               "and turn labels on). Ground truth: thin white boxes (gt ids hidden the same way).",
-              "- Misses: red. False positives: magenta. ID switches: thick black. "
+              "- Misses: red. False positives: magenta, drawn 4 px outside the track box. "
+              "ID switches: thick black, 8 px outside. Marks are drawn over the track boxes. "
               "These never occur in the track palette.",
+              "- Births: newborn particles are pink dots (the survivors keep their weight "
+              "colours). Classifier hits: cyan boxes (the rejected windows stay thin grey).",
+              "- Clusters: a kept cluster (its box and members) in the colour of the confirmed "
+              "track that took it; a kept cluster no confirmed track took in light grey; a "
+              "dropped cluster dark grey.",
+              "- Association: this frame's vertices as thin boxes in their track's colour "
+              "(tentative tracks too), the chosen edges in the track's colour labelled "
+              "`id: gap=… log f=…` (the edge gain), candidate edges thin grey.",
               "- Particles: colour = the particle's weight *ranked within its cloud* (each "
               "cloud, each frame), on viridis: dark purple = the lightest, teal = the median, "
               "yellow = the heaviest tenth. Heavier particles are also larger, more opaque and "
-              "drawn on top. A cloud of equal weights (predicted, resampled) is all teal. "
+              "drawn on top. A cloud of equal weights (predicted, resampled, DLPF's free "
+              "parents) is all teal. "
               "Ranks hide how uneven the weights are: `plots/weights/<cloud>/top_tenth` is the "
               "share of the cloud's weight its yellow tenth holds (0.1 = even, near 1 = a few "
               "particles carry it all) and `.../ess` its effective sample size / N.",
+              "- A per-particle score (DBN-PHD's DBN score tab) is on viridis by its value, "
+              "0 (purple) to 1 (yellow), not by rank. A dense field (DLPF's motion) is viridis "
+              "from 0 (transparent) to the frame's largest value, plotted as `.../max`.",
               "- Plots: misses red, false positives magenta, true count white, as on the video"
               + ("; in the lane plots each lane has its own colour." if lanes else "."),
               ""]

@@ -64,6 +64,8 @@ from pfscope.trackers.pipeline import BaseHook, FrameReport, Outcome, RunInfo
 from .blueprint import compare_blueprint, default_blueprint
 from .properties import about_markdown, any_values
 from .reporters import Reporter, layout_for
+from .tabs import compare_tabs, single_tabs
+from .tabs import to_property as tabs_property
 from .reporters.base import SERIES_PALETTE, Columns, TimedStream, annotation_context
 
 
@@ -228,6 +230,8 @@ class RerunRecorder(BaseHook):
         # the last frame whose picture is still being encoded: (frame, seconds, source bytes)
         self._picture: Optional[tuple[int, float, Optional[bytes]]] = None
         self.live, self.web_port, self.announce = live, web_port, announce
+        self.grpc_port: Optional[int] = None
+        self.serve_url: Optional[str] = None
         # Wall-clock step times differ run to run: recorded only when asked, so that the same
         # seed and input give the same recording.
         self.timing = timing
@@ -259,12 +263,17 @@ class RerunRecorder(BaseHook):
                                           metrics=info.has_gt)
             about = about_markdown(f"{names[0]} on {getattr(info.source, 'name', 'source')}",
                                    layout.views, plots, has_gt=info.has_gt)
+            tabs = single_tabs(layout.views)
         else:
-            blueprint = compare_blueprint(names, size=_frame_size(info.source))
+            lane_views = [layout_for(info.trackers[n].name).views for n in names]
+            blueprint = compare_blueprint(names, size=_frame_size(info.source),
+                                          lane_views=lane_views)
+            tabs = compare_tabs(list(zip(names, lane_views)))
             about = about_markdown(f"{' vs '.join(names)} on "
                                    f"{getattr(info.source, 'name', 'source')}",
-                                   [(n, [f"{n}/video/tracks/**", f"{n}/video/metrics/**"])
-                                    for n in names],
+                                   [(f"{v['lane']}: {t['title']}",
+                                     [e for e in v["entities"] if e.startswith(v["lane"])])
+                                    for t in tabs for v in t["lanes"]],
                                    [("OSPA, ID switches, FP, misses, estimated targets",
                                      [f"{n}/plots/metrics/**" for n in names])],
                                    lanes=names, has_gt=info.has_gt)
@@ -276,11 +285,16 @@ class RerunRecorder(BaseHook):
             rec.set_sinks(rr.FileSink(str(self.partial)), rr.GrpcSink(),
                           default_blueprint=blueprint)
         elif self.live == "serve":
-            grpc = rr.GrpcServerSink()
+            # localhost only; the gRPC port is kept so that, after the run, a server of the
+            # finished file can take it over under the same URL (record --serve)
+            from .serve import free_port, viewer_url
+
+            self.grpc_port = self.grpc_port or free_port()
+            grpc = rr.GrpcServerSink(bind_ip="127.0.0.1", port=self.grpc_port)
             rec.set_sinks(rr.FileSink(str(self.partial)), grpc, default_blueprint=blueprint)
             rr.serve_web_viewer(web_port=self.web_port, connect_to=grpc.uri, open_browser=False)
-            uri = grpc.uri.replace("0.0.0.0", "127.0.0.1")
-            self.announce(f"web viewer: http://127.0.0.1:{self.web_port}/?url={uri}")
+            self.serve_url = viewer_url(self.web_port, self.grpc_port)
+            self.announce(f"web viewer: {self.serve_url}")
         src = getattr(info.source, "name", "source")
         rec.send_recording_name(f"{src} · {' vs '.join(names)}")
         if self.properties:
@@ -289,6 +303,7 @@ class RerunRecorder(BaseHook):
         else:
             rec.send_property("config", any_values(self.config))
         rec.send_property("versions", rr.AnyValues(**versions()))
+        rec.send_property("tabs", any_values(tabs_property(tabs)))
         rec.log("/", annotation_context(), static=True)
         rec.log("about", rr.TextDocument(about, media_type=rr.MediaType.MARKDOWN), static=True)
         if info.has_gt:
@@ -355,6 +370,7 @@ class RerunRecorder(BaseHook):
             base.role_boxes("gt", r.gt.boxes, "gt", labels=[f"gt {i}" for i in r.gt.ids])
         for name, res in r.results.items():
             rep = self.reporters[name]
+            rep.frame_stages(res.stages, res.tracks.ids)
             for stage in res.stages:
                 self._stage(k, name, stage.name)
                 rep.stage(stage)
@@ -480,8 +496,10 @@ class RerunRecorder(BaseHook):
         for ev in events:
             rec.set_time("frame", sequence=ev.frame)
             rec.set_time("stage", sequence=ev.frame * self.stride + self.slots[(lane, "output")])
-            rec.log(f"{self._root(lane)}events", rr.TextLog(
-                ev.message, level="WARN" if ev.kind in ("id_switch", "lost_track") else "INFO"))
+            rec.log(f"{self._root(lane)}events", rr.TextLog(ev.short, level=ev.severity),
+                    rr.AnyValues(kind=ev.kind, track_ids=" ".join(map(str, ev.track_ids)),
+                                 gt_ids=" ".join(map(str, ev.gt_ids)),
+                                 last_frame=ev.last_frame, message=ev.message))
         rec.set_time("frame", sequence=now)
         self._stage(now, lane, "output")
 

@@ -77,7 +77,7 @@ class RecordOptions:
     tracker: str = "phd"
     detector: Optional[str] = None  # None: 'file' when the source has detections, else 'hog'
     min_score: float = float("-inf")
-    level: str = "clusters"
+    level: str = "particles"
     max_points: int = 3000
     frames: Optional[int] = None
     start: int = 1                     # first frame (frame indices stay the video's)
@@ -104,6 +104,22 @@ class RecordResult:
     scores: dict = field(default_factory=dict)  # lane name -> evaluate() keys, when gt exists
     start: int = 1                              # first frame of the run
     lanes: list = field(default_factory=list)   # lane names, in order
+    serve_url: Optional[str] = None             # record --serve: the web viewer's URL
+    grpc_port: Optional[int] = None             # ... and the port of its gRPC server
+
+
+def _web_port() -> int:
+    """WEB_PORT when it is free here, else any free port (the URL is printed)."""
+    import socket
+
+    from .serve import free_port
+
+    with socket.socket() as s:
+        try:
+            s.bind(("127.0.0.1", WEB_PORT))
+            return WEB_PORT
+        except OSError:
+            return free_port()
 
 
 def default_out_path(source: Source, tracker: str) -> Path:
@@ -374,7 +390,8 @@ def _record_locked(source, out, opts, lanes, infos, params, tracks_out, live, pr
             "params": cfg.get("params", {}),
             **{k: v for k, v in cfg.items() if k not in ("params", "tracker")}}
     recorder = RerunRecorder(out, config, max_points=opts.max_points, live=live,
-                             web_port=WEB_PORT, timing=opts.timing,
+                             web_port=_web_port() if live == "serve" else WEB_PORT,
+                             timing=opts.timing,
                              announce=lambda msg: print(msg, file=sys.stderr),
                              properties=properties, long_miss=opts.long_miss,
                              video=opts.video)
@@ -410,7 +427,8 @@ def _record_locked(source, out, opts, lanes, infos, params, tracks_out, live, pr
                         interrupted=res.interrupted,
                         tracks_out=(writer.kept_as or tracks_out) if writer else None,
                         bytes=final.stat().st_size, scores=res.scores, start=opts.start,
-                        lanes=names)
+                        lanes=names, serve_url=recorder.serve_url,
+                        grpc_port=recorder.grpc_port)
 
 
 class _CallbackHook(BaseHook):

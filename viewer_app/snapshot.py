@@ -41,12 +41,6 @@ def vulkan_problem() -> Optional[str]:
     return None
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 def _view_names(bp: dict) -> dict[str, str]:
     """view entity path -> display name; the video (2D) views first, so a title shared by a
     video tab and a plot ("Particles") picks the video tab."""
@@ -62,25 +56,43 @@ def tab_names(bp: dict) -> list[str]:
     return sorted(set(_view_names(bp).values()))
 
 
-def select_tab(bp: dict, tab: str) -> dict:
-    """The blueprint with the view titled ``tab`` (case-insensitive) active in its tab group."""
-    views = _view_names(bp)
-    match = [k for k, n in views.items() if n.lower() == tab.lower()]
-    if not match:
-        raise InputError(f"no tab {tab!r}; the recording's tabs: "
-                         f"{', '.join(sorted(set(views.values())))}")
-    view = match[0]
-    found = False
+def _tab_children(bp: dict) -> list[tuple[str, str, str]]:
+    """(tabs container key, child key, title) of every child of a Tabs container that is a 2D
+    view or a container of 2D views (compare: a stage's grid of lane views)."""
+    def entry(key):
+        return bp.get("/" + key.lstrip("/")) or {}
+
+    def is_2d(key):
+        vb = entry(key).get("ViewBlueprint")
+        if vb:
+            return vb.get("class_identifier") == "2D"
+        cb = entry(key).get("ContainerBlueprint")
+        return bool(cb) and bool(cb.get("contents")) and all(is_2d(c) for c in cb["contents"])
+
+    out = []
     for key, val in bp.items():
         cb = val.get("ContainerBlueprint") if isinstance(val, dict) else None
-        contents = cb.get("contents") or [] if cb else []
-        # contents name views with or without the leading "/"
-        hits = [c for c in contents if c.lstrip("/") == view.lstrip("/")]
-        if cb and cb.get("container_kind") == "Tabs" and hits:
-            cb["active_tab"] = hits[0]
-            found = True
-    if not found:
-        raise InputError(f"tab {tab!r} is not inside a tab group")
+        if not cb or cb.get("container_kind") != "Tabs":
+            continue
+        for c in cb.get("contents") or []:
+            if is_2d(c):
+                e = entry(c)
+                title = (e.get("ViewBlueprint") or e.get("ContainerBlueprint") or {}).get(
+                    "display_name", "")
+                out.append((key, c, title))
+    return out
+
+
+def select_tab(bp: dict, tab: str) -> dict:
+    """The blueprint with the video tab titled ``tab`` (case-insensitive: a 2D view, or in a
+    compare recording a stage's grid of lanes) active in its tab group."""
+    kids = _tab_children(bp)
+    match = [(k, c) for k, c, t in kids if t.lower() == tab.lower()]
+    if not match:
+        raise InputError(f"no tab {tab!r}; the recording's tabs: "
+                         f"{', '.join(dict.fromkeys(t for _, _, t in kids))}")
+    for key, child in match:
+        bp[key]["ContainerBlueprint"]["active_tab"] = child
     return bp
 
 
@@ -92,62 +104,220 @@ def _collapse_panels(bp: dict) -> dict:
     return bp
 
 
+def _collapse_top(bp: dict) -> dict:
+    """The top bar (its "software rasterizer" warning) collapsed too."""
+    bp.setdefault("/top_panel", {}).setdefault("PanelBlueprint", {})["state"] = "Collapsed"
+    return bp
+
+
+def stage_slots(rrd: Path) -> tuple[int, dict[str, int]]:
+    """(slots per frame, stage name -> its slot within a frame) of a recording, from its run
+    properties and the trackers' declared stage lists (the recorder's layout: ``input``, then
+    each lane's stages and its ``output``).  In a compare recording a stage name is
+    ``LANE:STAGE`` (a bare name picks the first lane that has it)."""
+    from pfscope.trackers.api import registry
+
+    from .properties import read_properties
+
+    props = read_properties(rrd)
+    lanes = {g.split(".", 1)[1]: v for g, v in props.items() if g.startswith("tracker.")}
+    order = (props.get("run") or {}).get("lanes") or list(lanes)
+    if isinstance(order, str):
+        order = [x.strip() for x in order.split(",")]
+    reg = registry()
+    slots: dict[str, int] = {"input": 0}
+    n = 1
+    for lane in order:
+        name = (lanes.get(lane) or {}).get("tracker", lane)
+        cls = reg.get(name)
+        if cls is None:
+            raise InputError(f"{rrd}: tracker {name!r} of lane {lane!r} is not known here")
+        for st in tuple(cls.stages) + ("output",):
+            slots[f"{lane}:{st}"] = n
+            slots.setdefault(st, n)
+            n += 1
+    return n, slots
+
+
+class _Viewer:
+    """Rerun's headless viewer, started by us: listening on 127.0.0.1 only, its logs (Rust
+    tracing with terminal colours) kept in a file instead of our stderr (shown, last lines
+    only, when it fails), bounded waits."""
+
+    def __init__(self, timeout: float):
+        import tempfile
+
+        from rerun.experimental import ViewerClient
+
+        from .serve import free_port, rerun_binary, spawn
+
+        self.port = free_port()
+        self.log = tempfile.NamedTemporaryFile(prefix="pfscope-viewer-", suffix=".log",
+                                               delete=False)
+        env = {**os.environ, "RERUN_APP_ONLY": "true", "RERUN_ANALYTICS": "0",
+               "NO_COLOR": "1", "RUST_LOG": os.environ.get("PFSCOPE_VIEWER_LOG", "warn")}
+        cmd = rerun_binary() + ["--headless", "--bind", "127.0.0.1", "--port", str(self.port),
+                                  "--hide-welcome-screen", "--memory-limit", "75%"]
+        try:
+            # its own process group, ended as one, and ended with us
+            self.proc = spawn(cmd, self.log, env)
+        except OSError as e:
+            raise RunFailed(f"the headless viewer did not start ({e}); {VULKAN_HINT}") from None
+        url = f"rerun+http://127.0.0.1:{self.port}/proxy"
+        deadline = time.monotonic() + timeout
+        last: Optional[Exception] = None
+        while time.monotonic() < deadline:
+            if self.proc.poll() is not None:
+                self.close()
+                raise RunFailed(f"the headless viewer exited ({self.tail()}); {VULKAN_HINT}")
+            try:
+                with socket.create_connection(("127.0.0.1", self.port), timeout=0.5):
+                    pass
+                self.client = ViewerClient(url)
+                return
+            except Exception as e:  # noqa: BLE001 - not listening yet
+                last = e
+                time.sleep(0.2)
+        self.close()
+        raise RunFailed(f"the headless viewer did not answer within {timeout:.0f} s "
+                        f"({type(last).__name__ if last else 'no reply'}); {VULKAN_HINT}")
+
+    def tail(self) -> str:
+        from .serve import log_tail
+
+        return log_tail(self.log.name)
+
+    def close(self) -> None:
+        from .serve import end_group
+
+        end_group(self.proc)
+        self.log.close()
+        try:
+            os.unlink(self.log.name)
+        except OSError:
+            pass
+
+
+def series_path(out: Path, frame: int) -> Path:
+    """``shot.png`` -> ``shot-000080.png`` (one picture per frame of a ``--frames`` series)."""
+    return out.with_name(f"{out.stem}-{frame:06d}{out.suffix or '.png'}")
+
+
 def snapshot(rrd, out, *, frame: Optional[int] = None, tab: Optional[str] = None,
-             clean: bool = True, settle: float = 1.5, timeout: float = 60.0) -> Path:
-    """Render ``rrd`` at ``frame`` (default: the last) into the PNG ``out``."""
+             clean: bool = True, settle: float = 1.5, timeout: float = 60.0,
+             stage: Optional[str] = None, frames: Optional[tuple[int, int]] = None):
+    """Render ``rrd`` at ``frame`` (default: the last) into the PNG ``out``.  ``stage``: at that
+    stage of the frame (the ``stage`` timeline: what the frame's earlier stages logged);
+    ``frames=(a, b)``: one picture per frame, ``out`` numbered (:func:`series_path`); returns
+    the path, or the list of paths for a series."""
     from .run import check_output
     from pfscope.trackers.outputs import incomplete_path
 
     rrd, out = Path(rrd), Path(out)
     if not rrd.is_file():
         raise InputError(f"{rrd}: no such recording")
-    out = check_output(out, force=True, what="picture")
+    wanted = list(range(frames[0], frames[1] + 1)) if frames else [frame]
+    outs = [series_path(out, f) for f in wanted] if frames else [out]
+    for o in outs:
+        check_output(o, force=True, what="picture")
+    slot = None
+    if stage is not None:
+        stride, slots = stage_slots(rrd)
+        if stage not in slots:
+            raise InputError(f"no stage {stage!r}; the recording's stages: "
+                             f"{', '.join(slots)}")
+        slot = slots[stage]
     problem = vulkan_problem()
     if problem:
         raise RunFailed(problem)
-    from rerun.experimental import ViewerClient
-
-    port = _free_port()
+    viewer = _Viewer(timeout)
     try:
-        viewer = ViewerClient.spawn(headless=True, port=port, hide_welcome_screen=True)
-    except Exception as e:  # noqa: BLE001 - one line for any start failure
-        raise RunFailed(f"the headless viewer did not start ({type(e).__name__}: {e}); "
-                        f"{VULKAN_HINT}") from None
-    try:
+        client = viewer.client
         try:
-            viewer.open(str(rrd.resolve()))
+            client.open(str(rrd.resolve()))
         except Exception as e:  # noqa: BLE001
-            raise RunFailed(f"the headless viewer could not open {rrd} or did not start "
+            raise RunFailed(f"the headless viewer could not open {rrd} "
                             f"({type(e).__name__}: {str(e)[:200]}); {VULKAN_HINT}") from None
-        if tab or clean:
-            info = viewer.get_blueprint()
-            bp = info.blueprint
-            if tab:
-                bp = select_tab(bp, tab)
-            if clean:
-                bp = _collapse_panels(bp)
-            viewer.set_blueprint(bp, store_id=info.store_id)
-        if frame is not None:
-            viewer.set_time("frame", sequence=int(frame), play_state="paused")
+        info = client.get_blueprint()
+        if tab and tab.lower() == "all":  # every video tab, one picture each
+            titles = video_tabs(info.blueprint)
+            jobs = [(t, f, tab_path(o, t)) for t in titles for f, o in zip(wanted, outs)]
         else:
-            viewer.set_time(play_state="paused")
-        time.sleep(settle)  # let the frame's chunks load and the views lay out
-        tmp = incomplete_path(out)
-        viewer.save_screenshot(str(tmp))
-        os.replace(tmp, out)
+            jobs = [(tab or ("All stages" if stage else None), f, o)
+                    for f, o in zip(wanted, outs)]
+        shown = object()
+        for t, f, o in jobs:
+            if t != shown and (t or clean):
+                bp = info.blueprint
+                if t:
+                    bp = select_tab(bp, t)
+                if clean:
+                    bp = _collapse_top(_collapse_panels(bp))
+                client.set_blueprint(bp, store_id=info.store_id)
+                shown = t
+                settle = max(settle, 1.0)
+            if slot is not None:
+                last = f if f is not None else _last_frame(rrd)
+                client.set_time("stage", sequence=int(last) * stride + slot,
+                                play_state="paused")
+            elif f is not None:
+                client.set_time("frame", sequence=int(f), play_state="paused")
+            else:
+                client.set_time(play_state="paused")
+            time.sleep(settle)  # let the frame's chunks load, the views lay out, toasts fade
+            tmp = incomplete_path(o)
+            for attempt in (1, 2):  # a busy machine can miss the viewer's deadline once
+                try:
+                    client.save_screenshot(str(tmp))
+                    break
+                except Exception as e:  # noqa: BLE001 - one line, never a traceback
+                    if attempt == 2:
+                        raise RunFailed(f"the headless viewer did not take the picture "
+                                        f"{o.name} ({type(e).__name__}: {str(e)[:120]})"
+                                        ) from None
+                    time.sleep(settle)
+            os.replace(tmp, o)
+            settle = min(settle, 0.8)  # the next frames of a series: the data is loaded
     finally:
-        try:
-            viewer.quit(timeout=10)
-        except Exception:  # noqa: BLE001 - teardown best effort
-            pass
-    return out
+        viewer.close()
+    if len(jobs) > 1:
+        return [o for _, _, o in jobs]
+    return outs if frames else outs[0]
+
+
+def video_tabs(bp: dict) -> list[str]:
+    """The titles of the blueprint's video tabs, in their tab order."""
+    return list(dict.fromkeys(t for _, _, t in _tab_children(bp)))
+
+
+def tab_path(out: Path, title: str) -> Path:
+    """``shot.png`` + "Birth & update" -> ``shot-birth-update.png``."""
+    import re
+
+    slug = re.sub(r"[^a-z0-9]+", "-", title.lower()).strip("-") or "tab"
+    return out.with_name(f"{out.stem}-{slug}{out.suffix or '.png'}")
+
+
+def _last_frame(rrd: Path) -> int:
+    from .info import recording_info
+
+    last = recording_info(rrd)["frames"]["last"]
+    if last is None:
+        raise InputError(f"{rrd}: no recorded frames")
+    return int(last)
 
 
 def cmd_snapshot(args) -> int:
-    out = snapshot(args.file, args.out, frame=args.frame, tab=args.tab,
-                   clean=not args.keep_panels)
-    print(f"wrote {out}")
+    if args.frames and args.frame:
+        raise InputError("give --frame N or --frames A:B, not both")
+    got = snapshot(args.file, args.out, frame=args.frame, tab=args.tab,  # "all": every tab
+                   clean=not args.keep_panels, stage=args.stage, frames=args.frames)
+    if isinstance(got, list):
+        print(f"wrote {len(got)} pictures: {got[0]} .. {got[-1]}")
+    else:
+        print(f"wrote {got}")
     return 0
 
 
-__all__ = ["snapshot", "select_tab", "tab_names", "vulkan_problem", "cmd_snapshot"]
+__all__ = ["snapshot", "select_tab", "tab_names", "vulkan_problem", "cmd_snapshot",
+           "stage_slots", "series_path"]

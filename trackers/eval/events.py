@@ -60,10 +60,24 @@ class TrackEvent:
         return (f"long miss: gt {g} unmatched for frames {self.frame}-{self.last_frame} "
                 f"({self.last_frame - self.frame + 1} frames)")
 
+    @property
+    def severity(self) -> str:
+        """WARN for what breaks an identity (switches, lost tracks), INFO for the rest."""
+        return "WARN" if self.kind in ("id_switch", "lost_track") else "INFO"
+
+    @property
+    def short(self) -> str:
+        """The body of the viewer's row: the kind and its frames; the ids are in their own
+        columns (``track_ids``, ``gt_ids``)."""
+        name = self.kind.replace("_", " ")
+        if self.last_frame != self.frame:
+            return f"{name}, frames {self.frame}-{self.last_frame}"
+        return f"{name}, frame {self.frame}"
+
     def to_dict(self) -> dict:
         return {"kind": self.kind, "frame": self.frame, "last_frame": self.last_frame,
                 "track_ids": list(self.track_ids), "gt_ids": list(self.gt_ids),
-                "message": self.message}
+                "severity": self.severity, "message": self.message}
 
 
 @dataclass
@@ -93,6 +107,10 @@ class EventIndex:
         self._miss: dict[int, tuple[int, int]] = {}   # gt id -> (first, last) unmatched frame
         self._heap: list[tuple[float, int]] = []
         self._last_frame = 0
+        #: the first frame the tracker showed a track: frames before it are its start-up
+        #: (no tracker confirms a track before it has seen enough frames), whose OSPA is the
+        #: cut-off by construction; they are left out of the worst frames
+        self.first_shown: Optional[int] = None
         self.counts = {k: 0 for k in KINDS}
 
     @property
@@ -144,8 +162,10 @@ class EventIndex:
         for g in missed:
             first, _ = self._miss.get(g, (frame, frame))
             self._miss[g] = (first, frame)
-        # worst frames by OSPA (ties: the earlier frame is kept)
-        if self.worst:
+        # worst frames by OSPA (ties: the earlier frame is kept), after the start-up
+        if self.first_shown is None and len(t_ids):
+            self.first_shown = frame
+        if self.worst and self.first_shown is not None:
             # ties (OSPA saturates at its cut-off): the frame with more errors, then the earlier
             item = (float(m.ospa), int(m.fp + m.fn + m.idsw), -frame)
             if len(self._heap) < self.worst:

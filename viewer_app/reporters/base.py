@@ -36,7 +36,7 @@ import rerun as rr
 
 from pfscope.trackers.report import (Boxes, Event, Field, Mask, Points, Scalar, Segments, Stage)
 
-from ..colors import id_colors, ramp, weight_style, weight_summary
+from ..colors import TrackPalette, id_colors, ramp, ramp_table, weight_style, weight_summary
 
 #: Semantic class ids of the static AnnotationContext (ids >= 1; 0 is "no class").
 #: Disjoint from the track palette (colors.TRACK_HUE_MIN..MAX): greys, white, black, red,
@@ -49,7 +49,23 @@ ROLES: dict[str, tuple[int, tuple[int, int, int, int]]] = {
     "switch": (5, (0, 0, 0, 255)),
     "dropped": (6, (110, 110, 110, 200)),
     "candidate": (7, (150, 150, 150, 140)),
+    # a particle born this frame (pink dots over the survivors' weight colours)
+    "birth": (8, (255, 170, 220, 235)),
+    # a classifier hit (a window the classifier accepted; the rest stay thin grey)
+    "hit": (9, (0, 230, 255, 255)),
+    # a kept cluster no confirmed track took (neutral, dashed-looking thin grey)
+    "unmatched": (10, (200, 200, 200, 200)),
 }
+#: Items styled by what their path says they are (the engine's paths, for items it reports
+#: with a generic role): newborn particles, classifier hits.
+PATH_ROLES = (("particles/birth", "birth"), ("classify/hits", "hit"))
+#: Metric marks are drawn outside the track box they mark (inflated by this many pixels per
+#: side) and over it (draw order), so a thick track box never hides them.
+MARK_INFLATE = {"false_positive": 4.0, "switch": 8.0, "miss": 0.0}
+MARK_DRAW_ORDER = 30.0
+#: Association edges: their gains are shown as labels when a frame has at most this many
+#: chosen edges (a label per edge; more would pile up)
+EDGE_LABELS_MAX = 25
 MAX_LABELS = 60
 DEFAULT_POINT_RADIUS = 1.5
 STATIC_FLUSH_TIMEOUT = 10.0  # seconds; see Reporter._static
@@ -92,6 +108,8 @@ class TrackerLayout:
     plots: tuple[tuple[str, tuple[str, ...]], ...] = (("Counts", ("tracks/count",
                                                                   "detections/count")),
                                                       ("Step ms", ("timing/**",)))
+    #: tab title -> one sentence on what the tab shows (the README's tab table)
+    notes: tuple[tuple[str, str], ...] = ()
 
 
 def _fmt(v: float) -> str:
@@ -117,10 +135,11 @@ def value_labels(values: dict, n: int, ids: Optional[np.ndarray] = None) -> Opti
     return out
 
 
-def _colors(ids: Optional[np.ndarray], id_kind: Optional[str]) -> Optional[np.ndarray]:
-    if ids is None:
-        return None
-    return id_colors(ids)
+def _path_role(path: str) -> Optional[str]:
+    for suffix, role in PATH_ROLES:
+        if path.endswith(suffix):
+            return role
+    return None
 
 
 class Columns:
@@ -271,6 +290,11 @@ class Reporter:
         self.jpeg_quality = int(jpeg_quality)
         self.logged: set[str] = set()
         self._mask_classes: dict[str, tuple] = {}
+        # one colour per track id for this lane, ids alive together far apart (OKLab)
+        self.palette = TrackPalette()
+        # this frame's kept clusters -> the confirmed track that took them (-1: none), by
+        # cluster prefix ("phd/clusters"): see stages()
+        self._cluster_track: dict[str, np.ndarray] = {}
 
     def video(self, path: str) -> str:
         return f"{self.root}video/{path}"
@@ -286,8 +310,68 @@ class Reporter:
         self.columns.add(entity, archetype, **fields)
 
     def stage(self, stage: Stage) -> None:
+        self.palette.frame = self.columns.frame
         for item in stage.items:
             self.item(item)
+
+    def frame_stages(self, stages, track_ids=None) -> None:
+        """Read the frame's stages before they are drawn: ``track_ids`` (the frame's output
+        tracks) get their palette colours first, so every item of the frame shows a track in
+        the colour of its box; the association's vertices are the kept clusters in order
+        (PHD-MT, DBN-PHD: ``assoc/vertices`` = ``clusters/kept``), so a kept cluster can be
+        drawn in the colour of the confirmed track that took it."""
+        self.palette.frame = self.columns.frame
+        if track_ids is not None:
+            self.palette.colors(track_ids)
+        self._cluster_track = {}
+        verts, kept = None, {}
+        for st in stages:
+            for it in st.items:
+                if isinstance(it, Boxes) and it.path == "assoc/vertices":
+                    verts = it
+                elif isinstance(it, Boxes) and it.path.endswith("clusters/kept") \
+                        and it.ids is not None:
+                    kept[it.path[:-len("/kept")]] = it.ids
+        if verts is None or verts.ids is None:
+            return
+        conf = verts.values.get("confirmed")
+        tids = np.where(conf > 0, verts.ids, -1) if conf is not None else verts.ids
+        for prefix, idx in kept.items():
+            if len(idx) != len(tids):
+                continue  # not the same estimates: leave them neutral
+            lut = np.full(int(idx.max()) + 1 if len(idx) else 0, -1, dtype=np.int64)
+            lut[idx] = tids
+            self._cluster_track[prefix] = lut
+
+    def _track_of_clusters(self, path: str, ids: np.ndarray) -> np.ndarray:
+        """Cluster ids -> the confirmed track id that took the cluster, or -1."""
+        prefix = path.rsplit("/", 1)[0]
+        lut = self._cluster_track.get(prefix)
+        out = np.full(len(ids), -1, dtype=np.int64)
+        if lut is None or not len(lut):
+            return out
+        ok = (ids >= 0) & (ids < len(lut))
+        out[ok] = lut[ids[ok]]
+        return out
+
+    def _id_colors(self, ids: Optional[np.ndarray], id_kind: Optional[str], path: str = "",
+                   alpha: int = 255) -> Optional[np.ndarray]:
+        """Colours of items with ids: a track id its track colour; a cluster the colour of the
+        confirmed track that took it, else the neutral "unmatched" grey; other ids (a detection
+        index, a class) the stateless palette."""
+        if ids is None:
+            return None
+        if id_kind == "track":  # the frame's tracks are registered first (frame_stages)
+            return self.palette.colors(ids, alpha, register=False)
+        if id_kind == "cluster":
+            tids = self._track_of_clusters(path, np.asarray(ids, dtype=np.int64))
+            out = np.tile(np.array(ROLES["unmatched"][1], dtype=np.uint8), (len(tids), 1))
+            out[:, 3] = min(alpha, 200)
+            m = tids >= 0
+            if m.any():
+                out[m] = self.palette.colors(tids[m], alpha, register=False)
+            return out
+        return id_colors(ids, alpha)
 
     def item(self, item) -> None:
         if isinstance(item, Scalar):
@@ -315,14 +399,31 @@ class Reporter:
         # the kept points only are converted (a cloud can hold many times max_points)
         xy = (p.xy if keep is None else p.xy[keep]).astype(np.float32)
         radii = np.float32(DEFAULT_POINT_RADIUS)
-        if p.weights is not None:
+        role = _path_role(p.path) or p.role
+        if role == "birth":  # newborn: white dots, apart from the survivors' weight colours
+            colors = None
+        elif p.weights is not None and "score" in p.values:
+            # a probability per particle (the DBN score): viridis on its value, 0 → 1, not
+            # by rank (the legend says so); the highest drawn last
+            w = p.weights if keep is None else p.weights[keep]
+            order = np.argsort(w, kind="stable")
+            colors = ramp_table(np.clip(w[order], 0.0, 1.0))
+            xy = xy[order]
+        elif p.weights is not None:
             w = p.weights if keep is None else p.weights[keep]
             order, colors, radii = weight_style(w, DEFAULT_POINT_RADIUS)
             xy = xy[order]  # the heaviest last: drawn on top
-        else:  # colours of the kept points only
-            colors = _colors(p.ids if p.ids is None or keep is None else np.asarray(p.ids)[keep],
-                             p.id_kind)
-        class_ids = ROLES[p.role][0] if p.role in ROLES and colors is None else None
+        elif p.ids is not None:  # colours of the kept points only
+            colors = self._id_colors(p.ids if keep is None else np.asarray(p.ids)[keep],
+                                     p.id_kind, p.path, alpha=200)
+        elif role is None:
+            # a cloud with no weights, ids or role (resampled parents): equal weights, the
+            # middle of the weight map (teal), as the legend says
+            colors = ramp_table(np.full(len(xy), 0.5))
+            colors[:, 3] = 200
+        else:
+            colors = None
+        class_ids = ROLES[role][0] if role in ROLES and colors is None else None
         self._row(self.video(p.path), rr.Points2D, positions=xy, colors=colors,
                   class_ids=class_ids, radii=radii, show_labels=False)
         if p.weights is not None:
@@ -331,10 +432,13 @@ class Reporter:
 
     def boxes(self, b: Boxes, radii: float = 1.0) -> None:
         boxes = b.boxes.astype(np.float32)
-        colors = _colors(b.ids, b.id_kind) if b.id_kind in ("track", "cluster") else None
+        colors = self._id_colors(b.ids, b.id_kind, b.path) \
+            if b.id_kind in ("track", "cluster") else None
         if colors is not None and b.values:  # evidence about a track (a window, a MAP box
             radii = min(radii, 0.5)          # with its score), not the track: thin
-        role = b.role if b.role in ROLES else None
+        role = _path_role(b.path) or (b.role if b.role in ROLES else None)
+        if role == "hit":
+            colors, radii = None, 1.5
         if colors is None and role is None:
             # no identity, no role (classifier windows, candidates): a thin neutral background,
             # fainter the more there are, so hundreds of windows do not hide the frame
@@ -351,12 +455,14 @@ class Reporter:
     def segments(self, s: Segments) -> None:
         strips = np.stack([s.a, s.b], axis=1).astype(np.float32)
         chosen = s.role is None
-        colors = _colors(s.ids, s.id_kind) if chosen else None
+        colors = self._id_colors(s.ids, s.id_kind, s.path) if chosen else None
         class_ids = ROLES[s.role][0] if s.role in ROLES else None
         labels = value_labels(s.values, len(s), s.ids if s.id_kind == "track" else None) \
             if chosen else None
+        # the chosen edges' gains are shown (few a frame); candidates' labels stay hidden
+        show = bool(chosen and labels and len(s) <= EDGE_LABELS_MAX)
         self._row(self.video(s.path), rr.LineStrips2D, strips=list(strips),
-                  colors=colors, class_ids=class_ids, labels=labels, show_labels=False,
+                  colors=colors, class_ids=class_ids, labels=labels, show_labels=show,
                   radii=1.5 if chosen else 0.5)
 
     def mask(self, m: Mask) -> None:
@@ -396,20 +502,26 @@ class Reporter:
 
     def track_boxes(self, path: str, ids: np.ndarray, boxes: np.ndarray) -> None:
         boxes = np.asarray(boxes, dtype=np.float32).reshape(-1, 4)
-        self._boxes(self.video(path), boxes, colors=id_colors(ids),
+        self.palette.frame = self.columns.frame
+        self._boxes(self.video(path), boxes, colors=self.palette.colors(ids),
                     labels=[str(int(i)) for i in ids], radii=2.0)
 
     def track_strips(self, path: str, ids: np.ndarray, strips: list) -> None:
         self._row(self.video(path), rr.LineStrips2D,
                   strips=[np.asarray(s, dtype=np.float32) for s in strips],
-                  colors=id_colors(ids), radii=1.0)
+                  colors=self.palette.colors(ids), radii=1.0)
 
     def role_boxes(self, path: str, boxes: np.ndarray, role: str,
                    labels: Optional[list[str]] = None, radii: float = 1.0) -> None:
         boxes = np.asarray(boxes, dtype=np.float32).reshape(-1, 4)
+        grow = MARK_INFLATE.get(role)
+        extra = {}
+        if grow is not None:  # a metric mark: outside and over the track box it marks
+            boxes = boxes + np.array([-grow, -grow, 2 * grow, 2 * grow], dtype=np.float32)
+            extra["draw_order"] = MARK_DRAW_ORDER
         self._boxes(self.video(path), boxes, class_ids=np.full(len(boxes), ROLES[role][0]),
                     labels=(labels if len(boxes) <= MAX_LABELS else [])
-                    if labels is not None else None, show_labels=False, radii=radii)
+                    if labels is not None else None, show_labels=False, radii=radii, **extra)
 
     def _boxes(self, entity: str, boxes: np.ndarray, **fields) -> None:
         """Boxes (N, 4) float32 ``x, y, w, h`` as a ``Boxes2D`` row (centres and half sizes,

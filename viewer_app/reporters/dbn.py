@@ -16,10 +16,21 @@ LAYOUT = TrackerLayout(
            # the cloud after the update only: the one before (equal weights, all teal) drawn
            # with it covered it ("All stages" still shows both)
            ("Update", ("dbn/particles/after", "dbn/update/**")),
-           ("Birth", ("dbn/particles/birth", "dbn/blobs/accepted")),
+           # the survivors by weight, the newborn in white, the blobs that spawned them
+           ("Birth", ("dbn/particles/predicted", "dbn/particles/birth", "dbn/blobs/accepted")),
            ("Resampled", ("dbn/particles/resampled", "tracks/**")),
            ("Clusters", ("dbn/clusters/**",)),
-           ("Association", ("assoc/**", "tracks/**"))),
+           ("Association", ("assoc/**", "tracks/trails"))),
+    notes=(("Tracks", "confirmed tracks and their errors"),
+           ("Foreground", "the background-subtraction mask"),
+           ("Blobs", "blobs the DBN accepted (grey) and rejected (dark grey)"),
+           ("DBN score", "each scored particle's DBN probability, viridis 0 to 1 (not a rank)"),
+           ("Update", "the cloud after the update, colour = weight rank, blobs with the mass "
+                      "each won"),
+           ("Birth", "survivors by predicted weight, newborn particles pink, accepted blobs"),
+           ("Resampled", "the resampled cloud (equal weights, teal) and the tracks"),
+           ("Clusters", "K-means clusters in the colour of the track that took them"),
+           ("Association", "vertices, chosen edges with their gain, candidate edges, trails")),
     plots=(("N̂_k vs true count", ("dbn/n_hat", "metrics/cardinality/true", "tracks/count")),
            ("Blobs", ("dbn/blobs/count", "dbn/blobs/rejected", "dbn/clusters/kept")),
            ("Particles", ("dbn/particles/count", "dbn/birth/count", "dbn/particles/scored")),

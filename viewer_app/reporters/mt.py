@@ -3,7 +3,10 @@
 from .base import TrackerLayout
 
 LAYOUT = TrackerLayout(
-    views=(("Association", ("assoc/**", "tracks/**")), ("Tracks", ("tracks/**",))),
+    views=(("Association", ("assoc/**", "tracks/trails")), ("Tracks", ("tracks/**",))),
+    notes=(("Association", "vertices (the detections), chosen edges labelled with their "
+                           "gain log f, candidate edges grey, trails"),
+           ("Tracks", "confirmed tracks (thick, id labels, trails) and their errors")),
     plots=(("Counts", ("tracks/count", "detections/count", "assoc/**")),
            ("Step ms", ("timing/**",))),
 )
