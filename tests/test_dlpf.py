@@ -258,8 +258,10 @@ def test_scale_prior_learns_height_vs_row_online():
     prior.add(boxes(10))
     assert not prior.ready()                                  # too few samples
     narrow = ScalePrior(H, min_samples=5)
-    narrow.add(np.array([[0.0, 200.0, 20.0, 60.0]] * 30))      # all at one row: no slope
-    assert not narrow.ready()
+    narrow.add(np.array([[0.0, 200.0, 20.0, 60.0]] * 30))      # all at one row: no slope yet,
+    assert narrow.ready()                                      # but the height range is learnt
+    assert narrow.coef()[1] == 0.0
+    assert np.allclose(narrow.mean_height(np.array([50.0, 400.0])), 60.0)
     prior.add(boxes(200))
     assert prior.ready()
     a, b = prior.coef()
