@@ -118,6 +118,17 @@ class ScalePrior:
         use = rng.random(n) < mix
         return np.where(use, np.clip(prior, lo, hi), flat)
 
+    def bounds(self, lo: float, hi: float, margin: float = 2.0) -> tuple[float, float]:
+        """The flat draw's range once the prior is :meth:`ready`: the learnt heights over the
+        image rows widened by ``margin`` either way (people at depths not seen yet are still
+        found), inside ``[lo, hi]``; ``(lo, hi)`` while not ready."""
+        if not self.ready():
+            return lo, hi
+        h = self.mean_height(np.array([0.0, self.height]))
+        a = float(np.clip(h.min() / margin, lo, hi))
+        b = float(np.clip(h.max() * margin, lo, hi))
+        return (a, b) if b > a else (lo, hi)
+
     def describe(self) -> str:
         if not self.ready():
             return f"scale prior: not ready ({self.n} samples)"
