@@ -8,10 +8,13 @@ One frame (stages in order):
               scored (eq. (7)).
 ``parents``   free parents are resampled on those weights (eq. (8)), a fraction ``explore`` is
               re-drawn uniformly (ours: without it a person who starts walking where no parent
-              is would never be found), each draws a random scale (§2.1).  Once the online
-              perspective prior (:mod:`.scale`: person height linear in the image row, fitted
-              to the classifier-verified boxes of confirmed tracks, nothing scene-specific) is
-              ready, a fraction ``prior_mix`` of them draw their scale from it instead (ours).
+              is would never be found), each draws a random scale (§2.1), log-uniform over
+              ``scale_min..scale_max`` of the image height (0.06-0.9: any person) until the
+              online perspective prior (:mod:`.scale`: person height linear in the image row,
+              or a constant height while its samples sit at one depth, fitted to the
+              classifier-verified boxes of confirmed tracks, nothing scene-specific) is ready;
+              then a fraction ``prior_mix`` draw from it and the rest from the learnt heights
+              widened ×/÷ ``prior_margin`` (ours).
 ``classify``  each free parent evaluates the HOG+SVM classifier on its one window
               (:mod:`.classifier`; windows snapped to a pyramid grid so that duplicates and
               shared HOG blocks are computed once per frame; the SVM is OpenCV's people SVM or
@@ -21,7 +24,10 @@ One frame (stages in order):
 ``confirm``   hits extend candidate objects; 4 sequential detections confirm one (§2.2,
               :mod:`.confirm`); its parent leaves the search, spawns children and takes the HSV
               reference histogram (eq. (12)).
-``children``  every track's children: AR(2) prediction, histograms, Bhattacharyya distance
+``children``  every track's children: moved by the track's Lucas-Kanade flow into this frame
+              (``children.flow``, ours: the current frame's observation; the paper preset's
+              AR(2) prediction from earlier estimates trails a walker by about a frame),
+              histograms, Bhattacharyya distance
               (eq. (13)), weights (eq. (14)), MAP estimate (eq. (15)), resampling
               (:mod:`.children`).  A track whose MAP likelihood ``exp(−λB²)`` stays below
               ``lost_likelihood`` for ``lost_frames`` frames ends and its parent is reset (§2.2).
