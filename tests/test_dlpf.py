@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from conftest import sequence
+from conftest import flat_params, sequence
 from pfscope.trackers.api import make_tracker, registry
 from pfscope.trackers.data.sources import open_source
 from pfscope.trackers.data.synthetic import SceneConfig
@@ -486,24 +486,14 @@ def test_spread_moves_copies_of_a_parent_to_neighbouring_nodes_deterministically
 
 # ------------------------------------------------------------------ issue 20: presets, scale
 
-def _flat(d: dict, prefix: str = "") -> dict:
-    out = {}
-    for k, v in d.items():
-        if isinstance(v, dict):
-            out.update(_flat(v, f"{prefix}{k}."))
-        else:
-            out[f"{prefix}{k}"] = v
-    return out
-
-
 def test_paper_preset_differs_from_the_default_in_exactly_the_documented_fields():
     from pfscope.trackers.api import make_params
     from pfscope.trackers.dlpf.tracker import PAPER_CHANGES
     from pfscope.trackers.params import to_dict
 
-    default = _flat(to_dict(make_params("dlpf", None, {})))
-    paper = _flat(to_dict(make_params("dlpf", "paper", {})))
-    assert default == _flat(to_dict(make_params("dlpf", "default", {})))
+    default = flat_params(to_dict(make_params("dlpf", None, {})))
+    paper = flat_params(to_dict(make_params("dlpf", "paper", {})))
+    assert default == flat_params(to_dict(make_params("dlpf", "default", {})))
     differ = {k: paper[k] for k in default if paper[k] != default[k]}
     assert differ == PAPER_CHANGES
     # and the paper preset is what it says: eq. (15) MAP, no snapping, no reference refresh,
