@@ -27,6 +27,17 @@ def sequence(name: str) -> Path:
     return root / name
 
 
+def flat_params(d: dict, prefix: str = "") -> dict:
+    """A nested parameter dict (``params.to_dict``) as ``{"part.name": value}``."""
+    out = {}
+    for k, v in d.items():
+        if isinstance(v, dict):
+            out.update(flat_params(v, f"{prefix}{k}."))
+        else:
+            out[f"{prefix}{k}"] = v
+    return out
+
+
 @pytest.fixture
 def pets() -> Path:
     return sequence("PETS09-S2L1")

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from conftest import sequence
+from conftest import flat_params, sequence
 from pfscope.trackers.api import make_tracker, registry
 from pfscope.trackers.data.sources import open_source
 from pfscope.trackers.data.synthetic import SceneConfig
@@ -258,8 +258,10 @@ def test_scale_prior_learns_height_vs_row_online():
     prior.add(boxes(10))
     assert not prior.ready()                                  # too few samples
     narrow = ScalePrior(H, min_samples=5)
-    narrow.add(np.array([[0.0, 200.0, 20.0, 60.0]] * 30))      # all at one row: no slope
-    assert not narrow.ready()
+    narrow.add(np.array([[0.0, 200.0, 20.0, 60.0]] * 30))      # all at one row: no slope yet,
+    assert narrow.ready()                                      # but the height range is learnt
+    assert narrow.coef()[1] == 0.0
+    assert np.allclose(narrow.mean_height(np.array([50.0, 400.0])), 60.0)
     prior.add(boxes(200))
     assert prior.ready()
     a, b = prior.coef()
@@ -480,3 +482,38 @@ def test_spread_moves_copies_of_a_parent_to_neighbouring_nodes_deterministically
     base = clf.snap(w[:1])[0]
     assert (np.abs(a[:, :2] + a[:, 2:] / 2 - (base[:2] + base[2:] / 2)) < 0.5 * base[3]).all()
     assert np.allclose(clf.snap(a), a)                         # on the grid
+
+
+# ------------------------------------------------------------------ issue 20: presets, scale
+
+def test_paper_preset_differs_from_the_default_in_exactly_the_documented_fields():
+    from pfscope.trackers.api import make_params
+    from pfscope.trackers.dlpf.tracker import PAPER_CHANGES
+    from pfscope.trackers.params import to_dict
+
+    default = flat_params(to_dict(make_params("dlpf", None, {})))
+    paper = flat_params(to_dict(make_params("dlpf", "paper", {})))
+    assert default == flat_params(to_dict(make_params("dlpf", "default", {})))
+    differ = {k: paper[k] for k in default if paper[k] != default[k]}
+    assert differ == PAPER_CHANGES
+    # and the paper preset is what it says: eq. (15) MAP, no snapping, no reference refresh,
+    # no scale prior, no measured flow
+    p = make_params("dlpf", "paper", {})
+    assert (p.children.estimate, p.children.snap, p.children.ref_update, p.parents.prior_mix,
+            p.children.flow) == ("map", 0.0, 0.0, 0.0, False)
+
+
+def test_scale_is_learnt_on_a_scene_of_people_three_times_taller():
+    """People 96-199 px tall in a 240-px image (0.4-0.83 of its height; the old fixed range
+    stopped at 0.3, 72 px, and found none of them: recall 0.008).  The scale prior learns
+    their height from the confirmed hits and DLPF tracks them."""
+    cfg = SceneConfig(frames=40, targets=4, width=320, height=240, seed=3, height_far=0.4,
+                      height_near=0.87)
+    src = open_source("synthetic", synthetic_config=cfg)
+    tr = make_tracker("dlpf", seed=0)
+    res = run(src, [tr])
+    gt_h = np.median(src.gt.boxes[:, 3])
+    assert tr.scale_prior.ready()
+    learnt = tr.scale_prior.mean_height(np.array([120.0]))[0]
+    assert abs(np.log(learnt / gt_h)) < np.log(1.3), (learnt, gt_h)
+    assert res.scores["dlpf"]["Recall"] > 0.3

@@ -179,7 +179,8 @@ def run(source, trackers: Mapping[str, Tracker] | Sequence[Tracker], *,
         frames: Optional[int] = None, level: Optional[str] = None,
         detector: Optional[str] = None, detector_options: Optional[dict] = None,
         hooks: Sequence[Hook] = (), should_stop: Optional[Callable[[], bool]] = None,
-        keep_rows: bool = True, score: bool = True, start: int = 1) -> RunResult:
+        keep_rows: bool = True, score: bool = True, start: int = 1,
+        offline: bool = True) -> RunResult:
     """Run ``trackers`` (lane name → tracker, or a list: lanes named by ``tracker.name``) over
     ``source`` for ``frames`` frames (default all) and hand every frame to ``hooks``.
 
@@ -189,6 +190,9 @@ def run(source, trackers: Mapping[str, Tracker] | Sequence[Tracker], *,
     ``keep_rows``: keep each lane's rows in memory (for ``scores``; off for very long runs).
     ``start``: the first frame (1-based; frame indices stay the video's, and the scores cover
     frames ``start .. start + frames - 1``).
+    ``offline`` (default): the source is a recording, so a tracker with a ``prepare(source,
+    first, last)`` method may look at the frames of the run ahead of time before the first
+    step (DBN-PHD: a temporal-median background); False (``--online``): a stream, no look ahead.
     """
     from .detect import make_detector
 
@@ -242,6 +246,11 @@ def run(source, trackers: Mapping[str, Tracker] | Sequence[Tracker], *,
         for h in hooks:
             h.begin(info)
             begun.append(h)
+        if offline and total is not None:
+            for tracker in lanes.values():
+                prepare = getattr(tracker, "prepare", None)
+                if prepare is not None:
+                    prepare(source, start, start + total - 1)
         for frame in iter_frames(source, total, start):
             if should_stop is not None and should_stop():
                 break

@@ -166,6 +166,11 @@ class _Parser(argparse.ArgumentParser):
         super()._check_value(action, value)
 
 
+ONLINE_HELP = ("treat the source as a stream: no look at the clip ahead of time (dbn-phd and "
+               "phd-bgsub then learn their background from the first frames only, instead of "
+               "starting from a temporal median of frames sampled over the clip)")
+
+
 def build_parser() -> argparse.ArgumentParser:
     from pfscope.trackers.api import DEFAULT_TRACKER, registry
     from pfscope.trackers.detect import DETECTORS
@@ -213,6 +218,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="frame rate of an image folder or a video file (MOT folders have theirs "
                         "in seqinfo.ini)")
     r.add_argument("--tracks-out", type=Path, default=None, help="also write MOT tracks here")
+    r.add_argument("--online", action="store_true", help=ONLINE_HELP)
     r.add_argument("--classifier", type=Path, default=None, metavar="MODEL",
                    help="dlpf: an IKSVM from `pfscope train-classifier` (default OpenCV's people "
                         "SVM); dbn-phd: a DBN from `pfscope train-dbn` (same as --set model=MODEL)")
@@ -253,6 +259,7 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--fps", type=POSITIVE, default=None)
     c.add_argument("--force", action="store_true")
     c.add_argument("--json", action="store_true", help="print the scores as JSON")
+    c.add_argument("--online", action="store_true", help=ONLINE_HELP)
     c.add_argument("--quiet", action="store_true")
 
     e = sub.add_parser("eval", help="score MOT tracks files against ground truth (one "
@@ -369,22 +376,31 @@ def build_parser() -> argparse.ArgumentParser:
                         "0.05 (default 0: off)")
     s.add_argument("--quiet", action="store_true")
 
-    td = sub.add_parser("train-dbn", help="train the DBN of dbn-phd (feng2015) on a sequence's "
+    td = sub.add_parser("train-dbn", help="train the DBN of dbn-phd (feng2015) on sequences' "
                                           "ground truth",
                         description="Train DBN-PHD's deep belief network: people = the ground-"
-                                    "truth boxes, not people = background-subtraction noise "
-                                    "blobs and random background windows. The last frames of "
-                                    "the range are held out and scored (accuracy, ROC AUC). "
+                                    "truth boxes (and the foreground blobs covering them), not "
+                                    "people = background-subtraction noise blobs and random "
+                                    "background windows. The last frames of each sequence's "
+                                    "range are held out and scored (accuracy, ROC AUC). "
                                     "Use it with: pfscope record SOURCE --tracker dbn-phd "
-                                    "--set model=MODEL.pt")
-    td.add_argument("source", help="MOTChallenge folder with gt/gt.txt, or 'synthetic'")
+                                    "--set model=MODEL.pt. The shipped default model: "
+                                    "pfscope train-dbn ../shared/data/PETS09-S2L1 "
+                                    "../shared/data/PETS09-S3MF1 --holdout 0 --augment --stride 3 "
+                                    "--batch 256 --seed 0 --out people_dbn.pt")
+    td.add_argument("source", nargs="+",
+                    help="MOTChallenge folder(s) with gt/gt.txt, or 'synthetic'")
     td.add_argument("--out", type=Path, required=True, help="model file to write (MODEL.pt)")
     td.add_argument("--frames", type=FRAMES, default=None, metavar="N|FIRST:LAST",
-                    help="frames to train on, e.g. 1:400 (default: all)")
+                    help="frames to train on, e.g. 1:400 (default: all; one source only)")
     td.add_argument("--holdout", type=float, default=0.2,
-                    help="fraction of the range, at its end, held out for scoring (default 0.2)")
+                    help="fraction of each range, at its end, held out for scoring "
+                         "(default 0.2; 0: train on everything)")
+    td.add_argument("--augment", action="store_true",
+                    help="also describe every sampled frame mirrored and colour-jittered")
     td.add_argument("--stride", type=int, default=2, help="sample every N-th frame (default 2)")
     td.add_argument("--epochs", type=int, default=30, help="fine-tuning epochs (default 30)")
+    td.add_argument("--batch", type=int, default=64, help="mini-batch size (default 64)")
     td.add_argument("--seed", type=int, default=0, help="random seed (same seed, same model)")
     td.add_argument("--force", action="store_true", help="overwrite an existing model file")
     td.add_argument("--quiet", action="store_true")
@@ -658,7 +674,8 @@ def cmd_compare(args) -> int:
     opts = RecordOptions(detector=args.detector, min_score=args.min_score, level=args.level,
                          max_points=args.max_points, frames=count, start=start, seed=args.seed,
                          force=args.force, preset=args.preset, video=args.video,
-                         tracker_options={**file_opts, **_tracker_options(args)})
+                         tracker_options={**file_opts, **_tracker_options(args)},
+                         online=args.online)
     res = record(source, out, opts, trackers=names, progress=not args.quiet)
     if res.scores:
         _print_scores(res.scores, args.json)
@@ -811,7 +828,8 @@ def cmd_record(args) -> int:
                          level=args.level, max_points=args.max_points, frames=count, start=start,
                          seed=args.seed, force=args.force, tracks_out=args.tracks_out,
                          spawn=args.spawn, serve=args.serve, preset=preset,
-                         timing=args.timing, tracker_options=options, video=args.video)
+                         timing=args.timing, tracker_options=options, video=args.video,
+                         online=args.online)
     res = record(source, out, opts, progress=not args.quiet)
     size = res.bytes / 1e6
     state = ("interrupted; recording finished, readable and kept as incomplete"
@@ -893,7 +911,7 @@ def cmd_synth(args) -> int:
 
 
 def cmd_train_dbn(args) -> int:
-    """``pfscope train-dbn``: DBN-PHD's classifier from a sequence's ground truth."""
+    """``pfscope train-dbn``: DBN-PHD's classifier from sequences' ground truth."""
     import time
 
     import numpy as np
@@ -904,9 +922,13 @@ def cmd_train_dbn(args) -> int:
         raise InputError(f"{args.out}: exists (use --force to overwrite)")
     if not 0.0 <= args.holdout < 1.0:
         raise InputError(f"--holdout must be in [0, 1), got {args.holdout}")
-    src = open_source(args.source)
-    length = getattr(src, "length", None)
-    lo, hi = frames_within(args.frames, length, args.source)
+    if args.frames and len(args.source) > 1:
+        raise InputError("--frames applies to one source; give one source or no --frames")
+    ranges = []
+    for spec in args.source:
+        src = open_source(spec)
+        lo, hi = frames_within(args.frames, getattr(src, "length", None), spec)
+        ranges.append((spec, src, lo, hi))
     from pfscope.trackers.dbn.model import collect_samples, train_dbn  # torch, on demand
 
     t0 = time.perf_counter()
@@ -918,14 +940,25 @@ def cmd_train_dbn(args) -> int:
             last_print[0] = now
             print(f"train-dbn: {phase} {i}/{n} ({now - t0:.0f} s)", file=sys.stderr)
 
-    X, y, f = collect_samples(src, range(lo, hi + 1), stride=args.stride, seed=args.seed,
-                              progress=progress, with_frames=True)
-    cut = hi - int(round(args.holdout * (hi - lo + 1)))
-    hold = f > cut if args.holdout > 0 else None
+    Xs, ys, holds, parts = [], [], [], []
+    for k, (spec, src, lo, hi) in enumerate(ranges):
+        X, y, f = collect_samples(src, range(lo, hi + 1), stride=args.stride,
+                                  seed=args.seed + k, augment=args.augment,
+                                  progress=progress, with_frames=True)
+        cut = hi - int(round(args.holdout * (hi - lo + 1)))
+        Xs.append(X)
+        ys.append(y)
+        holds.append(f > cut)
+        parts.append(f"{src.name} frames {lo}-{cut}"
+                     + (f" (held out {cut + 1}-{hi})" if cut < hi else ""))
+    X, y = np.concatenate(Xs), np.concatenate(ys)
+    hold = np.concatenate(holds) if args.holdout > 0 else None
+    if args.batch < 1:
+        raise InputError(f"--batch must be >= 1, got {args.batch}")
     model = train_dbn(X, y, seed=args.seed, fine_epochs=args.epochs, holdout_mask=hold,
-                      progress=progress)
-    model.info["trained_on"] = (f"{src.name} frames {lo}-{cut if hold is not None else hi}"
-                                + (f" (held out {cut + 1}-{hi})" if hold is not None else ""))
+                      holdout=0.0, batch=args.batch, progress=progress)
+    model.info["trained_on"] = "; ".join(parts)
+    model.info["augment"] = bool(args.augment)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     model.save(args.out)
     i = model.info
@@ -936,7 +969,8 @@ def cmd_train_dbn(args) -> int:
         print(f"held out {i['holdout']} samples ({i['holdout_positives']} people): accuracy "
               f"{i['holdout_accuracy']:.3f}  ROC AUC {i['holdout_auc']:.3f}")
     print(f"wrote {args.out} ({args.out.stat().st_size / 1024:.0f} KB)")
-    print(f"use it with:  pfscope record {args.source} --tracker dbn-phd --set model={args.out}")
+    print(f"use it with:  pfscope record {args.source[0]} --tracker dbn-phd "
+          f"--set model={args.out}")
     return 0
 
 

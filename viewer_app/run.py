@@ -91,6 +91,7 @@ class RecordOptions:
     tracker_options: dict = field(default_factory=dict)
     long_miss: int = 10                # failure index: a gt unmatched this many frames in a row
     video: str = "encode"              # encode | source | auto (recorder.VIDEO_MODES)
+    online: bool = False               # a stream: trackers get no look at the clip ahead
 
 
 @dataclass
@@ -413,7 +414,8 @@ def _record_locked(source, out, opts, lanes, infos, params, tracks_out, live, pr
             res = run_pipeline(source, built, frames=opts.frames, start=opts.start,
                                level=opts.level,
                                detector=det_name, detector_options=det_opts, hooks=hooks,
-                               should_stop=lambda: flag.requested)
+                               should_stop=lambda: flag.requested,
+                               offline=not opts.online)
         except InputError as e:
             raise InputError(f"{e} ({recorder.describe_kept()})") from None
         except Exception as e:

@@ -268,6 +268,41 @@ class SyntheticSource(Source):
             yield f
 
 
+def sample_frames(source, n: int, first: int = 1, last: Optional[int] = None) -> list[np.ndarray]:
+    """``n`` images evenly spaced over frames ``first..last`` of a recorded ``source`` (the
+    whole clip when ``last`` is None and the length is known): an *offline* look at the clip,
+    e.g. for a temporal-median background.  Folders read only the chosen files; a video is
+    read through once (``grab`` skips the frames not chosen).  [] when the length is unknown
+    (a stream: nothing can be sampled ahead)."""
+    length = getattr(source, "length", None)
+    last = length if last is None else (min(last, length) if length else last)
+    if not last or n < 1 or last < first:
+        return []
+    idx = np.unique(np.round(np.linspace(first, last, min(n, last - first + 1))).astype(int))
+    want = set(int(i) for i in idx)
+    if isinstance(source, MOTFolderSource):
+        return [_read_image(source._path(int(k)), int(k), (source.width, source.height))
+                for k in idx]
+    if isinstance(source, ImageFolderSource):
+        return [_read_image(source.files[int(k) - 1], int(k), (source.width, source.height))
+                for k in idx]
+    if isinstance(source, VideoFileSource):
+        out = []
+        cap = cv2.VideoCapture(str(source.path))
+        try:
+            for k in range(1, int(idx[-1]) + 1):
+                if not cap.grab():
+                    break
+                if k in want:
+                    ok, img = cap.retrieve()
+                    if ok and img is not None:
+                        out.append(img)
+        finally:
+            cap.release()
+        return out
+    return [f.image for f in source.frames(int(idx[-1])) if f.index in want]
+
+
 def _dataclass_dict(obj) -> dict:
     from dataclasses import asdict, is_dataclass
 

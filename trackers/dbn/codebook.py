@@ -52,6 +52,7 @@ from ..params import param
 from ..types import Frame
 
 METHODS = ("codebook", "mog2", "knn")
+INITIAL = ("median", "online")
 
 
 @dataclass(frozen=True)
@@ -77,6 +78,13 @@ class BackgroundParams:
     min_area: int = param(150, "smallest blob, full-resolution foreground pixels")
     max_foreground: float = param(0.5, "a frame whose foreground exceeds this fraction has no "
                                        "blobs (lighting change, camera moved)")
+    initial: str = param("median", "initial background of a recorded clip: 'median' (an "
+                                   "offline choice: the per-pixel temporal median of "
+                                   "median_frames frames sampled evenly over the run seeds the "
+                                   "codebook, which then detects and adapts as Kim §3 has it); "
+                                   "'online' (also `--online`): the codebook trains on the "
+                                   "first train_frames frames (Kim §2)")
+    median_frames: int = param(30, "frames sampled for the temporal-median background")
 
     def __post_init__(self):
         def check(name, ok, rule):
@@ -93,6 +101,8 @@ class BackgroundParams:
         check("beta", self.beta > 1, "> 1")
         check("min_area", self.min_area >= 1, ">= 1")
         check("max_foreground", 0 < self.max_foreground <= 1, "in (0, 1]")
+        check("initial", self.initial in INITIAL, f"one of {', '.join(INITIAL)}")
+        check("median_frames", self.median_frames >= 3, ">= 3")
 
 
 class _Book:
@@ -235,6 +245,38 @@ class Codebook:
         self.book = _Book(n, L)
         self.cache = _Book(n, 2)
 
+    def prime(self, images) -> np.ndarray:
+        """Seed the model with a background learnt offline: the per-pixel temporal median of
+        ``images`` (K, H', W', 3) at the model's scale, one codeword per pixel, its brightness
+        bounds the 25th–75th percentile of the pixel's brightness over the images (widened to
+        hold the median's).  The training period is then over (as if the median had been seen
+        for ``train_frames`` frames): the next frame is detected with the layered model of
+        Kim §3 (cache, promotion, deletion), and matched codewords keep learning.  Returns the
+        median image (uint8).  A person who walks through is in few of the images, so the
+        median shows the empty scene; one standing still in more than half of them is
+        background until the cache/stale rules move them out (as in Kim's own model)."""
+        p = self.params
+        stack = np.asarray(images, dtype=np.float32)
+        if stack.ndim != 4 or stack.shape[-1] != 3 or len(stack) < 1:
+            raise ValueError(f"codebook.prime: expected (K, H, W, 3) images, got {stack.shape}")
+        med = np.median(stack, axis=0)
+        self._init(stack.shape[1:3])
+        n = med.shape[0] * med.shape[1]
+        x = med.reshape(-1, 3)
+        inten = np.sqrt(np.einsum("pc,pc->p", x, x))
+        bright = np.sqrt(np.einsum("kpc,kpc->kp", stack.reshape(len(stack), n, 3),
+                                   stack.reshape(len(stack), n, 3)))
+        lo, hi = np.percentile(bright, [25.0, 75.0], axis=0).astype(np.float32)
+        b = self.book
+        self.t = p.train_frames
+        pix = np.arange(n)
+        b.add(pix, np.zeros(n, np.int64), x, inten, self.t)
+        b.imin[0] = np.minimum(lo, inten)
+        b.imax[0] = np.maximum(hi, inten)
+        b.f[0] = p.train_frames
+        b.lam[0] = 0
+        return np.clip(np.round(med), 0, 255).astype(np.uint8)
+
     def apply(self, image: np.ndarray) -> np.ndarray:
         p = self.params
         img = np.asarray(image)
@@ -323,6 +365,16 @@ class ForegroundModel:
         return cv2.resize(image, (max(1, round(w * s)), max(1, round(h * s))),
                           interpolation=cv2.INTER_AREA)
 
+    def prime(self, images) -> np.ndarray | None:
+        """Offline initial background (``BackgroundParams.initial == 'median'``) from full-
+        resolution frames ``images``: the codebook is seeded with their temporal median
+        (:meth:`Codebook.prime`); returns the median at the model's scale, or None when nothing
+        was done (MOG2/KNN, 'online', or no images)."""
+        if (not isinstance(self._model, Codebook) or self.params.initial != "median"
+                or not len(images)):
+            return None
+        return self._model.prime(np.stack([self._small(im) for im in images]))
+
     def mask(self, frame: Frame) -> np.ndarray:
         small = self._small(frame.image)
         if isinstance(self._model, Codebook):
@@ -354,4 +406,5 @@ def blobs_from_mask(mask: np.ndarray, scale: float, min_area: int,
     return boxes[order] / scale, fill[order]
 
 
-__all__ = ["BackgroundParams", "Codebook", "ForegroundModel", "blobs_from_mask", "METHODS"]
+__all__ = ["BackgroundParams", "Codebook", "ForegroundModel", "blobs_from_mask", "METHODS",
+           "INITIAL"]

@@ -53,9 +53,9 @@ class DBNParams:
 
     use_dbn: bool = param(True, "weight particles by the DBN score (false: the plain Gaussian "
                                 "likelihood on blobs, the no-DBN baseline)")
-    model: str = param("", "DBN model file (`pfscope train-dbn`); empty: the default model, "
-                           "trained on first use (~5 s) on a built-in synthetic scene")
-    model_seed: int = param(0, "seed of the default model (same seed → same model)")
+    model: str = param("", "DBN model file (`pfscope train-dbn`); empty: the model shipped "
+                           "in the package (trained on person / non-person crops of PETS09-S2L1 "
+                           "and PETS09-S3MF1)")
     c: float = param(1.0, "the constant c of eq. (9) (the paper gives no value)",
                      paper="feng2015 eq. (9)")
     score: str = param("logsigmoid", "log-score s(x): 'logsigmoid' c·log σ(a) (default) or "

@@ -401,24 +401,36 @@ def sample_boxes(image_shape, gt_boxes: np.ndarray, blobs: np.ndarray,
             np.concatenate([np.ones(len(pos)), np.zeros(len(neg))]))
 
 
+def _colour_jitter(image: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """The frame under another light: a random gain (0.75–1.3) and offset (±20) per colour
+    channel, so the DBN does not learn one camera's white balance."""
+    gain = rng.uniform(0.75, 1.3, 3)
+    off = rng.uniform(-20.0, 20.0, 3)
+    return np.clip(image.astype(np.float32) * gain + off, 0, 255).astype(np.uint8)
+
+
 def collect_samples(source, frames: Iterable[int], *, features: FeatureConfig = FeatureConfig(),
                     feature_scale: float = 0.5, background=None, seed: int = 0,
-                    stride: int = 2, min_vis: float = 0.5,
+                    stride: int = 2, min_vis: float = 0.5, augment: bool = False,
                     progress: Optional[Callable[[str, int, int], None]] = None,
                     with_frames: bool = False):
     """Features ``X (N, D)`` and labels ``y (N,)`` from a source with ground truth, over
     ``frames`` (every ``stride``-th is sampled; the background model sees every frame up to
-    the last one); ``with_frames`` adds the (N,) frame index of every sample.  People: gt
+    the last one, starting from the temporal median of the range as the tracker does);
+    ``with_frames`` adds the (N,) frame index of every sample.  People: gt
     boxes (visibility >= ``min_vis`` where known, conf != 0) and the background-subtraction
     blobs that cover one (:func:`sample_boxes`).  Not people: blobs that overlap no gt box,
-    random and shifted windows."""
+    random and shifted windows.  ``augment``: every sampled frame's boxes are also described
+    on the mirrored frame and on a colour-jittered copy (:func:`_colour_jitter`)."""
     from .codebook import BackgroundParams, ForegroundModel, blobs_from_mask
 
-    from ..data.sources import training_frames
+    from ..data.sources import sample_frames, training_frames
 
     gt, first, last, chosen = training_frames(source, frames, stride, "train-dbn")
     bp = background or BackgroundParams()
     fm = ForegroundModel(bp)
+    fm.prime(sample_frames(source, bp.median_frames, first, last)
+             if bp.initial == "median" else [])
     rng = np.random.default_rng(seed)
     Xs, ys, fs = [], [], []
     for frame in source.frames(last):
@@ -435,6 +447,16 @@ def collect_samples(source, frames: Iterable[int], *, features: FeatureConfig = 
         Xs.append(FrameFeatures(frame.image, features, feature_scale).describe(boxes))
         ys.append(labels)
         fs.append(np.full(len(labels), frame.index, dtype=np.int64))
+        if augment:
+            W = frame.image.shape[1]
+            mirrored = boxes.copy()
+            mirrored[:, 0] = W - boxes[:, 0] - boxes[:, 2]
+            Xs.append(FrameFeatures(np.ascontiguousarray(frame.image[:, ::-1]), features,
+                                    feature_scale).describe(mirrored))
+            Xs.append(FrameFeatures(_colour_jitter(frame.image, rng), features,
+                                    feature_scale).describe(boxes))
+            ys += [labels, labels]
+            fs += [fs[-1], fs[-1]]
         if progress:
             progress("features", frame.index - first + 1, last - first + 1)
     X = np.concatenate(Xs) if Xs else np.zeros((0, features.dim))
@@ -444,22 +466,25 @@ def collect_samples(source, frames: Iterable[int], *, features: FeatureConfig = 
     return X, y
 
 
-@lru_cache(maxsize=2)
-def default_model(seed: int = 0) -> DBNModel:
-    """The model used when none is given: trained on first use (a few seconds, deterministic)
-    on a built-in synthetic scene that no default run evaluates on (scene seed 1000 + seed)."""
-    from ..data.sources import open_source
-    from ..data.synthetic import SceneConfig
+#: The model DBN-PHD uses when none is given, shipped in the package (package data): trained on
+#: person and non-person crops of the development sequences PETS09-S2L1 and PETS09-S3MF1 by the
+#: command in :data:`SHIPPED_COMMAND` (same seed → same file).
+SHIPPED = Path(__file__).with_name("people_dbn.pt")
+SHIPPED_COMMAND = ("pfscope train-dbn ../shared/data/PETS09-S2L1 ../shared/data/PETS09-S3MF1 "
+                   "--holdout 0 --augment --stride 3 --batch 256 --seed 0 "
+                   "--out trackers/dbn/people_dbn.pt")
 
-    src = open_source("synthetic", synthetic_config=SceneConfig(
-        frames=60, targets=8, seed=1000 + int(seed), name="dbn-training"))
-    X, y = collect_samples(src, range(6, 61), seed=seed, stride=2)
-    # no hue-turned copies: the scene's shirts already have hues spread round the circle
-    # (golden-ratio spacing), and first use stays a few seconds
-    model = train_dbn(X, y, seed=seed, hue_shifts=())
-    model.info["trained_on"] = f"synthetic scene seed {1000 + int(seed)}, frames 6-60"
-    return model
+
+@lru_cache(maxsize=1)
+def default_model() -> DBNModel:
+    """The shipped model (:data:`SHIPPED`), loaded once per process with ``weights_only=True``;
+    nothing is trained at start-up."""
+    if not SHIPPED.is_file():
+        raise InputError(f"{SHIPPED}: the shipped DBN model is missing (a broken install?); "
+                         f"give one with --set model=FILE (`pfscope train-dbn`)")
+    return load_model(SHIPPED)
 
 
 __all__ = ["RBM", "DBN", "DBNModel", "load_model", "train_dbn", "pretrain_rbm", "roc_auc",
-           "collect_samples", "sample_boxes", "rotate_hue", "default_model", "FORMAT", "VERSION"]
+           "collect_samples", "sample_boxes", "rotate_hue", "default_model", "SHIPPED",
+           "SHIPPED_COMMAND", "FORMAT", "VERSION"]

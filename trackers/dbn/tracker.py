@@ -179,8 +179,21 @@ def _gated_pairs(states: np.ndarray, Z: np.ndarray, params: PHDParams, confidenc
             np.concatenate([c.cols for c in chunks]).astype(np.int64))
 
 
+#: ``--preset paper``: feng2015 as published, differing from the default in exactly these fields
+#: (tests/test_dbn.py checks it): the literal eq. (9) score on every particle, maggio2007's
+#: J_max, and the codebook trained online on the first frames (Kim 2005) instead of our
+#: offline temporal-median start.
+PAPER_CHANGES: dict[str, object] = {
+    "dbn.score": "logit",                  # eq. (9): s = c · a(x)
+    "dbn.apply": "particle",               # eq. (9) weighs every particle
+    "filter.birth.j_max": PHDParams().birth.j_max,  # maggio2007 §4's J_max
+    "background.initial": "online",        # Kim 2005 §2: train on the first N frames
+}
+
+
 @register(presets={"default": DBNPHDParams(), "paper": DBNPHDParams(
-    filter=PHDParams(), dbn=DBNParams(score="logit", apply="particle"))})
+    filter=PHDParams(), dbn=DBNParams(score="logit", apply="particle"),
+    background=BackgroundParams(initial="online"))})
 class DBNPHDTracker(_AssociatingTracker):
     """DBN-PHD: codebook blobs → particle PHD with a DBN colour+HOG likelihood → K-means →
     graph association."""
@@ -204,10 +217,21 @@ class DBNPHDTracker(_AssociatingTracker):
             if model is None:
                 from .model import default_model, load_model  # torch, on demand
 
-                model = load_model(dp.model) if dp.model else default_model(dp.model_seed)
+                model = load_model(dp.model) if dp.model else default_model()
             self.dbn = DBNLikelihood(model, dp, self.params.filter.likelihood)
         # the filter's parts; its likelihood is the DBN one (or maggio2007's Gaussian)
         self.filter = PHDFilter(self.params.filter, rng, likelihood=self.dbn)
+
+    def prepare(self, source, first: int, last: int) -> None:
+        """Offline start (the pipeline calls this for a recorded clip, not with ``--online``):
+        the background starts from the temporal median of frames sampled evenly over
+        ``first..last`` (``background.initial = 'median'``, :meth:`ForegroundModel.prime`)."""
+        bp = self.params.background
+        if bp.method != "codebook" or bp.initial != "median":
+            return
+        from ..data.sources import sample_frames
+
+        self.background.prime(sample_frames(source, bp.median_frames, first, last))
 
     def config(self) -> dict:
         cfg = {"tracker": self.name, "params": to_dict(self.params)}
@@ -363,7 +387,8 @@ def _baseline_params() -> DBNPHDParams:
 
 
 @register(presets={"default": _baseline_params(),
-                   "paper": replace(_baseline_params(), filter=PHDParams())})
+                   "paper": replace(_baseline_params(), filter=PHDParams(),
+                                    background=BackgroundParams(initial="online"))})
 class PHDBgsubTracker(DBNPHDTracker):
     """PHD on background-subtraction blobs without the DBN (DBN-PHD's baseline, feng2015 "PHD")."""
 

@@ -22,6 +22,8 @@ Bhattacharyya distance eq. (13), weights eq. (14) ``exp(−λ B²)``, MAP estima
 
 from __future__ import annotations
 
+from typing import Optional
+
 import cv2
 import numpy as np
 
@@ -91,16 +93,21 @@ def spawn(box: np.ndarray, n: int, pos_sigma: float, rng: np.random.Generator) -
 
 
 def predict(states: np.ndarray, damping: float, pos_sigma: float, scale_sigma: float,
-            rng: np.random.Generator) -> np.ndarray:
+            rng: np.random.Generator, shift: Optional[np.ndarray] = None) -> np.ndarray:
     """Second-order AR prediction (module docstring); position noise ``pos_sigma · h``, height
-    noise log-normal with ``scale_sigma``."""
+    noise log-normal with ``scale_sigma``.  ``shift`` (2,): a measured motion into this frame
+    (the track's optical flow) used instead of the AR velocity term."""
     s = np.asarray(states, dtype=np.float64)
     n = len(s)
     cur, prev = s[:, :3], s[:, 3:]
     new = np.empty_like(s)
     h = cur[:, 2]
-    new[:, 0] = cur[:, 0] + damping * (cur[:, 0] - prev[:, 0]) + rng.normal(0, 1, n) * pos_sigma * h
-    new[:, 1] = cur[:, 1] + damping * (cur[:, 1] - prev[:, 1]) + rng.normal(0, 1, n) * pos_sigma * h
+    if shift is None:
+        dx, dy = damping * (cur[:, 0] - prev[:, 0]), damping * (cur[:, 1] - prev[:, 1])
+    else:
+        dx, dy = float(shift[0]), float(shift[1])
+    new[:, 0] = cur[:, 0] + dx + rng.normal(0, 1, n) * pos_sigma * h
+    new[:, 1] = cur[:, 1] + dy + rng.normal(0, 1, n) * pos_sigma * h
     new[:, 2] = h * np.exp(rng.normal(0.0, scale_sigma, n))
     new[:, 3:] = cur
     return new

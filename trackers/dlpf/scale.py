@@ -11,6 +11,11 @@ box at confirmation) is one sample ``(y_c, h)``.  Nothing is scene-specific: bef
 fit is not usable (a non-positive height anywhere in the image, a residual spread ≥
 ``sigma_max``), :meth:`ScalePrior.ready` is False and the parents keep the flat log-uniform draw.
 
+When the samples do not yet spread over ``min_spread`` of the image height (people all at one
+depth, a close street camera, the first people of a clip) the fit falls back to a constant
+height (``β = 0``, ``α`` the weighted mean height): the scale *range* is then still learnt from
+the scene, only its slope waits for people at other rows.
+
 Estimator: exponentially forgetting weighted least squares (``forget`` per sample) of ``h`` on
 ``(1, y_c)``, i.e. sufficient statistics ``Σw, Σw y, Σw y², Σw h, Σw y h`` decayed by ``forget``
 at each new sample, so the prior follows a slow change (a zooming camera) but one bad sample
@@ -62,11 +67,14 @@ class ScalePrior:
             self._ymin, self._ymax = min(self._ymin, yc), max(self._ymax, yc)
 
     def coef(self) -> np.ndarray | None:
-        """``(α, β)`` of ``h = α + β y_c / H``, or None (degenerate)."""
+        """``(α, β)`` of ``h = α + β y_c / H``, or None (no sample); ``β = 0`` while the samples
+        span less than ``min_spread`` of the image height (module docstring)."""
         sw, sy, syy, sh, syh = self.S
-        det = sw * syy - sy * sy
-        if sw <= 0 or det <= 1e-9 * max(sw * syy, 1e-12):
+        if sw <= 0:
             return None
+        det = sw * syy - sy * sy
+        if self._ymax - self._ymin < self.min_spread or det <= 1e-9 * max(sw * syy, 1e-12):
+            return np.array([sh / sw, 0.0])
         beta = (sw * syh - sy * sh) / det
         alpha = (sh - beta * sy) / sw
         return np.array([alpha, beta])
@@ -81,8 +89,8 @@ class ScalePrior:
         return max(float(np.sqrt(var)), self.sigma_min)
 
     def ready(self) -> bool:
-        """Enough, spread-out samples and a fit that is positive over the image."""
-        if self.n < self.min_samples or self._ymax - self._ymin < self.min_spread:
+        """Enough samples and a fit that is positive over the image."""
+        if self.n < self.min_samples:
             return False
         ab = self.coef()
         if ab is None or min(ab[0], ab[0] + ab[1]) <= 1.0:
@@ -109,6 +117,17 @@ class ScalePrior:
         prior = np.exp(mu + rng.normal(0.0, self.sigma, n))
         use = rng.random(n) < mix
         return np.where(use, np.clip(prior, lo, hi), flat)
+
+    def bounds(self, lo: float, hi: float, margin: float = 2.0) -> tuple[float, float]:
+        """The flat draw's range once the prior is :meth:`ready`: the learnt heights over the
+        image rows widened by ``margin`` either way (people at depths not seen yet are still
+        found), inside ``[lo, hi]``; ``(lo, hi)`` while not ready."""
+        if not self.ready():
+            return lo, hi
+        h = self.mean_height(np.array([0.0, self.height]))
+        a = float(np.clip(h.min() / margin, lo, hi))
+        b = float(np.clip(h.max() * margin, lo, hi))
+        return (a, b) if b > a else (lo, hi)
 
     def describe(self) -> str:
         if not self.ready():

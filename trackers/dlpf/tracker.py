@@ -8,10 +8,13 @@ One frame (stages in order):
               scored (eq. (7)).
 ``parents``   free parents are resampled on those weights (eq. (8)), a fraction ``explore`` is
               re-drawn uniformly (ours: without it a person who starts walking where no parent
-              is would never be found), each draws a random scale (§2.1).  Once the online
-              perspective prior (:mod:`.scale`: person height linear in the image row, fitted
-              to the classifier-verified boxes of confirmed tracks, nothing scene-specific) is
-              ready, a fraction ``prior_mix`` of them draw their scale from it instead (ours).
+              is would never be found), each draws a random scale (§2.1), log-uniform over
+              ``scale_min..scale_max`` of the image height (0.06-0.9: any person) until the
+              online perspective prior (:mod:`.scale`: person height linear in the image row,
+              or a constant height while its samples sit at one depth, fitted to the
+              classifier-verified boxes of confirmed tracks, nothing scene-specific) is ready;
+              then a fraction ``prior_mix`` draw from it and the rest from the learnt heights
+              widened ×/÷ ``prior_margin`` (ours).
 ``classify``  each free parent evaluates the HOG+SVM classifier on its one window
               (:mod:`.classifier`; windows snapped to a pyramid grid so that duplicates and
               shared HOG blocks are computed once per frame; the SVM is OpenCV's people SVM or
@@ -21,7 +24,10 @@ One frame (stages in order):
 ``confirm``   hits extend candidate objects; 4 sequential detections confirm one (§2.2,
               :mod:`.confirm`); its parent leaves the search, spawns children and takes the HSV
               reference histogram (eq. (12)).
-``children``  every track's children: AR(2) prediction, histograms, Bhattacharyya distance
+``children``  every track's children: moved by the track's Lucas-Kanade flow into this frame
+              (``children.flow``, ours: the current frame's observation; the paper preset's
+              AR(2) prediction from earlier estimates trails a walker by about a frame),
+              histograms, Bhattacharyya distance
               (eq. (13)), weights (eq. (14)), MAP estimate (eq. (15)), resampling
               (:mod:`.children`).  A track whose MAP likelihood ``exp(−λB²)`` stays below
               ``lost_likelihood`` for ``lost_frames`` frames ends and its parent is reset (§2.2).
@@ -126,15 +132,19 @@ class ParentParams:
                                      "only)")
     scale_jitter: float = param(0.1, "std of the log-scale random walk of a resampled parent "
                                      "(ours; 0 = the paper: a fresh random scale every frame)")
-    scale_min: float = param(0.1, "smallest person height a parent looks for, fraction of the "
-                                  "image height (PETS09 768x576: 58 px)")
-    scale_max: float = param(0.3, "largest person height, fraction of the image height")
+    scale_min: float = param(0.06, "smallest person height a parent looks for before the scale "
+                                   "prior has learnt the scene's range, fraction of the image "
+                                   "height (768x576: 35 px)")
+    scale_max: float = param(0.9, "largest person height searched before the scale prior has "
+                                  "learnt the scene's range, fraction of the image height")
     prior_mix: float = param(0.7, "fraction of free parents whose scale is drawn from the online "
                                   "perspective prior (height vs image row, fitted to verified "
                                   "track boxes; dlpf.scale) once it is ready (ours; 0 = the "
                                   "paper's flat random scale)")
     prior_forget: float = param(0.995, "forgetting factor per sample of the scale prior's fit")
-    prior_min_samples: int = param(20, "verified boxes the scale prior needs before it is used")
+    prior_min_samples: int = param(8, "verified boxes the scale prior needs before it is used")
+    prior_margin: float = param(2.0, "once the prior is ready, the flat draw spans its learnt "
+                                     "heights (top to bottom row) divided / multiplied by this")
 
     def __post_init__(self):
         if self.n < 1 or not 0 <= self.explore <= 1 or not 0 < self.scale_min <= self.scale_max:
@@ -230,6 +240,11 @@ class ChildParams:
     overlap_iou: float = param(0.4, "children of a weaker track overlapping a stronger track's "
                                     "box by this IoU get zero weight")
     merge_frames: int = param(3, "frames a weaker track may overlap a stronger one before it ends")
+    flow: bool = param(True, "children move by the track's Lucas-Kanade flow measured from the "
+                             "last frame to this one (median over a grid inside its box), the "
+                             "current frame's observation, instead of the AR(2) velocity of the "
+                             "earlier estimates, which trails a walking person by about a frame "
+                             "(ours; false = the AR(2) prediction)")
 
     def __post_init__(self):
         if self.estimate not in ("map", "mean"):
@@ -263,6 +278,7 @@ class _Track:
     unsupported: int = 0         # consecutive frames without a parent hit
     support: Optional[np.ndarray] = None  # this frame's best classifier hit of its parent
     overlap: int = 0             # consecutive frames overlapping a stronger track
+    shift: Optional[np.ndarray] = None  # this frame's measured LK motion of its box (children.flow)
 
 
 #: The settings DLPF landed with (before the scale prior etc.): ``--preset landed`` reproduces
@@ -272,7 +288,47 @@ LANDED = DLPFParams(parents=ParentParams(prior_mix=0.0),
                     children=ChildParams(estimate="map", ref_update=0.0, snap=0.0))
 
 
-@register(presets={"paper": DLPFParams(), "landed": LANDED})
+#: ``--preset paper``: jung2013 as published.  Each field below is one of our additions turned
+#: off (its value in the paper's reading) — and these are the *only* fields in which the paper
+#: preset differs from the default (tests/test_dlpf.py checks that).  The classifier stays
+#: OpenCV's linear people SVM unless ``classifier.model`` names an IKSVM from
+#: ``pfscope train-classifier`` (the paper's classifier needs training data we do not ship).
+PAPER_CHANGES: dict[str, object] = {
+    "parents.velocity_from_flow": False,   # eq. (4): constant velocity, v moved by noise only
+    "parents.explore": 0.0,                # eq. (8): resampled on motion only, no re-draws
+    "parents.score_weight": 0.0,           # eq. (8): motion weights only
+    "parents.scale_jitter": 0.0,           # §2.1: a fresh random scale every frame
+    "parents.prior_mix": 0.0,              # §2.1: no scale prior (flat random scale)
+    "classifier.hit_threshold": 0.0,       # the SVM's sign
+    "classifier.verify_windows": 0,        # §2.2: a confirmed object is tracked by colour only
+    "confirm.max_gap": 0,                  # §2.2: 4 *sequential* detections
+    "confirm.backfill": False,             # tracks start at confirmation
+    "children.estimate": "map",            # eq. (15): MAP child
+    "children.flow": False,                # children's AR(2) prediction, no measured flow
+    "children.inject": 0.0,                # no re-seeding at classifier hits
+    "children.support_sigma": 0.0,         # eq. (14): colour weights only
+    "children.unsupported_frames": 0,      # a track ends only when its colour is lost
+    "children.ref_update": 0.0,            # §2.2: q* taken at k0 and kept
+    "children.snap": 0.0,                  # eq. (15) reported as is
+    "children.merge_frames": 1_000_000,    # no duplicate-track removal (ours)
+    "children.overlap_iou": 1.01,          # no overlap suppression between tracks (ours)
+}
+
+
+def _with_changes(base, changes: dict):
+    from dataclasses import replace
+
+    parts: dict[str, dict] = {}
+    for key, value in changes.items():
+        part, name = key.split(".")
+        parts.setdefault(part, {})[name] = value
+    return replace(base, **{k: replace(getattr(base, k), **v) for k, v in parts.items()})
+
+
+PAPER = _with_changes(DLPFParams(), PAPER_CHANGES)
+
+
+@register(presets={"default": DLPFParams(), "paper": PAPER, "landed": LANDED})
 class DLPFTracker:
     """DLPF (jung2013): parents on LK motion classify one HOG window each; confirmed people are
     tracked by HSV child particles."""
@@ -314,9 +370,33 @@ class DLPFTracker:
         if not self.tracks:
             return np.zeros((0, 4))
         b = np.array([t.box for t in self.tracks])
-        v = np.array([t.velocity for t in self.tracks])
-        b[:, :2] += v
+        b[:, :2] += self._shifts()
         return b
+
+    def _shifts(self) -> np.ndarray:
+        """(T, 2) each live track's motion into this frame: its measured flow (children.flow)
+        when it has one, else its velocity."""
+        return np.array([t.shift if t.shift is not None else t.velocity
+                         for t in self.tracks]).reshape(-1, 2)
+
+    def _measure_track_flow(self, grey: np.ndarray) -> None:
+        """``t.shift`` of every track: the median Lucas-Kanade flow, last frame → this one, of
+        a 4 × 8 grid over the central half of its box's width (the person, not the background
+        beside them); None when fewer than 4 grid points were tracked (one LK call for all)."""
+        for t in self.tracks:
+            t.shift = None
+        if not self.tracks or self._prev_grey is None or not self.params.children.flow:
+            return
+        M = self.params.motion
+        gx, gy = np.meshgrid(np.linspace(0.3, 0.7, 4), np.linspace(0.1, 0.9, 8))
+        grid = np.c_[gx.ravel(), gy.ravel()]
+        b = np.array([t.box for t in self.tracks])
+        pts = (b[:, None, :2] + grid[None] * b[:, None, 2:]).reshape(-1, 2)
+        flow, ok = mo.lk_flow(self._prev_grey, grey, pts, win=M.lk_window, levels=M.lk_levels)
+        flow, ok = flow.reshape(len(b), -1, 2), ok.reshape(len(b), -1)
+        for k, t in enumerate(self.tracks):
+            if ok[k].sum() >= 4:
+                t.shift = np.median(flow[k][ok[k]], axis=0)
 
     def _end(self, track: _Track, why: str, frame: int, log: StageLog) -> None:
         assert self.parents is not None and self._size is not None
@@ -347,6 +427,7 @@ class DLPFTracker:
         prior = self.scale_prior
         log = StageLog(self.stages, level)
         rows: Rows = []
+        self._measure_track_flow(grey)
         tboxes = self.predicted_track_boxes()
 
         # ---------------------------------------------------------------- motion (eqs. 1-7)
@@ -391,6 +472,8 @@ class DLPFTracker:
         if n_explore:
             pick = rng.choice(len(free), n_explore, replace=False)
             new[pick] = pa.uniform_states(n_explore, W, H, rng)
+        if P.parents.prior_mix > 0:  # the learnt range narrows the flat draw too (ours)
+            lo, hi = prior.bounds(lo, hi, P.parents.prior_margin)
         heights = pa.draw_heights(len(free), lo, hi, rng)
         if P.parents.scale_jitter > 0:  # inherited scale, random walk (ours; §2.1 redraws)
             inherited = self.parents.extra[free[anc], 0] * np.exp(
@@ -519,7 +602,7 @@ class DLPFTracker:
         ``verify_windows − 1`` jittered copies (position 10% of the height, scale 10%)."""
         k = self.params.classifier.verify_windows
         tboxes = np.array([t.box for t in self.tracks]).reshape(-1, 4)
-        tboxes[:, :2] += np.array([t.velocity for t in self.tracks]).reshape(-1, 2)
+        tboxes[:, :2] += self._shifts()
         if k <= 0 or len(tboxes) == 0:
             return np.zeros((0, 4)), np.zeros(0, dtype=np.int64)
         n = len(tboxes)
@@ -568,7 +651,8 @@ class DLPFTracker:
             return
         rng = self.rng
         H, W = img.shape[:2]
-        preds = [ch.predict(t.kids.states, C.damping, C.pos_sigma, C.scale_sigma, rng)
+        preds = [ch.predict(t.kids.states, C.damping, C.pos_sigma, C.scale_sigma, rng,
+                            shift=t.shift)
                  for t in self.tracks]
         for t, p in zip(self.tracks, preds):  # re-seed part of the children at the parent's hit
             k = int(round(C.inject * len(p)))
