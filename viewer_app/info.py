@@ -22,11 +22,29 @@ from .properties import PROPERTY_ROOT, read_properties
 HEADLINE = ("MOTA", "MOTP", "IDF1", "HOTA", "IDSW", "FP", "FN", "OSPA")
 
 
+RRD_MAGIC = b"RRF2"
+
+
+def check_rrd_header(path: Path) -> None:
+    """One line when ``path`` is not a Rerun recording (empty, or not starting with RRF2)."""
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(len(RRD_MAGIC))
+    except OSError as e:
+        raise InputError(f"{path}: cannot read ({e.strerror or e})") from None
+    if not head:
+        raise InputError(f"{path}: empty file, not a Rerun recording")
+    if head != RRD_MAGIC:
+        raise InputError(f"{path}: not a Rerun recording (it does not start with "
+                         f"{RRD_MAGIC.decode()})")
+
+
 def _open(path: Path):
     import rerun as rr
 
     if not path.is_file():
         raise InputError(f"{path}: no such recording")
+    check_rrd_header(path)
     try:
         reader = rr.chunk.RrdReader(str(path))
     except Exception as e:  # noqa: BLE001 - any reader error is the file's fault
@@ -166,7 +184,14 @@ def print_info(info: dict, out=None, params: bool = True) -> None:
         if params:
             for k, v in sorted(cfg.items()):
                 if k.startswith("params."):
-                    p(f"    {k[len('params.'):]} = {_fmt(v)}")
+                    name = k[len("params."):]
+                    eff, origin = cfg.get(f"effective.{name}"), cfg.get(f"origin.{name}")
+                    line = f"    {name} = {_fmt(v)}"
+                    if eff is not None and eff != v:
+                        line += f" -> in effect {_fmt(eff)}"
+                    if origin:
+                        line += f"  ({origin})"
+                    p(line)
     if info["scores"]:
         p()
         lanes = list(info["scores"])
@@ -217,7 +242,7 @@ def cmd_view(args) -> int:
               f"'rerun {path.name}' (pip install rerun-sdk==0.41.*), or take a picture with "
               f"'pfscope snapshot {path} --frame N --out shot.png'")
         return 0
-    cmd = viewer_command() + [str(path)]
+    cmd = viewer_command() + [os.path.abspath(path)]  # a name may start with '-'
     subprocess.Popen(cmd, start_new_session=True, stdout=subprocess.DEVNULL,
                      stderr=subprocess.DEVNULL, env={**os.environ, "RERUN_ANALYTICS": "0"})
     print(f"opened {path} in the Rerun viewer")

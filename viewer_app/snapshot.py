@@ -101,6 +101,9 @@ def snapshot(rrd, out, *, frame: Optional[int] = None, tab: Optional[str] = None
     rrd, out = Path(rrd), Path(out)
     if not rrd.is_file():
         raise InputError(f"{rrd}: no such recording")
+    from .info import check_rrd_header
+
+    check_rrd_header(rrd)
     out = check_output(out, force=True, what="picture")
     problem = vulkan_problem()
     if problem:
