@@ -52,7 +52,13 @@ def _open(path: Path):
     try:
         return reader.store().stream(), True
     except Exception:  # noqa: BLE001 - no footer (killed run): stream what is there
+        pass
+    try:
         return reader.stream(), False
+    except Exception as e:  # noqa: BLE001 - cut short inside an entry
+        msg = str(e).splitlines()[0] if str(e) else type(e).__name__
+        raise InputError(f"{path}: cut short, not readable as it is ({msg[:160]}); try "
+                         f"`pfscope repair {path}`") from None
 
 
 def recording_info(path, top: int = 10) -> dict[str, Any]:
@@ -101,7 +107,11 @@ def recording_info(path, top: int = 10) -> dict[str, Any]:
                     events.setdefault(lane, []).append({"frame": f, "message": msg})
     except Exception as e:  # noqa: BLE001
         raise InputError(f"{path}: unreadable chunk ({type(e).__name__}: {e})") from None
-    props = read_properties(path)
+    try:
+        props = read_properties(path)
+    except Exception as e:  # noqa: BLE001 - the file's fault
+        raise InputError(f"{path}: unreadable properties ({type(e).__name__}: "
+                         f"{str(e).splitlines()[0][:160] if str(e) else ''})") from None
     lanes = {g.split(".", 1)[1]: v for g, v in props.items() if g.startswith("tracker.")}
     scores = {g.split(".", 1)[1]: v for g, v in props.items() if g.startswith("scores.")}
     counts = {g.split(".", 1)[1]: v for g, v in props.items() if g.startswith("events.")}

@@ -122,22 +122,28 @@ def snapshot(rrd, out, *, frame: Optional[int] = None, tab: Optional[str] = None
         except Exception as e:  # noqa: BLE001
             raise RunFailed(f"the headless viewer could not open {rrd} or did not start "
                             f"({type(e).__name__}: {str(e)[:200]}); {VULKAN_HINT}") from None
-        if tab or clean:
-            info = viewer.get_blueprint()
-            bp = info.blueprint
-            if tab:
-                bp = select_tab(bp, tab)
-            if clean:
-                bp = _collapse_panels(bp)
-            viewer.set_blueprint(bp, store_id=info.store_id)
-        if frame is not None:
-            viewer.set_time("frame", sequence=int(frame), play_state="paused")
-        else:
-            viewer.set_time(play_state="paused")
-        time.sleep(settle)  # let the frame's chunks load and the views lay out
-        tmp = incomplete_path(out)
-        viewer.save_screenshot(str(tmp))
-        os.replace(tmp, out)
+        try:
+            if tab or clean:
+                info = viewer.get_blueprint()
+                bp = info.blueprint
+                if tab:
+                    bp = select_tab(bp, tab)
+                if clean:
+                    bp = _collapse_panels(bp)
+                viewer.set_blueprint(bp, store_id=info.store_id)
+            if frame is not None:
+                viewer.set_time("frame", sequence=int(frame), play_state="paused")
+            else:
+                viewer.set_time(play_state="paused")
+            time.sleep(settle)  # let the frame's chunks load and the views lay out
+            tmp = incomplete_path(out)
+            viewer.save_screenshot(str(tmp))
+            os.replace(tmp, out)
+        except InputError:
+            raise
+        except Exception as e:  # noqa: BLE001 - a truncated or foreign file: one line
+            raise RunFailed(f"{rrd}: the viewer could not show it ({type(e).__name__}: "
+                            f"{str(e).splitlines()[0][:200] if str(e) else ''})") from None
     finally:
         try:
             viewer.quit(timeout=10)
