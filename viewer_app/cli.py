@@ -466,13 +466,14 @@ def _lane_params_options(args, lane_trackers: list[str]) -> dict:
     pf = _read_params(args)
     if pf is None:
         return {}
+    preset = getattr(args, "preset", None) or pf.preset
     if pf.tracker:
-        _check_params_file(pf, pf.tracker, None)
+        _check_params_file(pf, pf.tracker, preset)
         return {f"{pf.tracker}.{k}": v for k, v in pf.options.items()}
     errors = []
     for t in dict.fromkeys(lane_trackers):
         try:
-            _check_params_file(pf, t, None)
+            _check_params_file(pf, t, preset)
             break
         except InputError as e:
             errors.append(e)
