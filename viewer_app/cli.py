@@ -957,6 +957,8 @@ def cmd_tune(args) -> int:
 
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
+    from pfscope.trackers.jobs import Interrupted
+
     os.environ.setdefault("RERUN_ANALYTICS", "0")
     args = build_parser().parse_args(argv)
     try:
@@ -1008,13 +1010,9 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     except KeyboardInterrupt:
         print("pfscope: interrupted", file=sys.stderr)
         return _interrupted_status()
-    except Exception as e:  # noqa: BLE001 - Interrupted (a stopped batch or tune), else a bug
-        from pfscope.trackers.jobs import Interrupted
-
-        if isinstance(e, Interrupted):
-            print(f"pfscope: {args.command}: {e}", file=sys.stderr)
-            return e.exit_status
-        raise
+    except Interrupted as e:  # a batch or tune stopped by a signal
+        print(f"pfscope: {args.command}: {e}", file=sys.stderr)
+        return e.exit_status
     except BrokenPipeError:  # `pfscope trackers | head`: the reader left, nothing to report
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
