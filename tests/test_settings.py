@@ -237,3 +237,12 @@ def test_ids_are_parsed_as_integers(tmp_path):
     f.write_text(f"1,{2 ** 64},0,0,10,10,-1,-1,-1,-1\n")
     with pytest.raises(Exception, match="64-bit"):
         read_mot(f, "tracks")
+
+
+def test_stdout_to_a_full_device_is_one_line():
+    with open("/dev/full", "w") as full:
+        r = subprocess.run([sys.executable, "-m", "pfscope.viewer_app.cli", "trackers"],
+                           cwd=REPO, env=dict(os.environ, RERUN_ANALYTICS="0"), stdout=full,
+                           stderr=subprocess.PIPE, text=True, timeout=120)
+    assert r.returncode == 1 and "Traceback" not in r.stderr, r.stderr
+    assert "cannot write" in r.stderr

@@ -1016,6 +1016,17 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     except BrokenPipeError:  # `pfscope trackers | head`: the reader left, nothing to report
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
+    except OSError as e:
+        import errno
+
+        if e.errno not in (errno.ENOSPC, errno.EIO, errno.EFBIG):
+            raise
+        # stdout (or a file) on a full or failing device: one line, and no second traceback
+        # when Python flushes stdout at exit
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        print(f"pfscope: error: cannot write ({e.strerror}); nothing more was written",
+              file=sys.stderr)
+        return EXIT_RUN_FAILED
     return 1
 
 
