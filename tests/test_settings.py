@@ -246,3 +246,13 @@ def test_stdout_to_a_full_device_is_one_line():
                            stderr=subprocess.PIPE, text=True, timeout=120)
     assert r.returncode == 1 and "Traceback" not in r.stderr, r.stderr
     assert "cannot write" in r.stderr
+
+
+@pytest.mark.parametrize("cmd,name", [("train-dbn", "m.pt"), ("train-classifier", "c.npz")])
+def test_training_with_an_unwritable_out_fails_before_training(tmp_path, cmd, name):
+    blocker = tmp_path / "file"
+    blocker.write_text("a file, not a folder")
+    t0 = time.time()
+    r = cli(cmd, "synthetic", "--out", blocker / name, "--quiet")
+    assert "cannot create output folder" in one_line_error(r)
+    assert time.time() - t0 < 60

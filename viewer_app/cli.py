@@ -731,8 +731,10 @@ def cmd_train_dbn(args) -> int:
 
     from pfscope.trackers.data.sources import open_source
 
-    if args.out.exists() and not args.force:
-        raise InputError(f"{args.out}: exists (use --force to overwrite)")
+    from pfscope.trackers.outputs import check_output
+
+    # before training: an unwritable --out must not cost the training run
+    check_output(args.out, args.force, "model")
     if not 0.0 <= args.holdout < 1.0:
         raise InputError(f"--holdout must be in [0, 1), got {args.holdout}")
     src = open_source(args.source)
