@@ -85,7 +85,17 @@ def test_feature_cost_does_not_depend_on_box_area():
     ff = FrameFeatures(_image(h=240, w=320), FeatureConfig())
     small = ff.describe(np.tile([[10, 10, 4, 8]], (2000, 1)))
     big = ff.describe(np.tile([[0, 0, 320, 240]], (2000, 1)))
-    assert small.shape == big.shape   # one gather per cell corner: same work for both
+    assert small.shape == big.shape
+    # the integral-image gather gives every copy of a box the same features as the box alone,
+    # and different boxes different features
+    one_small = ff.describe(np.array([[10, 10, 4, 8]]))
+    np.testing.assert_allclose(small, np.repeat(one_small, 2000, axis=0), atol=1e-9)
+    img = _image(h=240, w=320)
+    ref = describe_brute_force(img, np.array([[10, 10, 4, 8], [0, 0, 320, 240]]),
+                               FeatureConfig())   # pixel-by-pixel sums: the reference
+    np.testing.assert_allclose(small[0], ref[0], atol=1e-6)
+    np.testing.assert_allclose(big[0], ref[1], atol=1e-6)
+    assert not np.allclose(small[0], big[0])
 
 
 # ----------------------------------------------------------------------------- background
@@ -144,7 +154,7 @@ def test_same_seed_same_model_and_a_useful_classifier():
     for k, v in a.net.state_dict().items():
         assert torch.equal(v, b.net.state_dict()[k])
     assert any(not torch.equal(v, c.net.state_dict()[k]) for k, v in a.net.state_dict().items())
-    assert a.info["holdout_auc"] > 0.9 and 0 <= a.info["holdout_accuracy"] <= 1
+    assert a.info["holdout_auc"] > 0.9 and a.info["holdout_accuracy"] > 0.75
 
 
 def test_model_save_load_round_trip(tmp_path):
@@ -208,10 +218,20 @@ def test_algorithm3_is_systematic_resampling_to_n_with_weights_n_hat_over_n():
     rng = np.random.default_rng(0)
     ps = ParticleSet(rng.normal(size=(300, 6)), np.log(rng.random(300) * 0.02))
     a = resample_alg3(ps, 1000, np.random.default_rng(5))
-    b = resample(ps, 1000, np.random.default_rng(5), "systematic")
     assert len(a) == 1000 and np.isclose(a.mass, ps.mass)
     np.testing.assert_allclose(a.weights, ps.mass / 1000)
-    assert np.mean(np.all(a.states == b.states, axis=1)) > 0.99  # boundary ties aside
+    # independent reference, feng2015 Algorithm 3 written out: the CDF of w / N_hat, one
+    # uniform u1 in [0, 1/n), u_j = u1 + (j - 1)/n, particle i for the u_j in its CDF step
+    w = np.exp(ps.log_weights - ps.log_weights.max())
+    cdf = np.cumsum(w / w.sum())
+    u1 = np.random.default_rng(5).random() / 1000
+    ref = np.minimum(np.searchsorted(cdf, u1 + np.arange(1000) / 1000), len(cdf) - 1)
+    match = np.all(a.states == ps.states[ref], axis=1)
+    assert match.mean() > 0.99, match.mean()            # float ties at a step's edge aside
+    # and counts per particle: floor or ceil of n * w / N_hat, as systematic resampling gives
+    counts = np.bincount(ref, minlength=len(cdf))
+    expect = 1000 * w / w.sum()
+    assert np.all(np.abs(counts - expect) <= 1 + 1e-9)
 
 
 # ----------------------------------------------------------------------------- the tracker

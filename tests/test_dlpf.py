@@ -200,10 +200,24 @@ def test_same_seed_same_tracks():
 
 
 def test_runs_on_the_synthetic_scene_with_both_layers_reported():
+    from pfscope.trackers.pipeline import BaseHook
+
     tr = make_tracker("dlpf", seed=0)
-    res = run(_scene(12), [tr], level="particles")
+    seen = {}
+
+    class Keep(BaseHook):
+        def on_frame(self, r):
+            seen[r.frame.index] = r.results["dlpf"].stages
+
+    res = run(_scene(12), [tr], level="particles", hooks=[Keep()])
     assert res.outcome.status == "completed" and res.frames == 12
     assert 0 < tr.windows_evaluated / tr.frames_seen <= tr.params.parents.n + 50
+    # both layers, as the name says: parent particles every frame, and once a target is
+    # confirmed, child particles carrying its track id
+    assert all(find(st, "dlpf/parents/predicted", Points) for st in seen.values())
+    kids = [p for st in seen.values() for p in find(st, "dlpf/children", Points)]
+    assert kids and any(len(p) and p.ids is not None and len(set(p.ids.tolist())) >= 1
+                        for p in kids)
 
 
 def test_runs_on_pets09_frames():

@@ -160,7 +160,7 @@ def test_tune_without_optuna_says_how_to_install(monkeypatch, tmp_path, capsys):
 # ------------------------------------------------------------------ parameters files
 
 def test_params_file_round_trip(tmp_path):
-    base = make_params("phd")
+    base = make_params("phd", "paper")   # depth is per frame there (practical derives it)
     tuned = with_options(base, {"p_miss": 0.2, "assoc.depth": 30})
     path = write_params_file(tmp_path / "p.toml", "phd", tuned, preset="paper",
                              info={"metric": "HOTA"},
@@ -175,7 +175,7 @@ def test_params_file_round_trip(tmp_path):
 
 def test_record_params_applies_values_and_set_overrides(tmp_path):
     f = tmp_path / "p.toml"
-    f.write_text('tracker = "phd"\n[params]\np_miss = 0.2\n'
+    f.write_text('tracker = "phd"\npreset = "paper"\n[params]\np_miss = 0.2\n'
                  '[params.assoc]\ndepth = 30\nmin_length = 4\n')
     rc = main(["record", "synthetic", "--frames", "3", "--params", str(f), "--set", "depth=20",
                "--out", str(tmp_path / "r.rrd"), "--quiet"])
@@ -190,7 +190,7 @@ def test_compare_params_go_to_the_files_tracker_only(tmp_path):
     f = tmp_path / "p.toml"
     f.write_text('tracker = "mt"\n[params.assoc]\ndepth = 17\n')
     rc = main(["compare", "synthetic", "--frames", "3", "--trackers", "phd,mt",
-               "--params", str(f), "--out", str(tmp_path / "c.rrd"), "--quiet", "--json"])
+               "--preset", "paper", "--params", str(f), "--out", str(tmp_path / "c.rrd"), "--quiet", "--json"])
     assert rc == 0
     rec = read_rrd(tmp_path / "c.rrd")
     assert rec["/__properties/tracker.mt"][0][1]["params.assoc.depth"] == [17]
@@ -202,6 +202,7 @@ def test_batch_params_reach_the_files_tracker(tmp_path):
     f.write_text('tracker = "mt"\n[params.assoc]\ndepth = 17\n')
     rc = main(["batch", "--sources", "synthetic", "--trackers", "mt,mt[depth=9]", "--frames",
                "3", "--workers", "1", "--out", str(tmp_path / "b"), "--params", str(f),
+               "--preset", "paper",
                "--quiet", "--json"])
     assert rc == 0
     depth = {p.name: read_rrd(p)[next(k for k in read_rrd(p) if k.startswith(

@@ -221,10 +221,14 @@ def test_batch_reports_a_failing_run_keeps_going_and_resumes(tmp_path, capsys):
     assert "toy-passthrough-seed0" in (out / "summary.csv").read_text()
     # resume: the finished run is skipped, the failed one retried (and fails again)
     spec = tmp_path / "b.toml"
-    spec.write_text(f'sources = ["{good}"]\ntrackers = ["passthrough"]\nout = "{out}"\n'
-                    'frames = "2:4"\n')
+    spec.write_text(f'sources = ["{good}"]\ntrackers = ["passthrough"]\nout = "{out}"\n')
     assert main(["batch", str(spec), "--quiet"]) == 0
     assert "skipped" in capsys.readouterr().out
+    # other frames are another run: re-run, never reused as "already finished"
+    spec.write_text(spec.read_text() + 'frames = "2:4"\n')
+    assert main(["batch", str(spec)]) == 0
+    cap = capsys.readouterr()
+    assert "skipped" not in cap.out and "changed frames, start" in cap.err, cap.err
 
 
 # ------------------------------------------------------------------ 7. colours

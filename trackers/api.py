@@ -172,10 +172,41 @@ def make_tracker(name: str, seed: int = 0, *, preset: Optional[str] = None,
     return info.cls(params, rng=np.random.default_rng(seed))
 
 
+def param_origins(name: str, preset: Optional[str], params: Any,
+                  fps: Optional[float] = None) -> dict[str, tuple[Any, str]]:
+    """``{dotted name: (effective value, where it came from)}`` for ``params`` of tracker
+    ``name`` run at ``fps``: ``preset NAME``, ``set`` (``--set`` / ``--params``), or, for a
+    field the preset derives (or a setting nothing reads), why -- e.g. ``derived each frame
+    from rate.gap_s (rate.per_second = true)`` with the value at ``fps``."""
+    from .params import derived_from, leaves
+
+    info = tracker_info(name)
+    pname = preset or next(iter(info.presets), "default")
+    base = {n: v for n, _, v in leaves(make_params(name, preset))}
+    eff = params
+    at_fps = getattr(params, "at_fps", None)
+    if callable(at_fps):
+        rate = getattr(params, "rate", None)
+        eff = at_fps(float(fps or getattr(rate, "fallback_fps", 0) or 25.0))
+    effective = {n: v for n, _, v in leaves(eff)}
+    derived = derived_from(params)
+    out: dict[str, tuple[Any, str]] = {}
+    for n, _, v in leaves(params):
+        if n in derived:
+            why = derived[n].split(";")[0]
+            out[n] = (effective[n], why + (f" at {fps:g} fps" if fps and "derived" in why
+                                           else ""))
+        elif v != base.get(n):
+            out[n] = (effective[n], "set")
+        else:
+            out[n] = (effective[n], f"preset {pname}")
+    return out
+
+
 def params_config(params: Any) -> dict:
     """Parameters as a plain nested dict (for ``config()``)."""
     return to_dict(params)
 
 
 __all__ = ["Tracker", "StepResult", "Rows", "TrackerInfo", "register", "registry",
-           "tracker_info", "make_params", "make_tracker", "params_config", "DEFAULT_TRACKER"]
+           "tracker_info", "make_params", "make_tracker", "params_config", "param_origins", "DEFAULT_TRACKER"]

@@ -56,6 +56,51 @@ def check_output(path: str | os.PathLike, force: bool, what: str = "recording") 
     return path
 
 
+def _file_ids(paths) -> dict:
+    """(device, inode) → path of every existing regular file in ``paths``; a folder stands for
+    every file in it and in its sub-folders (a MOT sequence: images, det, gt, seqinfo)."""
+    ids: dict = {}
+
+    def add(p: Path) -> None:
+        try:
+            st = os.stat(p)
+        except OSError:
+            return
+        ids[(st.st_dev, st.st_ino)] = p
+
+    for p in paths:
+        if p is None:
+            continue
+        p = Path(p)
+        if p.is_dir():
+            for root, _dirs, files in os.walk(p):
+                for f in files:
+                    add(Path(root) / f)
+        elif p.exists():
+            add(p)
+    return ids
+
+
+def refuse_inputs(outputs, inputs) -> None:
+    """Refuse (one line, even with ``--force``) an output that is one of the run's input files:
+    ``outputs`` are (path, what) pairs, ``inputs`` files or folders the run reads.  Compared by
+    device and inode, so a symlink or a hard link to an input is caught too."""
+    ids = None
+    for path, what in outputs:
+        if path is None:
+            continue
+        try:
+            st = os.stat(path)
+        except OSError:
+            continue  # does not exist yet: it is not an input
+        if ids is None:
+            ids = _file_ids(inputs)
+        hit = ids.get((st.st_dev, st.st_ino))
+        if hit is not None:
+            raise InputError(f"{path}: is an input of this run ({hit}); refusing to write the "
+                             f"{what} over it, even with --force")
+
+
 def _alive(pid: int) -> bool:
     try:
         os.kill(pid, 0)
@@ -117,4 +162,4 @@ class OutputLock:
         self.release()
 
 
-__all__ = ["incomplete_path", "check_output", "OutputLock"]
+__all__ = ["incomplete_path", "check_output", "refuse_inputs", "OutputLock"]

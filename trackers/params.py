@@ -108,6 +108,8 @@ def with_options(obj: Any, options: dict[str, Any]) -> Any:
     """A copy of ``obj`` with ``options`` applied (see the module docstring).  Validation in the
     dataclasses' ``__post_init__`` runs again, so a bad value fails here with its name."""
     known = {name: f for name, f, _ in leaves(obj)}
+    before = {name: v for name, _, v in leaves(obj)}
+    asked: dict[str, str] = {}
     for key, value in options.items():
         if key in known:
             targets = [key]
@@ -119,7 +121,30 @@ def with_options(obj: Any, options: dict[str, Any]) -> Any:
                              f"`pfscope trackers` lists all {len(known)}")
         for target in targets:
             obj = _set(obj, target.split("."), value, key)
+            asked[target] = key
+    _refuse_silent(obj, asked, before)
     return obj
+
+
+def derived_from(obj: Any) -> dict:
+    """``{dotted field: why}``: the fields a setting cannot change in ``obj`` as it stands (a
+    params class declares them with ``derived_from()``: e.g. the per-frame fields the
+    ``practical`` preset derives from its per-second ``rate.*`` settings)."""
+    fn = getattr(obj, "derived_from", None)
+    return dict(fn()) if callable(fn) else {}
+
+
+def _refuse_silent(obj: Any, asked: dict, before: dict) -> None:
+    """No silent settings: an option that changed a field the result never reads (see
+    :func:`derived_from`) is refused with one line naming what to set instead.  Writing a
+    field's current value (a parameters file lists every field) is not a change."""
+    if not asked:
+        return
+    ignored = derived_from(obj)
+    after = {name: v for name, _, v in leaves(obj)}
+    for target, key in asked.items():
+        if target in ignored and after[target] != before.get(target):
+            raise ValueError(f"option {key}={after[target]!r}: {target} is {ignored[target]}")
 
 
 def _set(obj: Any, path: list[str], value: Any, shown: str) -> Any:
@@ -351,6 +376,6 @@ def write_params_file(path: str | os.PathLike, tracker: str, params: Any, *,
     return write_text_atomic(path, to_toml(data, header=header, comments=comments))
 
 
-__all__ = ["param", "part", "describe", "leaves", "with_options", "parse_set", "to_dict",
+__all__ = ["param", "part", "describe", "leaves", "with_options", "derived_from", "parse_set", "to_dict",
            "ParamsFile", "read_params_file", "apply_file_options", "write_params_file",
            "to_toml", "toml_value", "write_text_atomic"]

@@ -50,7 +50,6 @@ import json
 import os
 import sys
 import time
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Optional
@@ -74,6 +73,7 @@ class Job:
     options: dict = field(default_factory=dict)
     force: bool = False
     max_points: int = 3000
+    identity: Optional[dict] = None   # run_identity(), computed once by run_batch
 
     @property
     def source_name(self) -> str:
@@ -95,30 +95,101 @@ BACKENDS = ("local", "dask", "ray")
 
 
 def _init_worker() -> None:
-    for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
-        os.environ[var] = "1"
-    os.environ.setdefault("RERUN_ANALYTICS", "0")
-    try:
-        import cv2
+    """Single-threaded BLAS/OpenCV/torch (a Dask or Ray worker; the local pool's workers get
+    :func:`pfscope.trackers.jobs.init_worker`)."""
+    from pfscope.trackers.jobs import single_thread_env
 
-        cv2.setNumThreads(1)
-    except Exception:  # noqa: BLE001
-        pass
-    try:
-        import torch
+    single_thread_env()
 
-        torch.set_num_threads(1)
+
+def _fingerprint(source: str) -> dict:
+    """What identifies the source's content without reading it: path, size and mtime of the
+    file, or of every file in the folder and its sub-folders one level down."""
+    if source in ("", "synthetic"):
+        return {"source": "synthetic"}
+    p = Path(source)
+    if not p.exists():
+        return {"source": os.path.abspath(source), "missing": True}
+    if p.is_file():
+        st = p.stat()
+        return {"source": os.path.abspath(source), "size": st.st_size, "mtime": st.st_mtime_ns}
+    import hashlib
+
+    h = hashlib.sha256()
+    n = 0
+    for root in [p] + sorted(c for c in p.iterdir() if c.is_dir()):
+        for f in sorted(root.iterdir()):
+            if f.is_file():
+                st = f.stat()
+                h.update(f"{f.relative_to(p)}\0{st.st_size}\0{st.st_mtime_ns}\n".encode())
+                n += 1
+    return {"source": os.path.abspath(source), "files": n, "content": h.hexdigest()[:16]}
+
+
+def run_identity(job: "Job") -> dict:
+    """Everything that shapes a run's result (resume compares it): the source's path, sizes
+    and mtimes, the tracker, the preset, every effective parameter (after --params/--set and
+    the lane's own), the seed, the frames, the level, the detector and pfscope's version."""
+    from pfscope.trackers.api import make_params
+    from pfscope.trackers.params import leaves
+
+    from .lanes import parse_lane
+    from .run import _options_for
+
+    ident: dict = {**_fingerprint(job.source), "lane": job.lane, "preset": job.preset,
+                   "seed": job.seed, "start": job.start, "frames": job.frames,
+                   "level": job.level, "detector": job.detector, "max_points": job.max_points,
+                   "pfscope": _version()}
+    try:
+        lane = parse_lane(job.lane)
+        params = make_params(lane.tracker, job.preset,
+                             {**_options_for(lane.tracker, job.options, 1), **lane.options})
+        ident["params"] = {n: repr(v) for n, _, v in leaves(params)}
+    except Exception:  # noqa: BLE001 - the run itself reports it; the options then identify
+        ident["params"] = {k: repr(v) for k, v in sorted(job.options.items())}
+    return ident
+
+
+def _version() -> str:
+    try:
+        from importlib.metadata import version
+
+        return version("pfscope")
     except Exception:  # noqa: BLE001
-        pass
+        return "unknown"
+
+
+def identity_hash(ident: dict) -> str:
+    import hashlib
+
+    return hashlib.sha256(json.dumps(ident, sort_keys=True, default=str).encode()).hexdigest()
+
+
+def changed_fields(old: dict, new: dict) -> list[str]:
+    """Names of what differs between two identities (``params.NAME`` for a parameter)."""
+    out = []
+    for k in sorted(set(old) | set(new)):
+        if k == "params" and isinstance(old.get(k), dict) and isinstance(new.get(k), dict):
+            o, n = old[k], new[k]
+            out += [f"params.{p}" for p in sorted(set(o) | set(n)) if o.get(p) != n.get(p)]
+        elif old.get(k) != new.get(k):
+            out.append(k)
+    return out
 
 
 def run_job(job: Job) -> dict:
     """One run (in a worker process): never raises, returns its result row."""
+    from pfscope.trackers.jobs import note_signal, stop_event
+
     from .api import record
 
     t0 = time.perf_counter()
     row = {"run": job.run_id, "source": job.source, "lane": job.lane, "seed": job.seed,
            "rrd": str(job.path(".rrd")), "tracks": str(job.path(".txt"))}
+    ev = stop_event()
+    if ev is not None and ev.is_set():  # queued when the batch was stopped: do not start
+        row.update(status="not run", rrd="", tracks="")
+        return row
     try:
         synthetic = {}
         if job.source in ("", "synthetic"):
@@ -127,7 +198,7 @@ def run_job(job: Job) -> dict:
                      tracks_out=job.path(".txt"), frames=job.frames, start=job.start,
                      level=job.level, seed=job.seed, detector=job.detector, preset=job.preset,
                      force=job.force, progress=False, max_points=job.max_points,
-                     **synthetic, **job.options)
+                     stop=stop_event(), **synthetic, **job.options)
         scores = next(iter(res.scores.values()), {}) if res.scores else {}
         row.update(status="interrupted" if res.interrupted else "ok", frames=res.frames,
                    seconds=round(res.seconds, 3), fps=round(res.fps, 2), bytes=res.bytes,
@@ -135,9 +206,16 @@ def run_job(job: Job) -> dict:
                    **{k: scores[k] for k in SUMMARY_KEYS if k in scores})
         if row["status"] == "ok":
             tmp = job.path(".json.part")
-            tmp.write_text(json.dumps({**row, "scores": scores}, indent=2, sort_keys=True,
-                                      default=str))
+            ident = job.identity or run_identity(job)
+            tmp.write_text(json.dumps({**row, "scores": scores, "identity": ident,
+                                       "identity_hash": identity_hash(ident)}, indent=2,
+                                      sort_keys=True, default=str))
             os.replace(tmp, job.path(".json"))
+    except KeyboardInterrupt:  # a second Ctrl-C inside the run: it stopped where it was
+        import signal
+
+        note_signal(signal.SIGINT)
+        row.update(status="interrupted", seconds=round(time.perf_counter() - t0, 3))
     except BaseException as e:  # noqa: BLE001 - one failing run must not stop the batch
         msg = str(e).splitlines()[0] if str(e) else type(e).__name__
         row.update(status="failed", error=f"{type(e).__name__}: {msg}"[:300],
@@ -203,6 +281,13 @@ def plan(args) -> tuple[list[Job], Path, int]:
     out = pick("out", "out")
     if not out:
         raise InputError("batch needs --out DIR (or 'out' in the spec)")
+    if not isinstance(spec.get("set", {}), dict):
+        raise InputError(f"{args.spec}: 'set' must be a table ([set] then NAME = VALUE lines), "
+                         f"got {spec['set']!r}")
+    for key, kind in (("workers", int), ("max_points", int), ("force", bool)):
+        if key in spec and (not isinstance(spec[key], kind) or isinstance(spec[key], bool)
+                            != (kind is bool)):
+            raise InputError(f"{args.spec}: '{key}' must be {'true or false' if kind is bool else 'an integer'}, got {spec[key]!r}")
     options = {str(k): str(v) for k, v in (spec.get("set") or {}).items()}
     if args.set_options:
         from pfscope.trackers.params import parse_set
@@ -384,17 +469,67 @@ def run_batch(jobs: list[Job], out: Path, workers: int, *, quiet: bool = False,
     ``"dask"`` when ``cluster`` is given, else ``"local"``."""
     cluster, backend = _pick_backend(backend, cluster)
     stream = stream or sys.stderr
-    out.mkdir(parents=True, exist_ok=True)
+    _check_out_dir(out)
+    from pfscope.trackers.outputs import OutputLock
+
+    lock = OutputLock(out / "batch")
+    try:
+        lock.acquire()
+    except InputError:
+        owner = lock._owner()
+        raise InputError(f"{out}: another pfscope batch (pid {owner}) is writing into this "
+                         f"folder; wait for it or choose another --out") from None
+    try:
+        return _run_batch_locked(jobs, out, workers, quiet=quiet, stream=stream,
+                                 cluster=cluster, backend=backend)
+    finally:
+        lock.release()
+
+
+def _check_out_dir(out: Path) -> None:
+    if out.exists() and not out.is_dir():
+        raise InputError(f"{out}: exists and is not a folder (--out names the batch's folder)")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise InputError(f"{out}: cannot create the output folder ({e.strerror or e})") from None
+    if not os.access(out, os.W_OK | os.X_OK):
+        raise InputError(f"{out}: output folder is not writable")
+
+
+def _leftovers(j: Job) -> list[Path]:
+    from pfscope.trackers.outputs import incomplete_path
+
+    paths = [j.path(".rrd"), j.path(".txt")]
+    return [p for p in paths + [incomplete_path(x) for x in paths] if p.exists()]
+
+
+def _run_batch_locked(jobs, out, workers, *, quiet, stream, cluster, backend) -> list[dict]:
     rows: dict[str, dict] = {}
     todo = []
+    notes: dict[str, str] = {}
     for j in jobs:
+        if j.identity is None:
+            j.identity = run_identity(j)
         done = j.path(".json")
         if done.is_file() and not j.force:
             try:
-                rows[j.run_id] = {**json.loads(done.read_text()), "status": "skipped"}
-                continue
+                prev = json.loads(done.read_text())
             except (OSError, ValueError):
-                pass
+                prev = {}
+            old = prev.get("identity")
+            if isinstance(old, dict) and prev.get("identity_hash") == identity_hash(j.identity):
+                rows[j.run_id] = {**prev, "status": "skipped"}
+                continue
+            what = ", ".join(changed_fields(old, j.identity)[:6]) if isinstance(old, dict) \
+                else "no run identity (an older pfscope)"
+            notes[j.run_id] = f"re-run: changed {what}"
+        elif _leftovers(j) and not j.force:
+            notes[j.run_id] = "re-run: interrupted or failed earlier"
+        # this batch holds the folder's lock: the run's own leftovers are its to replace
+        # (a completed run only renames over them at the end)
+        if _leftovers(j) or done.is_file():
+            j = dataclasses.replace(j, force=True)
         todo.append(j)
     total, t0 = len(todo), time.perf_counter()
 
@@ -411,8 +546,9 @@ def run_batch(jobs: list[Job], out: Path, workers: int, *, quiet: bool = False,
         what = (f"failed: {row.get('error')}" if row["status"] == "failed" else
                 f"{row['status']} in {row.get('seconds', 0):.1f} s"
                 + (f", MOTA {row['MOTA']:.3f}" if "MOTA" in row else ""))
-        print(f"batch [{i}/{total}] {row['run']}: {what}  (elapsed {el:.0f} s, ETA {eta:.0f} s)",
-              file=stream)
+        note = f" [{notes[row['run']]}]" if row["run"] in notes else ""
+        print(f"batch [{i}/{total}] {row['run']}: {what}{note}  (elapsed {el:.0f} s, ETA "
+              f"{eta:.0f} s)", file=stream)
 
     if backend == "ray" and todo:
         rows.update(_run_on_ray(todo, cluster, header, report))
@@ -422,27 +558,32 @@ def run_batch(jobs: list[Job], out: Path, workers: int, *, quiet: bool = False,
         rows.update(_run_on_cluster(todo, cluster, header, report))
     elif cluster:
         header(f"Dask cluster {cluster}")  # nothing to run: no need to connect
-    elif workers <= 1 or total <= 1:
-        header(f"{min(workers, max(total, 1))} worker(s)")
-        for i, j in enumerate(todo, start=1):
-            rows[j.run_id] = run_job(j)
-            report(i, rows[j.run_id])
     else:
-        import multiprocessing as mp
+        from pfscope.trackers.jobs import JobRunner
 
-        header(f"{min(workers, max(total, 1))} worker(s)")
-        with ProcessPoolExecutor(max_workers=min(workers, total),
-                                 mp_context=mp.get_context("spawn"),
-                                 initializer=_init_worker) as pool:
-            futs = {pool.submit(run_job, j): j for j in todo}
-            for i, fut in enumerate(as_completed(futs), start=1):
-                j = futs[fut]
-                try:
-                    row = fut.result()
-                except BaseException as e:  # noqa: BLE001 - a worker died (killed, OOM)
-                    row = _died(j, e)
+        n = min(workers, max(total, 1))
+        header(f"{n} worker(s)")
+        with JobRunner(n, in_process=n <= 1) as runner:
+            i = 0
+            for j, row in runner.each(run_job, todo):
+                if isinstance(row, BaseException):
+                    row = ({**_died(j, row), "status": "interrupted"} if runner.stopping
+                           else _died(j, row))
+                i += 1
                 rows[j.run_id] = row
                 report(i, row)
+            stopped = runner.signum
+        if stopped is not None:
+            for j in todo:
+                rows.setdefault(j.run_id, {"run": j.run_id, "source": j.source, "lane": j.lane,
+                                           "seed": j.seed, "status": "not run"})
+            if not quiet:
+                import signal
+
+                left = sum(r["status"] == "not run" for r in rows.values())
+                print(f"batch: stopped by {signal.Signals(stopped).name}: {left} queued run(s) "
+                      f"not started; running ones kept as *.incomplete.*; re-run the same "
+                      f"command to resume", file=stream)
     ordered = [rows[j.run_id] for j in jobs]
     write_summary(ordered, out, wall=time.perf_counter() - t0)
     return ordered
@@ -515,6 +656,8 @@ def add_batch_parser(sub, add_tracker_options) -> None:
 
 
 def cmd_batch(args) -> int:
+    from pfscope.trackers.jobs import last_signal
+
     jobs, out, workers = plan(args)
     rows = run_batch(jobs, out, workers, quiet=args.quiet, cluster=args.cluster,
                      backend=args.backend)
@@ -526,6 +669,9 @@ def cmd_batch(args) -> int:
     failed = [r for r in rows if r["status"] == "failed"]
     for r in failed:
         print(f"pfscope batch: {r['run']} failed: {r.get('error')}", file=sys.stderr)
+    if last_signal() is not None and any(r["status"] in ("interrupted", "not run")
+                                         for r in rows):
+        return 128 + int(last_signal())
     return 1 if failed else 0
 
 

@@ -21,7 +21,14 @@ from pfscope.trackers.errors import InputError, RunFailed
 
 EXIT_RUN_FAILED = 1      # not the user's input: a bug, out of memory, disk full ...
 EXIT_BAD_INPUT = 2
-EXIT_INTERRUPTED = 130
+EXIT_INTERRUPTED = 130   # 128 + SIGINT; SIGTERM gives 143 (128 + 15)
+
+
+def _interrupted_status() -> int:
+    """128 + the signal that stopped the run: 130 for Ctrl-C, 143 for SIGTERM."""
+    from pfscope.trackers.jobs import exit_status
+
+    return exit_status(EXIT_INTERRUPTED)
 
 
 
@@ -586,13 +593,14 @@ def _lane_params_options(args, lane_trackers: list[str]) -> dict:
     pf = _read_params(args)
     if pf is None:
         return {}
+    preset = getattr(args, "preset", None) or pf.preset
     if pf.tracker:
-        _check_params_file(pf, pf.tracker, None)
+        _check_params_file(pf, pf.tracker, preset)
         return {f"{pf.tracker}.{k}": v for k, v in pf.options.items()}
     errors = []
     for t in dict.fromkeys(lane_trackers):
         try:
-            _check_params_file(pf, t, None)
+            _check_params_file(pf, t, preset)
             break
         except InputError as e:
             errors.append(e)
@@ -683,7 +691,7 @@ def cmd_compare(args) -> int:
         print(f"{source.name} has no ground truth: nothing to score", file=sys.stderr)
     print(f"{res.frames} frames, {res.bytes / 1e6:.1f} MB -> {res.out}", file=sys.stderr)
     print(f"open it with:  rerun {res.out}", file=sys.stderr)
-    return EXIT_INTERRUPTED if res.interrupted else 0
+    return _interrupted_status() if res.interrupted else 0
 
 
 def cmd_eval(args) -> int:
@@ -792,24 +800,37 @@ def cmd_repair(args) -> int:
     src = args.file
     if not src.is_file():
         raise InputError(f"{src}: no such recording")
+    from .info import check_rrd_header
+
+    check_rrd_header(src)
     out = args.out or src.with_name(f"{src.stem}.repaired{src.suffix}")
     check_output(out, args.force)
     rerun = shutil.which("rerun") or str(Path(sys.executable).with_name("rerun"))
     tmp = incomplete_path(out)
     try:
-        r = subprocess.run([rerun, "rrd", "optimize", str(src), "-o", str(tmp)],
+        # absolute paths: a name starting with '-' must not reach rerun as an option
+        r = subprocess.run([rerun, "rrd", "optimize", os.path.abspath(src), "-o",
+                            os.path.abspath(tmp)],
                            capture_output=True, text=True, timeout=600)
         if r.returncode != 0:
             raise InputError(f"{src}: cannot be repaired: {_last_line(r.stderr)}")
-        v = subprocess.run([rerun, "rrd", "verify", str(tmp)], capture_output=True, text=True,
-                           timeout=600)
+        v = subprocess.run([rerun, "rrd", "verify", os.path.abspath(tmp)], capture_output=True,
+                           text=True, timeout=600)
         if v.returncode != 0:
             raise InputError(f"{src}: repaired file does not verify: {_last_line(v.stderr)}")
     except (OSError, subprocess.TimeoutExpired) as e:
         raise InputError(f"{src}: cannot run '{rerun} rrd optimize' ({e})") from None
+    if tmp.stat().st_size <= _rrd_size_empty():
+        tmp.unlink()
+        raise InputError(f"{src}: nothing could be recovered (no complete entry in the file)")
     os.replace(tmp, out)
     print(f"repaired: {out} (verified)")
     return 0
+
+
+def _rrd_size_empty() -> int:
+    """Size of an .rrd that holds no entry (header and footer only)."""
+    return 256
 
 
 def _last_line(text: str) -> str:
@@ -829,7 +850,8 @@ def cmd_record(args) -> int:
                          seed=args.seed, force=args.force, tracks_out=args.tracks_out,
                          spawn=args.spawn, serve=args.serve, preset=preset,
                          timing=args.timing, tracker_options=options, video=args.video,
-                         online=args.online)
+                         online=args.online,
+                         inputs=(args.params,) if args.params else ())
     res = record(source, out, opts, progress=not args.quiet)
     size = res.bytes / 1e6
     state = ("interrupted; recording finished, readable and kept as incomplete"
@@ -852,7 +874,7 @@ def cmd_record(args) -> int:
         print(f"still serving {res.out} at {res.serve_url} until Ctrl-C "
               f"(--serve-exit: stop when the run ends)", flush=True)
         server.wait()
-    return EXIT_INTERRUPTED if res.interrupted else 0
+    return _interrupted_status() if res.interrupted else 0
 
 
 def cmd_trackers(args) -> int:
@@ -918,8 +940,10 @@ def cmd_train_dbn(args) -> int:
 
     from pfscope.trackers.data.sources import open_source
 
-    if args.out.exists() and not args.force:
-        raise InputError(f"{args.out}: exists (use --force to overwrite)")
+    from pfscope.trackers.outputs import check_output
+
+    # before training: an unwritable --out must not cost the training run
+    check_output(args.out, args.force, "model")
     if not 0.0 <= args.holdout < 1.0:
         raise InputError(f"--holdout must be in [0, 1), got {args.holdout}")
     if args.frames and len(args.source) > 1:
@@ -1046,6 +1070,14 @@ def cmd_tune(args) -> int:
     if holdout is not None and holdout[0] <= frames[1] and frames[0] <= holdout[1]:
         raise InputError(f"--holdout {holdout[0]}:{holdout[1]} overlaps the tuned-on frames "
                          f"{frames[0]}:{frames[1]}")
+    from pfscope.trackers.outputs import refuse_inputs
+
+    from .run import run_inputs
+
+    refuse_inputs([(args.out, "parameters file"), (args.study_out, "recording"),
+                   (args.best_out, "recording"), (args.tracks_out, "tracks file")],
+                  run_inputs(source, [make_params(tracker, preset, base_options)],
+                             (args.params,) if args.params else ()))
     out = check_output(args.out, args.force, "parameters file")
     study_out = check_output(args.study_out or RECORDINGS_DIR / f"{source.name}-{tracker}-tune.rrd",
                              args.force)
@@ -1126,7 +1158,7 @@ def cmd_tune(args) -> int:
                        for t in result.trials],
             "params_file": str(out), "study": str(study_path),
             "best_recording": str(rec_res.out) if rec_res else None}, indent=2, default=str))
-        return EXIT_INTERRUPTED if rec_res is not None and rec_res.interrupted else 0
+        return _interrupted_status() if rec_res is not None and rec_res.interrupted else 0
     print(f"{T.METRICS[args.metric]} on the tuned-on frames {frames[0]}-{frames[1]} (the "
           f"search's runs, over those frames alone): "
           f"{result.best_value:.4f} (trial {result.best['number']} of {len(result.trials)}; "
@@ -1136,10 +1168,12 @@ def cmd_tune(args) -> int:
     print(f"parameters: {out}   (pfscope record {args.source} --params {out})")
     print(f"study: {study_path}" + (f"   best run: {rec_res.out}" if rec_res else "")
           + (f"   tracks: {rec_res.tracks_out}" if rec_res and rec_res.tracks_out else ""))
-    return EXIT_INTERRUPTED if rec_res is not None and rec_res.interrupted else 0
+    return _interrupted_status() if rec_res is not None and rec_res.interrupted else 0
 
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
+    from pfscope.trackers.jobs import Interrupted
+
     os.environ.setdefault("RERUN_ANALYTICS", "0")
     args = build_parser().parse_args(argv)
     try:
@@ -1193,10 +1227,24 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         return EXIT_RUN_FAILED
     except KeyboardInterrupt:
         print("pfscope: interrupted", file=sys.stderr)
-        return EXIT_INTERRUPTED
+        return _interrupted_status()
+    except Interrupted as e:  # a batch or tune stopped by a signal
+        print(f"pfscope: {args.command}: {e}", file=sys.stderr)
+        return e.exit_status
     except BrokenPipeError:  # `pfscope trackers | head`: the reader left, nothing to report
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
+    except OSError as e:
+        import errno
+
+        if e.errno not in (errno.ENOSPC, errno.EIO, errno.EFBIG):
+            raise
+        # stdout (or a file) on a full or failing device: one line, and no second traceback
+        # when Python flushes stdout at exit
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        print(f"pfscope: error: cannot write ({e.strerror}); nothing more was written",
+              file=sys.stderr)
+        return EXIT_RUN_FAILED
     return 1
 
 

@@ -75,8 +75,10 @@ def cmd_train_classifier(args) -> int:
     out = Path(args.out)
     if out.suffix != ".npz":
         raise InputError(f"--out {out}: use a .npz file name")
-    if out.exists() and not args.force:
-        raise InputError(f"{out}: exists (use --force to overwrite)")
+    from pfscope.trackers.outputs import check_output
+
+    # before training: an unwritable --out must not cost the training run
+    check_output(out, args.force, "classifier model")
     if not 0.0 <= args.holdout < 1.0:
         raise InputError(f"--holdout must be in [0, 1), got {args.holdout}")
     if args.stride < 1 or args.negatives < 0 or args.hard < 0 or args.bins < 2 or args.C <= 0:

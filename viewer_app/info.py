@@ -23,11 +23,29 @@ from .tabs import from_property as tabs_from_property
 HEADLINE = ("MOTA", "MOTP", "IDF1", "HOTA", "IDSW", "FP", "FN", "OSPA")
 
 
+RRD_MAGIC = b"RRF2"
+
+
+def check_rrd_header(path: Path) -> None:
+    """One line when ``path`` is not a Rerun recording (empty, or not starting with RRF2)."""
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(len(RRD_MAGIC))
+    except OSError as e:
+        raise InputError(f"{path}: cannot read ({e.strerror or e})") from None
+    if not head:
+        raise InputError(f"{path}: empty file, not a Rerun recording")
+    if head != RRD_MAGIC:
+        raise InputError(f"{path}: not a Rerun recording (it does not start with "
+                         f"{RRD_MAGIC.decode()})")
+
+
 def _open(path: Path):
     import rerun as rr
 
     if not path.is_file():
         raise InputError(f"{path}: no such recording")
+    check_rrd_header(path)
     try:
         reader = rr.chunk.RrdReader(str(path))
     except Exception as e:  # noqa: BLE001 - any reader error is the file's fault
@@ -35,7 +53,13 @@ def _open(path: Path):
     try:
         return reader.store().stream(), True
     except Exception:  # noqa: BLE001 - no footer (killed run): stream what is there
+        pass
+    try:
         return reader.stream(), False
+    except Exception as e:  # noqa: BLE001 - cut short inside an entry
+        msg = str(e).splitlines()[0] if str(e) else type(e).__name__
+        raise InputError(f"{path}: cut short, not readable as it is ({msg[:160]}); try "
+                         f"`pfscope repair {path}`") from None
 
 
 def recording_info(path, top: int = 10) -> dict[str, Any]:
@@ -97,7 +121,11 @@ def recording_info(path, top: int = 10) -> dict[str, Any]:
                     events.setdefault(lane, []).append(ev)
     except Exception as e:  # noqa: BLE001
         raise InputError(f"{path}: unreadable chunk ({type(e).__name__}: {e})") from None
-    props = read_properties(path)
+    try:
+        props = read_properties(path)
+    except Exception as e:  # noqa: BLE001 - the file's fault
+        raise InputError(f"{path}: unreadable properties ({type(e).__name__}: "
+                         f"{str(e).splitlines()[0][:160] if str(e) else ''})") from None
     lanes = {g.split(".", 1)[1]: v for g, v in props.items() if g.startswith("tracker.")}
     scores = {g.split(".", 1)[1]: v for g, v in props.items() if g.startswith("scores.")}
     counts = {g.split(".", 1)[1]: v for g, v in props.items() if g.startswith("events.")}
@@ -187,7 +215,14 @@ def print_info(info: dict, out=None, params: bool = True) -> None:
         if params:
             for k, v in sorted(cfg.items()):
                 if k.startswith("params."):
-                    p(f"    {k[len('params.'):]} = {_fmt(v)}")
+                    name = k[len("params."):]
+                    eff, origin = cfg.get(f"effective.{name}"), cfg.get(f"origin.{name}")
+                    line = f"    {name} = {_fmt(v)}"
+                    if eff is not None and eff != v:
+                        line += f" -> in effect {_fmt(eff)}"
+                    if origin:
+                        line += f"  ({origin})"
+                    p(line)
     if info["scores"]:
         p()
         lanes = list(info["scores"])
@@ -242,7 +277,7 @@ def cmd_view(args) -> int:
               f"with 'pfscope view {path} --web', or take a picture with "
               f"'pfscope snapshot {path} --frame N --out shot.png'")
         return 0
-    cmd = viewer_command() + [str(path)]
+    cmd = viewer_command() + [os.path.abspath(path)]  # a name may start with '-'
     subprocess.Popen(cmd, start_new_session=True, stdout=subprocess.DEVNULL,
                      stderr=subprocess.DEVNULL, env={**os.environ, "RERUN_ANALYTICS": "0"})
     print(f"opened {path} in the Rerun viewer")

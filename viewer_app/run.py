@@ -29,7 +29,7 @@ import numpy as np
 from pfscope.trackers.data.sources import Source
 from pfscope.trackers.errors import InputError, RunFailed
 from pfscope.trackers.pipeline import BaseHook
-from pfscope.trackers.outputs import OutputLock, incomplete_path
+from pfscope.trackers.outputs import OutputLock, incomplete_path, refuse_inputs
 from pfscope.trackers.outputs import check_output as _check_output
 from pfscope.trackers.report import level_rank
 
@@ -55,10 +55,16 @@ class StopFlag:
     def requested(self) -> bool:
         return self._requested or (self.event is not None and self.event.is_set())
 
-    def _handler(self, signum, _frame):
+    def _handler(self, signum, frame):
+        from pfscope.trackers.jobs import note_signal
+
         if self._requested:
             raise KeyboardInterrupt
         self._requested = True
+        note_signal(signum)  # the exit status says which signal (130 SIGINT, 143 SIGTERM)
+        old = self._old.get(signum)
+        if callable(old) and old not in (self._handler, signal.default_int_handler):
+            old(signum, frame)  # a job runner around this run stops its queue too
 
     def __enter__(self):
         if threading.current_thread() is threading.main_thread():
@@ -92,6 +98,7 @@ class RecordOptions:
     long_miss: int = 10                # failure index: a gt unmatched this many frames in a row
     video: str = "encode"              # encode | source | auto (recorder.VIDEO_MODES)
     online: bool = False               # a stream: trackers get no look at the clip ahead
+    inputs: tuple = ()                 # other files the run reads (a --params file)
 
 
 @dataclass
@@ -130,6 +137,23 @@ def default_out_path(source: Source, tracker: str) -> Path:
 def check_output(path: Path, force: bool, what: str = "recording") -> Path:
     """See :func:`pfscope.trackers.outputs.check_output`."""
     return _check_output(path, force, what)
+
+
+def run_inputs(source: Source, params=(), extra=()) -> list:
+    """The files and folders a run reads: the source (a sequence folder stands for its images,
+    det, gt and seqinfo), files named by parameters (a model), and ``extra`` (a --params file)."""
+    from pfscope.trackers.params import leaves
+
+    reads: list = []
+    loc = getattr(source, "location", "")
+    if loc and Path(loc).exists():
+        reads.append(Path(loc))
+    for p in params:
+        for _, _, v in leaves(p):
+            if isinstance(v, (str, os.PathLike)) and str(v) and os.path.isfile(str(v)):
+                reads.append(Path(v))
+    reads += [Path(x) for x in extra if x]
+    return reads
 
 
 def display_available() -> bool:
@@ -322,6 +346,8 @@ def record(source: Source, out: Path, opts: RecordOptions, *, trackers: Optional
                   for ln in lanes]
     except ValueError as e:
         raise InputError(str(e)) from None
+    refuse_inputs([(Path(out), "recording"), (opts.tracks_out, "tracks file")],
+                  run_inputs(source, params, opts.inputs))
     out = check_output(Path(out), opts.force)
     partial = incomplete_path(out)
     if partial.exists() and not opts.force:
@@ -384,11 +410,17 @@ def _record_locked(source, out, opts, lanes, infos, params, tracks_out, live, pr
                 **({"video": opts.video} if opts.video != "encode" else {})},
         "source": source.describe(),
     }
-    for ln, t in zip(lanes, built.values()):
+    from pfscope.trackers.api import param_origins
+
+    for ln, t, p in zip(lanes, built.values(), params):
         cfg = t.config()
+        origins = param_origins(ln.tracker, opts.preset, p, source.fps)
         properties[f"tracker.{ln.name}"] = {
             "tracker": ln.tracker, "spec": ln.spec,
             "params": cfg.get("params", {}),
+            # what `pfscope info` shows beside each value: the value in effect, and why
+            "effective": {n: v for n, (v, _) in origins.items()},
+            "origin": {n: o for n, (_, o) in origins.items()},
             **{k: v for k, v in cfg.items() if k not in ("params", "tracker")}}
     recorder = RerunRecorder(out, config, max_points=opts.max_points, live=live,
                              web_port=_web_port() if live == "serve" else WEB_PORT,

@@ -216,6 +216,9 @@ def snapshot(rrd, out, *, frame: Optional[int] = None, tab: Optional[str] = None
     rrd, out = Path(rrd), Path(out)
     if not rrd.is_file():
         raise InputError(f"{rrd}: no such recording")
+    from .info import check_rrd_header
+
+    check_rrd_header(rrd)
     wanted = list(range(frames[0], frames[1] + 1)) if frames else [frame]
     outs = [series_path(out, f) for f in wanted] if frames else [out]
     for o in outs:
@@ -238,46 +241,52 @@ def snapshot(rrd, out, *, frame: Optional[int] = None, tab: Optional[str] = None
         except Exception as e:  # noqa: BLE001
             raise RunFailed(f"the headless viewer could not open {rrd} "
                             f"({type(e).__name__}: {str(e)[:200]}); {VULKAN_HINT}") from None
-        info = client.get_blueprint()
-        if tab and tab.lower() == "all":  # every video tab, one picture each
-            titles = video_tabs(info.blueprint)
-            jobs = [(t, f, tab_path(o, t)) for t in titles for f, o in zip(wanted, outs)]
-        else:
-            jobs = [(tab or ("All stages" if stage else None), f, o)
-                    for f, o in zip(wanted, outs)]
-        shown = object()
-        for t, f, o in jobs:
-            if t != shown and (t or clean):
-                bp = info.blueprint
-                if t:
-                    bp = select_tab(bp, t)
-                if clean:
-                    bp = _collapse_top(_collapse_panels(bp))
-                client.set_blueprint(bp, store_id=info.store_id)
-                shown = t
-                settle = max(settle, 1.0)
-            if slot is not None:
-                last = f if f is not None else _last_frame(rrd)
-                client.set_time("stage", sequence=int(last) * stride + slot,
-                                play_state="paused")
-            elif f is not None:
-                client.set_time("frame", sequence=int(f), play_state="paused")
+        try:
+            info = client.get_blueprint()
+            if tab and tab.lower() == "all":  # every video tab, one picture each
+                titles = video_tabs(info.blueprint)
+                jobs = [(t, f, tab_path(o, t)) for t in titles for f, o in zip(wanted, outs)]
             else:
-                client.set_time(play_state="paused")
-            time.sleep(settle)  # let the frame's chunks load, the views lay out, toasts fade
-            tmp = incomplete_path(o)
-            for attempt in (1, 2):  # a busy machine can miss the viewer's deadline once
-                try:
-                    client.save_screenshot(str(tmp))
-                    break
-                except Exception as e:  # noqa: BLE001 - one line, never a traceback
-                    if attempt == 2:
-                        raise RunFailed(f"the headless viewer did not take the picture "
-                                        f"{o.name} ({type(e).__name__}: {str(e)[:120]})"
-                                        ) from None
-                    time.sleep(settle)
-            os.replace(tmp, o)
-            settle = min(settle, 0.8)  # the next frames of a series: the data is loaded
+                jobs = [(tab or ("All stages" if stage else None), f, o)
+                        for f, o in zip(wanted, outs)]
+            shown = object()
+            for t, f, o in jobs:
+                if t != shown and (t or clean):
+                    bp = info.blueprint
+                    if t:
+                        bp = select_tab(bp, t)
+                    if clean:
+                        bp = _collapse_top(_collapse_panels(bp))
+                    client.set_blueprint(bp, store_id=info.store_id)
+                    shown = t
+                    settle = max(settle, 1.0)
+                if slot is not None:
+                    last = f if f is not None else _last_frame(rrd)
+                    client.set_time("stage", sequence=int(last) * stride + slot,
+                                    play_state="paused")
+                elif f is not None:
+                    client.set_time("frame", sequence=int(f), play_state="paused")
+                else:
+                    client.set_time(play_state="paused")
+                time.sleep(settle)  # let the frame's chunks load, the views lay out, toasts fade
+                tmp = incomplete_path(o)
+                for attempt in (1, 2):  # a busy machine can miss the viewer's deadline once
+                    try:
+                        client.save_screenshot(str(tmp))
+                        break
+                    except Exception as e:  # noqa: BLE001 - one line, never a traceback
+                        if attempt == 2:
+                            raise RunFailed(f"the headless viewer did not take the picture "
+                                            f"{o.name} ({type(e).__name__}: {str(e)[:120]})"
+                                            ) from None
+                        time.sleep(settle)
+                os.replace(tmp, o)
+                settle = min(settle, 0.8)  # the next frames of a series: the data is loaded
+        except (InputError, RunFailed):
+            raise
+        except Exception as e:  # noqa: BLE001 - a truncated or foreign file: one line
+            raise RunFailed(f"{rrd}: the viewer could not show it ({type(e).__name__}: "
+                            f"{str(e).splitlines()[0][:200] if str(e) else ''})") from None
     finally:
         viewer.close()
     if len(jobs) > 1:

@@ -108,6 +108,7 @@ def read_mot(path: str | os.PathLike, kind: str = "gt") -> MotTable:
     except (OSError, UnicodeDecodeError) as e:
         raise InputError(f"{path}: cannot read {kind} file ({e.__class__.__name__}: {e})") from None
     rows = []
+    ints: list = []
     min_cols = _MIN_COLS[kind]
     for lineno, line in enumerate(text.splitlines(), start=1):
         s = line.strip()
@@ -138,11 +139,25 @@ def read_mot(path: str | os.PathLike, kind: str = "gt") -> MotTable:
         score = vals[6] if len(vals) > 6 else 1.0
         cls = vals[7] if len(vals) > 7 else -1.0
         vis = vals[8] if len(vals) > 8 else -1.0
+        # frame and id as integers from their text: a float loses ids >= 2**53
+        frame_i, tid_i = _exact_int(parts[0], frame), _exact_int(parts[1], tid)
+        if not (-2 ** 63 <= tid_i < 2 ** 63 and frame_i < 2 ** 63):
+            raise InputError(f"{where}: id or frame out of the 64-bit range: {s[:60]!r}")
+        ints.append((frame_i, tid_i))
         rows.append((frame, tid, x, y, w, h, score, cls, vis))
     arr = np.array(rows, dtype=np.float64).reshape(-1, 9)
-    return MotTable(frame=arr[:, 0].astype(np.int64), id=arr[:, 1].astype(np.int64),
+    iarr = np.array(ints, dtype=np.int64).reshape(-1, 2)
+    return MotTable(frame=iarr[:, 0].copy(), id=iarr[:, 1].copy(),
                     boxes=arr[:, 2:6].copy(), score=arr[:, 6].copy(), cls=arr[:, 7].copy(),
                     vis=arr[:, 8].copy(), path=str(path))
+
+
+def _exact_int(text: str, as_float: float) -> int:
+    """``"12"`` → 12 exactly (any size); ``"12.0"`` → 12 (via the float)."""
+    try:
+        return int(text.strip())
+    except ValueError:
+        return int(as_float)
 
 
 def format_rows(kind: str, frame, ids, boxes, score=None, cls=None, vis=None) -> list[str]:

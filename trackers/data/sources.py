@@ -134,7 +134,7 @@ class MOTFolderSource(Source):
     (:func:`~trackers.types.blank_image`, ``Frame.has_pixels`` false), ``has_frames`` is false,
     and trackers that need pixels refuse it (:func:`~trackers.pipeline.run`)."""
 
-    def __init__(self, root: str | os.PathLike):
+    def __init__(self, root: str | os.PathLike, fps: Optional[float] = None):
         root = Path(root)
         ini = root / "seqinfo.ini"
         if not ini.is_file():
@@ -144,7 +144,7 @@ class MOTFolderSource(Source):
             cp.read(ini)
             seq = cp["Sequence"]
             name = seq.get("name", root.name)
-            fps = float(seq.get("frameRate", "25"))
+            ini_fps = float(seq["frameRate"]) if "frameRate" in seq else None
             length = int(seq["seqLength"])
             width = int(seq.get("imWidth", "0"))
             height = int(seq.get("imHeight", "0"))
@@ -152,6 +152,13 @@ class MOTFolderSource(Source):
             self.im_ext = seq.get("imExt", ".jpg")
         except (KeyError, ValueError, configparser.Error) as e:
             raise InputError(f"{ini}: malformed seqinfo.ini ({e.__class__.__name__}: {e})") from None
+        if ini_fps is not None and fps is not None:
+            raise InputError(f"{root}: --fps does not apply to a MOTChallenge folder (its "
+                             f"frameRate is in seqinfo.ini)")
+        if ini_fps is None and fps is None:  # per-second settings depend on it: no guess
+            raise InputError(f"{ini}: no frameRate; add frameRate=N to [Sequence] or give "
+                             f"--fps N")
+        fps = ini_fps if ini_fps is not None else fps
         if length <= 0 or fps <= 0:
             raise InputError(f"{ini}: seqLength and frameRate must be positive")
         gt_path, det_path = root / "gt" / "gt.txt", root / "det" / "det.txt"
@@ -323,10 +330,7 @@ def open_source(spec: str | os.PathLike | None, *, fps: Optional[float] = None,
     path = Path(spec)
     if path.is_dir():
         if (path / "seqinfo.ini").exists() or (path / "img1").is_dir():
-            if fps is not None:
-                raise InputError(f"{path}: --fps does not apply to a MOTChallenge folder "
-                                 f"(its frameRate is in seqinfo.ini)")
-            return MOTFolderSource(path)
+            return MOTFolderSource(path, fps=fps)
         return ImageFolderSource(path, fps=fps or 25.0)
     if path.exists():
         src = VideoFileSource(path)

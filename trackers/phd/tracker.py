@@ -131,6 +131,38 @@ class RateParams:
         _check(self, "survival_per_s", 0.0 <= self.survival_per_s <= 1.0, "in [0, 1]")
 
 
+#: Per-frame field → the per-second field it is derived from when ``rate.per_second`` is true
+#: (what :func:`filter_per_frame` and :func:`assoc_per_frame` overwrite).  ``--set`` on one
+#: of these is then refused naming the ``rate.*`` field (trackers.params.derived_from).
+RATE_DERIVED = {
+    "filter.motion.sigma_v": "rate.accel_per_s", "filter.motion.sigma_size": "rate.size_per_s",
+    "filter.motion.p_survival": "rate.survival_per_s",
+    "filter.birth.birth_speed_std": "rate.birth_speed_per_s",
+    "filter.birth.birth_odds": "rate.birth_odds_per_s",
+    "filter.clutter.clutter_memory": "rate.memory_s",
+    "assoc.sigma_v": "rate.accel_per_s", "assoc.sigma_size": "rate.size_per_s",
+    "assoc.speed_prior": "rate.birth_speed_per_s", "assoc.depth": "rate.gap_s",
+    "assoc.min_length": "rate.min_track_s", "assoc.relink_depth": "rate.relink_s",
+    "assoc.relink_tau": "rate.relink_tau_s", "assoc.app_alpha": "rate.app_memory_s",
+}
+
+
+def rate_derived(params) -> dict:
+    """``{field: why}`` of the fields of ``params`` (with a ``rate`` part) that a ``--set``
+    cannot change as things stand: under ``rate.per_second`` the per-frame fields derived from
+    ``rate.*``; without it the ``rate.*`` fields (nothing reads them)."""
+    from ..params import leaves
+
+    names = {n for n, _, _ in leaves(params)}
+    if params.rate.per_second:
+        return {n: f"derived each frame from {src} (rate.per_second = true); set {src} "
+                   f"instead, or rate.per_second=false to give per-frame values"
+                for n, src in RATE_DERIVED.items() if n in names}
+    return {n: "read only when rate.per_second = true (preset practical); set "
+               "rate.per_second=true too, or the per-frame field it converts to"
+            for n in names if n.startswith("rate.") and n != "rate.per_second"}
+
+
 def assoc_per_frame(a: AssocParams, r: RateParams, fps: float) -> AssocParams:
     """The association's per-frame fields from the per-second ones at ``fps``."""
     dt = 1.0 / fps
@@ -164,6 +196,9 @@ class PHDTrackerParams:
     assoc: AssocParams = part(AssocParams, "graph-matching association")
     rate: RateParams = part(RateParams, "settings per second (practical preset)")
 
+    def derived_from(self) -> dict:
+        return rate_derived(self)
+
     def at_fps(self, fps: float) -> "PHDTrackerParams":
         """The per-frame settings at ``fps`` (itself when ``rate.per_second`` is false)."""
         if not self.rate.per_second:
@@ -178,6 +213,9 @@ class MTParams:
 
     assoc: AssocParams = part(AssocParams, "graph-matching association")
     rate: RateParams = part(RateParams, "settings per second (practical preset)")
+
+    def derived_from(self) -> dict:
+        return rate_derived(self)
 
     def at_fps(self, fps: float) -> "MTParams":
         if not self.rate.per_second:
