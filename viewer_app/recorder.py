@@ -497,9 +497,15 @@ class RerunRecorder(BaseHook):
             rec.set_time("frame", sequence=ev.frame)
             rec.set_time("stage", sequence=ev.frame * self.stride + self.slots[(lane, "output")])
             rec.log(f"{self._root(lane)}events", rr.TextLog(ev.short, level=ev.severity),
-                    rr.AnyValues(kind=ev.kind, track_ids=" ".join(map(str, ev.track_ids)),
-                                 gt_ids=" ".join(map(str, ev.gt_ids)),
-                                 last_frame=ev.last_frame, message=ev.message))
+                    # every row has the same columns ("-": no id; an empty string or None drops
+                    # the column, and rows of two column sets go to two chunks whose order in
+                    # the file varies from run to run: same-seed files would differ)
+                    rr.AnyValues(kind=ev.kind,
+                                 track_ids=" ".join(map(str, ev.track_ids)) or "-",
+                                 gt_ids=" ".join(map(str, ev.gt_ids)) or "-",
+                                 last_frame=(ev.last_frame if ev.last_frame is not None
+                                             else ev.frame),
+                                 message=ev.message))
         rec.set_time("frame", sequence=now)
         self._stage(now, lane, "output")
 
