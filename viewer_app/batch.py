@@ -14,7 +14,7 @@ A TOML spec holds the same keys (command-line flags override it)::
     out = "runs/study1"
     workers = 2
     [set]
-    depth = 30
+    "rate.gap_s" = 3
 
 Per run ``DIR/<source>-<lane>-seed<S>``: ``.rrd`` (the recording), ``.txt`` (MOT tracks) and
 ``.json`` (the result: scores, timings, paths).  The ``.json`` is written last, only for a run

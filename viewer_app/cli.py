@@ -420,7 +420,7 @@ def build_parser() -> argparse.ArgumentParser:
 def _add_tracker_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--set", dest="set_options", action="append", metavar="NAME=VALUE",
                    default=[],
-                   help="set a tracker parameter, e.g. --set p_miss=0.2 --set depth=30 "
+                   help="set a tracker parameter, e.g. --set p_miss=0.2 --set rate.gap_s=3 "
                         "(dotted names pick one part: filter.motion.sigma_v; in compare, "
                         "phd.p_miss sets it for phd only). `pfscope trackers` lists them all.")
     p.add_argument("--preset", default=None,
