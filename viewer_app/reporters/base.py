@@ -57,8 +57,9 @@ ROLES: dict[str, tuple[int, tuple[int, int, int, int]]] = {
     "unmatched": (10, (200, 200, 200, 200)),
 }
 #: Items styled by what their path says they are (the engine's paths, for items it reports
-#: with a generic role): newborn particles, classifier hits.
-PATH_ROLES = (("particles/birth", "birth"), ("classify/hits", "hit"))
+#: with a generic role): newborn particles, classifier hits, and the blobs DBN-PHD's classifier
+#: accepted (cyan like DLPF's hits, so they cannot be taken for the thin white ground truth).
+PATH_ROLES = (("particles/birth", "birth"), ("classify/hits", "hit"), ("blobs/accepted", "hit"))
 #: Metric marks are drawn outside the track box they mark (inflated by this many pixels per
 #: side) and over it (draw order), so a thick track box never hides them.
 MARK_INFLATE = {"false_positive": 4.0, "switch": 8.0, "miss": 0.0}

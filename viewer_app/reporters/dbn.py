@@ -23,7 +23,7 @@ LAYOUT = TrackerLayout(
            ("Association", ("assoc/**", "tracks/trails"))),
     notes=(("Tracks", "confirmed tracks and their errors"),
            ("Foreground", "the background-subtraction mask"),
-           ("Blobs", "blobs the DBN accepted (grey) and rejected (dark grey)"),
+           ("Blobs", "blobs the DBN accepted (cyan, as classifier hits) and rejected (dark grey)"),
            ("DBN score", "each scored particle's DBN probability, viridis 0 to 1 (not a rank)"),
            ("Update", "the cloud after the update, colour = weight rank, blobs with the mass "
                       "each won"),
