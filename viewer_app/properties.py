@@ -100,7 +100,8 @@ def about_markdown(title: str, views: Iterable[tuple[str, Iterable[str]]],
               "ID switches: thick black, 8 px outside. Marks are drawn over the track boxes. "
               "These never occur in the track palette.",
               "- Births: newborn particles are pink dots (the survivors keep their weight "
-              "colours). Classifier hits (DLPF windows, DBN-accepted blobs): cyan boxes (the rejected windows stay thin grey).",
+              "colours). Classifier hits (DLPF windows, DBN-accepted blobs): cyan boxes (the "
+              "rejected windows stay thin grey).",
               "- Clusters: a kept cluster (its box and members) in the colour of the confirmed "
               "track that took it; a kept cluster no confirmed track took in light grey; a "
               "dropped cluster dark grey.",
