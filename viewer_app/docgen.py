@@ -1,6 +1,6 @@
 """The command line's documentation, generated from its argparse parsers.
 
-    python -m pfscope.viewer_app.docgen            # rewrite README.md's synopsis and docs/cli.md
+    python -m pfscope.viewer_app.docgen            # rewrite README.md's generated blocks, docs/cli.md
     python -m pfscope.viewer_app.docgen --check    # exit 1 (and say which) when they are stale
 
 The README holds the synopsis between ``<!-- cli-synopsis:begin -->`` and
@@ -178,13 +178,30 @@ def readme_with_synopsis(readme: str, ap: Optional[argparse.ArgumentParser] = No
     return f"{head}{BEGIN}\n```text\n{synopsis(ap)}\n```\n{END}{tail}"
 
 
+TABS_BEGIN = "<!-- tabs:begin (generated: python -m pfscope.viewer_app.docgen) -->"
+TABS_END = "<!-- tabs:end -->"
+
+
+def readme_with_tabs(readme: str) -> str:
+    """``readme`` with the text between the tab-table markers replaced by the layouts' own
+    summary (:func:`pfscope.viewer_app.tabs.readme_summary`)."""
+    from .tabs import readme_summary
+
+    if TABS_BEGIN not in readme or TABS_END not in readme:
+        raise ValueError(f"README.md has no {TABS_BEGIN} ... {TABS_END} block")
+    head, rest = readme.split(TABS_BEGIN, 1)
+    _, tail = rest.split(TABS_END, 1)
+    return f"{head}{TABS_BEGIN}\n{readme_summary()}\n{TABS_END}{tail}"
+
+
 def targets(root: Path) -> dict[Path, str]:
     """Each generated file and the text it must hold."""
     from .cli import build_parser
 
     ap = build_parser()
     readme = root / "README.md"
-    return {readme: readme_with_synopsis(readme.read_text(encoding="utf-8"), ap),
+    return {readme: readme_with_tabs(readme_with_synopsis(readme.read_text(encoding="utf-8"),
+                                                          ap)),
             root / "docs" / "cli.md": reference(ap)}
 
 

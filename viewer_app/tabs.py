@@ -78,6 +78,24 @@ def readme_table(trackers: Optional[Sequence[str]] = None) -> str:
     return "\n".join(rows)
 
 
+def readme_summary(trackers: Optional[Sequence[str]] = None) -> str:
+    """The README's short tab table: one row per tracker, its tabs in order with what each
+    shows (the same layouts and notes as :func:`readme_table`)."""
+    from .reporters import layout_for
+
+    groups = [("phd",), ("mt",), ("dlpf",), ("dbn-phd", "phd-bgsub")]
+    if trackers:
+        groups = [(t,) for t in trackers]
+    rows = ["| tracker | tabs (then All stages) |", "|---|---|"]
+    for names in groups:
+        layout = layout_for(names[0])
+        notes = dict(layout.notes)
+        cells = [f"**{t}** ({notes[t]})" if notes.get(t) else f"**{t}**"
+                 for t, _ in layout.views]
+        rows.append(f"| {', '.join(names)} | {'; '.join(cells)} |")
+    return "\n".join(rows)
+
+
 def to_property(tabs: list[dict]) -> dict:
     """The ``tabs`` recording property: the list as JSON (one string field)."""
     return {"json": json.dumps(tabs, separators=(",", ":"))}
