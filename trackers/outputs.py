@@ -46,14 +46,21 @@ def check_output(path: str | os.PathLike, force: bool, what: str = "recording") 
                              f"the {what} there, even with --force")
         if not force:
             raise InputError(f"{path}: {what} exists; pass --force to overwrite it")
-    parent = path.parent if str(path.parent) else Path(".")
-    try:
-        parent.mkdir(parents=True, exist_ok=True)
-    except OSError as e:
-        raise InputError(f"{parent}: cannot create output folder ({e.strerror or e})") from None
-    if not os.access(parent, os.W_OK | os.X_OK):
-        raise InputError(f"{parent}: output folder is not writable")
+    writable_folder(path.parent if str(path.parent) else Path("."))
     return path
+
+
+def writable_folder(folder: str | os.PathLike) -> Path:
+    """Create ``folder`` (and its parents) if needed and check it is writable; one-line
+    :class:`InputError` otherwise."""
+    folder = Path(folder)
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise InputError(f"{folder}: cannot create output folder ({e.strerror or e})") from None
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise InputError(f"{folder}: output folder is not writable")
+    return folder
 
 
 def _file_ids(paths) -> dict:
@@ -162,4 +169,4 @@ class OutputLock:
         self.release()
 
 
-__all__ = ["incomplete_path", "check_output", "refuse_inputs", "OutputLock"]
+__all__ = ["incomplete_path", "check_output", "writable_folder", "refuse_inputs", "OutputLock"]

@@ -489,12 +489,9 @@ def run_batch(jobs: list[Job], out: Path, workers: int, *, quiet: bool = False,
 def _check_out_dir(out: Path) -> None:
     if out.exists() and not out.is_dir():
         raise InputError(f"{out}: exists and is not a folder (--out names the batch's folder)")
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as e:
-        raise InputError(f"{out}: cannot create the output folder ({e.strerror or e})") from None
-    if not os.access(out, os.W_OK | os.X_OK):
-        raise InputError(f"{out}: output folder is not writable")
+    from pfscope.trackers.outputs import writable_folder
+
+    writable_folder(out)
 
 
 def _leftovers(j: Job) -> list[Path]:
