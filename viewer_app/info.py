@@ -117,7 +117,8 @@ def recording_info(path, top: int = 10) -> dict[str, Any]:
                     ev = {"frame": f, "message": msg, **more}
                     for k in ("track_ids", "gt_ids"):
                         if isinstance(ev.get(k), str):
-                            ev[k] = [int(x) for x in ev[k].split()]
+                            # "-": no id (the recorder never logs an empty string)
+                            ev[k] = [int(x) for x in ev[k].split() if x != "-"]
                     events.setdefault(lane, []).append(ev)
     except Exception as e:  # noqa: BLE001
         raise InputError(f"{path}: unreadable chunk ({type(e).__name__}: {e})") from None
