@@ -135,15 +135,16 @@ def test_unknown_option_is_refused():
 
 
 def test_shared_motion_option_reaches_filter_and_association():
-    tr = make_tracker("phd", sigma_v=0.05)
+    # per-frame fields are the paper preset's (practical derives them from rate.*)
+    tr = make_tracker("phd", preset="paper", sigma_v=0.05)
     assert tr.params.filter.motion.sigma_v == 0.05 and tr.associator.params.sigma_v == 0.05
     # a dotted name sets exactly one
-    tr = make_tracker("phd", **{"assoc.sigma_v": 0.07})
+    tr = make_tracker("phd", preset="paper", **{"assoc.sigma_v": 0.07})
     assert tr.params.filter.motion.sigma_v == 0.03 and tr.associator.params.sigma_v == 0.07
 
 
 def test_cli_strings_are_converted_and_checked():
-    tr = make_tracker("phd", p_miss="0.2", depth="30")
+    tr = make_tracker("phd", preset="paper", p_miss="0.2", depth="30")
     assert tr.params.filter.likelihood.p_miss == 0.2 and tr.associator.params.depth == 30
     with pytest.raises(ValueError, match="p_miss"):
         make_tracker("phd", p_miss="lots")

@@ -237,8 +237,8 @@ def test_set_options_route_per_tracker_in_compare(tmp_path, capsys):
     from pfscope.viewer_app.cli import main
 
     rc = main(["compare", "synthetic", "--frames", "3", "--trackers", "phd,mt",
-               "--set", "phd.p_miss=0.3", "--set", "depth=20", "--out", str(tmp_path / "c.rrd"),
-               "--quiet", "--json"])
+               "--set", "phd.p_miss=0.3", "--set", "depth=20", "--preset", "paper",
+               "--out", str(tmp_path / "c.rrd"), "--quiet", "--json"])
     assert rc == 0
     rc = main(["record", "synthetic", "--frames", "3", "--set", "p_mis=0.3",
                "--out", str(tmp_path / "d.rrd"), "--quiet"])
