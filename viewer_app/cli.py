@@ -649,6 +649,9 @@ def _print_scores(scores: dict, as_json: bool) -> None:
 
     from pfscope.trackers.eval import describe_convention, format_table
 
+    # keys starting with "_" are evaluate()'s intermediate counts (for combining sequences)
+    scores = {name: {k: v for k, v in sc.items() if not k.startswith("_")}
+              for name, sc in scores.items()}
     if as_json:
         print(json.dumps(scores, indent=2, sort_keys=True, default=float))
         return

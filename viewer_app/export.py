@@ -181,6 +181,14 @@ def _colors_for(row: dict, prefix: str, n: int, roles: dict) -> np.ndarray:
     return np.tile(np.array([200, 200, 200, 255], dtype=np.uint8), (n, 1))
 
 
+def _show_labels(row: dict, kind: str) -> bool:
+    """Rerun shows an archetype's labels unless its ``show_labels`` says otherwise."""
+    show = row.get(f"{kind}:show_labels")
+    if isinstance(show, list) and show:
+        return bool(show[0])
+    return True if show is None else bool(show)
+
+
 def _thickness(row: dict, prefix: str, default: float = 1.0) -> int:
     r = row.get(f"{prefix}:radii")
     v = float(r[0]) if r else default
@@ -211,10 +219,7 @@ def draw_entity(img: np.ndarray, kind: str, row: dict, roles: dict,
         rgba = _colors_for(row, "Boxes2D", n, roles)
         t = _thickness(row, "Boxes2D")
         labels = row.get("Boxes2D:labels") or []
-        show = row.get("Boxes2D:show_labels")
-        # Rerun shows the labels unless show_labels says otherwise
-        show = bool(show[0]) if isinstance(show, list) and show else bool(show) \
-            if show is not None else True
+        show = _show_labels(row, "Boxes2D")
         layer = img.copy()
         for i in range(n):
             p0 = tuple(int(v) for v in np.round(c[i] - hs[i]))
@@ -232,9 +237,7 @@ def draw_entity(img: np.ndarray, kind: str, row: dict, roles: dict,
         rgba = _colors_for(row, "LineStrips2D", n, roles)
         t = _thickness(row, "LineStrips2D")
         labels = row.get("LineStrips2D:labels") or []
-        show = row.get("LineStrips2D:show_labels")
-        show = bool(show[0]) if isinstance(show, list) and show else bool(show) \
-            if show is not None else True
+        show = _show_labels(row, "LineStrips2D")
         layer = img.copy()
         for i, s in enumerate(strips):
             pts = np.round(np.asarray(s, dtype=np.float32).reshape(-1, 2)).astype(np.int32)
