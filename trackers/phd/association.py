@@ -177,6 +177,17 @@ class AssocParams:
     relink_tau: float = param(20.0, "re-linking: time constant of the velocity damping, "
                                     "frames (the motion noise sigma_v with a pull of the "
                                     "velocity back to rest: an Ornstein-Uhlenbeck process)")
+    extend_heads: bool = param(False, "when a track is confirmed, give the frames before its "
+                                      "first estimate the detections that seeded it: walking "
+                                      "back from the first estimate along the track's mean "
+                                      "velocity, each held-back frame takes the detection "
+                                      "inside the edge gate (one frame's estimate noise, "
+                                      "twice), none another track's estimate covers; stops "
+                                      "at the first frame without one (PHD-MT: the frames "
+                                      "its mass took to reach T; flagged as filled; needs "
+                                      "fill_gaps; not in paper)")
+    head_skip: int = param(0, "extend_heads: frames without a fitting detection the walk "
+                              "back may cross in a row")
 
     def __post_init__(self):
         if int(self.depth) != self.depth or self.depth < 1:
@@ -201,6 +212,9 @@ class AssocParams:
             raise ValueError(f"AssocParams.app_alpha must be in (0, 1], got {self.app_alpha}")
         if not self.relink_tau > 0:
             raise ValueError(f"AssocParams.relink_tau must be > 0, got {self.relink_tau}")
+        if self.extend_heads and not self.fill_gaps:
+            raise ValueError("AssocParams.extend_heads needs fill_gaps (the held-back frames "
+                             "it writes into)")
 
     @cached_property
     def gate_d2(self) -> float:
@@ -629,6 +643,8 @@ class GraphAssociator:
         self._next_id = 1
         self._last_frame: int | None = None
         self._buffer: deque[tuple[int, np.ndarray, np.ndarray, np.ndarray]] = deque()
+        #: detections (cx, cy, w, h) of the held-back frames, beside ``_buffer`` (extend_heads)
+        self._dets: deque[tuple[int, np.ndarray]] = deque()
 
     # ---- introspection
     @property
@@ -688,10 +704,12 @@ class GraphAssociator:
         return f
 
     # ---- one frame
-    def step(self, frame: int, states, features=None) -> AssocResult:
+    def step(self, frame: int, states, features=None, detections=None) -> AssocResult:
         """Extend the path cover with the estimates of ``frame``; ``states (M, 6)``, NaN velocity
         meaning unknown; ``features (M, D)``: their colour features
-        (:func:`.appearance.box_features`, NaN rows unknown), used when ``app_weight > 0``."""
+        (:func:`.appearance.box_features`, NaN rows unknown), used when ``app_weight > 0``;
+        ``detections (N, 4)`` ``(cx, cy, w, h)``: the frame's detections, read by
+        ``extend_heads`` (PHD-MT, whose estimates are not the detections)."""
         new = self._check(frame, states)
         frame = int(frame)
         self._last_frame = frame
@@ -817,8 +835,15 @@ class GraphAssociator:
 
         # 6. bounded-lag output: rows of frames <= k − L, judged with the lengths known now
         self._buffer.append((frame, ids.copy(), new.copy(), np.zeros(M, dtype=bool)))
+        if p.extend_heads and p.fill_gaps:
+            d = (np.zeros((0, 4)) if detections is None
+                 else np.asarray(detections, dtype=np.float64).reshape(-1, 4))
+            self._dets.append((frame, d))
+            self._extend_heads(frame, relinked)
         finalised = []
         while self._buffer and self._buffer[0][0] <= frame - self.lag:
+            if self._dets and self._dets[0][0] == self._buffer[0][0]:
+                self._dets.popleft()
             f, bid, bst, bfill = self._buffer.popleft()
             ok = self._confirmed_ids(bid, ended_ids, ended_len)
             finalised.append(FinalRows(f, bid[ok], bst[ok], bfill[ok]))
@@ -901,6 +926,52 @@ class GraphAssociator:
             self._fill_gaps(src, src_frame, dst, dst_frame, old_ids)
         return np.stack([new_ids, old_ids], axis=1).astype(np.int64)
 
+    def _extend_heads(self, frame: int, relinked: np.ndarray) -> None:
+        """``extend_heads``: the tracks confirmed at ``frame`` (not re-linked) get rows in the
+        held-back frames before their first estimate, from the detections there (module
+        docstring of :class:`AssocParams`, ``extend_heads``).  A loop over those tracks and
+        the frames walked back (at most the report lag), vectorised over the detections."""
+        p = self.params
+        cand = np.flatnonzero((self._length == p.min_length) & (self._tail_frame == frame))
+        if len(relinked):
+            cand = cand[~np.isin(self._ids[cand], relinked[:, 1])]
+        if not len(cand) or not self._dets:
+            return
+        frames = {f: n for n, (f, _, _, _) in enumerate(self._buffer)}
+        dets = {f: d for f, d in self._dets}
+        for t in cand.tolist():
+            first, f0 = self._first[t], int(self._first_frame[t])
+            span = int(self._tail_frame[t]) - f0
+            v = ((self._tail[t, :2] - first[:2]) / span) if span > 0 else np.zeros(2)
+            x = first[OBS_INDEX].copy()
+            var = 2.0 * obs_noise_var(first[None], p)[0]
+            f, skip = f0 - 1, p.head_skip
+            while f in frames and f in dets:
+                d = dets[f]
+                pred = x.copy()
+                pred[:2] -= v
+                n = frames[f]
+                fr, bid, bst, bfill = self._buffer[n]
+                d2 = np.sum((d - pred) ** 2 / var, axis=1)
+                if len(bst) and len(d):   # a detection another track's row covers is taken
+                    d2[_iou(d, bst[:, OBS_INDEX]).max(axis=1) >= p.fill_overlap] = np.inf
+                j = int(np.argmin(d2)) if len(d) else -1
+                if j < 0 or not d2[j] <= p.gate_d2:
+                    if skip <= 0:   # no detection here (nor in the frames skipped): stop
+                        break
+                    skip -= 1
+                    x = pred
+                    f -= 1
+                    continue
+                skip = p.head_skip
+                st = np.full((1, STATE_DIM), np.nan)
+                st[0, OBS_INDEX] = d[j]
+                st[0, 2:4] = v
+                self._buffer[n] = (fr, np.append(bid, self._ids[t]), np.concatenate([bst, st]),
+                                   np.append(bfill, True))
+                x = d[j]
+                f -= 1
+
     def _fill_gaps(self, src: np.ndarray, src_frame: np.ndarray, dst: np.ndarray, frame,
                    ids: np.ndarray) -> None:
         """Add interpolated rows to the buffered frames strictly between each chosen edge's ends
@@ -953,6 +1024,7 @@ class GraphAssociator:
     def flush(self) -> tuple[FinalRows, ...]:
         """End of sequence: the buffered rows (the last ``L`` frames) of confirmed tracks."""
         out = []
+        self._dets.clear()
         while self._buffer:
             f, bid, bst, bfill = self._buffer.popleft()
             ok = self._confirmed_ids(bid)

@@ -273,14 +273,15 @@ class _AssociatingTracker:
     def _retime_filter(self, ratio: float) -> None:
         pass
 
-    def _associate(self, frame: Frame, states: np.ndarray, log: StageLog) -> StepResult:
+    def _associate(self, frame: Frame, states: np.ndarray, log: StageLog,
+                   detections: Optional[np.ndarray] = None) -> StepResult:
         log.stage("associate")
         feats = None
         if frame.image is not None and getattr(frame.image, "ndim", 0) >= 2:
             self.associator.area = float(frame.width * frame.height)
         if self.associator.params.app_weight > 0 and frame.has_pixels:
             feats = box_features(frame.image, states)
-        res = self.associator.step(frame.index, states, feats)
+        res = self.associator.step(frame.index, states, feats, detections)
         self._report_association(frame, res, log)
         keep = res.confirmed
         return StepResult(TrackSet(res.ids[keep], res.boxes[keep]),
@@ -334,7 +335,7 @@ class _AssociatingTracker:
 PHD_PRACTICAL = PHDTrackerParams(
     filter=PHDParams.of(clutter_model="gate", near_learn=True, score_model="gaussian",
                         p_miss=0.1),
-    assoc=AssocParams(fill_gaps=True, app_weight=2.0),
+    assoc=AssocParams(fill_gaps=True, app_weight=2.0, extend_heads=True),
     rate=RateParams(per_second=True))
 PHD_SCENE = with_options(PHD_PRACTICAL, {"filter.clutter.clutter_model": "scene"})
 #: The practical default of MT: the same association settings per second (re-linking
@@ -385,7 +386,7 @@ class PHDTracker(_AssociatingTracker):
         clusters = kmeans_peaks(r.resampled, r.observations, cp.T, params=self.filter.params,
                                 split_rule=cp.split_rule)
         self._report_filter(dets, r, clusters, log)
-        return self._associate(frame, clusters.kept_centers, log)
+        return self._associate(frame, clusters.kept_centers, log, r.observations)
 
     def _report_filter(self, detections: Detections, r: PHDStepResult, clusters: Clusters,
                        log: StageLog) -> None:
