@@ -184,8 +184,9 @@ class AssocParams:
                                       "inside the edge gate (one frame's estimate noise, "
                                       "twice), none another track's estimate covers; stops "
                                       "at the first frame without one (PHD-MT: the frames "
-                                      "its mass took to reach T; flagged as filled; needs "
-                                      "fill_gaps; not in paper)")
+                                      "its mass took to reach T; flagged as filled; the "
+                                      "report lag becomes max(min_length − 1, depth) as "
+                                      "with fill_gaps; not in paper)")
     head_skip: int = param(0, "extend_heads: frames without a fitting detection the walk "
                               "back may cross in a row")
 
@@ -212,9 +213,6 @@ class AssocParams:
             raise ValueError(f"AssocParams.app_alpha must be in (0, 1], got {self.app_alpha}")
         if not self.relink_tau > 0:
             raise ValueError(f"AssocParams.relink_tau must be > 0, got {self.relink_tau}")
-        if self.extend_heads and not self.fill_gaps:
-            raise ValueError("AssocParams.extend_heads needs fill_gaps (the held-back frames "
-                             "it writes into)")
 
     @cached_property
     def gate_d2(self) -> float:
@@ -651,7 +649,8 @@ class GraphAssociator:
     def lag(self) -> int:
         """Frames between a step and the frame its ``finalised`` rows belong to."""
         p = self.params
-        return max(p.min_length - 1, p.depth) if p.fill_gaps else p.min_length - 1
+        return (max(p.min_length - 1, p.depth) if p.fill_gaps or p.extend_heads
+                else p.min_length - 1)
 
     @property
     def n_live(self) -> int:
@@ -835,7 +834,7 @@ class GraphAssociator:
 
         # 6. bounded-lag output: rows of frames <= k − L, judged with the lengths known now
         self._buffer.append((frame, ids.copy(), new.copy(), np.zeros(M, dtype=bool)))
-        if p.extend_heads and p.fill_gaps:
+        if p.extend_heads:
             d = (np.zeros((0, 4)) if detections is None
                  else np.asarray(detections, dtype=np.float64).reshape(-1, 4))
             self._dets.append((frame, d))

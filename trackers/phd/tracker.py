@@ -273,6 +273,12 @@ class _AssociatingTracker:
     def _retime_filter(self, ratio: float) -> None:
         pass
 
+    @property
+    def _flagged(self) -> bool:
+        """Rows carry the filled flag (tracks-file conf) when some are not estimates."""
+        p = self.associator.params
+        return p.fill_gaps or p.extend_heads
+
     def _associate(self, frame: Frame, states: np.ndarray, log: StageLog,
                    detections: Optional[np.ndarray] = None) -> StepResult:
         log.stage("associate")
@@ -285,7 +291,7 @@ class _AssociatingTracker:
         self._report_association(frame, res, log)
         keep = res.confirmed
         return StepResult(TrackSet(res.ids[keep], res.boxes[keep]),
-                          _rows(res.finalised, self.associator.params.fill_gaps), log.result())
+                          _rows(res.finalised, self._flagged), log.result())
 
     def _report_association(self, frame: Frame, res: AssocResult, log: StageLog) -> None:
         log.scalar("assoc/tracks/live", self.associator.n_live)
@@ -319,7 +325,7 @@ class _AssociatingTracker:
 
     def finish(self) -> Rows:
         """End of sequence: every row not yet finalised."""
-        return _rows(self.associator.flush(), self.associator.params.fill_gaps)
+        return _rows(self.associator.flush(), self._flagged)
 
 
 #: The practical default of PHD-MT (README, "Presets"): maggio2007's algorithm with settings
