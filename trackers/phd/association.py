@@ -925,6 +925,23 @@ class GraphAssociator:
             self._fill_gaps(src, src_frame, dst, dst_frame, old_ids)
         return np.stack([new_ids, old_ids], axis=1).astype(np.int64)
 
+    def returning(self, frame: int, Z: np.ndarray) -> np.ndarray:
+        """(N_z,) bool: the detections ``Z`` (N_z, 4) ``(cx, cy, w, h)`` of ``frame`` (the
+        frame about to be stepped) inside the edge gate of a confirmed live track that had no
+        estimate in the previous frame (its prediction over the gap, :func:`propagate`)."""
+        p = self.params
+        Z = np.asarray(Z, dtype=np.float64).reshape(-1, 4)
+        lost = (self._length >= p.min_length) & (frame - self._tail_frame >= 2) \
+            & (frame - self._tail_frame <= p.depth)
+        if not lost.any() or not len(Z):
+            return np.zeros(len(Z), dtype=bool)
+        prev_gap = np.where(self._prev_frame[lost] >= 0,
+                            self._tail_frame[lost] - self._prev_frame[lost], 0)
+        v, b, c = tail_velocity(self._tail[lost], self._prev[lost], prev_gap, p)
+        sc = score_edges(self._tail[lost], v, b, c, frame - self._tail_frame[lost],
+                         np.concatenate([Z[:, :2], np.zeros((len(Z), 2)), Z[:, 2:]], axis=1), p)
+        return sc.allowed.any(axis=0)
+
     def _extend_heads(self, frame: int, relinked: np.ndarray) -> None:
         """``extend_heads``: the tracks confirmed at ``frame`` (not re-linked) get rows in the
         held-back frames before their first estimate, from the detections there (module

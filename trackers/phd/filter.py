@@ -223,6 +223,11 @@ class BirthParams:
                                     "(paper); > 0: their weight is set from κ(z) so that a "
                                     "detection no target explains gives its newborn this "
                                     "odds of target against clutter, C_b/κ (not in paper)")
+    revive_odds: float = param(0.0, "with birth_odds > 0: the odds given instead to a "
+                                    "detection the tracker marks as the return of a confirmed "
+                                    "track that lost its estimate (inside the gate of its "
+                                    "prediction; PHDTracker), so one miss does not cost the "
+                                    "slow re-birth of a new target (0: off; not in paper)")
     max_births_per_frame: int = param(50_000, "newborn particles per frame at most: above it "
                                               "every J_z is scaled down by the same factor "
                                               "(not in paper; bounds a clutter storm)")
@@ -236,6 +241,7 @@ class BirthParams:
         _check(self, "birth_spread", self.birth_spread > 0, "> 0")
         _check(self, "birth_speed_std", self.birth_speed_std >= 0, ">= 0")
         _check(self, "max_births_per_frame", self.max_births_per_frame >= 0, ">= 0")
+        _check(self, "revive_odds", self.revive_odds >= 0, ">= 0")
         _check(self, "birth_odds", self.birth_odds >= 0, ">= 0")
 
 
@@ -650,11 +656,13 @@ def log_birth_weight(Z: np.ndarray, params: PHDParams,
 
 
 def birth(predicted: ParticleSet, Z, params: PHDParams, rng: np.random.Generator,
-          log_kappa: Optional[np.ndarray] = None) -> BirthResult:
+          log_kappa: Optional[np.ndarray] = None,
+          revive: Optional[np.ndarray] = None) -> BirthResult:
     """Draw J_k newborn particles around the detections (maggio2007 §2; readings in the module
     docstring): ``J_z = J_max max(0, 1 − M(z))`` (capped per frame, :func:`allocate_births`),
     each detection's newborn carrying total weight ``birth_intensity`` (or the weight set by
-    ``birth_odds`` from ``log_kappa``, :func:`log_birth_weight`).
+    ``birth_odds`` from ``log_kappa``, :func:`log_birth_weight`); ``revive`` (N_z,) bool marks
+    the detections that get ``revive_odds`` instead of ``birth_odds``.
     Draw order: (J, 4) normals, J direction uniforms, J speed normals."""
     Z = as_observations(Z)
     bp, lk = params.birth, params.likelihood
@@ -666,6 +674,8 @@ def birth(predicted: ParticleSet, Z, params: PHDParams, rng: np.random.Generator
     speed_n = rng.standard_normal(n)
     # eq. (4), newborn branch, with γ_z ∝ p_z: every newborn of z weighs birth_intensity / J_z.
     lw_det = log_birth_weight(Z, params, log_kappa) - np.log(np.maximum(j, 1))
+    if revive is not None and bp.revive_odds > bp.birth_odds > 0 and log_kappa is not None:
+        lw_det = lw_det + np.where(revive, math.log(bp.revive_odds / bp.birth_odds), 0.0)
     # one fused pass (numba): (y, w, h) = z + spread σ(z) ε, speed (mean + std n) sqrt(w h)
     # in direction θ, sizes clipped to min_size
     states, log_w, det = _kernels.birth_fill(
@@ -1000,18 +1010,20 @@ class PHDFilter:
         self.particles = ParticleSet.empty(STATE_DIM)
         self.scene = SceneModel(self.params)
 
-    def step(self, Z, frame: Optional[Frame] = None) -> PHDStepResult:
+    def step(self, Z, frame: Optional[Frame] = None,
+             revive: Optional[np.ndarray] = None) -> PHDStepResult:
         """One frame: predict → birth → update (eq. (5) on the gated pairs:
         :class:`GatedGaussian` for the Gaussian likelihood, :func:`gated_log_g` for any other)
         → resample.  ``Z`` is (N_z, 4) ``(y1, y2, w, h)`` or a
         :class:`~pfscope.trackers.types.Detections`; ``frame`` is handed to the likelihood
-        (image-based likelihoods need the pixels)."""
+        (image-based likelihoods need the pixels); ``revive`` (N_z,) bool: detections whose
+        newborn get ``revive_odds`` (:func:`birth`)."""
         scores = getattr(Z, "scores", None)
         Z = as_observations(Z)
         p = self.params
         predicted = predict(self.particles, p.motion, self.rng)
         log_kappa_geo, log_kappa = self.scene.log_kappa(Z, scores, frame)
-        born = birth(predicted, Z, p, self.rng, log_kappa_geo)
+        born = birth(predicted, Z, p, self.rng, log_kappa_geo, revive)
         candidates = predicted.concat(born.particles)
         if type(self.likelihood) is GaussianLikelihood:
             # maggio2007's Gaussian: evaluated inside the update's fused kernel

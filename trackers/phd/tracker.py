@@ -340,7 +340,7 @@ class _AssociatingTracker:
 #: scene: mass within 10 % of the true count, where ``gate`` under-counts by ~20 %).
 PHD_PRACTICAL = PHDTrackerParams(
     filter=PHDParams.of(clutter_model="gate", near_learn=True, score_model="gaussian",
-                        p_miss=0.1),
+                        p_miss=0.1, revive_odds=1.0),
     assoc=AssocParams(fill_gaps=True, app_weight=2.0, extend_heads=True),
     rate=RateParams(per_second=True))
 PHD_SCENE = with_options(PHD_PRACTICAL, {"filter.clutter.clutter_model": "scene"})
@@ -387,7 +387,10 @@ class PHDTracker(_AssociatingTracker):
         dets = detections if detections is not None else Detections.empty()
         self._retime(frame)
         log = StageLog(self.stages, level)
-        r = self.filter.step(dets, frame)
+        revive = None
+        if self.active.filter.birth.revive_odds > 0 and len(dets):
+            revive = self.associator.returning(frame.index, xywh_to_cxcywh(dets.boxes))
+        r = self.filter.step(dets, frame, revive)
         cp = self.params.clusters
         clusters = kmeans_peaks(r.resampled, r.observations, cp.T, params=self.filter.params,
                                 split_rule=cp.split_rule)
