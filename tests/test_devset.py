@@ -47,8 +47,8 @@ def test_frameless_folder_runs_detection_trackers_and_refuses_pixel_ones(tmp_pat
     from pfscope.trackers.api import make_params, tracker_info
     from pfscope.trackers.pipeline import run
 
-    full = _seq(tmp_path, "full", seed=3, frames=25)
-    root = _seq(tmp_path, "detonly", seed=3, frames=25, frameless=True)
+    full = _seq(tmp_path, "full", seed=3, frames=40)
+    root = _seq(tmp_path, "detonly", seed=3, frames=40, frameless=True)
     src = open_source(root)
     assert not src.has_frames and src.describe()["pixels"].startswith("none")
     frame = next(iter(src.frames(1)))
@@ -57,7 +57,7 @@ def test_frameless_folder_runs_detection_trackers_and_refuses_pixel_ones(tmp_pat
     def rows(source, name, opts):
         trk = tracker_info(name).cls(make_params(name, None, opts), rng=np.random.default_rng(0))
         res = run(source, {name: trk})
-        assert res.outcome.status == "completed" and res.frames == 25
+        assert res.outcome.status == "completed" and res.frames == 40
         return [(f, ts.ids.tolist(), ts.boxes.tolist()) for f, ts in res.rows[name]]
 
     # MT reads no pixels: the same tracks with and without frames; PHD-MT's colour cue

@@ -187,6 +187,10 @@ class AssocParams:
                                       "its mass took to reach T; flagged as filled; the "
                                       "report lag becomes max(min_length − 1, depth) as "
                                       "with fill_gaps; not in paper)")
+    revive_rate: float = param(0.85, "PHD-MT's revive_odds go only to the detections near "
+                                      "a confirmed track that had estimates in at least "
+                                      "this share of its frames (clutter that fires now "
+                                      "and then in one place does not qualify)")
     head_skip: int = param(0, "extend_heads: frames without a fitting detection the walk "
                               "back may cross in a row")
 
@@ -928,11 +932,15 @@ class GraphAssociator:
     def returning(self, frame: int, Z: np.ndarray) -> np.ndarray:
         """(N_z,) bool: the detections ``Z`` (N_z, 4) ``(cx, cy, w, h)`` of ``frame`` (the
         frame about to be stepped) inside the edge gate of a confirmed live track that had no
-        estimate in the previous frame (its prediction over the gap, :func:`propagate`)."""
+        estimate in the previous frame (its prediction over the gap, :func:`propagate`) and
+        had estimates in at least ``revive_rate`` of its frames so far (a person who was just
+        missed, not clutter that fires now and then in one place)."""
         p = self.params
         Z = np.asarray(Z, dtype=np.float64).reshape(-1, 4)
         lost = (self._length >= p.min_length) & (frame - self._tail_frame >= 2) \
             & (frame - self._tail_frame <= p.depth)
+        span = self._tail_frame - self._first_frame + 1
+        lost &= self._length >= p.revive_rate * span
         if not lost.any() or not len(Z):
             return np.zeros(len(Z), dtype=bool)
         prev_gap = np.where(self._prev_frame[lost] >= 0,
