@@ -52,6 +52,8 @@ from typing import Optional
 
 import cv2
 import numpy as np
+from scipy.sparse import csr_matrix
+from scipy.sparse.csgraph import connected_components
 
 WIN_W, WIN_H = 64, 128
 CELL = 8            # HOG cell and block stride (px)
@@ -191,52 +193,51 @@ class HOGWindowClassifier:
         k, cu, cv = self._levels(w)
         _, first, inv = np.unique(_pack(k, cu, cv), return_index=True,
                                   return_inverse=True)          # duplicates scored once
-        ukey = np.stack([k[first], cu[first], cv[first]], axis=1)
+        k, cu, cv = k[first], cu[first], cv[first]
         inv = inv.reshape(-1)
-        ucells = np.empty((len(ukey), (WIN_W // CELL - 1) * (WIN_H // CELL - 1), BLOCK_LEN),
-                          dtype=np.float32)
+        n = len(k)
         wx, wy = WIN_W // CELL, WIN_H // CELL            # window: 8 x 16 cells, 7 x 15 blocks
-        bi = np.arange(wx - 1)[:, None]                  # OpenCV's block order: x outer, y inner
-        bj = np.arange(wy - 1)[None, :]
-        for lev in np.unique(ukey[:, 0]):
-            sel = np.flatnonzero(ukey[:, 0] == lev)
-            s = self.scale_step ** int(lev)
-            u0, v0 = int(ukey[sel, 1].min()), int(ukey[sel, 2].min())
-            u, v = ukey[sel, 1] - u0, ukey[sel, 2] - v0   # cells on this level's local grid
-            gw, gh = int(u.max()) + wx, int(v.max()) + wy
-            cells = _rasterise(u, v, wx, wy, gw, gh)       # cells inside some window
-            need = _rasterise(u, v, wx - 1, wy - 1, gw, gh)  # blocks some window uses
-            # each connected group of overlapping windows is one region of the level image,
-            # resampled once; each block of it that some window uses is computed once
-            ncomp, lab, stats, _ = cv2.connectedComponentsWithStats(cells, connectivity=4)
-            bv, bu = np.nonzero(need)
-            blab = lab[bv, bu]
-            order = np.argsort(blab, kind="stable")
-            bv, bu, blab = bv[order], bu[order], blab[order]
-            cuts = np.searchsorted(blab, np.arange(1, ncomp + 1))
-            descs = []
-            for c in range(1, ncomp):
-                x, y, cw, chh = (int(t) for t in stats[c, :4])    # region, in cells
-                # 1 px more on each side so that the region's border gradients see their real
-                # neighbours; level px (a, b) samples frame px ((a + 0.5)/s - 0.5, ...)
-                ox, oy = (u0 + x) * CELL - 1, (v0 + y) * CELL - 1
-                M = np.array([[1.0 / s, 0.0, (ox + 0.5) / s - 0.5],
-                              [0.0, 1.0 / s, (oy + 0.5) / s - 0.5]])
-                region = cv2.warpAffine(grey, M, (cw * CELL + 2, chh * CELL + 2),
-                                        flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
-                                        borderMode=cv2.BORDER_REPLICATE)
-                sl = slice(cuts[c - 1], cuts[c])
-                locs = np.empty((sl.stop - sl.start, 2), dtype=np.int32)
-                locs[:, 0] = 1 + CELL * (bu[sl] - x)
-                locs[:, 1] = 1 + CELL * (bv[sl] - y)
-                descs.append(self.block_hog.compute(region, (CELL, CELL), (0, 0), locs)
-                             .reshape(-1, BLOCK_LEN))
-            row = np.full((gh, gw), -1, dtype=np.int64)
-            row[bv, bu] = np.arange(len(bv))
-            blocks = np.concatenate(descs)
-            idx = row[v[:, None, None] + bj[None], u[:, None, None] + bi[None]]  # (n, 7, 15)
-            ucells[sel] = blocks[idx.reshape(len(sel), -1)]
-        return ucells.reshape(len(ukey), -1), inv
+        nb = (wx - 1) * (wy - 1)
+        # each connected group of touching windows of one level is one region of the level
+        # image, resampled once; each block of it that some window uses is computed once
+        nreg, reg = _regions(k, cu, cv, wx, wy)
+        # every block of every window, in OpenCV's order (x outer, y inner); the distinct ones
+        bu = (cu[:, None] + np.repeat(np.arange(wx - 1), wy - 1)[None]).ravel()
+        bv = (cv[:, None] + np.tile(np.arange(wy - 1), wx - 1)[None]).ravel()
+        _, bfirst, binv = np.unique(_pack(np.repeat(k, nb), bu, bv), return_index=True,
+                                    return_inverse=True)
+        bu, bv, breg = bu[bfirst], bv[bfirst], reg[bfirst // nb]
+        order = np.argsort(breg, kind="stable")
+        cuts = np.searchsorted(breg[order], np.arange(nreg + 1))
+        big = np.iinfo(np.int64).max
+        x0, y0 = np.full(nreg, big), np.full(nreg, big)
+        x1, y1 = np.full(nreg, -big), np.full(nreg, -big)
+        np.minimum.at(x0, reg, cu)
+        np.minimum.at(y0, reg, cv)
+        np.maximum.at(x1, reg, cu + wx)
+        np.maximum.at(y1, reg, cv + wy)
+        rlev = np.empty(nreg, dtype=np.int64)
+        rlev[reg] = k
+        blocks = np.empty((len(bu), BLOCK_LEN), dtype=np.float32)
+        compute, step = self.block_hog.compute, self.scale_step
+        for r in range(nreg):
+            sel = order[cuts[r]:cuts[r + 1]]
+            s = step ** int(rlev[r])
+            rx, ry = int(x0[r]), int(y0[r])
+            # 1 px more on each side so that the region's border gradients see their real
+            # neighbours; level px (a, b) samples frame px ((a + 0.5)/s - 0.5, ...)
+            ox, oy = rx * CELL - 1, ry * CELL - 1
+            M = np.array([[1.0 / s, 0.0, (ox + 0.5) / s - 0.5],
+                          [0.0, 1.0 / s, (oy + 0.5) / s - 0.5]])
+            region = cv2.warpAffine(grey, M, ((int(x1[r]) - rx) * CELL + 2,
+                                              (int(y1[r]) - ry) * CELL + 2),
+                                    flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
+                                    borderMode=cv2.BORDER_REPLICATE)
+            locs = np.empty((len(sel), 2), dtype=np.int32)
+            locs[:, 0] = 1 + CELL * (bu[sel] - rx)
+            locs[:, 1] = 1 + CELL * (bv[sel] - ry)
+            blocks[sel] = compute(region, (CELL, CELL), (0, 0), locs).reshape(-1, BLOCK_LEN)
+        return blocks[binv.reshape(n, nb)].reshape(n, -1), inv
 
     def _window_descriptors(self, grey: np.ndarray, w: np.ndarray) -> np.ndarray:
         n = len(w)
@@ -301,15 +302,18 @@ def _pack(k: np.ndarray, cu: np.ndarray, cv: np.ndarray) -> np.ndarray:
     return ((k + (1 << 20)) << 42) | ((cu + (1 << 20)) << 21) | (cv + (1 << 20))
 
 
-def _rasterise(u: np.ndarray, v: np.ndarray, w: int, h: int, gw: int, gh: int) -> np.ndarray:
-    """(gh, gw) uint8 mask of the union of the ``w`` x ``h`` rectangles at ``(u, v)`` (a
-    difference array and two cumulative sums, no loop over rectangles)."""
-    d = np.zeros((gh + 1, gw + 1), dtype=np.int32)
-    np.add.at(d, (v, u), 1)
-    np.add.at(d, (v, u + w), -1)
-    np.add.at(d, (v + h, u), -1)
-    np.add.at(d, (v + h, u + w), 1)
-    return (d.cumsum(0).cumsum(1)[:gh, :gw] > 0).astype(np.uint8)
+def _regions(k: np.ndarray, cu: np.ndarray, cv: np.ndarray, wx: int, wy: int
+             ) -> tuple[int, np.ndarray]:
+    """Connected groups of windows (``wx`` x ``wy`` cells at ``(cu, cv)`` on level ``k``): two
+    windows of one level are in a group when their cell rectangles overlap or share an edge
+    (the 4-connected components of the union of their cells).  Returns (groups, label per
+    window); a pairwise test over the few hundred distinct windows of a frame."""
+    same = k[:, None] == k[None]
+    du = np.abs(cu[:, None] - cu[None])
+    dv = np.abs(cv[:, None] - cv[None])
+    touch = same & (du <= wx) & (dv <= wy) & ~((du == wx) & (dv == wy))
+    n, labels = connected_components(csr_matrix(touch), directed=False)
+    return int(n), labels.astype(np.int64)
 
 
 def sliding_window_count(width: int, height: int, *, win_stride=(8, 8), padding=(8, 8),
