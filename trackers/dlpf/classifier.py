@@ -23,8 +23,10 @@ Cost (``mode``):
   windows on one level share their 16×16 blocks.  Resampled parents are often exact copies
   (about half the windows of a PETS09 frame are duplicates) and overlapping windows share most
   blocks: per frame, each distinct window is scored once and each block it uses is computed
-  once.  Per level, the windows' union is split into connected regions (a cell occupancy grid,
-  ``cv2.connectedComponentsWithStats``); each region is resampled once from the frame
+  once.  Per level, the windows' union is split into connected regions (windows whose cell
+  rectangles overlap or share an edge, one pairwise test over the frame's distinct windows and
+  ``scipy.sparse.csgraph.connected_components``: the 4-connected components of the union of
+  their cells, without rasterising it); each region is resampled once from the frame
   (``cv2.warpAffine``, level px ``u`` samples frame px ``(u + 0.5)/s − 0.5`` like
   ``cv2.resize``; replicated border; 1 px more on each side so that border gradients see their
   real neighbours) and its needed blocks are computed in one ``HOGDescriptor.compute`` call
@@ -32,9 +34,12 @@ Cost (``mode``):
   gamma as the 64×128 one); a window's descriptor is then a gather of its 7×15 blocks in
   OpenCV's order (x outer).  At integer level offsets this equals OpenCV's descriptor of the
   window on the level image exactly; elsewhere up to warpAffine's 1/32-px coordinate rounding
-  (tests/test_dlpf.py).  PETS09 frames 1–120: ~8.7 k blocks/frame instead of 310 × 105 = 32.5 k.
+  (tests/test_dlpf.py).  PETS09 frames 1–120: ~8.3 k blocks/frame instead of 310 × 105 = 32.5 k,
+  over ~630 k level px.  The HOG of those blocks is most of DLPF's time: with ``threads`` > 1
+  the regions are split into shares of equal area computed by that many threads (OpenCV
+  releases the GIL; each block is computed by one thread, so the margins do not depend on it).
 - ``"window"``: one ``cv2.resize`` + one ``HOGDescriptor.compute`` per window (a loop over a
-  few hundred windows, ~0.1 ms per window), no snapping.
+  few hundred windows, ~0.1 ms per window, split over ``threads``), no snapping.
 
 Both stack descriptors into (N, 3780) and score them with one matrix product ``D·w + b`` (or
 the intersection-kernel SVM's lookup tables, :mod:`.iksvm`).  The tracker scores its tracks'
@@ -93,18 +98,19 @@ class HOGWindowClassifier:
     MODES = ("pyramid", "window")
 
     def __init__(self, weights: np.ndarray | None = None, bias: float | None = None, *,
-                 mode: str = "pyramid", scale_step: float = 1.1):
+                 mode: str = "pyramid", scale_step: float = 1.1, threads: int = 1):
         if mode not in self.MODES:
             raise ValueError(f"classifier mode must be one of {', '.join(self.MODES)}, "
                              f"got {mode!r}")
         if not scale_step > 1.0:
             raise ValueError(f"classifier scale_step must be > 1, got {scale_step}")
         self.mode, self.scale_step = mode, float(scale_step)
+        if int(threads) < 1:
+            raise ValueError(f"classifier threads must be >= 1, got {threads}")
+        self.threads = int(threads)
+        self._pool = None
         self.hog = cv2.HOGDescriptor()
-        # one 16x16 block as a "window": same cells, bins, Gaussian block weighting
-        # (winSigma = (16+16)/8), L2-Hys and gamma correction as the 64x128 descriptor's blocks
-        self.block_hog = cv2.HOGDescriptor((16, 16), (16, 16), (8, 8), (8, 8), 9, 1, -1.0,
-                                           cv2.HOGDescriptor_L2Hys, 0.2, True)
+        self.block_hog = _block_hog()
         if weights is None:
             det = np.asarray(cv2.HOGDescriptor_getDefaultPeopleDetector(),
                              dtype=np.float32).reshape(-1)
@@ -219,25 +225,54 @@ class HOGWindowClassifier:
         rlev = np.empty(nreg, dtype=np.int64)
         rlev[reg] = k
         blocks = np.empty((len(bu), BLOCK_LEN), dtype=np.float32)
-        compute, step = self.block_hog.compute, self.scale_step
+        jobs = []
         for r in range(nreg):
             sel = order[cuts[r]:cuts[r + 1]]
-            s = step ** int(rlev[r])
+            s = self.scale_step ** int(rlev[r])
             rx, ry = int(x0[r]), int(y0[r])
             # 1 px more on each side so that the region's border gradients see their real
             # neighbours; level px (a, b) samples frame px ((a + 0.5)/s - 0.5, ...)
             ox, oy = rx * CELL - 1, ry * CELL - 1
             M = np.array([[1.0 / s, 0.0, (ox + 0.5) / s - 0.5],
                           [0.0, 1.0 / s, (oy + 0.5) / s - 0.5]])
-            region = cv2.warpAffine(grey, M, ((int(x1[r]) - rx) * CELL + 2,
-                                              (int(y1[r]) - ry) * CELL + 2),
-                                    flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
-                                    borderMode=cv2.BORDER_REPLICATE)
+            size = ((int(x1[r]) - rx) * CELL + 2, (int(y1[r]) - ry) * CELL + 2)
             locs = np.empty((len(sel), 2), dtype=np.int32)
             locs[:, 0] = 1 + CELL * (bu[sel] - rx)
             locs[:, 1] = 1 + CELL * (bv[sel] - ry)
-            blocks[sel] = compute(region, (CELL, CELL), (0, 0), locs).reshape(-1, BLOCK_LEN)
+            jobs.append((sel, M, size, locs))
+        self._run_regions(grey, jobs, blocks)
         return blocks[binv.reshape(n, nb)].reshape(n, -1), inv
+
+    def _run_regions(self, grey: np.ndarray, jobs: list, blocks: np.ndarray) -> None:
+        """Resample each region and compute its blocks into ``blocks[sel]``; with ``threads``
+        > 1 the regions are split into that many shares of about equal area, one per thread
+        (OpenCV releases the GIL; each block is computed once, by one thread, so the result
+        does not depend on the split)."""
+        if self.threads <= 1 or len(jobs) < 2:
+            _regions_blocks(grey, jobs, blocks, self.block_hog)
+            return
+        size = np.array([j[2][0] * j[2][1] for j in jobs], dtype=np.float64)
+        mid = np.cumsum(size) - size / 2                 # each region's middle, by area so far
+        share = np.minimum(mid * self.threads // size.sum(), self.threads - 1)
+        parts = [[j for j, p in zip(jobs, share) if p == t] for t in range(self.threads)]
+        pool, hogs, _ = self._workers()
+        futures = [pool.submit(_regions_blocks, grey, part, blocks, hog)
+                   for part, hog in zip(parts[1:], hogs[1:]) if part]
+        _regions_blocks(grey, parts[0], blocks, hogs[0])
+        for f in futures:
+            f.result()
+
+    def _workers(self):
+        """The worker threads (created on first use), one block HOG and one window HOG per
+        thread (the calling thread's first)."""
+        if self._pool is None:
+            from concurrent.futures import ThreadPoolExecutor
+
+            extra = self.threads - 1
+            self._pool = ThreadPoolExecutor(extra, thread_name_prefix="pfscope-hog")
+            self._hogs = ([self.block_hog] + [_block_hog() for _ in range(extra)],
+                          [self.hog] + [cv2.HOGDescriptor() for _ in range(extra)])
+        return (self._pool, *self._hogs)
 
     def _window_descriptors(self, grey: np.ndarray, w: np.ndarray) -> np.ndarray:
         n = len(w)
@@ -259,12 +294,24 @@ class HOGWindowClassifier:
         x0, y0 = np.maximum(x0, 0), np.maximum(y0, 0)
         x1 = np.minimum(x1, padded.shape[1])
         y1 = np.minimum(y1, padded.shape[0])
-        buf = np.empty((WIN_H, WIN_W), dtype=np.uint8)
-        compute = self.hog.compute
-        for i in range(n):  # a few hundred windows: resize + HOG each (see the module docstring)
-            cv2.resize(padded[y0[i]:y1[i], x0[i]:x1[i]], (WIN_W, WIN_H), dst=buf,
-                       interpolation=cv2.INTER_LINEAR)
-            out[i] = compute(buf).reshape(-1)
+
+        def part(idx: range, hog: cv2.HOGDescriptor) -> None:
+            buf = np.empty((WIN_H, WIN_W), dtype=np.uint8)
+            for i in idx:  # a few hundred windows: resize + HOG each (module docstring)
+                cv2.resize(padded[y0[i]:y1[i], x0[i]:x1[i]], (WIN_W, WIN_H), dst=buf,
+                           interpolation=cv2.INTER_LINEAR)
+                out[i] = hog.compute(buf).reshape(-1)
+
+        if self.threads <= 1 or n < 2 * self.threads:
+            part(range(n), self.hog)
+            return out
+        pool, _, hogs = self._workers()     # each window by one thread: same result
+        cuts = np.linspace(0, n, self.threads + 1).astype(int)
+        futures = [pool.submit(part, range(cuts[t], cuts[t + 1]), hogs[t])
+                   for t in range(1, self.threads)]
+        part(range(cuts[0], cuts[1]), hogs[0])
+        for f in futures:
+            f.result()
         return out
 
     def decision(self, d: np.ndarray) -> np.ndarray:
@@ -287,19 +334,39 @@ class HOGWindowClassifier:
         return "opencv-default-people-svm"
 
 
-def load_classifier(path: str = "", *, mode: str = "pyramid", scale_step: float = 1.1):
+def load_classifier(path: str = "", *, mode: str = "pyramid", scale_step: float = 1.1,
+                    threads: int = 1):
     """The DLPF classifier: OpenCV's people SVM (``path`` empty) or a model file written by
     ``pfscope train-classifier`` (:mod:`.iksvm`).  A missing, unreadable or mismatched file
     raises ``ValueError`` with one line naming it."""
     if not path:
-        return HOGWindowClassifier(mode=mode, scale_step=scale_step)
+        return HOGWindowClassifier(mode=mode, scale_step=scale_step, threads=threads)
     from .iksvm import IKSVMClassifier
-    return IKSVMClassifier.load(path, mode=mode, scale_step=scale_step)
+    clf = IKSVMClassifier.load(path, mode=mode, scale_step=scale_step)
+    clf.threads = int(threads)
+    return clf
 
 
 def _pack(k: np.ndarray, cu: np.ndarray, cv: np.ndarray) -> np.ndarray:
     """One int64 key per (level, cell column, cell row) (each well inside ±2^20)."""
     return ((k + (1 << 20)) << 42) | ((cu + (1 << 20)) << 21) | (cv + (1 << 20))
+
+
+def _block_hog() -> cv2.HOGDescriptor:
+    """One 16x16 block as a "window": same cells, bins, Gaussian block weighting (winSigma =
+    (16+16)/8), L2-Hys and gamma correction as the 64x128 descriptor's blocks."""
+    return cv2.HOGDescriptor((16, 16), (16, 16), (8, 8), (8, 8), 9, 1, -1.0,
+                             cv2.HOGDescriptor_L2Hys, 0.2, True)
+
+
+def _regions_blocks(grey: np.ndarray, jobs: list, blocks: np.ndarray,
+                    hog: cv2.HOGDescriptor) -> None:
+    """For each job ``(sel, M, size, locs)``: the level region ``warpAffine(grey, M, size)``
+    (inverse map, bilinear, replicated border) and its blocks at ``locs`` into ``blocks[sel]``."""
+    for sel, M, size, locs in jobs:
+        region = cv2.warpAffine(grey, M, size, flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
+                                borderMode=cv2.BORDER_REPLICATE)
+        blocks[sel] = hog.compute(region, (CELL, CELL), (0, 0), locs).reshape(-1, BLOCK_LEN)
 
 
 def _regions(k: np.ndarray, cu: np.ndarray, cv: np.ndarray, wx: int, wy: int

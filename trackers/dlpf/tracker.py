@@ -179,6 +179,9 @@ class ClassifierParams:
     exact_verify: bool = param(True, "tracks' verification windows are scored unsnapped, each "
                                      "resampled on its own (a few per track), in 'pyramid' "
                                      "mode too")
+    threads: int = param(2, "threads that compute the pyramid's HOG blocks ('pyramid' mode; "
+                            "each region's blocks by one thread, so the scores and the tracks "
+                            "are the same for any value; 1 = none)")
     model: str = param("", "classifier file from 'pfscope train-classifier' (an intersection-"
                            "kernel SVM, jung2013 §2.1); empty: OpenCV's pre-trained people SVM.  "
                            "Its margins are on another scale: use it with hit_threshold=0 "
@@ -191,6 +194,8 @@ class ClassifierParams:
                              f"{', '.join(HOGWindowClassifier.MODES)}, got {self.mode!r}")
         if not self.scale_step > 1.0:
             raise ValueError(f"classifier.scale_step must be > 1, got {self.scale_step}")
+        if self.threads < 1:
+            raise ValueError(f"classifier.threads must be >= 1, got {self.threads}")
 
 
 @dataclass(frozen=True)
@@ -349,7 +354,8 @@ class DLPFTracker:
         self.rng = rng if rng is not None else np.random.default_rng(0)
         cp = self.params.classifier
         self.classifier = classifier or load_classifier(cp.model, mode=cp.mode,
-                                                        scale_step=cp.scale_step)
+                                                        scale_step=cp.scale_step,
+                                                        threads=cp.threads)
         c = self.params.confirm
         self.confirmer = Confirmer(c.count, c.max_gap, c.match_iou)
         self.parents: Optional[ParticleSet] = None
