@@ -24,9 +24,9 @@ Cost (``mode``):
   (about half the windows of a PETS09 frame are duplicates) and overlapping windows share most
   blocks: per frame, each distinct window is scored once and each block it uses is computed
   once.  Per level, the windows' union is split into connected regions (windows whose cell
-  rectangles overlap or share an edge, one pairwise test over the frame's distinct windows and
-  ``scipy.sparse.csgraph.connected_components``: the 4-connected components of the union of
-  their cells, without rasterising it); each region is resampled once from the frame
+  rectangles overlap or share an edge, one pairwise test over the frame's distinct windows: the
+  4-connected components of the union of their cells, without rasterising it); each region is
+  resampled once from the frame
   (``cv2.warpAffine``, level px ``u`` samples frame px ``(u + 0.5)/s − 0.5`` like
   ``cv2.resize``; replicated border; 1 px more on each side so that border gradients see their
   real neighbours) and its needed blocks are computed in one ``HOGDescriptor.compute`` call
@@ -57,8 +57,6 @@ from typing import Optional
 
 import cv2
 import numpy as np
-from scipy.sparse import csr_matrix
-from scipy.sparse.csgraph import connected_components
 
 WIN_W, WIN_H = 64, 128
 CELL = 8            # HOG cell and block stride (px)
@@ -225,21 +223,21 @@ class HOGWindowClassifier:
         rlev = np.empty(nreg, dtype=np.int64)
         rlev[reg] = k
         blocks = np.empty((len(bu), BLOCK_LEN), dtype=np.float32)
-        jobs = []
-        for r in range(nreg):
-            sel = order[cuts[r]:cuts[r + 1]]
-            s = self.scale_step ** int(rlev[r])
-            rx, ry = int(x0[r]), int(y0[r])
-            # 1 px more on each side so that the region's border gradients see their real
-            # neighbours; level px (a, b) samples frame px ((a + 0.5)/s - 0.5, ...)
-            ox, oy = rx * CELL - 1, ry * CELL - 1
-            M = np.array([[1.0 / s, 0.0, (ox + 0.5) / s - 0.5],
-                          [0.0, 1.0 / s, (oy + 0.5) / s - 0.5]])
-            size = ((int(x1[r]) - rx) * CELL + 2, (int(y1[r]) - ry) * CELL + 2)
-            locs = np.empty((len(sel), 2), dtype=np.int32)
-            locs[:, 0] = 1 + CELL * (bu[sel] - rx)
-            locs[:, 1] = 1 + CELL * (bv[sel] - ry)
-            jobs.append((sel, M, size, locs))
+        # each block's top-left px in its region (1 px more on each side of a region so that
+        # its border gradients see their real neighbours)
+        locs = np.empty((len(bu), 2), dtype=np.int32)
+        locs[:, 0] = 1 + CELL * (bu - x0[breg])
+        locs[:, 1] = 1 + CELL * (bv - y0[breg])
+        locs = locs[order]
+        # level px (a, b) samples frame px ((a + 0.5)/s - 0.5, ...)
+        inv_s = self.scale_step ** -rlev.astype(np.float64)
+        tx = ((x0 * CELL - 1) + 0.5) * inv_s - 0.5
+        ty = ((y0 * CELL - 1) + 0.5) * inv_s - 0.5
+        sizes = np.stack([(x1 - x0) * CELL + 2, (y1 - y0) * CELL + 2], axis=1).tolist()
+        jobs = [(order[cuts[r]:cuts[r + 1]],
+                 np.array([[inv_s[r], 0.0, tx[r]], [0.0, inv_s[r], ty[r]]]),
+                 tuple(sizes[r]), locs[cuts[r]:cuts[r + 1]])
+                for r in range(nreg)]
         self._run_regions(grey, jobs, blocks)
         return blocks[binv.reshape(n, nb)].reshape(n, -1), inv
 
@@ -374,13 +372,25 @@ def _regions(k: np.ndarray, cu: np.ndarray, cv: np.ndarray, wx: int, wy: int
     """Connected groups of windows (``wx`` x ``wy`` cells at ``(cu, cv)`` on level ``k``): two
     windows of one level are in a group when their cell rectangles overlap or share an edge
     (the 4-connected components of the union of their cells).  Returns (groups, label per
-    window); a pairwise test over the few hundred distinct windows of a frame."""
-    same = k[:, None] == k[None]
+    window, 0..groups-1 in order of each group's first window): a pairwise test over the few
+    hundred distinct windows of a frame, then each window takes the smallest index among its
+    neighbours until nothing changes (as many rounds as the longest chain of windows)."""
+    n = len(k)
+    if n == 0:
+        return 0, np.zeros(0, dtype=np.int64)
     du = np.abs(cu[:, None] - cu[None])
     dv = np.abs(cv[:, None] - cv[None])
-    touch = same & (du <= wx) & (dv <= wy) & ~((du == wx) & (dv == wy))
-    n, labels = connected_components(csr_matrix(touch), directed=False)
-    return int(n), labels.astype(np.int64)
+    touch = (k[:, None] == k[None]) & (du <= wx) & (dv <= wy) & ~((du == wx) & (dv == wy))
+    lab = np.arange(n)
+    big = np.full((n, n), n)
+    while True:
+        new = np.where(touch, lab[None], big).min(axis=1)
+        new = new[new]                                   # jump along the chain too
+        if np.array_equal(new, lab):
+            break
+        lab = new
+    roots, labels = np.unique(lab, return_inverse=True)
+    return len(roots), labels.reshape(-1).astype(np.int64)
 
 
 def sliding_window_count(width: int, height: int, *, win_stride=(8, 8), padding=(8, 8),
