@@ -149,7 +149,7 @@ def boxes_of(states: np.ndarray, aspect: float | np.ndarray) -> np.ndarray:
     s = np.asarray(states, dtype=np.float64).reshape(-1, 6)
     h = s[:, 2]
     w = np.asarray(aspect) * h
-    return np.c_[s[:, 0] - w / 2, s[:, 1] - h / 2, w, h]
+    return np.stack([s[:, 0] - w / 2, s[:, 1] - h / 2, np.broadcast_to(w, h.shape), h], axis=1)
 
 
 def map_index(log_w: np.ndarray) -> int:

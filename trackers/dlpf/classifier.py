@@ -279,9 +279,9 @@ class HOGWindowClassifier:
             return out
         H, W = grey.shape[:2]
         # one replicated border for every window that sticks out of the frame
-        pad = int(math.ceil(max(0.0, float(np.max(np.r_[-w[:, 0], -w[:, 1],
-                                                      w[:, 0] + w[:, 2] - W,
-                                                      w[:, 1] + w[:, 3] - H, 0.0]))))) + 1
+        out_by = max(0.0, float(-w[:, 0].min()), float(-w[:, 1].min()),
+                     float((w[:, 0] + w[:, 2]).max() - W), float((w[:, 1] + w[:, 3]).max() - H))
+        pad = int(math.ceil(out_by)) + 1
         padded = cv2.copyMakeBorder(grey, pad, pad, pad, pad, cv2.BORDER_REPLICATE) \
             if pad > 1 else grey
         off = pad if pad > 1 else 0

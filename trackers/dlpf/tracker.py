@@ -271,6 +271,12 @@ class DLPFParams:
     children: ChildParams = part(ChildParams, "child particles (§2.2)")
 
 
+#: where a track's flow is measured, relative to its box: 4 x 8 points over the central half of
+#: its width (the person, not the background beside them) and 80 % of its height
+_FLOW_GRID = np.stack([g.ravel() for g in np.meshgrid(np.linspace(0.3, 0.7, 4),
+                                                      np.linspace(0.1, 0.9, 8))], axis=1)
+
+
 @dataclass
 class _Track:
     tid: int
@@ -393,10 +399,8 @@ class DLPFTracker:
         not the background beside them); none when ``children.flow`` is off."""
         if not self.tracks or self._prev_grey is None or not self.params.children.flow:
             return np.zeros((0, 2))
-        gx, gy = np.meshgrid(np.linspace(0.3, 0.7, 4), np.linspace(0.1, 0.9, 8))
-        grid = np.c_[gx.ravel(), gy.ravel()]
         b = np.array([t.box for t in self.tracks])
-        return (b[:, None, :2] + grid[None] * b[:, None, 2:]).reshape(-1, 2)
+        return (b[:, None, :2] + _FLOW_GRID[None] * b[:, None, 2:]).reshape(-1, 2)
 
     def _set_track_flow(self, flow: np.ndarray, ok: np.ndarray) -> None:
         """``t.shift`` of every track: the median flow of its grid points (None when fewer than
@@ -718,10 +722,11 @@ class DLPFTracker:
             else:
                 w = np.exp(lw - lw.max())
                 est = (w[:, None] * preds[k][:, :3]).sum(0) / w.sum()
-            box = ch.boxes_of(np.r_[est, est][None], t.aspect)[0]
+            box = ch.boxes_of(np.concatenate([est, est])[None], t.aspect)[0]
             if t.support is not None and C.snap > 0:  # pull the estimate onto the hit (ours)
-                sup = ch.boxes_of(np.r_[t.support[:2] + t.support[2:] / 2, t.support[3],
-                                        np.zeros(3)][None], t.aspect)[0]
+                sup = ch.boxes_of(np.concatenate([t.support[:2] + t.support[2:] / 2,
+                                                  t.support[3:4], np.zeros(3)])[None],
+                                  t.aspect)[0]
                 box = (1.0 - C.snap) * box + C.snap * sup
             Best = float(ch.bhattacharyya(t.ref, ch.histograms(
                 img, box[None], (C.grid_x, C.grid_y), C.Mh, C.Ms, C.Mv, C.s_min, C.v_min))[0]) \
