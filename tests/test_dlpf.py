@@ -630,3 +630,29 @@ def test_scale_is_learnt_on_a_scene_of_people_three_times_taller():
     learnt = tr.scale_prior.mean_height(np.array([120.0]))[0]
     assert abs(np.log(learnt / gt_h)) < np.log(1.3), (learnt, gt_h)
     assert res.scores["dlpf"]["Recall"] > 0.3
+
+
+# ------------------------------------------------------------------ the speed benchmark's profile
+
+def test_profile_clocks_hook_the_stages_a_dlpf_frame_runs(monkeypatch):
+    """benchmarks/bench_dlpf.py --profile: its clocks sit on functions a DLPF frame calls (a
+    renamed function would leave its stage at zero), the stages do not overlap (the remainders
+    stay >= 0) and the patched functions are restored afterwards."""
+    import sys
+    from pathlib import Path
+    bench_dir = str(Path(__file__).resolve().parents[1] / "benchmarks")
+    monkeypatch.syspath_prepend(bench_dir)
+    import bench_dlpf
+    from pfscope.trackers.dlpf import motion as mo_mod
+    before = mo_mod.lk_flow
+    r = bench_dlpf.profile_run("synthetic", 6, 0, {})
+    assert mo_mod.lk_flow is before
+    st = r["stages"]
+    assert r["frames"] == 6
+    for stage in ("decode", "lk flow", "classify parents", "recorder"):
+        assert st[stage]["wall_ms"] > 0, stage
+    for stage in ("dlpf other", "loop other"):
+        assert st[stage]["wall_ms"] >= 0 and st[stage]["cpu_ms"] >= -0.5, (stage, st[stage])
+    total = sum(v["wall_ms"] for v in st.values())
+    assert total == pytest.approx(1000 * r["loop_wall_s"] / 6, rel=1e-6)
+    sys.modules.pop("bench_dlpf", None)
