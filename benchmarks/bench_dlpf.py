@@ -43,7 +43,8 @@ per-window HOG), as two lanes of one run, without the exhaustive lane::
 --tracker dlpf --level tracks`` as a user runs it, twice: once as a subprocess (wall time from
 start to exit, and the frame loop's fps the command prints), once in this process through the
 same ``record()`` with clocks around the stages (wall and main-thread CPU ms per frame: frame
-decode, Lucas-Kanade, the parents' windows, the tracks' verification windows, confirmation,
+decode, Lucas-Kanade, the classifier (the parents' windows and the tracks' verification
+windows, which overlap on two threads), confirmation,
 children, the rest of the DLPF step, the recorder, the rest of the loop)::
 
     .venv/bin/python benchmarks/bench_dlpf.py --profile --source pets --frames 795
@@ -189,8 +190,8 @@ def fmt(v) -> str:
 # ----------------------------------------------------------------------------- --profile
 
 #: the profile's stages, in the order printed; "dlpf other" and "loop other" are what is left
-STAGES = ("decode", "lk flow", "classify parents", "classify verify", "confirm", "children",
-          "dlpf other", "recorder", "loop other")
+STAGES = ("decode", "lk flow", "classify", "confirm", "children", "dlpf other", "recorder",
+          "loop other")
 
 
 @contextlib.contextmanager
@@ -213,22 +214,28 @@ def dlpf_clocks(acc: dict):
         a[0] += w
         a[1] += c
 
+    depth = {}
+
     def wrap(owner, name, stage):
         fn = getattr(owner, name)
 
         def timed(*a, **k):
+            if depth.get(stage):            # a clocked call inside another of its stage
+                return fn(*a, **k)
+            depth[stage] = True
             w0, c0 = pc(), tc()
-            out = fn(*a, **k)
-            st = stage(a, k) if callable(stage) else stage
-            add(st, pc() - w0, tc() - c0)
-            return out
+            try:
+                return fn(*a, **k)
+            finally:
+                add(stage, pc() - w0, tc() - c0)
+                depth[stage] = False
 
         saved.append((owner, name, fn))
         setattr(owner, name, timed)
 
     wrap(mo_mod, "lk_flow", "lk flow")
-    wrap(HOGWindowClassifier, "score",
-         lambda a, k: "classify verify" if k.get("exact") else "classify parents")
+    wrap(HOGWindowClassifier, "score", "classify")             # parents' and tracks' windows
+    wrap(HOGWindowClassifier, "score_with_exact", "classify")  # both at once, overlapped
     wrap(Confirmer, "step", "confirm")
     wrap(tr_mod.DLPFTracker, "_update_children", "children")
     wrap(tr_mod.DLPFTracker, "step", "step")
@@ -307,8 +314,7 @@ def profile_run(source: str, frames: Optional[int], seed: int, dlpf_options: dic
     n = max(res.frames, 1)
     zero = [0.0, 0.0]
     step, loop = acc.get("step", zero), acc.get("loop", zero)
-    inner = [acc.get(s, zero) for s in ("lk flow", "classify parents", "classify verify",
-                                        "confirm", "children")]
+    inner = [acc.get(s, zero) for s in ("lk flow", "classify", "confirm", "children")]
     acc["dlpf other"] = [step[i] - sum(x[i] for x in inner) for i in (0, 1)]
     acc["loop other"] = [loop[i] - step[i] - acc.get("decode", zero)[i]
                          - acc.get("recorder", zero)[i] for i in (0, 1)]

@@ -453,7 +453,11 @@ def test_classifier_threads_change_no_score():
     one, two = HOGWindowClassifier(threads=1), HOGWindowClassifier(threads=2)
     a = one.score(img, w)
     assert np.array_equal(a, two.score(img, w))
-    assert np.array_equal(one.score(img, w[:40], exact=True), two.score(img, w[:40], exact=True))
+    exact = one.score(img, w[:40], exact=True)
+    assert np.array_equal(exact, two.score(img, w[:40], exact=True))
+    for clf in (one, two):   # both sets at once (overlapped on two threads): the same margins
+        both = clf.score_with_exact(img, w, w[:40])
+        assert np.array_equal(both[0], a) and np.array_equal(both[1], exact)
     with pytest.raises(ValueError):
         HOGWindowClassifier(threads=0)
 
@@ -649,7 +653,7 @@ def test_profile_clocks_hook_the_stages_a_dlpf_frame_runs(monkeypatch):
     assert mo_mod.lk_flow is before
     st = r["stages"]
     assert r["frames"] == 6
-    for stage in ("decode", "lk flow", "classify parents", "recorder"):
+    for stage in ("decode", "lk flow", "classify", "recorder"):
         assert st[stage]["wall_ms"] > 0, stage
     for stage in ("dlpf other", "loop other"):
         assert st[stage]["wall_ms"] >= 0 and st[stage]["cpu_ms"] >= -0.5, (stage, st[stage])

@@ -53,6 +53,7 @@ on a frame, for the efficiency comparison.
 from __future__ import annotations
 
 import math
+import threading
 from typing import Optional
 
 import cv2
@@ -190,8 +191,8 @@ class HOGWindowClassifier:
             return self._window_descriptors(grey, w), None
         return self._pyramid_descriptors(grey, w)
 
-    def _pyramid_descriptors(self, grey: np.ndarray, w: np.ndarray
-                             ) -> tuple[np.ndarray, np.ndarray]:
+    def _pyramid_descriptors(self, grey: np.ndarray, w: np.ndarray,
+                             drain: Optional["_Drain"] = None) -> tuple[np.ndarray, np.ndarray]:
         if len(w) == 0:
             return np.empty((0, self.hog.getDescriptorSize()), np.float32), np.zeros(0, np.int64)
         k, cu, cv = self._levels(w)
@@ -238,7 +239,12 @@ class HOGWindowClassifier:
                  np.array([[inv_s[r], 0.0, tx[r]], [0.0, inv_s[r], ty[r]]]),
                  tuple(sizes[r]), locs[cuts[r]:cuts[r + 1]])
                 for r in range(nreg)]
-        self._run_regions(grey, jobs, blocks)
+        if drain is None:
+            self._run_regions(grey, jobs, blocks)
+        else:   # shared with a worker that is already running (score_with_exact)
+            drain.start(grey, jobs, blocks)
+            drain.run(self.block_hog)
+            drain.wait()
         return blocks[binv.reshape(n, nb)].reshape(n, -1), inv
 
     def _run_regions(self, grey: np.ndarray, jobs: list, blocks: np.ndarray) -> None:
@@ -272,7 +278,9 @@ class HOGWindowClassifier:
                           [self.hog] + [cv2.HOGDescriptor() for _ in range(extra)])
         return (self._pool, *self._hogs)
 
-    def _window_descriptors(self, grey: np.ndarray, w: np.ndarray) -> np.ndarray:
+    def _window_descriptors(self, grey: np.ndarray, w: np.ndarray,
+                            hog: Optional[cv2.HOGDescriptor] = None) -> np.ndarray:
+        """Per-window descriptors; ``hog`` given: all of them on the calling thread with it."""
         n = len(w)
         out = np.empty((n, self.hog.getDescriptorSize()), dtype=np.float32)
         if n == 0:
@@ -300,8 +308,8 @@ class HOGWindowClassifier:
                            interpolation=cv2.INTER_LINEAR)
                 out[i] = hog.compute(buf).reshape(-1)
 
-        if self.threads <= 1 or n < 2 * self.threads:
-            part(range(n), self.hog)
+        if hog is not None or self.threads <= 1 or n < 2 * self.threads:
+            part(range(n), hog or self.hog)
             return out
         pool, _, hogs = self._workers()     # each window by one thread: same result
         cuts = np.linspace(0, n, self.threads + 1).astype(int)
@@ -328,6 +336,40 @@ class HOGWindowClassifier:
         m = self.decision(d)
         return m if inv is None else m[inv]
 
+    def score_with_exact(self, grey: np.ndarray, windows: np.ndarray,
+                         exact_windows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(score(grey, windows), score(grey, exact_windows, exact=True))``, the same margins.
+        With ``threads`` > 1 in ``"pyramid"`` mode a worker describes the exact windows while
+        this thread prepares the pyramid's regions, then both threads take regions from one
+        queue until none is left (each region by one thread: the result does not depend on
+        who took which)."""
+        w = np.asarray(windows, dtype=np.float64).reshape(-1, 4)
+        ew = np.asarray(exact_windows, dtype=np.float64).reshape(-1, 4)
+        if self.threads <= 1 or self.mode != "pyramid" or not len(w) or not len(ew):
+            return self.score(grey, w), self.score(grey, ew, exact=True)
+        pool, bhogs, whogs = self._workers()
+        drain = _Drain()
+
+        def worker():
+            try:
+                vd = self._window_descriptors(grey, ew, hog=whogs[1])
+                drain.ready.wait()
+                drain.run(bhogs[1])
+                return vd
+            except BaseException as e:       # re-raised on the calling thread
+                drain.error = e
+                raise
+            finally:
+                drain.finished.set()
+
+        head = pool.submit(worker)
+        try:
+            d, inv = self._pyramid_descriptors(grey, w, drain)
+        finally:
+            drain.ready.set()                   # never leave the worker waiting
+        vd = head.result()
+        return self.decision(d)[inv], self.decision(vd)
+
     def describe(self) -> str:
         return "opencv-default-people-svm"
 
@@ -348,6 +390,39 @@ def load_classifier(path: str = "", *, mode: str = "pyramid", scale_step: float 
 def _pack(k: np.ndarray, cu: np.ndarray, cv: np.ndarray) -> np.ndarray:
     """One int64 key per (level, cell column, cell row) (each well inside ±2^20)."""
     return ((k + (1 << 20)) << 42) | ((cu + (1 << 20)) << 21) | (cv + (1 << 20))
+
+
+class _Drain:
+    """The pyramid's regions handed out one at a time to the threads that compute them."""
+
+    def __init__(self):
+        self.ready = threading.Event()      # the regions are known
+        self.finished = threading.Event()   # the worker is done
+        self.lock = threading.Lock()
+        self.jobs: list = []
+        self.next = 0
+        self.error: Optional[BaseException] = None
+
+    def start(self, grey: np.ndarray, jobs: list, blocks: np.ndarray) -> None:
+        # largest first, so that the last region taken is a small one
+        self.grey, self.blocks = grey, blocks
+        self.jobs = sorted(jobs, key=lambda j: -j[2][0] * j[2][1])
+        self.ready.set()
+
+    def run(self, hog: cv2.HOGDescriptor) -> None:
+        while True:
+            with self.lock:
+                i = self.next
+                self.next += 1
+            if i >= len(self.jobs):
+                return
+            _regions_blocks(self.grey, [self.jobs[i]], self.blocks, hog)
+
+    def wait(self) -> None:
+        """Until the worker has finished its last region (its error re-raised here)."""
+        self.finished.wait()
+        if self.error is not None:
+            raise RuntimeError(f"classifier worker failed: {self.error}") from self.error
 
 
 def _block_hog() -> cv2.HOGDescriptor:

@@ -528,10 +528,14 @@ class DLPFTracker:
         windows = self.classifier.snap(window_boxes(new[:, :2], heights),
                                        rng if P.classifier.spread else None)
         vwin, vtrack = self._verify_windows()
-        scores = self.classifier.score(grey, windows)
         # a track's few verification windows localise it: scored exactly (unsnapped), since
         # the hit box pulls the track's box (children.snap) and feeds the scale prior
-        vscores = self.classifier.score(grey, vwin, exact=P.classifier.exact_verify)
+        both = getattr(self.classifier, "score_with_exact", None)
+        if P.classifier.exact_verify and both is not None:   # the two overlap on two threads
+            scores, vscores = both(grey, windows, vwin)
+        else:
+            scores = self.classifier.score(grey, windows)
+            vscores = self.classifier.score(grey, vwin, exact=P.classifier.exact_verify)
         all_scores = np.concatenate([scores, vscores])
         self.parents.extra[free, 1] = scores
         self._support(vwin, vscores, vtrack)
