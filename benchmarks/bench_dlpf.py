@@ -39,6 +39,16 @@ per-window HOG), as two lanes of one run, without the exhaustive lane::
     .venv/bin/python benchmarks/bench_dlpf.py --source pets --start 401 --seeds 0,1,2 \
         --baseline classifier.mode=window --no-exhaustive
 
+**Whole-process speed and the per-stage profile** (``--profile``): ``pfscope record SOURCE
+--tracker dlpf --level tracks`` as a user runs it, twice: once as a subprocess (wall time from
+start to exit, and the frame loop's fps the command prints), once in this process through the
+same ``record()`` with clocks around the stages (wall and main-thread CPU ms per frame: frame
+decode, Lucas-Kanade, the classifier (the parents' windows and the tracks' verification
+windows, which overlap on two threads), confirmation,
+children, the rest of the DLPF step, the recorder, the rest of the loop)::
+
+    .venv/bin/python benchmarks/bench_dlpf.py --profile --source pets --frames 795
+
 ``--seeds`` runs the whole comparison once per seed (DLPF is random, HOG+MT is not; the
 synthetic scene is also generated with that seed) and prints each run and the mean.
 """
@@ -46,12 +56,18 @@ synthetic scene is also generated with that seed) and prints each run and the me
 from __future__ import annotations
 
 import argparse
+import contextlib
+import os
+import re
+import subprocess
 import sys
+import tempfile
 import time
+from pathlib import Path
 from typing import Optional
 
 from _common import (EXIT_NO_DATA, NoData, command_line, machine, open_bench_source,
-                     print_machine, table, write_json)
+                     pets_path, print_machine, table, write_json)
 
 from pfscope.trackers.api import StepResult, make_tracker
 from pfscope.trackers.data.sources import open_source
@@ -171,6 +187,183 @@ def fmt(v) -> str:
     return str(v)
 
 
+# ----------------------------------------------------------------------------- --profile
+
+#: the profile's stages, in the order printed; "dlpf other" and "loop other" are what is left
+STAGES = ("decode", "lk flow", "classify", "confirm", "children", "dlpf other", "recorder",
+          "loop other")
+
+
+@contextlib.contextmanager
+def dlpf_clocks(acc: dict):
+    """Clocks (wall and main-thread CPU) around the functions one DLPF frame calls and around
+    the frame loop's other parts (module/class attributes, restored after).  ``acc[stage]`` =
+    [wall s, cpu s]; ``acc["step"]``, ``acc["loop"]`` the totals the remainders come from."""
+    from pfscope.trackers import pipeline as pipe_mod
+    from pfscope.trackers.dlpf import motion as mo_mod
+    from pfscope.trackers.dlpf import tracker as tr_mod
+    from pfscope.trackers.dlpf.classifier import HOGWindowClassifier
+    from pfscope.trackers.dlpf.confirm import Confirmer
+    from pfscope.viewer_app import recorder as rec_mod
+
+    pc, tc = time.perf_counter, time.thread_time
+    saved = []
+
+    def add(stage, w, c):
+        a = acc.setdefault(stage, [0.0, 0.0])
+        a[0] += w
+        a[1] += c
+
+    depth = {}
+
+    def wrap(owner, name, stage):
+        fn = getattr(owner, name, None)
+        if fn is None:                      # an older DLPF without it (e.g. score_with_exact)
+            return
+
+        def timed(*a, **k):
+            if depth.get(stage):            # a clocked call inside another of its stage
+                return fn(*a, **k)
+            depth[stage] = True
+            w0, c0 = pc(), tc()
+            try:
+                return fn(*a, **k)
+            finally:
+                add(stage, pc() - w0, tc() - c0)
+                depth[stage] = False
+
+        saved.append((owner, name, fn))
+        setattr(owner, name, timed)
+
+    wrap(mo_mod, "lk_flow", "lk flow")
+    wrap(HOGWindowClassifier, "score", "classify")             # parents' and tracks' windows
+    wrap(HOGWindowClassifier, "score_with_exact", "classify")  # both at once, overlapped
+    wrap(Confirmer, "step", "confirm")
+    wrap(tr_mod.DLPFTracker, "_update_children", "children")
+    wrap(tr_mod.DLPFTracker, "step", "step")
+    wrap(rec_mod.RerunRecorder, "on_frame", "recorder")
+    frames_fn = pipe_mod.iter_frames
+
+    def iter_frames(*a, **k):       # the time spent getting each frame (read + decode)
+        it = frames_fn(*a, **k)
+        while True:
+            w0, c0 = pc(), tc()
+            try:
+                f = next(it)
+            except StopIteration:
+                return
+            finally:
+                add("decode", pc() - w0, tc() - c0)
+            yield f
+
+    saved.append((pipe_mod, "iter_frames", frames_fn))
+    pipe_mod.iter_frames = iter_frames
+    run_fn = pipe_mod.run
+
+    def run(*a, **k):
+        w0, c0 = pc(), tc()
+        try:
+            return run_fn(*a, **k)
+        finally:
+            add("loop", pc() - w0, tc() - c0)
+
+    saved.append((pipe_mod, "run", run_fn))
+    pipe_mod.run = run
+    try:
+        yield acc
+    finally:
+        for owner, name, fn in reversed(saved):
+            setattr(owner, name, fn)
+
+
+def whole_process(source: str, frames: Optional[int], seed: int, dlpf_options: dict) -> dict:
+    """``pfscope record SOURCE --tracker dlpf --level tracks`` as a subprocess: wall seconds from
+    start to exit, CPU seconds, and the frame loop's own frames and seconds (its last line)."""
+    with tempfile.TemporaryDirectory() as tmp:
+        cmd = [sys.executable, "-m", "pfscope.viewer_app.cli", "record", source,
+               "--tracker", "dlpf", "--level", "tracks", "--seed", str(seed), "--quiet",
+               "--out", str(Path(tmp) / "p.rrd")]
+        if frames:
+            cmd += ["--frames", str(frames)]
+        for k, v in dlpf_options.items():
+            cmd += ["--set", f"{k}={v}"]
+        r0 = os.times()
+        t0 = time.perf_counter()
+        p = subprocess.run(cmd, capture_output=True, text=True)
+        wall = time.perf_counter() - t0
+        r1 = os.times()
+    if p.returncode != 0:
+        raise RuntimeError(f"pfscope record failed: {p.stderr.strip().splitlines()[-1:]}")
+    m = re.search(r"(\d+) frames in ([\d.]+) s", p.stdout + p.stderr)
+    n, loop = (int(m.group(1)), float(m.group(2))) if m else (frames or 0, float("nan"))
+    cpu = (r1.children_user - r0.children_user) + (r1.children_system - r0.children_system)
+    return {"frames": n, "wall_s": wall, "cpu_s": cpu, "loop_s": loop,
+            "fps_whole": n / wall, "fps_loop": n / loop if loop else float("nan")}
+
+
+def profile_run(source: str, frames: Optional[int], seed: int, dlpf_options: dict) -> dict:
+    """The same record in this process with :func:`dlpf_clocks`: ms per frame per stage."""
+    from pfscope.trackers.data.sources import open_source
+    from pfscope.viewer_app.run import RecordOptions, record
+
+    acc: dict = {}
+    with tempfile.TemporaryDirectory() as tmp, dlpf_clocks(acc):
+        opts = RecordOptions(tracker="dlpf", level="tracks", frames=frames, seed=seed,
+                             tracker_options=dict(dlpf_options))
+        c0 = time.process_time()
+        res = record(open_source(source), Path(tmp) / "p.rrd", opts, progress=False)
+        cpu_all = time.process_time() - c0
+    n = max(res.frames, 1)
+    zero = [0.0, 0.0]
+    step, loop = acc.get("step", zero), acc.get("loop", zero)
+    inner = [acc.get(s, zero) for s in ("lk flow", "classify", "confirm", "children")]
+    acc["dlpf other"] = [step[i] - sum(x[i] for x in inner) for i in (0, 1)]
+    acc["loop other"] = [loop[i] - step[i] - acc.get("decode", zero)[i]
+                         - acc.get("recorder", zero)[i] for i in (0, 1)]
+    stages = {s: {"wall_ms": 1000 * acc.get(s, zero)[0] / n, "cpu_ms": 1000 * acc.get(s, zero)[1] / n}
+              for s in STAGES}
+    return {"frames": res.frames, "loop_wall_s": loop[0], "loop_cpu_s": loop[1],
+            "other_threads_cpu_s": cpu_all - loop[1] if cpu_all >= loop[1] else 0.0,
+            "scores": {k: float(v) for k, v in res.scores.get("dlpf", {}).items()
+                       if k in ("MOTA", "IDF1")},
+            "stages": stages}
+
+
+def main_profile(a, dlpf_options: dict) -> int:
+    info = machine()
+    print_machine(info)
+    source = a.source
+    if source == "pets":
+        source = str(pets_path())
+    seed = int(a.seeds.split(",")[0])
+    print(f"whole process: pfscope record {source} --tracker dlpf --level tracks ...",
+          file=sys.stderr, flush=True)
+    whole = whole_process(source, a.frames, seed, dlpf_options)
+    print("profile: the same run in this process with stage clocks ...", file=sys.stderr,
+          flush=True)
+    prof = profile_run(source, a.frames, seed, dlpf_options)
+    n = prof["frames"]
+    print(f"\n=== DLPF whole process on {source}, {n} frames, seed {seed}, --level tracks ===")
+    print(f"subprocess: {whole['wall_s']:.1f} s start to exit ({whole['fps_whole']:.1f} frames/s"
+          f" whole process), frame loop {whole['loop_s']:.1f} s ({whole['fps_loop']:.1f} fps), "
+          f"{whole['cpu_s']:.1f} CPU s")
+    loop_ms = 1000 * prof["loop_wall_s"] / max(n, 1)
+    cpu_ms = 1000 * prof["loop_cpu_s"] / max(n, 1)
+    rows = [[s, f"{v['wall_ms']:.2f}", f"{100 * v['wall_ms'] / loop_ms:.1f}",
+             f"{v['cpu_ms']:.2f}", f"{100 * v['cpu_ms'] / cpu_ms:.1f}"]
+            for s, v in prof["stages"].items()]
+    rows.append(["frame loop", f"{loop_ms:.2f}", "100", f"{cpu_ms:.2f}", "100"])
+    print(f"\nper-stage profile (in-process, stage clocks; frame loop {1000 / loop_ms:.1f} fps "
+          f"wall, {1000 / cpu_ms:.1f} fps by main-thread CPU; other threads "
+          f"{1000 * prof['other_threads_cpu_s'] / max(n, 1):.2f} CPU ms/frame):")
+    print(table(["stage", "wall ms/frame", "wall %", "CPU ms/frame", "CPU %"], rows))
+    if prof["scores"]:
+        print("scores: " + ", ".join(f"{k} {v:.3f}" for k, v in prof["scores"].items()))
+    write_json(a.json, {"command": command_line(), "machine": info, "source": source,
+                        "seed": seed, "whole_process": whole, "profile": prof})
+    return 0
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -191,9 +384,18 @@ def main(argv=None) -> int:
     ap.add_argument("--no-exhaustive", action="store_true",
                     help="leave out the hog-mt lane (e.g. to time dlpf against dlpf-base only)")
     ap.add_argument("--json", default=None, metavar="FILE", help="write every number to FILE")
+    ap.add_argument("--profile", action="store_true",
+                    help="whole-process speed of `pfscope record SOURCE --tracker dlpf --level "
+                         "tracks` and its per-stage profile (frames from 1; --frames, first seed)")
     a = ap.parse_args(argv)
     start = a.start if a.start is not None else (401 if a.source == "pets" else 1)
     dlpf_options = dict(s.split("=", 1) for s in a.set)
+    if a.profile:
+        try:
+            return main_profile(a, dlpf_options)
+        except NoData as e:
+            print(f"error: {e}", file=sys.stderr)
+            return EXIT_NO_DATA
     hog_options = None if a.no_exhaustive else \
         ({"upscale": a.hog_upscale} if a.hog_upscale != 1.0 else {})
     base_options = None if a.baseline is None else {**dlpf_options, **dict(

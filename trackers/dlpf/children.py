@@ -22,38 +22,68 @@ Bhattacharyya distance eq. (13), weights eq. (14) ``exp(−λ B²)``, MAP estima
 
 from __future__ import annotations
 
+from functools import lru_cache
 from typing import Optional
 
 import cv2
 import numpy as np
 
 
+@lru_cache(maxsize=8)
 def sample_grid(gx: int, gy: int) -> tuple[np.ndarray, np.ndarray]:
-    """Relative sample positions in a box, (gx·gy,) each in (−0.5, 0.5)."""
+    """Relative sample positions in a box, (gx·gy,) each in (−0.5, 0.5) (read-only, cached)."""
     u = (np.arange(gx) + 0.5) / gx - 0.5
     v = (np.arange(gy) + 0.5) / gy - 0.5
     uu, vv = np.meshgrid(u, v)
-    return uu.ravel(), vv.ravel()
+    uu, vv = uu.ravel(), vv.ravel()
+    uu.flags.writeable = vv.flags.writeable = False
+    return uu, vv
+
+
+@lru_cache(maxsize=8)
+def _bin_table(mh: int, ms: int, mv: int, s_min: float, v_min: float) -> np.ndarray:
+    """``cv2.LUT`` table (1, 256, 3) of :func:`hsv_bins`: hue → hue bin; saturation → its bin,
+    +128 when too low for a chromatic bin; value → its bin, +128 when too low."""
+    a = np.arange(256)
+    lut = np.empty((1, 256, 3), dtype=np.uint8)
+    lut[0, :, 0] = np.minimum(np.minimum(a, 179) * mh // 180, mh - 1)
+    lut[0, :, 1] = np.minimum(a * ms // 256, ms - 1) + np.where(a >= s_min * 255.0, 0, 128)
+    lut[0, :, 2] = np.minimum(a * mv // 256, mv - 1) + np.where(a >= v_min * 255.0, 0, 128)
+    lut.flags.writeable = False
+    return lut
 
 
 def hsv_bins(bgr_pixels: np.ndarray, mh: int, ms: int, mv: int, s_min: float,
              v_min: float) -> np.ndarray:
-    """Bin index (0..M−1) of each BGR pixel, (...,) int64, ``M = mh·ms + mv`` (eq. (12)'s h(z))."""
+    """Bin index (0..M−1) of each BGR pixel, (...,) int, ``M = mh·ms + mv`` (eq. (12)'s h(z)).
+    OpenCV 8-bit HSV: H in [0, 180), S, V in [0, 256); a pixel whose S and V are at least
+    ``s_min``, ``v_min`` of 255 goes to hue-saturation bin ``hb·ms + sb``, any other to value
+    bin ``mh·ms + vb`` (one ``cv2.LUT``, no float maths per pixel)."""
+    if max(mh, ms, mv) > 127:
+        raise ValueError(f"at most 127 bins per channel, got {mh}, {ms}, {mv}")
     px = np.asarray(bgr_pixels, dtype=np.uint8)
     shape = px.shape[:-1]
-    hsv = cv2.cvtColor(px.reshape(1, -1, 3), cv2.COLOR_BGR2HSV).reshape(-1, 3).astype(np.int64)
-    h, s, v = hsv[:, 0], hsv[:, 1], hsv[:, 2]  # OpenCV 8-bit: H in [0, 180), S, V in [0, 256)
-    hb = np.minimum(h * mh // 180, mh - 1)
-    sb = np.minimum(s * ms // 256, ms - 1)
-    vb = np.minimum(v * mv // 256, mv - 1)
-    chromatic = (s >= s_min * 255.0) & (v >= v_min * 255.0)
-    return np.where(chromatic, hb * ms + sb, mh * ms + vb).reshape(shape)
+    hsv = cv2.cvtColor(px.reshape(1, -1, 3), cv2.COLOR_BGR2HSV)
+    q = cv2.LUT(hsv, _bin_table(mh, ms, mv, float(s_min), float(v_min))).reshape(-1, 3)
+    hb, sb, vb = q[:, 0], q[:, 1], q[:, 2]
+    dt = np.uint8 if mh * ms + mv <= 255 else np.int32
+    low = (sb | vb) >= 128
+    out = np.where(low, (vb & 127).astype(dt) + dt(mh * ms), hb.astype(dt) * dt(ms) + (sb & 127))
+    return out.reshape(shape)
+
+
+def _gather(image: np.ndarray, xs: np.ndarray, ys: np.ndarray) -> np.ndarray:
+    """``image[ys, xs]`` for in-image integer coordinates (N, S) → (N, S, C)."""
+    if xs.shape[0] < 32000:   # cv2.remap (nearest, exact at integer points) gathers fastest
+        return cv2.remap(image, xs.astype(np.float32), ys.astype(np.float32), cv2.INTER_NEAREST)
+    return image[ys, xs]
 
 
 def histograms(image: np.ndarray, boxes: np.ndarray, grid: tuple[int, int], mh: int, ms: int,
                mv: int, s_min: float, v_min: float) -> np.ndarray:
     """Eq. (12): normalised HSV histograms (N, M) of ``boxes`` (N, 4) ``(x, y, w, h)``, each from
-    the ``grid`` samples of its box (points outside the image are clamped to the border)."""
+    the ``grid`` samples of its box (points outside the image are clamped to the border).  All
+    boxes in one gather, one colour conversion and one ``bincount``."""
     b = np.asarray(boxes, dtype=np.float64).reshape(-1, 4)
     M = mh * ms + mv
     n = len(b)
@@ -61,10 +91,11 @@ def histograms(image: np.ndarray, boxes: np.ndarray, grid: tuple[int, int], mh: 
         return np.zeros((0, M))
     u, v = sample_grid(*grid)
     H, W = image.shape[:2]
-    xs = np.clip(np.rint(b[:, :1] + b[:, 2:3] * (u[None] + 0.5)), 0, W - 1).astype(np.int64)
-    ys = np.clip(np.rint(b[:, 1:2] + b[:, 3:4] * (v[None] + 0.5)), 0, H - 1).astype(np.int64)
-    bins = hsv_bins(image[ys, xs], mh, ms, mv, s_min, v_min)       # (N, S)
-    flat = (np.arange(n)[:, None] * M + bins).ravel()
+    xs = np.clip(np.rint(b[:, :1] + b[:, 2:3] * (u[None] + 0.5)), 0, W - 1)
+    ys = np.clip(np.rint(b[:, 1:2] + b[:, 3:4] * (v[None] + 0.5)), 0, H - 1)
+    bins = hsv_bins(_gather(image, xs.astype(np.intp), ys.astype(np.intp)),
+                    mh, ms, mv, s_min, v_min)                       # (N, S)
+    flat = (np.arange(n, dtype=np.intp)[:, None] * M + bins).ravel()
     counts = np.bincount(flat, minlength=n * M).reshape(n, M).astype(np.float64)
     return counts / counts.sum(axis=1, keepdims=True)               # K of eq. (12)
 
@@ -118,7 +149,7 @@ def boxes_of(states: np.ndarray, aspect: float | np.ndarray) -> np.ndarray:
     s = np.asarray(states, dtype=np.float64).reshape(-1, 6)
     h = s[:, 2]
     w = np.asarray(aspect) * h
-    return np.c_[s[:, 0] - w / 2, s[:, 1] - h / 2, w, h]
+    return np.stack([s[:, 0] - w / 2, s[:, 1] - h / 2, np.broadcast_to(w, h.shape), h], axis=1)
 
 
 def map_index(log_w: np.ndarray) -> int:

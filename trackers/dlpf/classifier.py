@@ -23,8 +23,10 @@ Cost (``mode``):
   windows on one level share their 16×16 blocks.  Resampled parents are often exact copies
   (about half the windows of a PETS09 frame are duplicates) and overlapping windows share most
   blocks: per frame, each distinct window is scored once and each block it uses is computed
-  once.  Per level, the windows' union is split into connected regions (a cell occupancy grid,
-  ``cv2.connectedComponentsWithStats``); each region is resampled once from the frame
+  once.  Per level, the windows' union is split into connected regions (windows whose cell
+  rectangles overlap or share an edge, one pairwise test over the frame's distinct windows: the
+  4-connected components of the union of their cells, without rasterising it); each region is
+  resampled once from the frame
   (``cv2.warpAffine``, level px ``u`` samples frame px ``(u + 0.5)/s − 0.5`` like
   ``cv2.resize``; replicated border; 1 px more on each side so that border gradients see their
   real neighbours) and its needed blocks are computed in one ``HOGDescriptor.compute`` call
@@ -32,9 +34,12 @@ Cost (``mode``):
   gamma as the 64×128 one); a window's descriptor is then a gather of its 7×15 blocks in
   OpenCV's order (x outer).  At integer level offsets this equals OpenCV's descriptor of the
   window on the level image exactly; elsewhere up to warpAffine's 1/32-px coordinate rounding
-  (tests/test_dlpf.py).  PETS09 frames 1–120: ~8.7 k blocks/frame instead of 310 × 105 = 32.5 k.
+  (tests/test_dlpf.py).  PETS09 frames 1–120: ~8.3 k blocks/frame instead of 310 × 105 = 32.5 k,
+  over ~630 k level px.  The HOG of those blocks is most of DLPF's time: with ``threads`` > 1
+  the regions are split into shares of equal area computed by that many threads (OpenCV
+  releases the GIL; each block is computed by one thread, so the margins do not depend on it).
 - ``"window"``: one ``cv2.resize`` + one ``HOGDescriptor.compute`` per window (a loop over a
-  few hundred windows, ~0.1 ms per window), no snapping.
+  few hundred windows, ~0.1 ms per window, split over ``threads``), no snapping.
 
 Both stack descriptors into (N, 3780) and score them with one matrix product ``D·w + b`` (or
 the intersection-kernel SVM's lookup tables, :mod:`.iksvm`).  The tracker scores its tracks'
@@ -48,6 +53,7 @@ on a frame, for the efficiency comparison.
 from __future__ import annotations
 
 import math
+import threading
 from typing import Optional
 
 import cv2
@@ -91,18 +97,19 @@ class HOGWindowClassifier:
     MODES = ("pyramid", "window")
 
     def __init__(self, weights: np.ndarray | None = None, bias: float | None = None, *,
-                 mode: str = "pyramid", scale_step: float = 1.1):
+                 mode: str = "pyramid", scale_step: float = 1.1, threads: int = 1):
         if mode not in self.MODES:
             raise ValueError(f"classifier mode must be one of {', '.join(self.MODES)}, "
                              f"got {mode!r}")
         if not scale_step > 1.0:
             raise ValueError(f"classifier scale_step must be > 1, got {scale_step}")
         self.mode, self.scale_step = mode, float(scale_step)
+        if int(threads) < 1:
+            raise ValueError(f"classifier threads must be >= 1, got {threads}")
+        self.threads = int(threads)
+        self._pool = None
         self.hog = cv2.HOGDescriptor()
-        # one 16x16 block as a "window": same cells, bins, Gaussian block weighting
-        # (winSigma = (16+16)/8), L2-Hys and gamma correction as the 64x128 descriptor's blocks
-        self.block_hog = cv2.HOGDescriptor((16, 16), (16, 16), (8, 8), (8, 8), 9, 1, -1.0,
-                                           cv2.HOGDescriptor_L2Hys, 0.2, True)
+        self.block_hog = _block_hog()
         if weights is None:
             det = np.asarray(cv2.HOGDescriptor_getDefaultPeopleDetector(),
                              dtype=np.float32).reshape(-1)
@@ -184,70 +191,105 @@ class HOGWindowClassifier:
             return self._window_descriptors(grey, w), None
         return self._pyramid_descriptors(grey, w)
 
-    def _pyramid_descriptors(self, grey: np.ndarray, w: np.ndarray
-                             ) -> tuple[np.ndarray, np.ndarray]:
+    def _pyramid_descriptors(self, grey: np.ndarray, w: np.ndarray,
+                             drain: Optional["_Drain"] = None) -> tuple[np.ndarray, np.ndarray]:
         if len(w) == 0:
             return np.empty((0, self.hog.getDescriptorSize()), np.float32), np.zeros(0, np.int64)
         k, cu, cv = self._levels(w)
         _, first, inv = np.unique(_pack(k, cu, cv), return_index=True,
                                   return_inverse=True)          # duplicates scored once
-        ukey = np.stack([k[first], cu[first], cv[first]], axis=1)
+        k, cu, cv = k[first], cu[first], cv[first]
         inv = inv.reshape(-1)
-        ucells = np.empty((len(ukey), (WIN_W // CELL - 1) * (WIN_H // CELL - 1), BLOCK_LEN),
-                          dtype=np.float32)
+        n = len(k)
         wx, wy = WIN_W // CELL, WIN_H // CELL            # window: 8 x 16 cells, 7 x 15 blocks
-        bi = np.arange(wx - 1)[:, None]                  # OpenCV's block order: x outer, y inner
-        bj = np.arange(wy - 1)[None, :]
-        for lev in np.unique(ukey[:, 0]):
-            sel = np.flatnonzero(ukey[:, 0] == lev)
-            s = self.scale_step ** int(lev)
-            u0, v0 = int(ukey[sel, 1].min()), int(ukey[sel, 2].min())
-            u, v = ukey[sel, 1] - u0, ukey[sel, 2] - v0   # cells on this level's local grid
-            gw, gh = int(u.max()) + wx, int(v.max()) + wy
-            cells = _rasterise(u, v, wx, wy, gw, gh)       # cells inside some window
-            need = _rasterise(u, v, wx - 1, wy - 1, gw, gh)  # blocks some window uses
-            # each connected group of overlapping windows is one region of the level image,
-            # resampled once; each block of it that some window uses is computed once
-            ncomp, lab, stats, _ = cv2.connectedComponentsWithStats(cells, connectivity=4)
-            bv, bu = np.nonzero(need)
-            blab = lab[bv, bu]
-            order = np.argsort(blab, kind="stable")
-            bv, bu, blab = bv[order], bu[order], blab[order]
-            cuts = np.searchsorted(blab, np.arange(1, ncomp + 1))
-            descs = []
-            for c in range(1, ncomp):
-                x, y, cw, chh = (int(t) for t in stats[c, :4])    # region, in cells
-                # 1 px more on each side so that the region's border gradients see their real
-                # neighbours; level px (a, b) samples frame px ((a + 0.5)/s - 0.5, ...)
-                ox, oy = (u0 + x) * CELL - 1, (v0 + y) * CELL - 1
-                M = np.array([[1.0 / s, 0.0, (ox + 0.5) / s - 0.5],
-                              [0.0, 1.0 / s, (oy + 0.5) / s - 0.5]])
-                region = cv2.warpAffine(grey, M, (cw * CELL + 2, chh * CELL + 2),
-                                        flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
-                                        borderMode=cv2.BORDER_REPLICATE)
-                sl = slice(cuts[c - 1], cuts[c])
-                locs = np.empty((sl.stop - sl.start, 2), dtype=np.int32)
-                locs[:, 0] = 1 + CELL * (bu[sl] - x)
-                locs[:, 1] = 1 + CELL * (bv[sl] - y)
-                descs.append(self.block_hog.compute(region, (CELL, CELL), (0, 0), locs)
-                             .reshape(-1, BLOCK_LEN))
-            row = np.full((gh, gw), -1, dtype=np.int64)
-            row[bv, bu] = np.arange(len(bv))
-            blocks = np.concatenate(descs)
-            idx = row[v[:, None, None] + bj[None], u[:, None, None] + bi[None]]  # (n, 7, 15)
-            ucells[sel] = blocks[idx.reshape(len(sel), -1)]
-        return ucells.reshape(len(ukey), -1), inv
+        nb = (wx - 1) * (wy - 1)
+        # each connected group of touching windows of one level is one region of the level
+        # image, resampled once; each block of it that some window uses is computed once
+        nreg, reg = _regions(k, cu, cv, wx, wy)
+        # every block of every window, in OpenCV's order (x outer, y inner); the distinct ones
+        bu = (cu[:, None] + np.repeat(np.arange(wx - 1), wy - 1)[None]).ravel()
+        bv = (cv[:, None] + np.tile(np.arange(wy - 1), wx - 1)[None]).ravel()
+        _, bfirst, binv = np.unique(_pack(np.repeat(k, nb), bu, bv), return_index=True,
+                                    return_inverse=True)
+        bu, bv, breg = bu[bfirst], bv[bfirst], reg[bfirst // nb]
+        order = np.argsort(breg, kind="stable")
+        cuts = np.searchsorted(breg[order], np.arange(nreg + 1))
+        big = np.iinfo(np.int64).max
+        x0, y0 = np.full(nreg, big), np.full(nreg, big)
+        x1, y1 = np.full(nreg, -big), np.full(nreg, -big)
+        np.minimum.at(x0, reg, cu)
+        np.minimum.at(y0, reg, cv)
+        np.maximum.at(x1, reg, cu + wx)
+        np.maximum.at(y1, reg, cv + wy)
+        rlev = np.empty(nreg, dtype=np.int64)
+        rlev[reg] = k
+        blocks = np.empty((len(bu), BLOCK_LEN), dtype=np.float32)
+        # each block's top-left px in its region (1 px more on each side of a region so that
+        # its border gradients see their real neighbours)
+        locs = np.empty((len(bu), 2), dtype=np.int32)
+        locs[:, 0] = 1 + CELL * (bu - x0[breg])
+        locs[:, 1] = 1 + CELL * (bv - y0[breg])
+        locs = locs[order]
+        # level px (a, b) samples frame px ((a + 0.5)/s - 0.5, ...)
+        inv_s = self.scale_step ** -rlev.astype(np.float64)
+        tx = ((x0 * CELL - 1) + 0.5) * inv_s - 0.5
+        ty = ((y0 * CELL - 1) + 0.5) * inv_s - 0.5
+        sizes = np.stack([(x1 - x0) * CELL + 2, (y1 - y0) * CELL + 2], axis=1).tolist()
+        jobs = [(order[cuts[r]:cuts[r + 1]],
+                 np.array([[inv_s[r], 0.0, tx[r]], [0.0, inv_s[r], ty[r]]]),
+                 tuple(sizes[r]), locs[cuts[r]:cuts[r + 1]])
+                for r in range(nreg)]
+        if drain is None:
+            self._run_regions(grey, jobs, blocks)
+        else:   # shared with a worker that is already running (score_with_exact)
+            drain.start(grey, jobs, blocks)
+            drain.run(self.block_hog)
+            drain.wait()
+        return blocks[binv.reshape(n, nb)].reshape(n, -1), inv
 
-    def _window_descriptors(self, grey: np.ndarray, w: np.ndarray) -> np.ndarray:
+    def _run_regions(self, grey: np.ndarray, jobs: list, blocks: np.ndarray) -> None:
+        """Resample each region and compute its blocks into ``blocks[sel]``; with ``threads``
+        > 1 the regions are split into that many shares of about equal area, one per thread
+        (OpenCV releases the GIL; each block is computed once, by one thread, so the result
+        does not depend on the split)."""
+        if self.threads <= 1 or len(jobs) < 2:
+            _regions_blocks(grey, jobs, blocks, self.block_hog)
+            return
+        size = np.array([j[2][0] * j[2][1] for j in jobs], dtype=np.float64)
+        mid = np.cumsum(size) - size / 2                 # each region's middle, by area so far
+        share = np.minimum(mid * self.threads // size.sum(), self.threads - 1)
+        parts = [[j for j, p in zip(jobs, share) if p == t] for t in range(self.threads)]
+        pool, hogs, _ = self._workers()
+        futures = [pool.submit(_regions_blocks, grey, part, blocks, hog)
+                   for part, hog in zip(parts[1:], hogs[1:]) if part]
+        _regions_blocks(grey, parts[0], blocks, hogs[0])
+        for f in futures:
+            f.result()
+
+    def _workers(self):
+        """The worker threads (created on first use), one block HOG and one window HOG per
+        thread (the calling thread's first)."""
+        if self._pool is None:
+            from concurrent.futures import ThreadPoolExecutor
+
+            extra = self.threads - 1
+            self._pool = ThreadPoolExecutor(extra, thread_name_prefix="pfscope-hog")
+            self._hogs = ([self.block_hog] + [_block_hog() for _ in range(extra)],
+                          [self.hog] + [cv2.HOGDescriptor() for _ in range(extra)])
+        return (self._pool, *self._hogs)
+
+    def _window_descriptors(self, grey: np.ndarray, w: np.ndarray,
+                            hog: Optional[cv2.HOGDescriptor] = None) -> np.ndarray:
+        """Per-window descriptors; ``hog`` given: all of them on the calling thread with it."""
         n = len(w)
         out = np.empty((n, self.hog.getDescriptorSize()), dtype=np.float32)
         if n == 0:
             return out
         H, W = grey.shape[:2]
         # one replicated border for every window that sticks out of the frame
-        pad = int(math.ceil(max(0.0, float(np.max(np.r_[-w[:, 0], -w[:, 1],
-                                                      w[:, 0] + w[:, 2] - W,
-                                                      w[:, 1] + w[:, 3] - H, 0.0]))))) + 1
+        out_by = max(0.0, float(-w[:, 0].min()), float(-w[:, 1].min()),
+                     float((w[:, 0] + w[:, 2]).max() - W), float((w[:, 1] + w[:, 3]).max() - H))
+        pad = int(math.ceil(out_by)) + 1
         padded = cv2.copyMakeBorder(grey, pad, pad, pad, pad, cv2.BORDER_REPLICATE) \
             if pad > 1 else grey
         off = pad if pad > 1 else 0
@@ -258,12 +300,24 @@ class HOGWindowClassifier:
         x0, y0 = np.maximum(x0, 0), np.maximum(y0, 0)
         x1 = np.minimum(x1, padded.shape[1])
         y1 = np.minimum(y1, padded.shape[0])
-        buf = np.empty((WIN_H, WIN_W), dtype=np.uint8)
-        compute = self.hog.compute
-        for i in range(n):  # a few hundred windows: resize + HOG each (see the module docstring)
-            cv2.resize(padded[y0[i]:y1[i], x0[i]:x1[i]], (WIN_W, WIN_H), dst=buf,
-                       interpolation=cv2.INTER_LINEAR)
-            out[i] = compute(buf).reshape(-1)
+
+        def part(idx: range, hog: cv2.HOGDescriptor) -> None:
+            buf = np.empty((WIN_H, WIN_W), dtype=np.uint8)
+            for i in idx:  # a few hundred windows: resize + HOG each (module docstring)
+                cv2.resize(padded[y0[i]:y1[i], x0[i]:x1[i]], (WIN_W, WIN_H), dst=buf,
+                           interpolation=cv2.INTER_LINEAR)
+                out[i] = hog.compute(buf).reshape(-1)
+
+        if hog is not None or self.threads <= 1 or n < 2 * self.threads:
+            part(range(n), hog or self.hog)
+            return out
+        pool, _, hogs = self._workers()     # each window by one thread: same result
+        cuts = np.linspace(0, n, self.threads + 1).astype(int)
+        futures = [pool.submit(part, range(cuts[t], cuts[t + 1]), hogs[t])
+                   for t in range(1, self.threads)]
+        part(range(cuts[0], cuts[1]), hogs[0])
+        for f in futures:
+            f.result()
         return out
 
     def decision(self, d: np.ndarray) -> np.ndarray:
@@ -282,18 +336,55 @@ class HOGWindowClassifier:
         m = self.decision(d)
         return m if inv is None else m[inv]
 
+    def score_with_exact(self, grey: np.ndarray, windows: np.ndarray,
+                         exact_windows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(score(grey, windows), score(grey, exact_windows, exact=True))``, the same margins.
+        With ``threads`` > 1 in ``"pyramid"`` mode a worker describes the exact windows while
+        this thread prepares the pyramid's regions, then both threads take regions from one
+        queue until none is left (each region by one thread: the result does not depend on
+        who took which)."""
+        w = np.asarray(windows, dtype=np.float64).reshape(-1, 4)
+        ew = np.asarray(exact_windows, dtype=np.float64).reshape(-1, 4)
+        if self.threads <= 1 or self.mode != "pyramid" or not len(w) or not len(ew):
+            return self.score(grey, w), self.score(grey, ew, exact=True)
+        pool, bhogs, whogs = self._workers()
+        drain = _Drain()
+
+        def worker():
+            try:
+                vd = self._window_descriptors(grey, ew, hog=whogs[1])
+                drain.ready.wait()
+                drain.run(bhogs[1])
+                return vd
+            except BaseException as e:       # re-raised on the calling thread
+                drain.error = e
+                raise
+            finally:
+                drain.finished.set()
+
+        head = pool.submit(worker)
+        try:
+            d, inv = self._pyramid_descriptors(grey, w, drain)
+        finally:
+            drain.ready.set()                   # never leave the worker waiting
+        vd = head.result()
+        return self.decision(d)[inv], self.decision(vd)
+
     def describe(self) -> str:
         return "opencv-default-people-svm"
 
 
-def load_classifier(path: str = "", *, mode: str = "pyramid", scale_step: float = 1.1):
+def load_classifier(path: str = "", *, mode: str = "pyramid", scale_step: float = 1.1,
+                    threads: int = 1):
     """The DLPF classifier: OpenCV's people SVM (``path`` empty) or a model file written by
     ``pfscope train-classifier`` (:mod:`.iksvm`).  A missing, unreadable or mismatched file
     raises ``ValueError`` with one line naming it."""
     if not path:
-        return HOGWindowClassifier(mode=mode, scale_step=scale_step)
+        return HOGWindowClassifier(mode=mode, scale_step=scale_step, threads=threads)
     from .iksvm import IKSVMClassifier
-    return IKSVMClassifier.load(path, mode=mode, scale_step=scale_step)
+    clf = IKSVMClassifier.load(path, mode=mode, scale_step=scale_step)
+    clf.threads = int(threads)
+    return clf
 
 
 def _pack(k: np.ndarray, cu: np.ndarray, cv: np.ndarray) -> np.ndarray:
@@ -301,15 +392,80 @@ def _pack(k: np.ndarray, cu: np.ndarray, cv: np.ndarray) -> np.ndarray:
     return ((k + (1 << 20)) << 42) | ((cu + (1 << 20)) << 21) | (cv + (1 << 20))
 
 
-def _rasterise(u: np.ndarray, v: np.ndarray, w: int, h: int, gw: int, gh: int) -> np.ndarray:
-    """(gh, gw) uint8 mask of the union of the ``w`` x ``h`` rectangles at ``(u, v)`` (a
-    difference array and two cumulative sums, no loop over rectangles)."""
-    d = np.zeros((gh + 1, gw + 1), dtype=np.int32)
-    np.add.at(d, (v, u), 1)
-    np.add.at(d, (v, u + w), -1)
-    np.add.at(d, (v + h, u), -1)
-    np.add.at(d, (v + h, u + w), 1)
-    return (d.cumsum(0).cumsum(1)[:gh, :gw] > 0).astype(np.uint8)
+class _Drain:
+    """The pyramid's regions handed out one at a time to the threads that compute them."""
+
+    def __init__(self):
+        self.ready = threading.Event()      # the regions are known
+        self.finished = threading.Event()   # the worker is done
+        self.lock = threading.Lock()
+        self.jobs: list = []
+        self.next = 0
+        self.error: Optional[BaseException] = None
+
+    def start(self, grey: np.ndarray, jobs: list, blocks: np.ndarray) -> None:
+        # largest first, so that the last region taken is a small one
+        self.grey, self.blocks = grey, blocks
+        self.jobs = sorted(jobs, key=lambda j: -j[2][0] * j[2][1])
+        self.ready.set()
+
+    def run(self, hog: cv2.HOGDescriptor) -> None:
+        while True:
+            with self.lock:
+                i = self.next
+                self.next += 1
+            if i >= len(self.jobs):
+                return
+            _regions_blocks(self.grey, [self.jobs[i]], self.blocks, hog)
+
+    def wait(self) -> None:
+        """Until the worker has finished its last region (its error re-raised here)."""
+        self.finished.wait()
+        if self.error is not None:
+            raise RuntimeError(f"classifier worker failed: {self.error}") from self.error
+
+
+def _block_hog() -> cv2.HOGDescriptor:
+    """One 16x16 block as a "window": same cells, bins, Gaussian block weighting (winSigma =
+    (16+16)/8), L2-Hys and gamma correction as the 64x128 descriptor's blocks."""
+    return cv2.HOGDescriptor((16, 16), (16, 16), (8, 8), (8, 8), 9, 1, -1.0,
+                             cv2.HOGDescriptor_L2Hys, 0.2, True)
+
+
+def _regions_blocks(grey: np.ndarray, jobs: list, blocks: np.ndarray,
+                    hog: cv2.HOGDescriptor) -> None:
+    """For each job ``(sel, M, size, locs)``: the level region ``warpAffine(grey, M, size)``
+    (inverse map, bilinear, replicated border) and its blocks at ``locs`` into ``blocks[sel]``."""
+    for sel, M, size, locs in jobs:
+        region = cv2.warpAffine(grey, M, size, flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
+                                borderMode=cv2.BORDER_REPLICATE)
+        blocks[sel] = hog.compute(region, (CELL, CELL), (0, 0), locs).reshape(-1, BLOCK_LEN)
+
+
+def _regions(k: np.ndarray, cu: np.ndarray, cv: np.ndarray, wx: int, wy: int
+             ) -> tuple[int, np.ndarray]:
+    """Connected groups of windows (``wx`` x ``wy`` cells at ``(cu, cv)`` on level ``k``): two
+    windows of one level are in a group when their cell rectangles overlap or share an edge
+    (the 4-connected components of the union of their cells).  Returns (groups, label per
+    window, 0..groups-1 in order of each group's first window): a pairwise test over the few
+    hundred distinct windows of a frame, then each window takes the smallest index among its
+    neighbours until nothing changes (as many rounds as the longest chain of windows)."""
+    n = len(k)
+    if n == 0:
+        return 0, np.zeros(0, dtype=np.int64)
+    du = np.abs(cu[:, None] - cu[None])
+    dv = np.abs(cv[:, None] - cv[None])
+    touch = (k[:, None] == k[None]) & (du <= wx) & (dv <= wy) & ~((du == wx) & (dv == wy))
+    lab = np.arange(n)
+    big = np.full((n, n), n)
+    while True:
+        new = np.where(touch, lab[None], big).min(axis=1)
+        new = new[new]                                   # jump along the chain too
+        if np.array_equal(new, lab):
+            break
+        lab = new
+    roots, labels = np.unique(lab, return_inverse=True)
+    return len(roots), labels.reshape(-1).astype(np.int64)
 
 
 def sliding_window_count(width: int, height: int, *, win_stride=(8, 8), padding=(8, 8),

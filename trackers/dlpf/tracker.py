@@ -179,6 +179,9 @@ class ClassifierParams:
     exact_verify: bool = param(True, "tracks' verification windows are scored unsnapped, each "
                                      "resampled on its own (a few per track), in 'pyramid' "
                                      "mode too")
+    threads: int = param(2, "threads that compute the pyramid's HOG blocks ('pyramid' mode; "
+                            "each region's blocks by one thread, so the scores and the tracks "
+                            "are the same for any value; 1 = none)")
     model: str = param("", "classifier file from 'pfscope train-classifier' (an intersection-"
                            "kernel SVM, jung2013 §2.1); empty: OpenCV's pre-trained people SVM.  "
                            "Its margins are on another scale: use it with hit_threshold=0 "
@@ -191,6 +194,8 @@ class ClassifierParams:
                              f"{', '.join(HOGWindowClassifier.MODES)}, got {self.mode!r}")
         if not self.scale_step > 1.0:
             raise ValueError(f"classifier.scale_step must be > 1, got {self.scale_step}")
+        if self.threads < 1:
+            raise ValueError(f"classifier.threads must be >= 1, got {self.threads}")
 
 
 @dataclass(frozen=True)
@@ -251,6 +256,8 @@ class ChildParams:
             raise ValueError(f"estimate must be 'map' or 'mean', got {self.estimate!r}")
         if min(self.n, self.Mh, self.Ms, self.Mv, self.grid_x, self.grid_y, self.lost_frames) < 1:
             raise ValueError("child counts, bins, grid and lost_frames must be >= 1")
+        if max(self.Mh, self.Ms, self.Mv) > 127:
+            raise ValueError("at most 127 bins per HSV channel (Mh, Ms, Mv)")
 
 
 @dataclass(frozen=True)
@@ -262,6 +269,12 @@ class DLPFParams:
     classifier: ClassifierParams = part(ClassifierParams, "HOG + SVM per window (§2.1)")
     confirm: ConfirmParams = part(ConfirmParams, "confirmation (§2.2)")
     children: ChildParams = part(ChildParams, "child particles (§2.2)")
+
+
+#: where a track's flow is measured, relative to its box: 4 x 8 points over the central half of
+#: its width (the person, not the background beside them) and 80 % of its height
+_FLOW_GRID = np.stack([g.ravel() for g in np.meshgrid(np.linspace(0.3, 0.7, 4),
+                                                      np.linspace(0.1, 0.9, 8))], axis=1)
 
 
 @dataclass
@@ -347,7 +360,8 @@ class DLPFTracker:
         self.rng = rng if rng is not None else np.random.default_rng(0)
         cp = self.params.classifier
         self.classifier = classifier or load_classifier(cp.model, mode=cp.mode,
-                                                        scale_step=cp.scale_step)
+                                                        scale_step=cp.scale_step,
+                                                        threads=cp.threads)
         c = self.params.confirm
         self.confirmer = Confirmer(c.count, c.max_gap, c.match_iou)
         self.parents: Optional[ParticleSet] = None
@@ -379,21 +393,23 @@ class DLPFTracker:
         return np.array([t.shift if t.shift is not None else t.velocity
                          for t in self.tracks]).reshape(-1, 2)
 
-    def _measure_track_flow(self, grey: np.ndarray) -> None:
-        """``t.shift`` of every track: the median Lucas-Kanade flow, last frame → this one, of
-        a 4 × 8 grid over the central half of its box's width (the person, not the background
-        beside them); None when fewer than 4 grid points were tracked (one LK call for all)."""
+    def _track_flow_points(self) -> np.ndarray:
+        """(T·32, 2) the points whose Lucas-Kanade flow, last frame → this one, gives each
+        track's ``shift``: a 4 × 8 grid over the central half of its box's width (the person,
+        not the background beside them); none when ``children.flow`` is off."""
+        if not self.tracks or self._prev_grey is None or not self.params.children.flow:
+            return np.zeros((0, 2))
+        b = np.array([t.box for t in self.tracks])
+        return (b[:, None, :2] + _FLOW_GRID[None] * b[:, None, 2:]).reshape(-1, 2)
+
+    def _set_track_flow(self, flow: np.ndarray, ok: np.ndarray) -> None:
+        """``t.shift`` of every track: the median flow of its grid points (None when fewer than
+        4 of them were tracked, or without flow points)."""
         for t in self.tracks:
             t.shift = None
-        if not self.tracks or self._prev_grey is None or not self.params.children.flow:
+        if not len(flow):
             return
-        M = self.params.motion
-        gx, gy = np.meshgrid(np.linspace(0.3, 0.7, 4), np.linspace(0.1, 0.9, 8))
-        grid = np.c_[gx.ravel(), gy.ravel()]
-        b = np.array([t.box for t in self.tracks])
-        pts = (b[:, None, :2] + grid[None] * b[:, None, 2:]).reshape(-1, 2)
-        flow, ok = mo.lk_flow(self._prev_grey, grey, pts, win=M.lk_window, levels=M.lk_levels)
-        flow, ok = flow.reshape(len(b), -1, 2), ok.reshape(len(b), -1)
+        flow, ok = flow.reshape(len(self.tracks), -1, 2), ok.reshape(len(self.tracks), -1)
         for k, t in enumerate(self.tracks):
             if ok[k].sum() >= 4:
                 t.shift = np.median(flow[k][ok[k]], axis=0)
@@ -427,20 +443,23 @@ class DLPFTracker:
         prior = self.scale_prior
         log = StageLog(self.stages, level)
         rows: Rows = []
-        self._measure_track_flow(grey)
-        tboxes = self.predicted_track_boxes()
-
-        # ---------------------------------------------------------------- motion (eqs. 1-7)
-        log.stage("motion")
         labels = self.parents.labels
         assert labels is not None
         free = np.flatnonzero(labels == 0)
         pred = pa.predict(self.parents.states[free], P.parents.q_pos, P.parents.q_vel, rng, W, H)
-        if self._prev_grey is not None and len(free):
-            flow, ok = mo.lk_flow(self._prev_grey, grey, pred[:, :2], win=P.motion.lk_window,
-                                  levels=P.motion.lk_levels)
+        # one Lucas-Kanade call for the tracks' flow grids and the free parents (eq. (1))
+        tpts = self._track_flow_points()
+        if self._prev_grey is not None and len(free) + len(tpts):
+            flow, ok = mo.lk_flow(self._prev_grey, grey, np.concatenate([tpts, pred[:, :2]]),
+                                  win=P.motion.lk_window, levels=P.motion.lk_levels)
         else:
-            flow, ok = np.zeros((len(free), 2)), np.zeros(len(free), dtype=bool)
+            flow, ok = np.zeros((len(tpts) + len(free), 2)), np.zeros(len(tpts) + len(free), bool)
+        self._set_track_flow(flow[:len(tpts)], ok[:len(tpts)])
+        flow, ok = flow[len(tpts):], ok[len(tpts):]
+        tboxes = self.predicted_track_boxes()
+
+        # ---------------------------------------------------------------- motion (eqs. 1-7)
+        log.stage("motion")
         tracked = mo.inside_boxes(pred[:, :2], tboxes, P.motion.mask_margin)
         m = mo.magnitude(flow, P.motion.cap)
         m[tracked] = 0.0                                          # §2.2: masked motion
@@ -509,10 +528,14 @@ class DLPFTracker:
         windows = self.classifier.snap(window_boxes(new[:, :2], heights),
                                        rng if P.classifier.spread else None)
         vwin, vtrack = self._verify_windows()
-        scores = self.classifier.score(grey, windows)
         # a track's few verification windows localise it: scored exactly (unsnapped), since
         # the hit box pulls the track's box (children.snap) and feeds the scale prior
-        vscores = self.classifier.score(grey, vwin, exact=P.classifier.exact_verify)
+        both = getattr(self.classifier, "score_with_exact", None)
+        if P.classifier.exact_verify and both is not None:   # the two overlap on two threads
+            scores, vscores = both(grey, windows, vwin)
+        else:
+            scores = self.classifier.score(grey, windows)
+            vscores = self.classifier.score(grey, vwin, exact=P.classifier.exact_verify)
         all_scores = np.concatenate([scores, vscores])
         self.parents.extra[free, 1] = scores
         self._support(vwin, vscores, vtrack)
@@ -662,13 +685,15 @@ class DLPFTracker:
                 seeds[:, 2] = t.support[3]
                 seeds[:, 3:5] = seeds[:, :2] - t.velocity
                 p[pick] = seeds
-            if t.support is not None and C.ref_update > 0:  # slow reference refresh (ours)
-                q = ch.histograms(img, t.support[None], (C.grid_x, C.grid_y), C.Mh, C.Ms, C.Mv,
-                                  C.s_min, C.v_min)[0]
-                t.ref = (1.0 - C.ref_update) * t.ref + C.ref_update * q
+        # slow reference refresh (ours): the tracks whose parent has a hit
+        refresh = [t for t in self.tracks if t.support is not None] if C.ref_update > 0 else []
         sizes = [len(p) for p in preds]
         allb = np.concatenate([ch.boxes_of(p, t.aspect) for p, t in zip(preds, self.tracks)])
-        hist = ch.histograms(img, allb, (C.grid_x, C.grid_y), C.Mh, C.Ms, C.Mv, C.s_min, C.v_min)
+        # every child's box and every refreshed track's hit box: one gather, one bincount
+        hist = ch.histograms(img, np.concatenate([allb, *(t.support[None] for t in refresh)]),
+                             (C.grid_x, C.grid_y), C.Mh, C.Ms, C.Mv, C.s_min, C.v_min)
+        for t, q in zip(refresh, hist[len(allb):]):
+            t.ref = (1.0 - C.ref_update) * t.ref + C.ref_update * q
         starts = np.cumsum([0] + sizes)
         Bs, lws, boxes = [], [], []
         for k, t in enumerate(self.tracks):
@@ -701,10 +726,11 @@ class DLPFTracker:
             else:
                 w = np.exp(lw - lw.max())
                 est = (w[:, None] * preds[k][:, :3]).sum(0) / w.sum()
-            box = ch.boxes_of(np.r_[est, est][None], t.aspect)[0]
+            box = ch.boxes_of(np.concatenate([est, est])[None], t.aspect)[0]
             if t.support is not None and C.snap > 0:  # pull the estimate onto the hit (ours)
-                sup = ch.boxes_of(np.r_[t.support[:2] + t.support[2:] / 2, t.support[3],
-                                        np.zeros(3)][None], t.aspect)[0]
+                sup = ch.boxes_of(np.concatenate([t.support[:2] + t.support[2:] / 2,
+                                                  t.support[3:4], np.zeros(3)])[None],
+                                  t.aspect)[0]
                 box = (1.0 - C.snap) * box + C.snap * sup
             Best = float(ch.bhattacharyya(t.ref, ch.histograms(
                 img, box[None], (C.grid_x, C.grid_y), C.Mh, C.Ms, C.Mv, C.s_min, C.v_min))[0]) \
