@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import Callable, Mapping, Optional, Protocol, Sequence
 
 from .api import Rows, StepResult, Tracker
+from .data.sources import prefetch
 from .errors import InputError
 from .report import level_rank
 from .types import Detections, Frame, GroundTruth
@@ -242,6 +243,7 @@ def run(source, trackers: Mapping[str, Tracker] | Sequence[Tracker], *,
     t0 = time.perf_counter()
     begun: list[Hook] = []
     current = None
+    stream = None
     try:
         for h in hooks:
             h.begin(info)
@@ -251,7 +253,10 @@ def run(source, trackers: Mapping[str, Tracker] | Sequence[Tracker], *,
                 prepare = getattr(tracker, "prepare", None)
                 if prepare is not None:
                     prepare(source, start, start + total - 1)
-        for frame in iter_frames(source, total, start):
+        stream = iter_frames(source, total, start)
+        if getattr(source, "has_frames", False) and source.kind != "synthetic":
+            stream = prefetch(stream)  # decode the next frames while this one is tracked
+        for frame in stream:
             if should_stop is not None and should_stop():
                 break
             current = frame.index
@@ -288,6 +293,8 @@ def run(source, trackers: Mapping[str, Tracker] | Sequence[Tracker], *,
         where = f" at frame {current}" if current is not None else ""
         outcome = Outcome("failed", done, f"failed{where}: {type(e).__name__}: {e}"
                           if not isinstance(e, InputError) else f"failed{where}: {e}", e)
+    if stream is not None and hasattr(stream, "close"):
+        stream.close()  # stops the frame reader thread (bounded)
     seconds = time.perf_counter() - t0
     hook_error: Optional[BaseException] = None
     for h in begun:

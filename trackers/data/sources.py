@@ -354,3 +354,62 @@ def training_frames(source, frames, stride: int, command: str):
         raise InputError(f"{command}: no frames to train on")
     first, last = wanted[0], wanted[-1]
     return gt, first, last, set(f for f in wanted if (f - first) % max(1, stride) == 0)
+
+
+def prefetch(frames: Iterator[Frame], depth: int = 2) -> Iterator[Frame]:
+    """``frames``, read ``depth`` frames ahead on a thread: decoding (OpenCV releases the GIL)
+    overlaps the tracking of the frame before.  Same frames in the same order; an error the
+    reader meets (an :class:`InputError` naming the frame) is raised here after the frames
+    before it.  Closing this generator (the run ends, fails or is interrupted) stops the reader
+    within a fraction of a second; no wait is unbounded."""
+    import queue
+    import threading
+
+    q: "queue.Queue" = queue.Queue(maxsize=max(1, depth))
+    stop = threading.Event()
+    done = object()
+
+    def put(item) -> bool:
+        while not stop.is_set():
+            try:
+                q.put(item, timeout=0.1)
+                return True
+            except queue.Full:
+                continue
+        return False
+
+    def read() -> None:
+        try:
+            for f in frames:
+                if not put((f, None)):
+                    return
+        except BaseException as e:  # handed to the consumer, raised there
+            put((done, e))
+            return
+        finally:
+            close = getattr(frames, "close", None)
+            if stop.is_set() and close is not None:
+                try:
+                    close()
+                except Exception:
+                    pass
+        put((done, None))
+
+    worker = threading.Thread(target=read, name="pfscope-frame-reader", daemon=True)
+    worker.start()
+    try:
+        while True:
+            try:
+                item, err = q.get(timeout=0.5)
+            except queue.Empty:
+                if not worker.is_alive() and q.empty():
+                    return  # the reader died without a word (cannot happen; never hang)
+                continue
+            if item is done:
+                if err is not None:
+                    raise err
+                return
+            yield item
+    finally:
+        stop.set()
+        worker.join(timeout=2.0)
