@@ -92,6 +92,38 @@ def test_compile_says_so_in_one_line(monkeypatch):
     assert prepare_kernels([_Lane("mt")], stream=io.StringIO()) == 0.0 and not calls
 
 
+def test_a_compile_during_the_frames_says_so_in_one_line():
+    """A kernel compiled on first need while the frames run (the K-means grid search on a
+    crowded frame) says so in one line; an already compiled one prints nothing, and no
+    kernel tracker means no listener at all."""
+    import numpy as np
+    from numba import njit
+
+    from pfscope.viewer_app.run import compile_notices
+
+    @njit(cache=False)
+    def fresh(a):                                  # never compiled before: a real compile
+        return a.sum() * 2.0
+
+    out = io.StringIO()
+    with compile_notices([_Lane("phd")], stream=out, delay=0.0):
+        assert fresh(np.ones(3)) == 6.0
+        first = out.getvalue()
+        fresh(np.ones(4))                          # compiled already: silent
+    assert first.count("compiling numba kernels this frame needs") == 1
+    assert first.endswith("s\n") and "done in" in first
+    assert out.getvalue() == first
+
+    @njit(cache=False)
+    def other(a):
+        return a.sum()
+
+    out = io.StringIO()
+    with compile_notices([_Lane("mt")], stream=out, delay=0.0):
+        other(np.ones(2))
+    assert out.getvalue() == ""
+
+
 def _signatures():
     from numba.core.registry import CPUDispatcher
 

@@ -151,7 +151,7 @@ def mass_near_kernel(states, w, Z, std_z, r2, cell_x, cell_y):
     on the observed columns (0, 1, 4, 5) of ``states`` (N, 6), ``std_z`` (N_z, 4) per detection.
     Returns ``(ok, out)``; ``ok`` False on non-finite positions."""
     nz = Z.shape[0]
-    out = np.zeros(nz)
+    out = np.zeros(nz, np.float64)
     if states.shape[0] == 0 or nz == 0:
         return True, out
     ok, x0, y0, cx, cy, ni, nj, order, starts = grid_build(states[:, 0], states[:, 1],
@@ -183,8 +183,8 @@ def birth_fill(Z, j, lw_det, eps, theta, speed_n, sigma_obs, sigma_min, pos_rati
     draws (``math.cos``/``math.sin`` here: libm's, without two (J,) temporaries).  Returns
     ``(states (J, 6), log_w (J,), det (J,))`` (the numpy birth's operations, same order)."""
     n = eps.shape[0]
-    states = np.empty((n, 6))
-    log_w = np.empty(n)
+    states = np.empty((n, 6), np.float64)
+    log_w = np.empty(n, np.float64)
     det = np.empty(n, np.int64)
     k = 0
     for z in range(Z.shape[0]):
@@ -235,7 +235,9 @@ def gauss_update(states, lw, Z, std, log_norm, by_det, log_kappa, log_pd, log_pm
     ``new_lw = lw + log[p_M + Σ_z ψ_z/(κ_z + C_z)]`` (κ = C = 0: the term is 0)."""
     n = states.shape[0]
     nz = Z.shape[0]
-    log_c = np.full(nz, -np.inf)
+    log_c = np.empty(nz, np.float64)
+    for j in range(nz):
+        log_c[j] = -np.inf
     new_lw = lw.copy()
     ok, x0, y0, cx, cy, ni, nj, order, starts = grid_build(states[:, 0], states[:, 1],
                                                            cell_x, cell_y)
@@ -248,8 +250,8 @@ def gauss_update(states, lw, Z, std, log_norm, by_det, log_kappa, log_pd, log_pm
         for i in range(n):
             hx_all = max(hx_all, std[i, 0])
             hy_all = max(hy_all, std[i, 1])
-    sh = np.zeros(n)
-    sm = np.zeros(n)
+    sh = np.zeros(n, np.float64)
+    sm = np.zeros(n, np.float64)
     if log_pm > -np.inf:
         for i in range(n):
             sh[i] = log_pm
@@ -258,7 +260,7 @@ def gauss_update(states, lw, Z, std, log_norm, by_det, log_kappa, log_pd, log_pm
     # log ψ kept in a buffer of at most N), then ψ/(κ + C) into each of those particles'
     # brackets — the same terms in the same order as two sweeps over every detection
     buf_i = np.empty(n, np.int64)
-    buf_v = np.empty(n)
+    buf_v = np.empty(n, np.float64)
     for j in range(nz):
         if by_det:
             hx = r * std[j, 0] * (1.0 + 1e-6) + 1e-9

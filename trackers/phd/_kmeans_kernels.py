@@ -19,7 +19,7 @@ from ._kernels import grid_build, grid_span
 def _inv_var(centers, sigma_obs, sigma_min, pos_ratio):
     """(K, 4) inverse observation-noise variances at each centre's size (``1 / obs_std²``)."""
     K = centers.shape[0]
-    inv = np.empty((K, 4))
+    inv = np.empty((K, 4), np.float64)
     for c in range(K):
         sw = max(sigma_obs * centers[c, 4], sigma_min)
         sh = max(sigma_obs * centers[c, 5], sigma_min)
@@ -50,8 +50,8 @@ def _d2(X, i, centers, inv, c):
 def _nearest_dense(X, i, centers, inv):
     """Particle i's nearest centre and its d², looking at every centre (as ``argmin``: the
     first of equal d², and centre 0 when every d² is NaN)."""
-    best = _d2(X, i, centers, inv, 0)
-    lab = 0
+    lab = 0                          # (a variable, not the literal: one _d2 specialisation)
+    best = _d2(X, i, centers, inv, lab)
     for c in range(1, centers.shape[0]):
         d = _d2(X, i, centers, inv, c)
         if d < best:
@@ -78,7 +78,9 @@ def _scaled(X, i, rm, cs, c):
 
 @njit(cache=True, nogil=True)
 def _min_inv(inv):
-    m = np.full(4, np.inf)
+    m = np.empty(4, np.float64)
+    for d in range(4):
+        m[d] = np.inf
     for c in range(inv.shape[0]):
         for d in range(4):
             m[d] = min(m[d], inv[c, d])
@@ -91,7 +93,7 @@ def _metric(centers, m):
     variances of every centre, and ``cs`` (K, 4) the centres in it."""
     K = centers.shape[0]
     rm = np.sqrt(m)
-    cs = np.empty((K, 4))
+    cs = np.empty((K, 4), np.float64)
     for c in range(K):
         cs[c, 0] = centers[c, 0] * rm[0]
         cs[c, 1] = centers[c, 1] * rm[1]
@@ -141,14 +143,14 @@ def _neighbours(cs, x0, y0, g, ni, nj, order, starts):
     from c is ``cover[c]``; the centres beyond are at least that far).  A crowded block gives
     an empty list and ``cover`` 0."""
     K = cs.shape[0]
-    cover = np.zeros(K)
+    cover = np.zeros(K, np.float64)
     count = np.zeros(K + 1, np.int64)
     for sweep in range(2):
         if sweep == 1:
             for c in range(K):
                 count[c + 1] += count[c]
             nb = np.empty(count[K], np.int64)
-            nbd = np.empty(count[K])
+            nbd = np.empty(count[K], np.float64)
         for c in range(K):
             pu = cs[c, 0]
             pv = cs[c, 1]
@@ -211,8 +213,11 @@ def _cell_guess(cs, x0, y0, g, ni, nj, order, starts):
     guesses, spread by one forward and one backward sweep over the grid (O(cells + K)).
     Any guess gives the exact answer (:func:`_ring_search` starts from it); a near one
     lets the search stop after a ring or two."""
-    rep = np.full(ni * nj, -1, np.int64)
-    score = np.full(ni * nj, np.inf)
+    rep = np.empty(ni * nj, np.int64)
+    score = np.empty(ni * nj, np.float64)
+    for q in range(ni * nj):
+        rep[q] = -1
+        score[q] = np.inf
     for a in range(ni):
         for b in range(nj):
             cell = a * nj + b
@@ -388,7 +393,7 @@ def assign(X, centers, inv, prev, labels, dmin, grid_min):
     the list ends before that does it search the grid's rings (:func:`_ring_search`).  Time and
     memory are O(N + K) for K centres spread at about one per cell (no K × K table)."""
     _assign(X, centers, inv, prev, labels, dmin, grid_min, _min_inv(inv),
-            np.zeros(centers.shape[0], np.bool_), np.empty(X.shape[0]))
+            np.zeros(centers.shape[0], np.bool_), np.empty(X.shape[0], np.float64))
 
 
 @njit(cache=True, nogil=True)
@@ -418,8 +423,8 @@ def _unstable_near_moved(centers, space, moved, stable, reach_c):
     if nm == 0:
         return
     idx = idx[:nm]
-    mu = np.empty(nm)
-    mv = np.empty(nm)
+    mu = np.empty(nm, np.float64)
+    mv = np.empty(nm, np.float64)
     for k in range(nm):
         mu[k] = centers[idx[k], 0] * rm[0]
         mv[k] = centers[idx[k], 1] * rm[1]
@@ -458,7 +463,10 @@ def _unstable_near_moved(centers, space, moved, stable, reach_c):
 def lloyd(X, S, w, centers, max_iter, tol, sigma_obs, sigma_min, pos_ratio, grid_min):
     """Weighted Lloyd iterations (maggio2007 §3) from ``centers`` (K, 6) until the labels are
     stable, no centre's (y1, y2, w, h) moved more than ``tol`` (> 0), or ``max_iter``
-    iterations (then the labels are the nearest centres; ``grid_min``: :func:`assign`).
+    iterations (then the labels are the nearest centres; ``grid_min``: :func:`assign`, or
+    None: every centre is looked at, and numba compiles none of the grid search -- its dead
+    branches are pruned for a None argument -- so a run that never has ``grid_min`` centres
+    never pays for compiling it).
     ``X`` (N, 4) the particles' (y1, y2, w, h), ``S`` (N, 6) their states, ``w`` (N,)
     weights.  Returns ``(centers, labels, masses, dmin, iterations)``; an empty cluster keeps
     its centre.  Same floats as the numpy iteration (distances and sums in the same order).
@@ -472,38 +480,49 @@ def lloyd(X, S, w, centers, max_iter, tol, sigma_obs, sigma_min, pos_ratio, grid
     n = X.shape[0]
     K = centers.shape[0]
     D = S.shape[1]
-    labels = np.full(n, -1, np.int64)
-    new = np.full(n, -1, np.int64)
-    dmin = np.zeros(n)
-    reach = np.zeros(n)
-    m = np.zeros(K)
-    sums = np.zeros((K, D))
+    # (one spelling per dtype for every allocation of the kernels: each distinct np.zeros /
+    # np.empty / np.full signature is one more numba compile on the first run)
+    labels = np.empty(n, np.int64)
+    new = np.empty(n, np.int64)
+    for i in range(n):
+        labels[i] = -1
+        new[i] = -1
+    dmin = np.zeros(n, np.float64)
+    reach = np.zeros(n, np.float64)
+    m = np.zeros(K, np.float64)
+    sums = np.zeros((K, D), np.float64)
     stable = np.zeros(K, np.bool_)
-    moved = np.ones(K, np.bool_)
-    touched = np.ones(K, np.bool_)
-    reach_c = np.zeros(K)
-    space = np.zeros(4)
+    moved = np.zeros(K, np.bool_)
+    touched = np.zeros(K, np.bool_)
+    for c in range(K):
+        moved[c] = True
+        touched[c] = True
+    reach_c = np.zeros(K, np.float64)
+    space = np.zeros(4, np.float64)
     it = 0
     done = False
     for it in range(1, max_iter + 1):
         inv = _inv_var(centers, sigma_obs, sigma_min, pos_ratio)
-        if K >= grid_min:
-            # the scaled space: a little below the smallest inverse variances, kept while every
-            # centre stays above it (so the reaches of the last iteration stay valid)
-            mm = _min_inv(inv)
-            same_space = it > 1
-            for d in range(4):
-                if mm[d] < space[d]:
-                    same_space = False
-            if not same_space:
+        if grid_min is None:
+            _assign_dense(X, centers, inv, new, dmin)
+        else:
+            if K >= grid_min:
+                # the scaled space: a little below the smallest inverse variances, kept while
+                # every centre stays above it (so the reaches of the last iteration stay valid)
+                mm = _min_inv(inv)
+                same_space = it > 1
                 for d in range(4):
-                    space[d] = 0.9 * mm[d]
-            # skip the particles of unmoved centres with no moved centre within their reach
-            for c in range(K):
-                stable[c] = same_space and not moved[c]
-            if same_space:
-                _unstable_near_moved(centers, space, moved, stable, reach_c)
-        _assign(X, centers, inv, labels, new, dmin, grid_min, space, stable, reach)
+                    if mm[d] < space[d]:
+                        same_space = False
+                if not same_space:
+                    for d in range(4):
+                        space[d] = 0.9 * mm[d]
+                # skip the particles of unmoved centres with no moved centre within their reach
+                for c in range(K):
+                    stable[c] = same_space and not moved[c]
+                if same_space:
+                    _unstable_near_moved(centers, space, moved, stable, reach_c)
+            _assign(X, centers, inv, labels, new, dmin, grid_min, space, stable, reach)
         if it > 1:
             for c in range(K):
                 touched[c] = False
@@ -551,12 +570,15 @@ def lloyd(X, S, w, centers, max_iter, tol, sigma_obs, sigma_min, pos_ratio, grid
             break
     if not done:
         inv = _inv_var(centers, sigma_obs, sigma_min, pos_ratio)
-        for c in range(K):
-            stable[c] = False
-        _assign(X, centers, inv, labels, new, dmin, grid_min, _min_inv(inv), stable, reach)
+        if grid_min is None:
+            _assign_dense(X, centers, inv, new, dmin)
+        else:
+            for c in range(K):
+                stable[c] = False
+            _assign(X, centers, inv, labels, new, dmin, grid_min, _min_inv(inv), stable, reach)
         for i in range(n):
             labels[i] = new[i]
-    masses = np.zeros(K)
+    masses = np.zeros(K, np.float64)
     for i in range(n):
         masses[labels[i]] += w[i]
     return centers, labels, masses, dmin, it
