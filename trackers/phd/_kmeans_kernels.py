@@ -50,7 +50,7 @@ def _d2(X, i, centers, inv, c):
 def _nearest_dense(X, i, centers, inv):
     """Particle i's nearest centre and its d², looking at every centre (as ``argmin``: the
     first of equal d², and centre 0 when every d² is NaN)."""
-    lab = 0                          # (a variable, not the literal: one _d2 specialisation)
+    lab = np.int64(0)                # (not the literal 0: one _d2 specialisation, not two)
     best = _d2(X, i, centers, inv, lab)
     for c in range(1, centers.shape[0]):
         d = _d2(X, i, centers, inv, c)
@@ -551,9 +551,10 @@ def lloyd(X, S, w, centers, max_iter, tol, sigma_obs, sigma_min, pos_ratio, grid
                 m[c] += wi
                 for d in range(D):
                     sums[c, d] += S[i, d] * wi
-        for i in range(n):
-            c = labels[i]
-            reach_c[c] = max(reach_c[c], reach[i])
+        if grid_min is not None:                # (the reaches: the grid search's only)
+            for i in range(n):
+                c = labels[i]
+                reach_c[c] = max(reach_c[c], reach[i])
         step = 0.0
         for c in range(K):
             moved[c] = False
