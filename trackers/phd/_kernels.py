@@ -50,7 +50,7 @@ def propagate_into(x, eps, sigma_v, sigma_size, accel_to_position, min_size, out
 
 # ----------------------------------------------------------------------------- grid index
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
 def grid_build(px, py, cell_x, cell_y):
     """Bucket the points ``(px, py)`` (N,) on a uniform grid of ``cell_x × cell_y``.
 
@@ -67,7 +67,7 @@ def grid_build(px, py, cell_x, cell_y):
     for i in range(n):
         a = px[i]
         b = py[i]
-        if not (np.isfinite(a) and np.isfinite(b)):
+        if not (math.isfinite(a) and math.isfinite(b)):
             return (False, 0.0, 0.0, cell_x, cell_y, 0, 0, np.zeros(0, np.int64),
                     np.zeros(1, np.int64))
         x0 = min(x0, a)
@@ -106,7 +106,8 @@ def grid_build(px, py, cell_x, cell_y):
     return True, x0, y0, cell_x, cell_y, ni, nj, order, starts
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
 def grid_span(lo, hi, origin, cell, n_cells):
     """Cells ``[c0, c1]`` along one axis that the interval ``[lo, hi]`` touches, clipped to the
     grid; ``c1 < c0`` when it misses the grid."""
@@ -121,7 +122,8 @@ def grid_span(lo, hi, origin, cell, n_cells):
 
 # ----------------------------------------------------------------------------- birth
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
 def _gate_d2(states, i, Z, j, std, k, r2):
     """``Σ_d ((x_id − z_jd)/σ_kd)²`` on the observed columns (0, 1, 4, 5), or inf when it
     exceeds ``r2`` (or is NaN).  The position terms are tested first: adding squares cannot
@@ -138,7 +140,7 @@ def _gate_d2(states, i, Z, j, std, k, r2):
     return d2 if d2 <= r2 else np.inf
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
 def mass_near_kernel(states, w, Z, std_z, r2, cell_x, cell_y):
     """M(z) (N_z,): ``Σ w_i`` over the particles with ``Σ_d ((x_id − z_d)/σ_zd)² <= r2``
     on the observed columns (0, 1, 4, 5) of ``states`` (N, 6), ``std_z`` (N_z, 4) per detection.
@@ -192,7 +194,8 @@ def birth_fill(Z, j, lw_det, eps, theta, speed_n, sigma_obs, sigma_min, pos_rati
 
 # ----------------------------------------------------------------------------- update
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
 def _lse_add(m, s, a):
     """Online log-sum-exp: the pair (shift m, sum s) with log Σ = m + log s, plus term a."""
     if s == 0.0:
@@ -202,7 +205,7 @@ def _lse_add(m, s, a):
     return a, s * math.exp(m - a) + 1.0
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
 def gauss_update(states, lw, Z, std, log_norm, by_det, log_kappa, log_pd, log_pm, r2,
                  cell_x, cell_y):
     """Eq. (5) of maggio2007 with the Gaussian g(z|x) of §2/§4 on the pairs inside the gate

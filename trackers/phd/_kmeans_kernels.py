@@ -15,7 +15,7 @@ from ._kernels import grid_build, grid_span
 
 # ----------------------------------------------------------------------------- K-means
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
 def _inv_var(centers, sigma_obs, sigma_min, pos_ratio):
     """(K, 4) inverse observation-noise variances at each centre's size (``1 / obs_std²``)."""
     K = centers.shape[0]
@@ -32,7 +32,8 @@ def _inv_var(centers, sigma_obs, sigma_min, pos_ratio):
     return inv
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
 def _d2(X, i, centers, inv, c):
     """``Σ_d (x_d − c_d)² inv_d`` on (y1, y2, w, h), summed in coordinate order."""
     a = X[i, 0] - centers[c, 0]
@@ -46,7 +47,8 @@ def _d2(X, i, centers, inv, c):
     return d
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
 def _nearest_dense(X, i, centers, inv):
     """Particle i's nearest centre and its d², looking at every centre (as ``argmin``: the
     first of equal d², and centre 0 when every d² is NaN)."""
@@ -60,13 +62,14 @@ def _nearest_dense(X, i, centers, inv):
     return lab, best
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
 def _assign_dense(X, centers, inv, labels, dmin):
     for i in range(X.shape[0]):
         labels[i], dmin[i] = _nearest_dense(X, i, centers, inv)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
 def _scaled(X, i, rm, cs, c):
     """Euclidean distance of particle i to centre c in the space scaled by ``rm`` (4,)."""
     a0 = X[i, 0] * rm[0] - cs[c, 0]
@@ -76,7 +79,8 @@ def _scaled(X, i, rm, cs, c):
     return math.sqrt(a0 * a0 + a1 * a1 + a2 * a2 + a3 * a3)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
 def _min_inv(inv):
     m = np.empty(4, np.float64)
     for d in range(4):
@@ -87,7 +91,8 @@ def _min_inv(inv):
     return m
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
 def _metric(centers, m):
     """The scaled space of :func:`assign`: ``rm`` (4,) = sqrt(m), m (4,) at most the inverse
     variances of every centre, and ``cs`` (K, 4) the centres in it."""
@@ -102,7 +107,8 @@ def _metric(centers, m):
     return rm, cs
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
 def _grid_of(u, v):
     """A grid of about ``len(u)`` square cells on the points ``(u, v)`` (:func:`grid_build`,
     which coarsens it to at most 4n + 64 cells)."""
@@ -124,7 +130,8 @@ def _grid_of(u, v):
     return grid_build(u, v, g, g)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
 def _slack(pu, pv, x0, y0, g, r):
     """Float slack of a ring bound: the cell edges and the point are O(|coordinates|)."""
     return 1e-9 * (1.0 + abs(pu) + abs(pv) + abs(x0) + abs(y0) + g * r)
@@ -135,7 +142,8 @@ def _slack(pu, pv, x0, y0, g, r):
 _MAX_NEIGHBOURS = 64
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
 def _neighbours(cs, x0, y0, g, ni, nj, order, starts):
     """Each centre's nearby centres by increasing scaled distance, as CSR arrays
     ``(first (K+1,), nb, nbd, cover (K,))``: every other centre within ``cover[c]`` of c is in
@@ -206,7 +214,8 @@ def _neighbours(cs, x0, y0, g, ni, nj, order, starts):
     return count, nb, nbd, cover
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
 def _cell_guess(cs, x0, y0, g, ni, nj, order, starts):
     """(ni·nj,) a first-guess centre per cell, for particles with no previous label: the
     cell's centre nearest to its middle, or (empty cell) the better of its neighbours'
@@ -252,7 +261,8 @@ def _cell_guess(cs, x0, y0, g, ni, nj, order, starts):
     return rep
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
 def _visit(X, i, centers, inv, order, starts, cell, lab, best):
     for k in range(starts[cell], starts[cell + 1]):
         c = order[k]
@@ -263,7 +273,8 @@ def _visit(X, i, centers, inv, order, starts, cell, lab, best):
     return lab, best
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
 def _ring_search(X, i, pu, pv, centers, inv, lab, best, x0, y0, g, ni, nj, order, starts):
     """The nearest centre (lowest index on ties) of particle i at scaled ``(pu, pv)``, from
     ``(lab, best)`` (a centre and its d², or ``(-1, inf)``): the grid's cells in rings of
@@ -300,7 +311,8 @@ def _ring_search(X, i, pu, pv, centers, inv, lab, best, x0, y0, g, ni, nj, order
     return lab, best
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
 def _assign(X, centers, inv, prev, labels, dmin, grid_min, m, stable, reach):
     """:func:`assign` in the space scaled by sqrt(m) (m (4,) at most every centre's inverse
     variances), plus: a particle whose previous centre is ``stable`` (K,) keeps its
@@ -375,7 +387,7 @@ def _assign(X, centers, inv, prev, labels, dmin, grid_min, m, stable, reach):
         reach[i] = _scaled(X, i, rm, cs, lab) + math.sqrt(best)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
 def assign(X, centers, inv, prev, labels, dmin, grid_min):
     """Nearest centre of every particle (the lowest index among equal d², as ``argmin`` over
     all centres) into ``labels``/``dmin``; ``X`` (N, 4) the particles' (y1, y2, w, h),
@@ -396,7 +408,8 @@ def assign(X, centers, inv, prev, labels, dmin, grid_min):
             np.zeros(centers.shape[0], np.bool_), np.empty(X.shape[0], np.float64))
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
 def _near(centers, rm, c, e, R):
     """Whether centre e is within scaled distance R of centre c (not strictly beyond it)."""
     a0 = (centers[c, 0] - centers[e, 0]) * rm[0]
@@ -406,7 +419,8 @@ def _near(centers, rm, c, e, R):
     return not math.sqrt(a0 * a0 + a1 * a1 + a2 * a2 + a3 * a3) > R
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
 def _unstable_near_moved(centers, space, moved, stable, reach_c):
     """Clear ``stable[c]`` of every centre with a ``moved`` centre within its reach
     (``reach_c[c]``, with float slack) in the space scaled by sqrt(space).  The moved centres
@@ -459,7 +473,7 @@ def _unstable_near_moved(centers, space, moved, stable, reach_c):
                     break
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
 def lloyd(X, S, w, centers, max_iter, tol, sigma_obs, sigma_min, pos_ratio, grid_min):
     """Weighted Lloyd iterations (maggio2007 §3) from ``centers`` (K, 6) until the labels are
     stable, no centre's (y1, y2, w, h) moved more than ``tol`` (> 0), or ``max_iter``
