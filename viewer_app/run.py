@@ -253,11 +253,15 @@ SPINNER = "|/-\\"
 
 class _CompileNotice:
     """ONE line on ``stream`` while numba compiles, once it has taken ``delay`` seconds: a
-    spinner with the seconds so far on a terminal, else the message once; ``stop`` ends the
-    line with the total.  Nothing is written for a wait shorter than ``delay``."""
+    spinner with ``msg`` (read live: it may change) and the seconds so far on a terminal,
+    else ``log_msg`` (default ``msg``) once; ``stop`` ends the line with the total and, in a
+    log, ``log_end()`` when given (what it turned out to be).  Nothing is written for a wait
+    shorter than ``delay``."""
 
-    def __init__(self, msg: str, stream=None, enabled: bool = True, delay: float = 1.0):
+    def __init__(self, msg: str, stream=None, enabled: bool = True, delay: float = 1.0,
+                 log_msg: Optional[str] = None, log_end: Optional[Callable[[], str]] = None):
         self.msg, self.enabled, self.delay = msg, enabled, delay
+        self.log_msg, self.log_end = log_msg or msg, log_end
         self.stream = stream or sys.stderr
         self.tty = hasattr(self.stream, "isatty") and self.stream.isatty()
         self._done = threading.Event()
@@ -280,11 +284,12 @@ class _CompileNotice:
         i = 0
         while True:
             if self.tty:
+                # (msg may change while it spins -- loading turns out to be compiling: pad)
                 self.stream.write(f"\r{self.msg} {SPINNER[i % 4]} "
-                                  f"{time.perf_counter() - self.t0:4.0f} s")
+                                  f"{time.perf_counter() - self.t0:4.0f} s    ")
                 self.stream.flush()
             elif i == 0:
-                self.stream.write(f"{self.msg} ...")
+                self.stream.write(f"{self.log_msg} ...")
                 self.stream.flush()
             i += 1
             if self._done.wait(0.1):
@@ -296,8 +301,9 @@ class _CompileNotice:
             self._th.join()
         secs = time.perf_counter() - self.t0
         if self._shown:
-            self.stream.write(f"\r{self.msg}: done in {secs:.1f} s\n" if self.tty
-                              else f" done in {secs:.1f} s\n")
+            end = f" {self.log_end()}" if self.log_end is not None else ""
+            self.stream.write(f"\r{self.msg}: done in {secs:.1f} s          \n" if self.tty
+                              else f"{end} done in {secs:.1f} s\n")
             self.stream.flush()
         return secs
 
@@ -306,16 +312,35 @@ def prepare_kernels(trackers, *, enabled: bool = True, stream=None, delay: float
     """Compile (first run after an install) or load (later runs) the numba kernels that
     ``trackers`` call, before the first frame, so the frame counter and its fps start with the
     frames.  When it takes longer than ``delay`` seconds, ONE line says so with a spinner and
-    the seconds so far (a terminal), or once with its total (a log).  Returns the seconds."""
+    the seconds so far (a terminal), or once with its total (a log): "compiling" once numba
+    has compiled something (its ``numba:compile`` event: a real compile, not a cache load),
+    "loading" until then.  Returns the seconds."""
     from pfscope.trackers.warmup import compile_kernels, uses_kernels
 
     if not any(uses_kernels(t) for t in trackers):
         return 0.0
-    notice = _CompileNotice("pfscope: compiling numba kernels (first run after an install; "
-                            "cached afterwards)", stream, enabled, delay)
+    from numba.core import event
+
+    compiled: list = []
+    notice = _CompileNotice(
+        "pfscope: loading numba kernels from the cache", stream, enabled, delay,
+        log_msg="pfscope: numba kernels",
+        log_end=lambda: ("compiled (first run after an install; cached afterwards):"
+                         if compiled else "loaded from the cache:"))
+
+    class Compiling(event.Listener):
+        def on_start(self, ev):
+            compiled.append(True)
+            notice.msg = ("pfscope: compiling numba kernels (first run after an install; "
+                          "cached afterwards)")
+
+        def on_end(self, ev):
+            pass
+
     notice.start()
     try:
-        compile_kernels()
+        with event.install_listener("numba:compile", Compiling()):
+            compile_kernels()
     finally:
         secs = notice.stop()
     return secs
