@@ -5,11 +5,11 @@ The numpy versions were already gated and vectorised; what was left was numpy's 
 and its temporaries (one (pairs,) or (N, K) array per arithmetic step).  Each kernel here is one
 or two passes over the particles with no temporary larger than O(N + N_z + grid):
 
-- :func:`propagate_into` — the size-aware motion model on pre-drawn normals (predict; numpy).
+- :func:`propagate_into` — the size-aware motion model on pre-drawn normals (predict).
 - :func:`grid_build` / :func:`grid_span` — a uniform grid on the particles' positions (counting
   sort by cell), so a detection visits only the particles in the cells its gate box touches.
 - :func:`mass_near_kernel` — M(z) of the birth allocation, the predicted mass in z's gate.
-- :func:`birth_fill` — the newborn states from pre-drawn random numbers (numpy).
+- :func:`birth_fill` — the newborn states from pre-drawn random numbers.
 - :func:`gauss_update` — eq. (5) with the Gaussian g(z|x) evaluated on the fly inside each
   detection's gate: C(z) by an online log-sum-exp per detection, then each particle's bracket
   ``p_M + Σ_z ψ/(κ + C)`` by an online log-sum-exp per particle; no pair arrays.
@@ -35,17 +35,24 @@ _HALF_LOG_2PI_4 = 2.0 * math.log(2.0 * math.pi)     # 0.5 · OBS_DIM · log(2π)
 
 # ----------------------------------------------------------------------------- predict
 
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
 def propagate_into(x, eps, sigma_v, sigma_size, accel_to_position, min_size, out):
     """``out`` (N, 6) = f(x) with the normals ``eps`` (N, 4): ``a = σ_v (w, h) ε₀₁``,
     ``y += v + c a``, ``v += a``, ``(w, h) = max((w, h) + σ_s (w, h) ε₂₃, min_size)``
-    (:func:`~.motion.propagate`, same operation order).  numpy, not numba: a few (N, 2)
-    temporaries cost less than compiling a kernel on the first run after an install."""
-    wh = x[:, 4:6]
-    a = sigma_v * wh * eps[:, 0:2]
-    out[:, 0:2] = x[:, 0:2] + (x[:, 2:4] + accel_to_position * a)
-    out[:, 2:4] = x[:, 2:4] + a
-    nwh = wh + sigma_size * wh * eps[:, 2:4]
-    out[:, 4:6] = np.where(nwh < min_size, min_size, nwh)     # NaN stays NaN, as the kernel
+    (:func:`~.motion.propagate`, same operation order)."""
+    for i in range(x.shape[0]):
+        w = x[i, 4]
+        h = x[i, 5]
+        a0 = sigma_v * w * eps[i, 0]
+        a1 = sigma_v * h * eps[i, 1]
+        out[i, 0] = x[i, 0] + (x[i, 2] + accel_to_position * a0)
+        out[i, 1] = x[i, 1] + (x[i, 3] + accel_to_position * a1)
+        out[i, 2] = x[i, 2] + a0
+        out[i, 3] = x[i, 3] + a1
+        nw = w + sigma_size * w * eps[i, 2]
+        nh = h + sigma_size * h * eps[i, 3]
+        out[i, 4] = nw if not nw < min_size else min_size
+        out[i, 5] = nh if not nh < min_size else min_size
 
 
 # ----------------------------------------------------------------------------- grid index
@@ -169,27 +176,41 @@ def mass_near_kernel(states, w, Z, std_z, r2, cell_x, cell_y):
     return True, out
 
 
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
 def birth_fill(Z, j, lw_det, eps, theta, speed_n, sigma_obs, sigma_min, pos_ratio,
                spread, speed_mean, speed_std, min_size):
     """The J = Σ j newborn: detection z's ``j[z]`` rows get ``(y, w, h) = z + spread σ(z) ε``,
     velocity ``(mean + std n) sqrt(w_z h_z) (cos θ, sin θ)``, sizes clipped to ``min_size``,
     log-weight ``lw_det[z]``.  ``eps`` (J, 4), ``theta``/``speed_n`` (J,) the caller's
-    draws.  Returns ``(states (J, 6), log_w (J,), det (J,))`` (the operations of the numba
-    kernel it was, same order, same floats; numpy: the compile it saved on a first run is
-    worth more than the few (J, 4) temporaries)."""
-    det = np.repeat(np.arange(len(Z), dtype=np.int64), j)
-    sw = np.maximum(sigma_obs * Z[:, 2], sigma_min)
-    sh = np.maximum(sigma_obs * Z[:, 3], sigma_min)
-    s = np.column_stack([spread * (pos_ratio * sw), spread * (pos_ratio * sh),
-                         spread * sw, spread * sh])
-    obs = Z[det] + s[det] * eps                                      # (J, 4): y1, y2, w, h
-    states = np.empty((len(det), 6))
-    states[:, 0:2] = obs[:, 0:2]
-    states[:, 4:6] = np.where(obs[:, 2:4] < min_size, min_size, obs[:, 2:4])
-    speed = (speed_mean + speed_std * speed_n) * np.sqrt(Z[:, 2] * Z[:, 3])[det]
-    states[:, 2] = speed * np.cos(theta)
-    states[:, 3] = speed * np.sin(theta)
-    return states, lw_det[det], det
+    draws (``math.cos``/``math.sin`` here: libm's, without two (J,) temporaries).  Returns
+    ``(states (J, 6), log_w (J,), det (J,))`` (the numpy birth's operations, same order)."""
+    n = eps.shape[0]
+    states = np.empty((n, 6), np.float64)
+    log_w = np.empty(n, np.float64)
+    det = np.empty(n, np.int64)
+    k = 0
+    for z in range(Z.shape[0]):
+        sw = max(sigma_obs * Z[z, 2], sigma_min)
+        sh = max(sigma_obs * Z[z, 3], sigma_min)
+        s0 = spread * (pos_ratio * sw)
+        s1 = spread * (pos_ratio * sh)
+        s2 = spread * sw
+        s3 = spread * sh
+        scale = math.sqrt(Z[z, 2] * Z[z, 3])
+        for _ in range(j[z]):
+            states[k, 0] = Z[z, 0] + s0 * eps[k, 0]
+            states[k, 1] = Z[z, 1] + s1 * eps[k, 1]
+            ww = Z[z, 2] + s2 * eps[k, 2]
+            hh = Z[z, 3] + s3 * eps[k, 3]
+            states[k, 4] = ww if not ww < min_size else min_size
+            states[k, 5] = hh if not hh < min_size else min_size
+            speed = (speed_mean + speed_std * speed_n[k]) * scale
+            states[k, 2] = speed * math.cos(theta[k])
+            states[k, 3] = speed * math.sin(theta[k])
+            log_w[k] = lw_det[z]
+            det[k] = z
+            k += 1
+    return states, log_w, det
 
 
 # ----------------------------------------------------------------------------- update
