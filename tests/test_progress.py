@@ -145,8 +145,22 @@ def test_a_compile_during_the_frames_says_so_in_one_line():
         first = out.getvalue()
         fresh(np.ones(4))                          # compiled already: silent
     assert first.count("compiling numba kernels this frame needs") == 1
-    assert first.endswith("s\n") and "done in" in first
+    assert first.startswith("pfscope: ") and first.endswith("s\n") and "done in" in first
     assert out.getvalue() == first
+
+    class Tty(io.StringIO):                        # a terminal: one new line, then the spinner
+        def isatty(self):
+            return True
+
+    @njit(cache=False)
+    def fresh3(a):
+        return a.sum() * 3.0
+
+    out = Tty()
+    with compile_notices([_Lane("phd")], stream=out, delay=0.0):
+        fresh3(np.ones(2))
+    text = out.getvalue()
+    assert text.startswith("\n\rpfscope: compiling") and text.count("\n") == 2
 
     @njit(cache=False)
     def other(a):

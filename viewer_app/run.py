@@ -259,9 +259,11 @@ class _CompileNotice:
     shorter than ``delay``."""
 
     def __init__(self, msg: str, stream=None, enabled: bool = True, delay: float = 1.0,
-                 log_msg: Optional[str] = None, log_end: Optional[Callable[[], str]] = None):
+                 log_msg: Optional[str] = None, log_end: Optional[Callable[[], str]] = None,
+                 tty_lead: str = ""):
         self.msg, self.enabled, self.delay = msg, enabled, delay
         self.log_msg, self.log_end = log_msg or msg, log_end
+        self.tty_lead = tty_lead        # written once before the spinner (a terminal only)
         self.stream = stream or sys.stderr
         self.tty = hasattr(self.stream, "isatty") and self.stream.isatty()
         self._done = threading.Event()
@@ -281,6 +283,8 @@ class _CompileNotice:
         if self._done.wait(self.delay) or not self.enabled:
             return
         self._shown.append(True)
+        if self.tty and self.tty_lead:
+            self.stream.write(self.tty_lead)
         i = 0
         while True:
             if self.tty:
@@ -359,8 +363,10 @@ def compile_notices(trackers, *, enabled: bool = True, stream=None, delay: float
         return
     from numba.core import event
 
-    notice = _CompileNotice("\npfscope: compiling numba kernels this frame needs (first "
-                            "time after an install; cached afterwards)", stream, enabled, delay)
+    # (on a terminal the progress bar's line is open: the notice starts a line of its own)
+    notice = _CompileNotice("pfscope: compiling numba kernels this frame needs (first time "
+                            "after an install; cached afterwards)", stream, enabled, delay,
+                            tty_lead="\n")
     depth = [0]
 
     class Listener(event.Listener):
