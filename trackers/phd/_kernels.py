@@ -20,7 +20,9 @@ Every random number is still drawn by the caller from its ``numpy.random.Generat
 same order and shapes as before, so a seed keeps its meaning.  The kernels do their arithmetic
 in the same order as the numpy code they replace where that is cheap (propagate, birth, the
 K-means distances and weighted sums: bit for bit the same floats); the update's sums run in a
-different order (float reordering only).  No kernel uses ``fastmath``.
+different order (float reordering only).  No kernel uses ``fastmath``.  They use numpy's error
+model (every divisor is positive, so no zero-division branches to compile), and the helpers only
+kernels call have no CPython wrapper: less to compile on the first run after an install.
 """
 
 from __future__ import annotations
