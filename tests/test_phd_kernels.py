@@ -335,7 +335,7 @@ def test_lloyd_equals_the_brute_force_iteration(seed, k, tol):
     w = rng.uniform(0.1, 1, 6000)
     init = truth + rng.normal(0, 8, truth.shape)      # centres off the peaks: they must move
     init[:, 2:4] = 0
-    for grid_min in (1, 10 ** 9):
+    for grid_min in (1, 10 ** 9, None):        # None: the dense specialisation
         c, lab, m, dmin, it = KM.lloyd(X, S, w, init, 50, tol, lk.sigma_obs, lk.sigma_obs_min,
                                       lk.sigma_obs_pos_ratio, grid_min)
         wc, wlab, wit = _brute_lloyd(X, S, w, init, lk, 50, tol)
@@ -346,3 +346,24 @@ def test_lloyd_equals_the_brute_force_iteration(seed, k, tol):
         if tol == 0:                                   # stopped on stable labels
             np.testing.assert_allclose(dmin, _brute_d2(X, c, lk)[np.arange(6000), lab],
                                        rtol=1e-12)
+
+
+def test_dense_lloyd_compiles_none_of_the_grid_search(tmp_path):
+    """A run whose frames never have INDEX_MIN_CENTERS centres compiles only the dense K-means
+    (the first run after an install compiles less): numba prunes the grid branches of the
+    ``grid_min=None`` specialisation.  A fresh process with an empty numba cache."""
+    import os
+    import subprocess
+    import sys
+
+    code = ("import numpy as np\n"
+            "from pfscope.trackers.phd import _kmeans_kernels as KM\n"
+            "rng = np.random.default_rng(0)\n"
+            "S = rng.uniform(10, 60, (200, 6)); X = np.ascontiguousarray(S[:, [0, 1, 4, 5]])\n"
+            "KM.lloyd(X, S, np.ones(200), S[:3].copy(), 10, 0.01, 0.15, 1.0, 0.5, None)\n"
+            "print(len(KM._assign.signatures), len(KM._unstable_near_moved.signatures),\n"
+            "      len(KM._assign_dense.signatures))\n")
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)}
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
+                         timeout=600, check=True).stdout.split()
+    assert out == ["0", "0", "1"]

@@ -7,6 +7,11 @@ those first calls on a throwaway PHD-MT run over a few frames of made-up detecti
 generator: the real trackers' random streams are untouched), so the app can say what it is
 doing while it waits, and the frame counter starts when frames do.
 
+The K-means grid search (frames with ``clustering.INDEX_MIN_CENTERS`` or more centres, i.e.
+that many detections) is left out: it is most of the compile, and most scenes never need it.
+It compiles on the first frame that does (the app says so then: ``viewer_app.run``'s
+``compile_notices``) and is cached like the rest.
+
 ``uses_kernels(tracker)`` tells which trackers call the kernels (by their registered name).
 """
 
@@ -40,7 +45,8 @@ def compile_kernels(presets=("practical", "paper")) -> float:
     t0 = time.perf_counter()
     image = blank_image(480, 640)
     rng = np.random.default_rng(0)
-    # eight walkers and some clutter, enough mass for several clusters (both K-means paths)
+    # eight walkers and some clutter, enough mass for several clusters (splits included),
+    # fewer than INDEX_MIN_CENTERS detections: the dense K-means
     start = np.column_stack([np.linspace(40, 560, 8), np.full(8, 200.0)])
     for preset in presets:
         tr = PHDTracker(make_params("phd", preset, {}), rng=np.random.default_rng(0))

@@ -15,6 +15,7 @@ Safety rules the code keeps:
 from __future__ import annotations
 
 import collections
+import contextlib
 import os
 import signal
 import sys
@@ -250,50 +251,137 @@ class Progress:
 SPINNER = "|/-\\"
 
 
+class _CompileNotice:
+    """ONE line on ``stream`` while numba compiles, once it has taken ``delay`` seconds: a
+    spinner with ``msg`` (read live: it may change) and the seconds so far on a terminal,
+    else ``log_msg`` (default ``msg``) once; ``stop`` ends the line with the total and, in a
+    log, ``log_end()`` when given (what it turned out to be).  Nothing is written for a wait
+    shorter than ``delay``."""
+
+    def __init__(self, msg: str, stream=None, enabled: bool = True, delay: float = 1.0,
+                 log_msg: Optional[str] = None, log_end: Optional[Callable[[], str]] = None,
+                 tty_lead: str = ""):
+        self.msg, self.enabled, self.delay = msg, enabled, delay
+        self.log_msg, self.log_end = log_msg or msg, log_end
+        self.tty_lead = tty_lead        # written once before the spinner (a terminal only)
+        self.stream = stream or sys.stderr
+        self.tty = hasattr(self.stream, "isatty") and self.stream.isatty()
+        self._done = threading.Event()
+        self._shown: list = []
+        self._th: Optional[threading.Thread] = None
+        self.t0 = 0.0
+
+    def start(self) -> None:
+        self.t0 = time.perf_counter()
+        self._done.clear()
+        self._shown.clear()
+        self._th = threading.Thread(target=self._spin, name="pfscope-compile-spinner",
+                                    daemon=True)
+        self._th.start()
+
+    def _spin(self) -> None:
+        if self._done.wait(self.delay) or not self.enabled:
+            return
+        self._shown.append(True)
+        if self.tty and self.tty_lead:
+            self.stream.write(self.tty_lead)
+        i = 0
+        while True:
+            if self.tty:
+                # (msg may change while it spins -- loading turns out to be compiling: pad)
+                self.stream.write(f"\r{self.msg} {SPINNER[i % 4]} "
+                                  f"{time.perf_counter() - self.t0:4.0f} s    ")
+                self.stream.flush()
+            elif i == 0:
+                self.stream.write(f"{self.log_msg} ...")
+                self.stream.flush()
+            i += 1
+            if self._done.wait(0.1):
+                return
+
+    def stop(self) -> float:
+        self._done.set()
+        if self._th is not None:
+            self._th.join()
+        secs = time.perf_counter() - self.t0
+        if self._shown:
+            end = f" {self.log_end()}" if self.log_end is not None else ""
+            self.stream.write(f"\r{self.msg}: done in {secs:.1f} s          \n" if self.tty
+                              else f"{end} done in {secs:.1f} s\n")
+            self.stream.flush()
+        return secs
+
+
 def prepare_kernels(trackers, *, enabled: bool = True, stream=None, delay: float = 1.0) -> float:
     """Compile (first run after an install) or load (later runs) the numba kernels that
     ``trackers`` call, before the first frame, so the frame counter and its fps start with the
     frames.  When it takes longer than ``delay`` seconds, ONE line says so with a spinner and
-    the seconds so far (a terminal), or once with its total (a log).  Returns the seconds."""
+    the seconds so far (a terminal), or once with its total (a log): "compiling" once numba
+    has compiled something (its ``numba:compile`` event: a real compile, not a cache load),
+    "loading" until then.  Returns the seconds."""
     from pfscope.trackers.warmup import compile_kernels, uses_kernels
 
     if not any(uses_kernels(t) for t in trackers):
         return 0.0
-    stream = stream or sys.stderr
-    tty = hasattr(stream, "isatty") and stream.isatty()
-    msg = "pfscope: compiling numba kernels (first run after an install; cached afterwards)"
-    done = threading.Event()
-    shown: list = []
-    t0 = time.perf_counter()
+    from numba.core import event
 
-    def spin():
-        if done.wait(delay) or not enabled:
-            return
-        shown.append(True)
-        i = 0
-        while True:
-            if tty:
-                stream.write(f"\r{msg} {SPINNER[i % 4]} {time.perf_counter() - t0:4.0f} s")
-                stream.flush()
-            elif i == 0:
-                stream.write(f"{msg} ...")
-                stream.flush()
-            i += 1
-            if done.wait(0.1):
-                return
+    compiled: list = []
+    notice = _CompileNotice(
+        "pfscope: loading numba kernels from the cache", stream, enabled, delay,
+        log_msg="pfscope: numba kernels",
+        log_end=lambda: ("compiled (first run after an install; cached afterwards):"
+                         if compiled else "loaded from the cache:"))
 
-    th = threading.Thread(target=spin, name="pfscope-compile-spinner", daemon=True)
-    th.start()
+    class Compiling(event.Listener):
+        def on_start(self, ev):
+            compiled.append(True)
+            notice.msg = ("pfscope: compiling numba kernels (first run after an install; "
+                          "cached afterwards)")
+
+        def on_end(self, ev):
+            pass
+
+    notice.start()
     try:
-        compile_kernels()
+        with event.install_listener("numba:compile", Compiling()):
+            compile_kernels()
     finally:
-        done.set()
-        th.join()
-    secs = time.perf_counter() - t0
-    if shown:
-        stream.write(f"\r{msg}: done in {secs:.1f} s\n" if tty else f" done in {secs:.1f} s\n")
-        stream.flush()
+        secs = notice.stop()
     return secs
+
+
+@contextlib.contextmanager
+def compile_notices(trackers, *, enabled: bool = True, stream=None, delay: float = 1.0):
+    """While the frames run: a kernel compiled on first need (the K-means grid search, for a
+    frame with many detections; :mod:`pfscope.trackers.warmup`) says so in ONE line as
+    :func:`prepare_kernels` does.  numba reports only real compiles (a load from its cache is
+    silent), through its event API."""
+    from pfscope.trackers.warmup import uses_kernels
+
+    if not any(uses_kernels(t) for t in trackers):
+        yield
+        return
+    from numba.core import event
+
+    # (on a terminal the progress bar's line is open: the notice starts a line of its own)
+    notice = _CompileNotice("pfscope: compiling numba kernels this frame needs (first time "
+                            "after an install; cached afterwards)", stream, enabled, delay,
+                            tty_lead="\n")
+    depth = [0]
+
+    class Listener(event.Listener):
+        def on_start(self, ev):
+            depth[0] += 1
+            if depth[0] == 1:
+                notice.start()
+
+        def on_end(self, ev):
+            depth[0] -= 1
+            if depth[0] == 0:
+                notice.stop()
+
+    with event.install_listener("numba:compile", Listener()):
+        yield
 
 
 class ProgressHook(BaseHook):
@@ -441,7 +529,7 @@ def _record_locked(source, out, opts, lanes, infos, params, tracks_out, live, pr
     if on_frame is not None:
         hooks.append(_CallbackHook(on_frame))
     prepare_kernels(built.values(), enabled=progress)
-    with StopFlag(stop) as flag:
+    with StopFlag(stop) as flag, compile_notices(built.values(), enabled=progress):
         try:
             res = run_pipeline(source, built, frames=opts.frames, start=opts.start,
                                level=opts.level,

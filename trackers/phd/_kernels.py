@@ -20,7 +20,9 @@ Every random number is still drawn by the caller from its ``numpy.random.Generat
 same order and shapes as before, so a seed keeps its meaning.  The kernels do their arithmetic
 in the same order as the numpy code they replace where that is cheap (propagate, birth, the
 K-means distances and weighted sums: bit for bit the same floats); the update's sums run in a
-different order (float reordering only).  No kernel uses ``fastmath``.
+different order (float reordering only).  No kernel uses ``fastmath``.  They use numpy's error
+model (every divisor is positive, so no zero-division branches to compile), and the helpers only
+kernels call have no CPython wrapper: less to compile on the first run after an install.
 """
 
 from __future__ import annotations
@@ -35,7 +37,7 @@ _HALF_LOG_2PI_4 = 2.0 * math.log(2.0 * math.pi)     # 0.5 · OBS_DIM · log(2π)
 
 # ----------------------------------------------------------------------------- predict
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
 def propagate_into(x, eps, sigma_v, sigma_size, accel_to_position, min_size, out):
     """``out`` (N, 6) = f(x) with the normals ``eps`` (N, 4): ``a = σ_v (w, h) ε₀₁``,
     ``y += v + c a``, ``v += a``, ``(w, h) = max((w, h) + σ_s (w, h) ε₂₃, min_size)``
@@ -57,7 +59,7 @@ def propagate_into(x, eps, sigma_v, sigma_size, accel_to_position, min_size, out
 
 # ----------------------------------------------------------------------------- grid index
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
 def grid_build(px, py, cell_x, cell_y):
     """Bucket the points ``(px, py)`` (N,) on a uniform grid of ``cell_x × cell_y``.
 
@@ -74,7 +76,7 @@ def grid_build(px, py, cell_x, cell_y):
     for i in range(n):
         a = px[i]
         b = py[i]
-        if not (np.isfinite(a) and np.isfinite(b)):
+        if not (math.isfinite(a) and math.isfinite(b)):
             return (False, 0.0, 0.0, cell_x, cell_y, 0, 0, np.zeros(0, np.int64),
                     np.zeros(1, np.int64))
         x0 = min(x0, a)
@@ -113,7 +115,8 @@ def grid_build(px, py, cell_x, cell_y):
     return True, x0, y0, cell_x, cell_y, ni, nj, order, starts
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
 def grid_span(lo, hi, origin, cell, n_cells):
     """Cells ``[c0, c1]`` along one axis that the interval ``[lo, hi]`` touches, clipped to the
     grid; ``c1 < c0`` when it misses the grid."""
@@ -128,7 +131,8 @@ def grid_span(lo, hi, origin, cell, n_cells):
 
 # ----------------------------------------------------------------------------- birth
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
 def _gate_d2(states, i, Z, j, std, k, r2):
     """``Σ_d ((x_id − z_jd)/σ_kd)²`` on the observed columns (0, 1, 4, 5), or inf when it
     exceeds ``r2`` (or is NaN).  The position terms are tested first: adding squares cannot
@@ -145,13 +149,13 @@ def _gate_d2(states, i, Z, j, std, k, r2):
     return d2 if d2 <= r2 else np.inf
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
 def mass_near_kernel(states, w, Z, std_z, r2, cell_x, cell_y):
     """M(z) (N_z,): ``Σ w_i`` over the particles with ``Σ_d ((x_id − z_d)/σ_zd)² <= r2``
     on the observed columns (0, 1, 4, 5) of ``states`` (N, 6), ``std_z`` (N_z, 4) per detection.
     Returns ``(ok, out)``; ``ok`` False on non-finite positions."""
     nz = Z.shape[0]
-    out = np.zeros(nz)
+    out = np.zeros(nz, np.float64)
     if states.shape[0] == 0 or nz == 0:
         return True, out
     ok, x0, y0, cx, cy, ni, nj, order, starts = grid_build(states[:, 0], states[:, 1],
@@ -174,7 +178,7 @@ def mass_near_kernel(states, w, Z, std_z, r2, cell_x, cell_y):
     return True, out
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
 def birth_fill(Z, j, lw_det, eps, theta, speed_n, sigma_obs, sigma_min, pos_ratio,
                spread, speed_mean, speed_std, min_size):
     """The J = Σ j newborn: detection z's ``j[z]`` rows get ``(y, w, h) = z + spread σ(z) ε``,
@@ -183,8 +187,8 @@ def birth_fill(Z, j, lw_det, eps, theta, speed_n, sigma_obs, sigma_min, pos_rati
     draws (``math.cos``/``math.sin`` here: libm's, without two (J,) temporaries).  Returns
     ``(states (J, 6), log_w (J,), det (J,))`` (the numpy birth's operations, same order)."""
     n = eps.shape[0]
-    states = np.empty((n, 6))
-    log_w = np.empty(n)
+    states = np.empty((n, 6), np.float64)
+    log_w = np.empty(n, np.float64)
     det = np.empty(n, np.int64)
     k = 0
     for z in range(Z.shape[0]):
@@ -213,7 +217,8 @@ def birth_fill(Z, j, lw_det, eps, theta, speed_n, sigma_obs, sigma_min, pos_rati
 
 # ----------------------------------------------------------------------------- update
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
 def _lse_add(m, s, a):
     """Online log-sum-exp: the pair (shift m, sum s) with log Σ = m + log s, plus term a."""
     if s == 0.0:
@@ -223,7 +228,7 @@ def _lse_add(m, s, a):
     return a, s * math.exp(m - a) + 1.0
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
 def gauss_update(states, lw, Z, std, log_norm, by_det, log_kappa, log_pd, log_pm, r2,
                  cell_x, cell_y):
     """Eq. (5) of maggio2007 with the Gaussian g(z|x) of §2/§4 on the pairs inside the gate
@@ -235,7 +240,9 @@ def gauss_update(states, lw, Z, std, log_norm, by_det, log_kappa, log_pd, log_pm
     ``new_lw = lw + log[p_M + Σ_z ψ_z/(κ_z + C_z)]`` (κ = C = 0: the term is 0)."""
     n = states.shape[0]
     nz = Z.shape[0]
-    log_c = np.full(nz, -np.inf)
+    log_c = np.empty(nz, np.float64)
+    for j in range(nz):
+        log_c[j] = -np.inf
     new_lw = lw.copy()
     ok, x0, y0, cx, cy, ni, nj, order, starts = grid_build(states[:, 0], states[:, 1],
                                                            cell_x, cell_y)
@@ -248,8 +255,8 @@ def gauss_update(states, lw, Z, std, log_norm, by_det, log_kappa, log_pd, log_pm
         for i in range(n):
             hx_all = max(hx_all, std[i, 0])
             hy_all = max(hy_all, std[i, 1])
-    sh = np.zeros(n)
-    sm = np.zeros(n)
+    sh = np.zeros(n, np.float64)
+    sm = np.zeros(n, np.float64)
     if log_pm > -np.inf:
         for i in range(n):
             sh[i] = log_pm
@@ -258,7 +265,7 @@ def gauss_update(states, lw, Z, std, log_norm, by_det, log_kappa, log_pd, log_pm
     # log ψ kept in a buffer of at most N), then ψ/(κ + C) into each of those particles'
     # brackets — the same terms in the same order as two sweeps over every detection
     buf_i = np.empty(n, np.int64)
-    buf_v = np.empty(n)
+    buf_v = np.empty(n, np.float64)
     for j in range(nz):
         if by_det:
             hx = r * std[j, 0] * (1.0 + 1e-6) + 1e-9

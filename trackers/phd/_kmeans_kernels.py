@@ -15,11 +15,11 @@ from ._kernels import grid_build, grid_span
 
 # ----------------------------------------------------------------------------- K-means
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
 def _inv_var(centers, sigma_obs, sigma_min, pos_ratio):
     """(K, 4) inverse observation-noise variances at each centre's size (``1 / obs_std²``)."""
     K = centers.shape[0]
-    inv = np.empty((K, 4))
+    inv = np.empty((K, 4), np.float64)
     for c in range(K):
         sw = max(sigma_obs * centers[c, 4], sigma_min)
         sh = max(sigma_obs * centers[c, 5], sigma_min)
@@ -32,7 +32,8 @@ def _inv_var(centers, sigma_obs, sigma_min, pos_ratio):
     return inv
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
 def _d2(X, i, centers, inv, c):
     """``Σ_d (x_d − c_d)² inv_d`` on (y1, y2, w, h), summed in coordinate order."""
     a = X[i, 0] - centers[c, 0]
@@ -46,12 +47,13 @@ def _d2(X, i, centers, inv, c):
     return d
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
 def _nearest_dense(X, i, centers, inv):
     """Particle i's nearest centre and its d², looking at every centre (as ``argmin``: the
     first of equal d², and centre 0 when every d² is NaN)."""
-    best = _d2(X, i, centers, inv, 0)
-    lab = 0
+    lab = np.int64(0)                # (not the literal 0: one _d2 specialisation, not two)
+    best = _d2(X, i, centers, inv, lab)
     for c in range(1, centers.shape[0]):
         d = _d2(X, i, centers, inv, c)
         if d < best:
@@ -60,13 +62,14 @@ def _nearest_dense(X, i, centers, inv):
     return lab, best
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
 def _assign_dense(X, centers, inv, labels, dmin):
     for i in range(X.shape[0]):
         labels[i], dmin[i] = _nearest_dense(X, i, centers, inv)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
 def _scaled(X, i, rm, cs, c):
     """Euclidean distance of particle i to centre c in the space scaled by ``rm`` (4,)."""
     a0 = X[i, 0] * rm[0] - cs[c, 0]
@@ -76,22 +79,26 @@ def _scaled(X, i, rm, cs, c):
     return math.sqrt(a0 * a0 + a1 * a1 + a2 * a2 + a3 * a3)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
 def _min_inv(inv):
-    m = np.full(4, np.inf)
+    m = np.empty(4, np.float64)
+    for d in range(4):
+        m[d] = np.inf
     for c in range(inv.shape[0]):
         for d in range(4):
             m[d] = min(m[d], inv[c, d])
     return m
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
 def _metric(centers, m):
     """The scaled space of :func:`assign`: ``rm`` (4,) = sqrt(m), m (4,) at most the inverse
     variances of every centre, and ``cs`` (K, 4) the centres in it."""
     K = centers.shape[0]
     rm = np.sqrt(m)
-    cs = np.empty((K, 4))
+    cs = np.empty((K, 4), np.float64)
     for c in range(K):
         cs[c, 0] = centers[c, 0] * rm[0]
         cs[c, 1] = centers[c, 1] * rm[1]
@@ -100,7 +107,8 @@ def _metric(centers, m):
     return rm, cs
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
 def _grid_of(u, v):
     """A grid of about ``len(u)`` square cells on the points ``(u, v)`` (:func:`grid_build`,
     which coarsens it to at most 4n + 64 cells)."""
@@ -122,7 +130,8 @@ def _grid_of(u, v):
     return grid_build(u, v, g, g)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
 def _slack(pu, pv, x0, y0, g, r):
     """Float slack of a ring bound: the cell edges and the point are O(|coordinates|)."""
     return 1e-9 * (1.0 + abs(pu) + abs(pv) + abs(x0) + abs(y0) + g * r)
@@ -133,7 +142,8 @@ def _slack(pu, pv, x0, y0, g, r):
 _MAX_NEIGHBOURS = 64
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
 def _neighbours(cs, x0, y0, g, ni, nj, order, starts):
     """Each centre's nearby centres by increasing scaled distance, as CSR arrays
     ``(first (K+1,), nb, nbd, cover (K,))``: every other centre within ``cover[c]`` of c is in
@@ -141,14 +151,14 @@ def _neighbours(cs, x0, y0, g, ni, nj, order, starts):
     from c is ``cover[c]``; the centres beyond are at least that far).  A crowded block gives
     an empty list and ``cover`` 0."""
     K = cs.shape[0]
-    cover = np.zeros(K)
+    cover = np.zeros(K, np.float64)
     count = np.zeros(K + 1, np.int64)
     for sweep in range(2):
         if sweep == 1:
             for c in range(K):
                 count[c + 1] += count[c]
             nb = np.empty(count[K], np.int64)
-            nbd = np.empty(count[K])
+            nbd = np.empty(count[K], np.float64)
         for c in range(K):
             pu = cs[c, 0]
             pv = cs[c, 1]
@@ -204,15 +214,19 @@ def _neighbours(cs, x0, y0, g, ni, nj, order, starts):
     return count, nb, nbd, cover
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
 def _cell_guess(cs, x0, y0, g, ni, nj, order, starts):
     """(ni·nj,) a first-guess centre per cell, for particles with no previous label: the
     cell's centre nearest to its middle, or (empty cell) the better of its neighbours'
     guesses, spread by one forward and one backward sweep over the grid (O(cells + K)).
     Any guess gives the exact answer (:func:`_ring_search` starts from it); a near one
     lets the search stop after a ring or two."""
-    rep = np.full(ni * nj, -1, np.int64)
-    score = np.full(ni * nj, np.inf)
+    rep = np.empty(ni * nj, np.int64)
+    score = np.empty(ni * nj, np.float64)
+    for q in range(ni * nj):
+        rep[q] = -1
+        score[q] = np.inf
     for a in range(ni):
         for b in range(nj):
             cell = a * nj + b
@@ -247,7 +261,8 @@ def _cell_guess(cs, x0, y0, g, ni, nj, order, starts):
     return rep
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
 def _visit(X, i, centers, inv, order, starts, cell, lab, best):
     for k in range(starts[cell], starts[cell + 1]):
         c = order[k]
@@ -258,7 +273,8 @@ def _visit(X, i, centers, inv, order, starts, cell, lab, best):
     return lab, best
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
 def _ring_search(X, i, pu, pv, centers, inv, lab, best, x0, y0, g, ni, nj, order, starts):
     """The nearest centre (lowest index on ties) of particle i at scaled ``(pu, pv)``, from
     ``(lab, best)`` (a centre and its d², or ``(-1, inf)``): the grid's cells in rings of
@@ -295,7 +311,8 @@ def _ring_search(X, i, pu, pv, centers, inv, lab, best, x0, y0, g, ni, nj, order
     return lab, best
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
 def _assign(X, centers, inv, prev, labels, dmin, grid_min, m, stable, reach):
     """:func:`assign` in the space scaled by sqrt(m) (m (4,) at most every centre's inverse
     variances), plus: a particle whose previous centre is ``stable`` (K,) keeps its
@@ -370,7 +387,7 @@ def _assign(X, centers, inv, prev, labels, dmin, grid_min, m, stable, reach):
         reach[i] = _scaled(X, i, rm, cs, lab) + math.sqrt(best)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
 def assign(X, centers, inv, prev, labels, dmin, grid_min):
     """Nearest centre of every particle (the lowest index among equal d², as ``argmin`` over
     all centres) into ``labels``/``dmin``; ``X`` (N, 4) the particles' (y1, y2, w, h),
@@ -388,10 +405,11 @@ def assign(X, centers, inv, prev, labels, dmin, grid_min):
     the list ends before that does it search the grid's rings (:func:`_ring_search`).  Time and
     memory are O(N + K) for K centres spread at about one per cell (no K × K table)."""
     _assign(X, centers, inv, prev, labels, dmin, grid_min, _min_inv(inv),
-            np.zeros(centers.shape[0], np.bool_), np.empty(X.shape[0]))
+            np.zeros(centers.shape[0], np.bool_), np.empty(X.shape[0], np.float64))
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
 def _near(centers, rm, c, e, R):
     """Whether centre e is within scaled distance R of centre c (not strictly beyond it)."""
     a0 = (centers[c, 0] - centers[e, 0]) * rm[0]
@@ -401,7 +419,8 @@ def _near(centers, rm, c, e, R):
     return not math.sqrt(a0 * a0 + a1 * a1 + a2 * a2 + a3 * a3) > R
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
 def _unstable_near_moved(centers, space, moved, stable, reach_c):
     """Clear ``stable[c]`` of every centre with a ``moved`` centre within its reach
     (``reach_c[c]``, with float slack) in the space scaled by sqrt(space).  The moved centres
@@ -418,8 +437,8 @@ def _unstable_near_moved(centers, space, moved, stable, reach_c):
     if nm == 0:
         return
     idx = idx[:nm]
-    mu = np.empty(nm)
-    mv = np.empty(nm)
+    mu = np.empty(nm, np.float64)
+    mv = np.empty(nm, np.float64)
     for k in range(nm):
         mu[k] = centers[idx[k], 0] * rm[0]
         mv[k] = centers[idx[k], 1] * rm[1]
@@ -454,11 +473,14 @@ def _unstable_near_moved(centers, space, moved, stable, reach_c):
                     break
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
 def lloyd(X, S, w, centers, max_iter, tol, sigma_obs, sigma_min, pos_ratio, grid_min):
     """Weighted Lloyd iterations (maggio2007 §3) from ``centers`` (K, 6) until the labels are
     stable, no centre's (y1, y2, w, h) moved more than ``tol`` (> 0), or ``max_iter``
-    iterations (then the labels are the nearest centres; ``grid_min``: :func:`assign`).
+    iterations (then the labels are the nearest centres; ``grid_min``: :func:`assign`, or
+    None: every centre is looked at, and numba compiles none of the grid search -- its dead
+    branches are pruned for a None argument -- so a run that never has ``grid_min`` centres
+    never pays for compiling it).
     ``X`` (N, 4) the particles' (y1, y2, w, h), ``S`` (N, 6) their states, ``w`` (N,)
     weights.  Returns ``(centers, labels, masses, dmin, iterations)``; an empty cluster keeps
     its centre.  Same floats as the numpy iteration (distances and sums in the same order).
@@ -472,38 +494,49 @@ def lloyd(X, S, w, centers, max_iter, tol, sigma_obs, sigma_min, pos_ratio, grid
     n = X.shape[0]
     K = centers.shape[0]
     D = S.shape[1]
-    labels = np.full(n, -1, np.int64)
-    new = np.full(n, -1, np.int64)
-    dmin = np.zeros(n)
-    reach = np.zeros(n)
-    m = np.zeros(K)
-    sums = np.zeros((K, D))
+    # (one spelling per dtype for every allocation of the kernels: each distinct np.zeros /
+    # np.empty / np.full signature is one more numba compile on the first run)
+    labels = np.empty(n, np.int64)
+    new = np.empty(n, np.int64)
+    for i in range(n):
+        labels[i] = -1
+        new[i] = -1
+    dmin = np.zeros(n, np.float64)
+    reach = np.zeros(n, np.float64)
+    m = np.zeros(K, np.float64)
+    sums = np.zeros((K, D), np.float64)
     stable = np.zeros(K, np.bool_)
-    moved = np.ones(K, np.bool_)
-    touched = np.ones(K, np.bool_)
-    reach_c = np.zeros(K)
-    space = np.zeros(4)
+    moved = np.zeros(K, np.bool_)
+    touched = np.zeros(K, np.bool_)
+    for c in range(K):
+        moved[c] = True
+        touched[c] = True
+    reach_c = np.zeros(K, np.float64)
+    space = np.zeros(4, np.float64)
     it = 0
     done = False
     for it in range(1, max_iter + 1):
         inv = _inv_var(centers, sigma_obs, sigma_min, pos_ratio)
-        if K >= grid_min:
-            # the scaled space: a little below the smallest inverse variances, kept while every
-            # centre stays above it (so the reaches of the last iteration stay valid)
-            mm = _min_inv(inv)
-            same_space = it > 1
-            for d in range(4):
-                if mm[d] < space[d]:
-                    same_space = False
-            if not same_space:
+        if grid_min is None:
+            _assign_dense(X, centers, inv, new, dmin)
+        else:
+            if K >= grid_min:
+                # the scaled space: a little below the smallest inverse variances, kept while
+                # every centre stays above it (so the reaches of the last iteration stay valid)
+                mm = _min_inv(inv)
+                same_space = it > 1
                 for d in range(4):
-                    space[d] = 0.9 * mm[d]
-            # skip the particles of unmoved centres with no moved centre within their reach
-            for c in range(K):
-                stable[c] = same_space and not moved[c]
-            if same_space:
-                _unstable_near_moved(centers, space, moved, stable, reach_c)
-        _assign(X, centers, inv, labels, new, dmin, grid_min, space, stable, reach)
+                    if mm[d] < space[d]:
+                        same_space = False
+                if not same_space:
+                    for d in range(4):
+                        space[d] = 0.9 * mm[d]
+                # skip the particles of unmoved centres with no moved centre within their reach
+                for c in range(K):
+                    stable[c] = same_space and not moved[c]
+                if same_space:
+                    _unstable_near_moved(centers, space, moved, stable, reach_c)
+            _assign(X, centers, inv, labels, new, dmin, grid_min, space, stable, reach)
         if it > 1:
             for c in range(K):
                 touched[c] = False
@@ -532,9 +565,10 @@ def lloyd(X, S, w, centers, max_iter, tol, sigma_obs, sigma_min, pos_ratio, grid
                 m[c] += wi
                 for d in range(D):
                     sums[c, d] += S[i, d] * wi
-        for i in range(n):
-            c = labels[i]
-            reach_c[c] = max(reach_c[c], reach[i])
+        if grid_min is not None:                # (the reaches: the grid search's only)
+            for i in range(n):
+                c = labels[i]
+                reach_c[c] = max(reach_c[c], reach[i])
         step = 0.0
         for c in range(K):
             moved[c] = False
@@ -551,12 +585,15 @@ def lloyd(X, S, w, centers, max_iter, tol, sigma_obs, sigma_min, pos_ratio, grid
             break
     if not done:
         inv = _inv_var(centers, sigma_obs, sigma_min, pos_ratio)
-        for c in range(K):
-            stable[c] = False
-        _assign(X, centers, inv, labels, new, dmin, grid_min, _min_inv(inv), stable, reach)
+        if grid_min is None:
+            _assign_dense(X, centers, inv, new, dmin)
+        else:
+            for c in range(K):
+                stable[c] = False
+            _assign(X, centers, inv, labels, new, dmin, grid_min, _min_inv(inv), stable, reach)
         for i in range(n):
             labels[i] = new[i]
-    masses = np.zeros(K)
+    masses = np.zeros(K, np.float64)
     for i in range(n):
         masses[labels[i]] += w[i]
     return centers, labels, masses, dmin, it

@@ -118,10 +118,12 @@ def _lloyd(X, states, w_rel, centers, params: PHDParams, max_iter, tol=0.0):
     returned labels (an empty cluster keeps its centre), except after ``max_iter`` iterations,
     where the labels are the nearest centres."""
     lk = params.likelihood
+    # below INDEX_MIN_CENTERS: the kernel's dense specialisation (grid_min None), which is all
+    # a run of few detections per frame compiles (the grid search compiles on first need)
+    grid_min = int(INDEX_MIN_CENTERS) if len(centers) >= INDEX_MIN_CENTERS else None
     c, lab, m, dmin, it = _kmeans_kernels.lloyd(
         X, states, w_rel, np.ascontiguousarray(centers, dtype=np.float64), int(max_iter),
-        float(tol), lk.sigma_obs, lk.sigma_obs_min, lk.sigma_obs_pos_ratio,
-        int(INDEX_MIN_CENTERS))
+        float(tol), lk.sigma_obs, lk.sigma_obs_min, lk.sigma_obs_pos_ratio, grid_min)
     return c, lab, m, dmin, int(it)
 
 

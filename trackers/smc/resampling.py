@@ -23,7 +23,7 @@ from .weights import ParticleSet, logsumexp, normalised_weights
 SCHEMES = ("systematic", "stratified", "residual", "multinomial")
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
 def _systematic_index(lw, log_mass, u0, n):
     """Ancestors (n,) of systematic resampling: ``u_k = (u0 + k) / n`` against the CDF of
     ``exp(lw − log_mass)`` (its last bin forced to 1, summed in order as ``np.cumsum``), the
