@@ -82,7 +82,7 @@ def test_compile_says_so_in_one_line(monkeypatch):
     def fresh(a):                                  # never compiled before: a real compile
         return a.sum()
 
-    def compile_one():
+    def compile_one(**kw):
         calls.append(1)
         time.sleep(0.3)                            # the line is out (delay 0.05) ...
         fresh(np.ones(2))                          # ... then numba compiles: it says so
@@ -96,7 +96,7 @@ def test_compile_says_so_in_one_line(monkeypatch):
     assert text.count("\n") == 1 and text.startswith("pfscope: numba kernels ...")
     assert "compiled (first run after an install; cached afterwards): done in " in text
 
-    monkeypatch.setattr(W, "compile_kernels", lambda: (calls.append(1), fresh2(np.ones(2)),
+    monkeypatch.setattr(W, "compile_kernels", lambda **kw: (calls.append(1), fresh2(np.ones(2)),
                                                        time.sleep(0.3)))
 
     @njit(cache=False)
@@ -112,7 +112,7 @@ def test_compile_says_so_in_one_line(monkeypatch):
     last = out.getvalue().split("\r")[-1]
     assert last.startswith("pfscope: compiling numba kernels") and "done in " in last
 
-    monkeypatch.setattr(W, "compile_kernels", lambda: (calls.append(1), time.sleep(0.3)))
+    monkeypatch.setattr(W, "compile_kernels", lambda **kw: (calls.append(1), time.sleep(0.3)))
     out = io.StringIO()                            # slow, but nothing compiled: "loaded"
     prepare_kernels([_Lane("phd")], stream=out, delay=0.05)
     assert "loaded from the cache: done in 0." in out.getvalue()
@@ -202,3 +202,17 @@ def test_compile_kernels_covers_a_run():
                                      rng=np.random.default_rng(0))
         run(open_source(None), {"phd": tr}, frames=20)
     assert _signatures() == before
+
+
+def test_a_dlpf_run_warms_only_the_resampling_kernel(monkeypatch):
+    """DLPF calls only systematic resampling: its warm-up does not compile (or load) the PHD
+    filter's kernels, which would add seconds to its start; PHD-MT's does."""
+    from pfscope.trackers import warmup as W
+    from pfscope.viewer_app.run import prepare_kernels
+
+    asked = []
+    monkeypatch.setattr(W, "compile_kernels", lambda **kw: asked.append(kw.get("phd", True)))
+    prepare_kernels([_Lane("dlpf")], stream=io.StringIO(), delay=5.0)
+    prepare_kernels([_Lane("phd")], stream=io.StringIO(), delay=5.0)
+    prepare_kernels([_Lane("dlpf"), _Lane("dbn-phd")], stream=io.StringIO(), delay=5.0)
+    assert asked == [False, True, True]

@@ -23,6 +23,8 @@ import numpy as np
 
 #: trackers whose step calls the numba kernels (PHD filter + K-means, or resampling)
 KERNEL_TRACKERS = frozenset({"phd", "dbn-phd", "phd-bgsub", "dlpf"})
+#: of those, the ones that call only the resampling kernel (not the PHD filter's)
+RESAMPLE_ONLY = frozenset({"dlpf"})
 _ready: frozenset = frozenset()       # the preset tuples already warmed in this process
 
 
@@ -30,12 +32,20 @@ def uses_kernels(tracker) -> bool:
     return getattr(tracker, "name", None) in KERNEL_TRACKERS
 
 
-def compile_kernels(presets=("practical", "paper")) -> float:
+def phd_kernels_needed(trackers) -> bool:
+    """True when one of ``trackers`` runs the PHD filter's kernels (not only resampling)."""
+    return any(uses_kernels(t) and getattr(t, "name", None) not in RESAMPLE_ONLY
+               for t in trackers)
+
+
+def compile_kernels(presets=("practical", "paper"), phd: bool = True) -> float:
     """Call every kernel once on made-up data (a compile on the first run after an install,
-    a load from numba's cache afterwards); returns the seconds it took.  Once per process:
-    later calls return 0 at once (the kernels stay compiled in the process)."""
+    a load from numba's cache afterwards); returns the seconds it took.  ``phd=False``: only
+    the resampling kernel (DLPF's one).  Once per process: later calls return 0 at once (the
+    kernels stay compiled in the process)."""
     global _ready
-    if presets in _ready:
+    key = presets if phd else ("resample",)
+    if key in _ready or (not phd and _ready):
         return 0.0
     from .api import make_params
     from .phd.tracker import PHDTracker
@@ -43,8 +53,12 @@ def compile_kernels(presets=("practical", "paper")) -> float:
     from .types import Detections, Frame, blank_image
 
     t0 = time.perf_counter()
-    image = blank_image(480, 640)
     rng = np.random.default_rng(0)
+    resample_indices(np.log(np.full(16, 1 / 16)), 16, rng, "systematic")
+    if not phd:
+        _ready = _ready | {key}
+        return time.perf_counter() - t0
+    image = blank_image(480, 640)
     # eight walkers and some clutter, enough mass for several clusters (splits included),
     # fewer than INDEX_MIN_CENTERS detections: the dense K-means
     start = np.column_stack([np.linspace(40, 560, 8), np.full(8, 200.0)])
@@ -56,9 +70,9 @@ def compile_kernels(presets=("practical", "paper")) -> float:
             clutter = np.column_stack([rng.uniform(0, 600, (3, 2)), np.full((3, 2), 35.0)])
             dets = Detections(np.vstack([boxes, clutter]), np.linspace(0.2, 1.0, 11))
             tr.step(Frame(k + 1, k / 25.0, image), dets)
-    resample_indices(np.log(np.full(16, 1 / 16)), 16, rng, "systematic")
-    _ready = _ready | {presets}
+    _ready = _ready | {key}
     return time.perf_counter() - t0
 
 
-__all__ = ["KERNEL_TRACKERS", "uses_kernels", "compile_kernels"]
+__all__ = ["KERNEL_TRACKERS", "RESAMPLE_ONLY", "uses_kernels", "phd_kernels_needed",
+           "compile_kernels"]
