@@ -252,6 +252,78 @@ def targets_scene(targets: int, frames: int, seed: int = 0, p_detect: float = 0.
                extra={"targets": T, "p_detect": p_detect, "clutter": clutter})
 
 
+
+def births_scene(targets: int, frames: int, seed: int = 0, p_detect: float = 0.9,
+                 clutter: float = 5.0, life_s: float = 4.0):
+    """Random clutter with births anywhere: a seeded detections-only scene, 640 x 480 at 25 fps
+    whatever ``targets``, with ``targets`` people at every frame.  Each moves at constant
+    velocity (0.5-2 px/frame, random direction; box w 24-48 px, h 2-3 w) and lives until it
+    leaves the image or its life ends (exponential, mean ``life_s`` seconds); then a new person
+    appears at a uniformly drawn place of the image, with a new id.  Detected with probability
+    ``p_detect`` (box noise 5 % of its size); Poisson(``clutter``) person-sized false boxes
+    uniform over the image each frame (as :func:`targets_scene`)."""
+    import math
+
+    import numpy as np
+
+    from pfscope.trackers.data.motio import MotTable
+
+    rng = np.random.default_rng([seed, targets, 11])
+    W, H, fps = 640.0, 480.0, 25.0
+    T = targets
+
+    def newborn(n):
+        w = rng.uniform(24, 48, n)
+        h = w * rng.uniform(2, 3, n)
+        c = np.c_[rng.uniform(w / 2, W - w / 2), rng.uniform(h / 2, H - h / 2)]
+        ang = rng.uniform(0, 2 * math.pi, n)
+        v = rng.uniform(0.5, 2.0, n)[:, None] * np.c_[np.cos(ang), np.sin(ang)]
+        life = rng.exponential(life_s * fps, n)
+        return c, v, np.c_[w, h], life
+
+    c, v, wh, life = newborn(T)
+    ids = np.arange(1, T + 1)
+    next_id = T + 1
+    gfr, gid, gbox, fr, boxes = [], [], [], [], []
+    for i in range(frames):
+        if i:
+            c = c + v
+            life = life - 1
+            out = ((c[:, 0] < 0) | (c[:, 0] > W) | (c[:, 1] < 0) | (c[:, 1] > H) | (life <= 0))
+            k = int(out.sum())
+            if k:
+                c[out], v[out], wh[out], life[out] = newborn(k)
+                ids = ids.copy()
+                ids[out] = np.arange(next_id, next_id + k)
+                next_id += k
+        b = np.c_[c - wh / 2, wh]
+        gfr.append(np.full(T, i + 1))
+        gid.append(ids.copy())
+        gbox.append(b)
+        hit = rng.random(T) < p_detect
+        tb = b[hit] + rng.standard_normal((int(hit.sum()), 4)) * 0.05 * np.c_[wh, wh][hit]
+        m = rng.poisson(clutter)
+        cw = rng.uniform(15, 60, m)
+        ch = cw * rng.uniform(2, 3, m)
+        cb = np.c_[rng.uniform(0, W, m) - cw / 2, rng.uniform(0, H, m) - ch / 2, cw, ch]
+        d = np.vstack([tb, cb])
+        d[:, 2:4] = np.maximum(d[:, 2:4], 2.0)
+        fr.append(np.full(len(d), i + 1))
+        boxes.append(d)
+    fr = np.concatenate(fr).astype(np.int64)
+    boxes = np.vstack(boxes)
+    n = len(fr)
+    det = MotTable(frame=fr, id=np.full(n, -1, np.int64), boxes=boxes, score=np.ones(n),
+                   cls=np.ones(n), vis=np.ones(n))
+    gfr = np.concatenate(gfr).astype(np.int64)
+    ng = len(gfr)
+    gt = MotTable(frame=gfr, id=np.concatenate(gid).astype(np.int64), boxes=np.vstack(gbox),
+                  score=np.ones(ng), cls=np.ones(ng), vis=np.ones(ng))
+    cls = _frame_class()
+    return cls(name=f"births{T}-seed{seed}", fps=fps, length=frames, width=int(W),
+               height=int(H), gt=gt, det=det, kind="synthetic", location="built-in",
+               extra={"targets": T, "p_detect": p_detect, "clutter": clutter})
+
 # ----------------------------------------------------------------------------- memory, fits
 
 def rss_mb() -> float:

@@ -211,15 +211,16 @@ def uncapped(targets: int, preset: str = "paper") -> dict:
 
 
 def run_phd_scene(targets: int, frames: int, seed: int, extra_lanes=None, extra=None,
-                  preset: str = "paper"):
-    """PHD-MT (+ optional extra lanes, stepping after it) on ``targets_scene``; returns the
-    collector of the PHD-MT lane and the run result."""
+                  preset: str = "paper", scene: str = "targets", options=None):
+    """PHD-MT (+ optional extra lanes, stepping after it) on ``targets_scene`` (``scene``
+    "births": ``births_scene``); returns the collector of the PHD-MT lane and the run result."""
     from pfscope.trackers.api import make_tracker
     from pfscope.trackers.pipeline import run as run_pipeline
 
-    source = C.targets_scene(targets, frames, seed)
+    make_scene = C.births_scene if scene == "births" else C.targets_scene
+    source = make_scene(targets, frames, seed)
     tracker = make_tracker("phd", seed, preset=preset_for("phd", preset),
-                           **uncapped(targets, preset))
+                           **{**uncapped(targets, preset), **(options or {})})
     clock = C.Clock()
     hook = make_collector("phd", clock, extra)
     lanes = {"phd": tracker}
@@ -464,7 +465,8 @@ def _centres(boxes) -> np.ndarray:
     return b[:, :2] + b[:, 2:4] / 2
 
 
-def ss_run(T: int, frames: int, seed: int, lanes, preset: str) -> dict:
+def ss_run(T: int, frames: int, seed: int, lanes, preset: str, scene: str = "targets",
+           options=None) -> dict:
     """One pipeline run: PHD-MT (``preset``) then the Stone Soup ``lanes`` on
     ``targets_scene(T, frames, seed)``. Per frame: OSPA parts (``_common.ospa_parts``) of every
     estimate, PHD masses, step seconds, particles in the update."""
@@ -535,7 +537,7 @@ def ss_run(T: int, frames: int, seed: int, lanes, preset: str) -> dict:
 
     t = time.perf_counter()
     hook, _, _src = run_phd_scene(T, frames, seed, extra_lanes=lanes_capture, extra=extra,
-                                  preset=preset)
+                                  preset=preset, scene=scene, options=options)
     wall = time.perf_counter() - t
     by_frame = holder["file"].by_frame
     per = {k: [e[k] for e in hook.extra] for k in ("pf_kmeans", "pf_clusters", "pf_live")}
@@ -580,7 +582,8 @@ def bench_stonesoup(args) -> dict:
     for T in args.ss_targets:
         per_seed = []
         for seed in args.ss_seeds:
-            r = ss_run(T, frames, seed, lanes, args.preset)
+            r = ss_run(T, frames, seed, lanes, args.preset, args.ss_scene,
+                       dict(o.split("=", 1) for o in args.ss_set))
             hook, ssr = r["hook"], r["ss_rows"]
             filt = [sum(st.get(s, 0.0) for s in PHD_STAGES[:4]) for st in hook.stages]
             pf_n = in_update(hook, lambda e: e["n"])
@@ -670,8 +673,8 @@ def bench_stonesoup(args) -> dict:
                   f"best Stone Soup lane "
                   f"{min(agg['ospa_mean'][f'ss_{n}'] for n in lanes):.1f} px: "
                   f"{'lower' if agg['phdmt_tracks_below_stonesoup'] else 'NOT lower'}")
-    return {"stonesoup_version": S.version(), "preset": args.preset, "frames": frames,
-            "warmup": warm, "seeds": list(args.ss_seeds), "lanes": lanes,
+    return {"stonesoup_version": S.version(), "preset": args.preset, "scene": args.ss_scene,
+            "options": list(args.ss_set), "frames": frames, "warmup": warm, "seeds": list(args.ss_seeds), "lanes": lanes,
             "rows": list(results.values())}
 
 
@@ -793,6 +796,14 @@ def parse_args(argv=None):
                     help="preset of every tracker that has it (default: paper; the others run "
                          "their first preset)")
     ss = ap.add_argument_group("stonesoup section (override the mode's defaults)")
+    ss.add_argument("--ss-scene", choices=("targets", "births"), default="targets",
+                    help="targets: all present from frame 1, bouncing, image growing with "
+                         "the count (default); births: 640x480 whatever the count, targets "
+                         "leave and new ones appear anywhere (_common.births_scene; the "
+                         "oracle-birth lane assumes 'targets')")
+    ss.add_argument("--ss-set", action="append", default=[], metavar="NAME=VALUE",
+                    help="PHD-MT option, as pfscope's --set (repeat), e.g. "
+                         "clutter_model=learn")
     ss.add_argument("--ss-targets", nargs="+", type=int, metavar="N",
                     help="target counts (full: 4 16 64; quick: 4 16)")
     ss.add_argument("--ss-frames", type=int, metavar="N",
@@ -840,6 +851,9 @@ def parse_args(argv=None):
     if not 0 <= args.ss_warmup < args.ss_frames:
         ap.error(f"--ss-warmup must be in [0, --ss-frames), got {args.ss_warmup} "
                  f"(frames {args.ss_frames})")
+    bad = [o for o in args.ss_set if "=" not in o]
+    if bad:
+        ap.error(f"--ss-set takes NAME=VALUE, got {bad[0]!r}")
     if any(t < 1 for t in args.ss_targets):
         ap.error(f"--ss-targets must be >= 1, got {' '.join(map(str, args.ss_targets))}")
     return args

@@ -337,6 +337,7 @@ class EvalJob:
     detector: Optional[str] = None
     min_score: float = float("-inf")
     convention: Optional[str] = None
+    keep_scores: bool = False          # also return each range's full scores (combining)
 
 
 def evaluate_config(job: EvalJob) -> dict:
@@ -369,6 +370,8 @@ def evaluate_config(job: EvalJob) -> dict:
                 sc = evaluate(src.gt, table, frames=range(a, b + 1), convention=job.convention)
                 for k in (*TABLE_KEYS, "convention"):
                     out.setdefault(k, []).append(sc.get(k))
+                if job.keep_scores:      # every count, for combining sequences (combine())
+                    out.setdefault("_scores", []).append(sc)
         return {"scores": scores, "seconds": time.perf_counter() - t0}
     except Exception as e:  # noqa: BLE001 - a trial's failure is reported, not raised
         msg = str(e).splitlines()[0] if str(e) else ""
@@ -413,6 +416,25 @@ class TuneConfig:
     detector: Optional[str] = None
     min_score: float = float("-inf")
     convention: Optional[str] = None
+    #: further sequences tuned on together with ``source`` (the objective is then the
+    #: COMBINED score: counts summed over the sequences, :func:`~.eval.combine`)
+    more: tuple = ()
+    name: str = ""                    # the first sequence's name (tables)
+
+    def sequences(self) -> list["TuneSequence"]:
+        """Every sequence tuned on: ``source`` (with ``frames``/``holdout``) then ``more``."""
+        return [TuneSequence(self.source, self.frames, self.holdout, self.name),
+                *self.more]
+
+
+@dataclass(frozen=True)
+class TuneSequence:
+    """One sequence of a study over several: its source, tuned-on and held-out frames."""
+
+    source: SourceSpec
+    frames: tuple
+    holdout: Optional[tuple] = None
+    name: str = ""
 
 
 @dataclass
@@ -444,6 +466,22 @@ def _objective(result: dict, key: str) -> Optional[float]:
     return v if math.isfinite(v) else None
 
 
+def _combined(results: list, key: str, ri: int = 0) -> Optional[float]:
+    """``key`` of the sequences' results combined (counts summed per seed, as TrackEval's
+    COMBINED row), mean over the seeds; None when any sequence failed."""
+    from .eval import combine
+
+    if any("error" in r for r in results):
+        return None
+    per_seed = zip(*(r["scores"][ri]["_scores"] for r in results))
+    v = _mean(combine(list(seqs)).get(key) for seqs in per_seed)
+    return v if math.isfinite(v) else None
+
+
+def _first_error(results: list) -> dict:
+    return next((r for r in results if "error" in r), results[0])
+
+
 def _fmt_opts(options: dict) -> str:
     return " ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}"
                     for k, v in options.items())
@@ -473,12 +511,23 @@ def run_study(cfg: TuneConfig, *, log=None, on_trial=None) -> TuneResult:
     if enqueue:
         study.enqueue_trial(start_sample)
     seeds = tuple(range(cfg.seed, cfg.seed + max(1, cfg.trial_seeds)))
-    a, b = cfg.frames
+    seqs = cfg.sequences()
+    multi = len(seqs) > 1
 
-    def job_for(options: dict) -> EvalJob:
-        return EvalJob(cfg.source, cfg.tracker, cfg.preset,
-                       tuple(cfg.base_options.items()) + tuple(options.items()), seeds, a, b,
-                       ((a, b),), cfg.detector, cfg.min_score, cfg.convention)
+    def jobs_for(options: dict) -> list[EvalJob]:
+        return [EvalJob(q.source, cfg.tracker, cfg.preset,
+                        tuple(cfg.base_options.items()) + tuple(options.items()), seeds,
+                        q.frames[0], q.frames[1], (q.frames,), cfg.detector, cfg.min_score,
+                        cfg.convention, keep_scores=multi) for q in seqs]
+
+    def scored(results: list) -> tuple[Optional[float], dict]:
+        """The trial's objective (combined over the sequences) and a result for its record."""
+        if not multi:
+            return _objective(results[0], key), results[0]
+        r = _first_error(results)
+        return _combined(results, key), {"seconds": sum(x.get("seconds", 0.0)
+                                                        for x in results),
+                                         **({"error": r["error"]} if "error" in r else {})}
 
     runner = _Runner(cfg.jobs)
     trials: list[dict] = []
@@ -487,14 +536,16 @@ def run_study(cfg: TuneConfig, *, log=None, on_trial=None) -> TuneResult:
     t0 = time.perf_counter()
     try:
         if not enqueue:  # the starting values are outside the given ranges: score them apart
-            start_value = _objective(runner.map([job_for({})])[0], key)
+            start_value = scored(runner.map(jobs_for({})))[0]
         done = 0
+        n_seq = len(seqs)
         while done < cfg.trials:
             batch = [study.ask(dists) for _ in range(min(cfg.batch, cfg.trials - done))]
             opts = [{d.name: d.value(t.params[d.label]) for d in dims} for t in batch]
-            results = runner.map([job_for(o) for o in opts])
-            for t, o, r in zip(batch, opts, results):
-                value = _objective(r, key)
+            flat = runner.map([j for o in opts for j in jobs_for(o)])
+            results = [flat[i * n_seq:(i + 1) * n_seq] for i in range(len(opts))]
+            for t, o, rs in zip(batch, opts, results):
+                value, r = scored(rs)
                 if value is None:
                     study.tell(t, state=TrialState.FAIL)
                 else:
@@ -532,7 +583,9 @@ def run_study(cfg: TuneConfig, *, log=None, on_trial=None) -> TuneResult:
     return result
 
 
-def _ranges(cfg: TuneConfig) -> list[tuple[str, tuple, str]]:
+def _ranges(cfg) -> list[tuple[str, tuple, str]]:
+    """(role, frames, tag) of a sequence (``cfg``: a :class:`TuneConfig` or a
+    :class:`TuneSequence`)."""
     out = [("tuned on", cfg.frames, "tuned")]
     if cfg.holdout is not None:
         out.append(("held out", cfg.holdout, "held"))
@@ -544,8 +597,13 @@ def _ranges(cfg: TuneConfig) -> list[tuple[str, tuple, str]]:
 
 def _final_table(result: TuneResult, runner: _Runner) -> None:
     """Score the starting and the best parameters over tuned-on, held-out and all frames,
-    ``eval_seeds`` seeds each (one run per seed covers every range)."""
+    ``eval_seeds`` seeds each (one run per seed covers every range); with several sequences,
+    rows per sequence then COMBINED ones (counts summed over the sequences)."""
     cfg = result.config
+    seqs = cfg.sequences()
+    if len(seqs) > 1:
+        _final_table_multi(result, runner, seqs)
+        return
     ranges = _ranges(cfg)
     lo = min(r[1][0] for r in ranges)
     hi = max(r[1][1] for r in ranges)
@@ -577,7 +635,88 @@ def _final_table(result: TuneResult, runner: _Runner) -> None:
     result.convention = str(out[0]["scores"][0]["convention"][0])
 
 
+def _final_table_multi(result: TuneResult, runner: _Runner, seqs: list) -> None:
+    cfg = result.config
+    seeds = tuple(range(cfg.seed, cfg.seed + max(1, cfg.eval_seeds)))
+    configs = ({},) if result.best.get("start") else ({}, result.best_options)
+    jobs, where = [], []
+    for wi, opts in enumerate(configs):
+        for qi, q in enumerate(seqs):
+            ranges = _ranges(q)
+            lo = min(r[1][0] for r in ranges)
+            hi = max(r[1][1] for r in ranges)
+            for s in seeds:
+                jobs.append(EvalJob(q.source, cfg.tracker, cfg.preset,
+                                    tuple(cfg.base_options.items()) + tuple(opts.items()),
+                                    (s,), lo, hi, tuple(r[1] for r in ranges), cfg.detector,
+                                    cfg.min_score, cfg.convention, keep_scores=True))
+                where.append((wi, qi))
+    out = runner.map(jobs)
+    for r in out:
+        if "error" in r:
+            raise InputError(f"scoring the parameters failed: {r['error']}")
+    whos = ("start", "tuned")
+    by: dict = {}
+    for (wi, qi), r in zip(where, out):
+        by.setdefault((whos[wi], qi), []).append(r)
+    if len(configs) == 1:
+        by.update({("tuned", qi): v for (w, qi), v in list(by.items())})
+    rows = []
+
+    def row(who, seq, role, tag, frames, per_seed: list[dict]) -> dict:
+        vals = {k: [p.get(k) for p in per_seed] for k in TABLE_KEYS}
+        return {"who": who, "sequence": seq, "frames": frames, "role": role, "tag": tag,
+                "mean": {k: _mean(v) for k, v in vals.items()},
+                "std": {k: float(np.std([float(x) for x in v if x is not None]))
+                        for k, v in vals.items()},
+                "seeds": list(seeds)}
+
+    from .eval import combine
+
+    for qi, q in enumerate(seqs):
+        for ri, (role, frames, tag) in enumerate(_ranges(q)):
+            for who in whos:
+                per = [p["scores"][ri]["_scores"][0] for p in by[(who, qi)]]
+                rows.append(row(who, q.name, role, tag, frames, per))
+    for ri, tag in enumerate(("tuned", "held", "all")):
+        have = [qi for qi, q in enumerate(seqs) if len(_ranges(q)) > ri]
+        if len(have) != len(seqs):
+            break          # a sequence without held-out frames: no combined held-out row
+        role = _ranges(seqs[0])[ri][0]
+        for who in whos:
+            per = [combine([by[(who, qi)][si]["scores"][ri]["_scores"][0] for qi in have])
+                   for si in range(len(seeds))]
+            rows.append(row(who, "COMBINED", role, tag, None, per))
+    result.table = rows
+    result.convention = str(out[0]["scores"][0]["convention"][0])
+
+
+def _format_table_multi(result: TuneResult) -> str:
+    cfg = result.config
+    seeds = result.table[0]["seeds"] if result.table else []
+    width = max(len("COMBINED"), *(len(r["sequence"]) for r in result.table))
+    head = (f"{'sequence':<{width}} {'params':<6} {'frames':<10} {'':<21}"
+            + " ".join(f"{k:>14}" for k in TABLE_KEYS[:3])
+            + " ".join(f"{k:>7}" for k in TABLE_KEYS[3:]))
+    lines = [f"scores, {result.convention.upper()} convention, mean ± std over tracker seeds "
+             f"{', '.join(map(str, seeds))} (FP/FN/IDSW: mean); COMBINED sums the counts over "
+             f"the {len(cfg.sequences())} sequences (the objective):", head]
+    for r in result.table:
+        m, s = r["mean"], r["std"]
+        cells = " ".join(f"{m[k]:>7.3f} ±{s[k]:.3f}".rjust(14) for k in TABLE_KEYS[:3])
+        cells += " ".join(f"{m[k]:>7.0f}" for k in TABLE_KEYS[3:])
+        fr = "" if r["frames"] is None else f"{r['frames'][0]}-{r['frames'][1]}"
+        lines.append(f"{r['sequence']:<{width}} {r['who']:<6} {fr:<10} {r['role']:<21}{cells}")
+    lines.append("note: the parameters were chosen on the tuned-on frames of every sequence "
+                 "(" + ", ".join(f"{q.name} {q.frames[0]}-{q.frames[1]}"
+                                 for q in cfg.sequences())
+                 + "): scores there overstate what to expect; the held-out rows do not.")
+    return "\n".join(lines)
+
+
 def format_table(result: TuneResult) -> str:
+    if len(result.config.sequences()) > 1:
+        return _format_table_multi(result)
     cfg = result.config
     seeds = result.table[0]["seeds"] if result.table else []
     head = (f"{'params':<8} {'frames':<10} {'':<21}" + " ".join(f"{k:>14}" for k in TABLE_KEYS[:3])
@@ -622,10 +761,19 @@ def tune_info(result: TuneResult, source_name: str) -> dict:
     }
     scores: dict = {}
     names = {"tuned": "tuned_on", "held": "held_out", "all": "all_frames"}
+    seqs = cfg.sequences()
+    if len(seqs) > 1:
+        info["sequences"] = [q.name for q in seqs]
+        info["tuned_on_frames"] = [f"{q.frames[0]}:{q.frames[1]}" for q in seqs]
+        info["held_out_frames"] = [f"{q.holdout[0]}:{q.holdout[1]}" if q.holdout else "none"
+                                   for q in seqs]
     for r in result.table:
-        scores.setdefault(r["who"], {})[names[r["tag"]]] = {
-            "frames": f"{r['frames'][0]}:{r['frames'][1]}",
-            **{k: round(v, 6) for k, v in r["mean"].items()}}
+        cell = {**({"frames": f"{r['frames'][0]}:{r['frames'][1]}"} if r["frames"] else {}),
+                **{k: round(v, 6) for k, v in r["mean"].items()}}
+        if len(seqs) > 1:      # [tune.scores.<who>.<sequence>.<range>]
+            scores.setdefault(r["who"], {}).setdefault(r["sequence"], {})[names[r["tag"]]] = cell
+        else:
+            scores.setdefault(r["who"], {})[names[r["tag"]]] = cell
     info["eval_seeds"] = result.table[0]["seeds"] if result.table else []
     info["convention"] = result.convention
     info["scores"] = scores     # [tune.scores.start.held_out] ...: mean over eval_seeds
@@ -633,6 +781,7 @@ def tune_info(result: TuneResult, source_name: str) -> dict:
 
 
 __all__ = ["Dim", "DEFAULT_SPACES", "DEFAULT_SPACES_PER_SECOND", "METRICS", "TABLE_KEYS", "SourceSpec",
+           "TuneSequence",
            "EvalJob", "TuneConfig", "TuneResult", "search_space", "derive_dim",
            "parse_space_spec", "evaluate_config", "run_study", "format_table", "tune_info",
            "blank_image_source", "import_optuna"]

@@ -445,7 +445,11 @@ def _add_tune_parser(sub, TRACKERS, DETECTORS, LEVELS) -> None:
                     "study (objective per trial) and the best parameters' recording. Same "
                     "seed and --batch, same result, whatever --jobs. Needs Optuna: "
                     "pip install \"pfscope[tune]\".")
-    tn.add_argument("source", help="MOTChallenge folder with gt/gt.txt, or 'synthetic'")
+    tn.add_argument("source", nargs="+",
+                    help="MOTChallenge folder with gt/gt.txt, or 'synthetic'; several: tune "
+                         "on all of them at once (the objective is the COMBINED score, counts "
+                         "summed over the sequences; each is reported apart; --frames and "
+                         "--holdout apply to each)")
     tn.add_argument("--tracker", default=None, choices=list(TRACKERS),
                     help=f"tracker to tune (default: the --params file's, else "
                          f"{DEFAULT_TRACKER})")
@@ -1014,6 +1018,34 @@ def _batch_params(args) -> None:
         list(args.set_options or [])
 
 
+def _tune_sequence(T, path, args):
+    """A further sequence of ``tune SEQ SEQ ...``: its source and frames (``--frames`` and
+    ``--holdout`` as for the first; default the first half, the rest held out)."""
+    spec = T.SourceSpec(str(path), args.fps, None)
+    source = spec.open()
+    if source.gt is None:
+        raise InputError(f"{path}: no ground truth (gt/gt.txt): nothing to tune against")
+    length = source.length
+    if length is None or length < 2:
+        raise InputError(f"{path}: tune needs a sequence of known length, at least 2 frames")
+    frames = args.frames
+    if isinstance(frames, int):
+        frames = (1, frames)
+    if frames is None:
+        frames = (1, length // 2)
+    holdout = args.holdout
+    if holdout is None:
+        holdout = (frames[1] + 1, length) if frames[1] < length else \
+            ((1, frames[0] - 1) if frames[0] > 1 else None)
+    for what, (a, b) in (("--frames", frames), ("--holdout", holdout or (1, 1))):
+        if b > length:
+            raise InputError(f"{what} {a}:{b}: {source.name} has {length} frames")
+    if holdout is not None and holdout[0] <= frames[1] and frames[0] <= holdout[1]:
+        raise InputError(f"--holdout {holdout[0]}:{holdout[1]} overlaps the tuned-on frames "
+                         f"{frames[0]}:{frames[1]}")
+    return T.TuneSequence(spec, frames, holdout, source.name)
+
+
 def cmd_tune(args) -> int:
     """``pfscope tune``: see :mod:`pfscope.viewer_app.tune`."""
     import json
@@ -1032,6 +1064,19 @@ def cmd_tune(args) -> int:
         make_params(tracker, preset, base_options)
     except ValueError as e:
         raise InputError(str(e)) from None
+    sources = list(args.source) if isinstance(args.source, (list, tuple)) else [args.source]
+    more = []
+    if len(sources) > 1:
+        if "synthetic" in sources:
+            raise InputError("tune on several sequences takes MOT folders, not 'synthetic'")
+        if len({str(Path(p).resolve()) for p in sources}) != len(sources):
+            raise InputError("tune: a sequence is given twice")
+        if args.best_out is not None or args.tracks_out is not None:
+            raise InputError("--best-out/--tracks-out record one sequence: give one source "
+                             "(or --no-record)")
+        args.no_record = True
+        more = [_tune_sequence(T, p, args) for p in sources[1:]]
+    args.source = sources[0]
     synthetic = args.source in (None, "synthetic")
     if not synthetic and (args.targets is not None or args.clutter is not None):
         raise InputError("--targets/--clutter only apply to the synthetic scene")
@@ -1082,7 +1127,8 @@ def cmd_tune(args) -> int:
                   run_inputs(source, [make_params(tracker, preset, base_options)],
                              (args.params,) if args.params else ()))
     out = check_output(args.out, args.force, "parameters file")
-    study_out = check_output(args.study_out or RECORDINGS_DIR / f"{source.name}-{tracker}-tune.rrd",
+    label = source.name + (f"+{len(more)}" if more else "")
+    study_out = check_output(args.study_out or RECORDINGS_DIR / f"{label}-{tracker}-tune.rrd",
                              args.force)
     best_out = None
     if not args.no_record:
@@ -1102,21 +1148,23 @@ def cmd_tune(args) -> int:
                        trial_seeds=args.trial_seeds, eval_seeds=args.eval_seeds,
                        space=args.space or None, detector=args.detector,
                        min_score=args.min_score,
-                       convention=None if args.convention == "auto" else args.convention)
+                       convention=None if args.convention == "auto" else args.convention,
+                       more=tuple(more), name=source.name)
     from pfscope.trackers.api import tracker_info
 
     preset_name = preset or next(iter(tracker_info(tracker).presets))
-    title = f"pfscope tune: {tracker} on {source.name}"
+    names = ", ".join([source.name] + [q.name for q in more])
+    title = f"pfscope tune: {tracker} on {names}"
     dims = T.search_space(tracker, make_params(tracker, preset, base_options), cfg.space)
     log = None if args.quiet else (lambda line: print(line, file=sys.stderr, flush=True))
     if log:
-        log(f"tune: {tracker} (preset {preset_name}) on {source.name}, {args.trials} "
+        log(f"tune: {tracker} (preset {preset_name}) on {names}, {args.trials} "
             f"trials, {T.METRICS[args.metric]} on frames {frames[0]}-{frames[1]} (held out: "
             + (f"{holdout[0]}-{holdout[1]}" if holdout else "none") + f"), seed {args.seed}, "
             f"{jobs} process(es), rounds of {args.batch}; searching "
             + "; ".join(d.describe() for d in dims))
     study = T.StudyRecorder(study_out, title, {
-        "tracker": tracker, "preset": preset_name, "source": source.name,
+        "tracker": tracker, "preset": preset_name, "source": names,
         "metric": T.METRICS[args.metric], "tuned_on": f"{frames[0]}:{frames[1]}",
         "held_out": f"{holdout[0]}:{holdout[1]}" if holdout else "none",
         "trials": args.trials, "seed": args.seed, "batch": args.batch,
@@ -1133,9 +1181,10 @@ def cmd_tune(args) -> int:
     for d in result.dims:
         for name, v in T._targets(make_params(tracker, preset, base_options), d.name):
             marked[name] = f"tuned (start {v!r})"
-    info = T.tune_info(result, source.name)
-    header = (f"pfscope tune: {tracker} on {source.name}, best of {len(result.trials)} trials "
-              f"({T.METRICS[args.metric]} on frames {frames[0]}-{frames[1]})\n"
+    info = T.tune_info(result, names)
+    combined = " COMBINED over the sequences" if more else ""
+    header = (f"pfscope tune: {tracker} on {names}, best of {len(result.trials)} trials "
+              f"({T.METRICS[args.metric]}{combined} on frames {frames[0]}-{frames[1]})\n"
               f"use: pfscope record {args.source} --params {out}")
     write_params_file(out, tracker, best_params, preset=preset_name, info=info, header=header,
                       marked=marked)
@@ -1153,7 +1202,8 @@ def cmd_tune(args) -> int:
         rec_res = record(source, best_out, opts, progress=not args.quiet)
     if args.json:
         print(json.dumps({
-            "tracker": tracker, "preset": preset, "source": source.name,
+            "tracker": tracker, "preset": preset, "source": names,
+            "sequences": [source.name] + [q.name for q in more],
             "metric": T.METRICS[args.metric], "best_trial": result.best["number"],
             "best_value": result.best_value, "start_value": result.start_value,
             "best_options": result.best_options, "table": result.table,
@@ -1162,8 +1212,8 @@ def cmd_tune(args) -> int:
             "params_file": str(out), "study": str(study_path),
             "best_recording": str(rec_res.out) if rec_res else None}, indent=2, default=str))
         return _interrupted_status() if rec_res is not None and rec_res.interrupted else 0
-    print(f"{T.METRICS[args.metric]} on the tuned-on frames {frames[0]}-{frames[1]} (the "
-          f"search's runs, over those frames alone): "
+    print(f"{T.METRICS[args.metric]}{combined} on the tuned-on frames "
+          f"{frames[0]}-{frames[1]} (the search's runs, over those frames alone): "
           f"{result.best_value:.4f} (trial {result.best['number']} of {len(result.trials)}; "
           f"starting values {result.start_value:.4f})")
     print(f"best: {T._fmt_opts(result.best_options)}")

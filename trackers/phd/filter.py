@@ -87,6 +87,8 @@ import numpy as np
 
 from ..params import param, part, with_options
 from . import _kernels, motion
+from .clutter import PlaceClutter
+from .clutter import NearClutter, clutter_share
 from .gating import DEFAULT_BUDGET, LogGPairs, gate_pairs, tail_radius2
 from ..smc.resampling import SCHEMES
 from ..smc.resampling import resample as _resample_set
@@ -162,7 +164,9 @@ class ClutterParams:
                                       "(reading; 'gate' only)")
     clutter_model: str = param("gate", "'gate': κ(z) = clutter_rate / V(z) (§4 reading); "
                                        "'scene': a density over the image and the box sizes, "
-                                       "rate estimated online (not in paper)")
+                                       "rate estimated online; 'learn': 'scene' plus 'gate' "
+                                       "where clutter fell before, the mix learnt online "
+                                       "(.clutter; not in paper)")
     near_rate: float = param(0.0, "'scene': plus this many clutter points per frame around "
                                   "each detection, spread as in 'gate' (duplicate or "
                                   "misplaced boxes near people; not in paper)")
@@ -171,12 +175,18 @@ class ClutterParams:
                                     "same frame inside a detection's clutter_gate")
     clutter_memory: float = param(100.0, "'scene': frames the online estimates (clutter rate, "
                                          "size distribution, score model) average over")
+    repeat_prior: float = param(1.0, "'learn': prior share β of clutter that comes back in "
+                                     "place (1: the 'gate' model wherever clutter fell)")
+    repeat_memory: float = param(0.1, "'learn': how long the places where clutter fell are "
+                                      "remembered, as a fraction of clutter_memory")
 
     def __post_init__(self):
         _check(self, "clutter_rate", self.clutter_rate >= 0, ">= 0")
         _check(self, "clutter_gate", 0.0 < self.clutter_gate < 1.0, "in (0, 1)")
-        _check(self, "clutter_model", self.clutter_model in ("gate", "scene"),
-               "'gate' or 'scene'")
+        _check(self, "clutter_model", self.clutter_model in ("gate", "scene", "learn"),
+               "'gate', 'scene' or 'learn'")
+        _check(self, "repeat_prior", 0.0 <= self.repeat_prior <= 1.0, "in [0, 1]")
+        _check(self, "repeat_memory", self.repeat_memory > 0, "> 0")
         _check(self, "clutter_memory", self.clutter_memory >= 1, ">= 1")
         _check(self, "near_rate", self.near_rate >= 0, ">= 0")
 
@@ -466,10 +476,21 @@ class SceneModel:
         self.extent: Optional[np.ndarray] = None       # (x0, y0, x1, y1) of all detections
         self.score_sums: Optional[np.ndarray] = None   # (2, 3): class (target, clutter) × S0..S2
         self.score_floor = 1e-12
+        # 'learn': the repeated-in-place part of κ (.clutter), this frame's parts for learn()
+        learn = self.cl.clutter_model == "learn"
+        self.place = PlaceClutter(self.cl, self.lk) if learn else None
+        self.people = NearClutter(self.cl, self.lk) if learn else None
+        self._parts: Optional[tuple] = None
+
+    def structured(self) -> float:
+        """'learn': the share of the clutter that is structured (near people or repeated in
+        place) rather than random, from the EM averages (.clutter)."""
+        rep = self.people.num + self.place.num
+        return rep / (rep + self.rate) if rep + self.rate > 0 else 0.0
 
     @property
     def scene_clutter(self) -> bool:
-        return self.cl.clutter_model == "scene"
+        return self.cl.clutter_model in ("scene", "learn")
 
     @property
     def uses_scores(self) -> bool:
@@ -497,7 +518,8 @@ class SceneModel:
         self.size_frames += 1
 
     def log_kappa(self, Z: np.ndarray, scores: Optional[np.ndarray],
-                  frame: Optional[Frame]) -> tuple[np.ndarray, np.ndarray]:
+                  frame: Optional[Frame], predicted: Optional[ParticleSet] = None
+                  ) -> tuple[np.ndarray, np.ndarray]:
         """``log κ(z)`` (N_z,) of this frame's detections: without, then with the scores."""
         if self.scene_clutter:
             if len(Z):
@@ -516,6 +538,14 @@ class SceneModel:
             if self.near > 0:
                 near = log_clutter_density(Z, replace(self.cl, clutter_rate=self.near), self.lk)
                 log_kappa = np.logaddexp(log_kappa, near)
+            if self.place is not None:
+                self.place.cl = self.people.cl = self.cl
+                log_rep = self.place.log_kappa(Z)
+                log_near = self.people.log_kappa(Z, predicted)
+                shadow = np.logaddexp(np.logaddexp(log_kappa, log_rep), log_near)
+                log_used = np.logaddexp(log_kappa, self.place.log_gate(Z, self.structured()))
+                self._parts = (Z, log_rep, log_near, shadow, log_used)
+                log_kappa = log_used
         else:
             log_kappa = log_clutter_density(Z, self.cl, self.lk)
         if self.uses_scores and scores is not None and len(Z):
@@ -557,7 +587,17 @@ class SceneModel:
     def learn(self, scores: Optional[np.ndarray], won: np.ndarray) -> None:
         """After the update: ``won`` (N_z,) = C/(κ + C), each detection's target share."""
         a = 1.0 / min(self.frames + 5, self.cl.clutter_memory)
-        if self.scene_clutter:
+        if self.place is not None and self._parts is not None:
+            Z, log_rep, log_near, total, log_used = self._parts
+            share = clutter_share(won, log_used, total)
+            with np.errstate(invalid="ignore"):
+                rep = np.nan_to_num(np.exp(log_rep - total))
+                near = np.nan_to_num(np.exp(log_near - total))
+            self.rate = (1 - a) * self.rate + a * float(np.sum(share * (1.0 - rep - near)))
+            self.place.learn(Z, share * (1.0 - near), share * rep, a)
+            self.people.learn(share * near, a)
+            self._parts = None
+        elif self.scene_clutter:
             self.rate = (1 - a) * self.rate + a * float(np.sum(1.0 - won))
         self.frames += 1
         if self.uses_scores and scores is not None and self.score_sums is not None:
@@ -1022,7 +1062,7 @@ class PHDFilter:
         Z = as_observations(Z)
         p = self.params
         predicted = predict(self.particles, p.motion, self.rng)
-        log_kappa_geo, log_kappa = self.scene.log_kappa(Z, scores, frame)
+        log_kappa_geo, log_kappa = self.scene.log_kappa(Z, scores, frame, predicted)
         born = birth(predicted, Z, p, self.rng, log_kappa_geo, revive)
         candidates = predicted.concat(born.particles)
         if type(self.likelihood) is GaussianLikelihood:
