@@ -446,3 +446,25 @@ def test_record_from_a_thread_and_stop_it(tmp_path):
     r = result["r"]
     assert r.interrupted and r.frames == 5 and r.out.name == "x.incomplete.rrd"
     read_rrd(r.out)
+
+
+@pytest.mark.parametrize("cmd", ["synth", "record"])
+@pytest.mark.parametrize("flag,value", [("--clutter", "1e9"), ("--targets", "100000000")])
+def test_a_scene_too_big_to_hold_is_a_usage_error(tmp_path, cmd, flag, value):
+    r = cli(cmd, flag, value, "--out", tmp_path / "x", timeout=60)
+    assert f"argument {flag}" in one_line_error(r) and "must be <=" in r.stderr
+    assert not (tmp_path / "x").exists()
+
+
+def test_out_of_memory_is_one_line(monkeypatch, capsys):
+    from pfscope.viewer_app import cli as cli_mod
+
+    def boom(args):
+        import numpy as np
+
+        return np.zeros(2 ** 62, np.uint8)  # numpy's own MemoryError (_ArrayMemoryError)
+
+    monkeypatch.setattr(cli_mod, "cmd_synth", boom)
+    assert cli_mod.main(["synth", "--out", "never"]) == 1
+    err = capsys.readouterr().err
+    assert err.startswith("pfscope: run failed: out of memory") and err.count("\n") == 1, err
