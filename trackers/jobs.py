@@ -301,13 +301,22 @@ class JobRunner:
             return
         pool, self.pool = self.pool, None
         if self.stopping:
-            procs = list(getattr(pool, "_processes", {}).values())
+            # queued items cancelled; an idle worker ends on the pool's shutdown message at
+            # once, a busy one when its item returns (it polls the stop event): wait for that
+            # at most `grace` seconds, then end the rest
+            procs = list((getattr(pool, "_processes", None) or {}).values())
+            pool.shutdown(wait=False, cancel_futures=True)
             t0 = time.monotonic()
             for p in procs:
                 p.join(timeout=max(0.0, self.grace - (time.monotonic() - t0)))
-            self.pool = pool
-            self._terminate()
-            self.pool = None
+            for p in procs:
+                if p.is_alive():
+                    p.terminate()
+            for p in procs:
+                p.join(timeout=3.0)
+                if p.is_alive():
+                    p.kill()
+                    p.join(timeout=2.0)
         pool.shutdown(wait=True, cancel_futures=True)
 
 
