@@ -197,6 +197,22 @@ def test_resume_skips_the_same_run_and_reruns_a_changed_one(tmp_path, capsys):
         ident = json.loads(js.read_text())["identity"]
         assert ident["frames"] == 7
     assert json.loads(js.read_text())["identity"]["preset"] == "paper"
+    # --params FILE: its values are part of the identity, so is an edit of the same file;
+    # then --detector
+    params = tmp_path / "p.toml"
+    last = base + ["--frames", "7", "--set", "gate=0.5", "--level", "clusters", "--preset",
+                   "paper"]
+    for depth, extra, what in ((17, [], "params.assoc.depth"), (18, [], "params.assoc.depth"),
+                               (18, ["--detector", "bgsub"], "detector")):
+        params.write_text(f'tracker = "mt"\n[params.assoc]\ndepth = {depth}\n')
+        capsys.readouterr()
+        assert main(last + ["--params", str(params)] + extra) == 0
+        err = capsys.readouterr().err
+        assert f"changed {what}" in err, err
+        assert _summary(out) == {"synthetic-seed0-mt-seed0": "ok"}
+        assert json.loads(js.read_text())["identity"]["params"]["assoc.depth"] == str(depth)
+    assert main(last + ["--params", str(params), "--detector", "bgsub"]) == 0
+    assert _summary(out) == {"synthetic-seed0-mt-seed0": "skipped"}
 
 
 def test_an_interrupted_run_is_rerun_without_force(tmp_path, capsys):

@@ -468,3 +468,38 @@ def test_out_of_memory_is_one_line(monkeypatch, capsys):
     assert cli_mod.main(["synth", "--out", "never"]) == 1
     err = capsys.readouterr().err
     assert err.startswith("pfscope: run failed: out of memory") and err.count("\n") == 1, err
+
+
+def test_a_video_a_model_and_tunes_outputs_onto_inputs_are_refused(tmp_path):
+    # issue 23 case 6 for the inputs the MOT-folder test does not have: a video file, a model
+    # file (--classifier), and tune's parameters file and study recording
+    video = tmp_path / "v.avi"
+    w = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*"MJPG"), 10, (64, 48))
+    for k in range(5):
+        w.write(np.full((48, 64, 3), 40 * k, np.uint8))
+    w.release()
+    model = tmp_path / "m.pt"
+    model.write_bytes(b"not really a model")
+    root = _toy(tmp_path)
+    gt = root / "gt" / "gt.txt"
+    before = {p: p.read_bytes() for p in (video, model, gt)}
+    runs = [("record", video, "--tracker", "passthrough", "--detector", "bgsub", "--out", video),
+            ("record", video, "--tracker", "passthrough", "--detector", "bgsub", "--out",
+             tmp_path / "x.rrd", "--tracks-out", video),
+            ("record", "--tracker", "dbn-phd", "--classifier", model, "--frames", "2", "--out",
+             model),
+            ("record", "--tracker", "dbn-phd", "--classifier", model, "--frames", "2", "--out",
+             tmp_path / "y.rrd", "--tracks-out", model)]
+    try:
+        import optuna  # noqa: F401
+
+        runs += [("tune", root, "--tracker", "mt", "--trials", "1", "--frames", "1:4", "--out",
+                  gt, "--no-record"),
+                 ("tune", root, "--tracker", "mt", "--trials", "1", "--frames", "1:4",
+                  "--study-out", gt, "--out", tmp_path / "best.toml", "--no-record")]
+    except ImportError:
+        pass
+    for argv in runs:
+        assert "is an input of this run" in one_line_error(cli(*argv, "--force", "--quiet")), argv
+    assert {p: p.read_bytes() for p in before} == before
+    assert not (tmp_path / "best.toml").exists()
