@@ -472,7 +472,23 @@ def test_train_classifier_command_trains_holds_out_and_writes_a_usable_model(tmp
     from pfscope.trackers.dlpf.iksvm import IKSVMClassifier
     info = IKSVMClassifier.load(str(out)).info
     assert info["frames"] == "1-32" and info["held_out_frames"] == "33-40"
-    assert 0.0 <= info["holdout_accuracy"] <= 1.0 and info["lookup_max_error"] < 0.05
+    assert info["lookup_max_error"] < 0.05
+    # the held-out accuracy it reports is what the written model scores on the held-out
+    # windows (collected again here, scored from the file), and it beats the trivial rule
+    # "always the majority class" (background: 82 % of the windows); measured seeds 0-2:
+    # accuracy 1.0, AUC 1.0 on 27-29 windows (5 people) each
+    from pfscope.trackers.data.sources import open_source
+    from pfscope.trackers.dlpf.iksvm import collect_samples
+
+    s = collect_samples(open_source("synthetic"), range(1, 41), stride=4, negatives=10, seed=0)
+    held = s.frame > 32
+    yh = s.y[held] > 0
+    assert info["holdout"] == held.sum() and info["holdout_people"] == yh.sum() > 0
+    acc = float(((IKSVMClassifier.load(str(out)).decision(s.X[held]) > 0) == yh).mean())
+    assert info["holdout_accuracy"] == pytest.approx(acc, abs=1.01 / held.sum())
+    majority = max(yh.mean(), 1 - yh.mean())
+    assert acc >= 0.9 and acc > majority, (acc, majority)
+    assert info["holdout_auc"] >= 0.95
     tr = make_tracker("dlpf", model=str(out), **{"parents.n": "60"})
     res = run(_scene(4), [tr])
     assert res.frames == 4
