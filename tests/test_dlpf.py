@@ -241,7 +241,16 @@ def test_runs_on_pets09_frames():
     # people move in PETS09: after a few frames the parents' motion is not all zero
     pred = find(last.stages, "dlpf/parents/predicted", Points)[0]
     assert (pred.values["m"] > 1.0).any()
-    assert sum(len(ts) for _, ts in res.rows["dlpf"]) > 0   # somebody was confirmed
+    # somebody was confirmed, and on people: the share of confirmed boxes that overlap a
+    # ground-truth box of their frame with IoU >= 0.3.  Measured tracker seeds 0-5: 0.47, 1.0,
+    # 0.60, 0.90, 0.44, 0.63 over 30-63 boxes (seed 0 here; the misses are boxes far taller
+    # than a person)
+    from pfscope.trackers.eval import box_iou
+
+    gt = src.gt
+    on = [bool((box_iou(ts.boxes[i:i + 1], gt.boxes[gt.frame == f]) >= 0.3).any())
+          for f, ts in res.rows["dlpf"] for i in range(len(ts))]
+    assert len(on) >= 10 and np.mean(on) >= 0.35, (len(on), np.mean(on))
 
 
 def test_wrong_frame_size_is_a_clear_error():
