@@ -139,9 +139,11 @@ def test_killing_the_batch_leaves_no_orphan_worker(tmp_path):
 @pytest.mark.slow
 def test_sigkill_of_a_worker_fails_its_run_and_the_batch_resumes(tmp_path):
     out = tmp_path / "runs"
-    p = _start(_batch_argv(out, 1500, seeds="0,1"))
+    p = _start(_batch_argv(out, 1500, seeds="0,1,2"))
     try:
-        assert _wait_for(lambda: len(_running(out)) >= 1)
+        # once a run has finished and another is running: the resume must keep the first
+        assert _wait_for(lambda: len([f for f in out.glob("*-seed?.json")]) >= 1
+                         and len(_running(out)) >= 1, 300)
         me = p.pid
         kids = [int(d.name) for d in Path("/proc").iterdir() if d.name.isdigit()
                 and _ppid(int(d.name)) == me]
@@ -155,12 +157,20 @@ def test_sigkill_of_a_worker_fails_its_run_and_the_batch_resumes(tmp_path):
         if p.poll() is None:
             os.killpg(p.pid, signal.SIGKILL)
     assert p.returncode == 1 and "Traceback" not in err, err
-    assert "failed" in _summary(out).values()
+    first = _summary(out)
+    assert "failed" in first.values()
     assert _wait_group_gone(p.pid, 10)
-    r = subprocess.run(_batch_argv(out, 1500, seeds="0,1"), cwd=REPO, env=ENV,
+    finished = {r: (out / f"{r}.json").stat().st_mtime_ns for r, st in first.items()
+                if st == "ok"}
+    assert finished, first
+    r = subprocess.run(_batch_argv(out, 1500, seeds="0,1,2"), cwd=REPO, env=ENV,
                        capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stderr
-    assert set(_summary(out).values()) <= {"ok", "skipped"}
+    # resumed to completion: what finished is skipped and untouched, the rest ran again
+    again = _summary(out)
+    assert again == {r: "skipped" if r in finished else "ok" for r in first}, (first, again)
+    assert {r: (out / f"{r}.json").stat().st_mtime_ns for r in finished} == finished
+    assert not _running(out) and not list(out.glob("*.part"))
 
 
 def _ppid(pid: int) -> int:
