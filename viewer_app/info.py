@@ -46,8 +46,14 @@ def _open(path: Path):
     if not path.is_file():
         raise InputError(f"{path}: no such recording")
     check_rrd_header(path)
+    import warnings
+
     try:
-        reader = rr.chunk.RrdReader(str(path))
+        with warnings.catch_warnings():
+            # a file without footer (a killed or cut-short run) is streamed below: Rerun's
+            # "no footer/manifest ... legacy format" warning would only add two lines of noise
+            warnings.filterwarnings("ignore", message=".*no footer")
+            reader = rr.chunk.RrdReader(str(path))
     except Exception as e:  # noqa: BLE001 - any reader error is the file's fault
         raise InputError(f"{path}: not a readable Rerun recording ({e})") from None
     try:
