@@ -241,9 +241,14 @@ def test_ids_are_parsed_as_integers(tmp_path):
         read_mot(f, "tracks")
 
 
-def test_stdout_to_a_full_device_is_one_line():
+@pytest.mark.parametrize("argv", [["trackers"], ["synth", "--frames", "2", "--quiet"],
+                                  ["batch", "--trackers", "passthrough", "--frames", "2",
+                                   "--workers", "1", "--quiet"]])
+def test_stdout_to_a_full_device_is_one_line(tmp_path, argv):
+    if argv[0] != "trackers":
+        argv = argv + ["--out", str(tmp_path / "out")]
     with open("/dev/full", "w") as full:
-        r = subprocess.run([sys.executable, "-m", "pfscope.viewer_app.cli", "trackers"],
+        r = subprocess.run([sys.executable, "-m", "pfscope.viewer_app.cli", *argv],
                            cwd=REPO, env=dict(os.environ, RERUN_ANALYTICS="0"), stdout=full,
                            stderr=subprocess.PIPE, text=True, timeout=120)
     assert r.returncode == 1 and "Traceback" not in r.stderr, r.stderr
