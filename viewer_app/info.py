@@ -68,6 +68,24 @@ def _open(path: Path):
                          f"`pfscope repair {path}`") from None
 
 
+def check_readable(path) -> None:
+    """Read every chunk of the recording once: an :class:`InputError` (one line) for a file
+    that is cut short, holds no data or is not a recording, before anything slower (the
+    headless viewer of ``snapshot``) is started on it."""
+    path = Path(path)
+    chunks, _ = _open(path)
+    n = 0
+    try:
+        for _ in chunks:
+            n += 1
+    except Exception as e:  # noqa: BLE001 - cut short inside an entry
+        msg = str(e).splitlines()[0] if str(e) else type(e).__name__
+        raise InputError(f"{path}: cut short, not readable as it is ({msg[:160]}); try "
+                         f"`pfscope repair {path}`") from None
+    if n == 0:
+        raise InputError(f"{path}: holds no recorded data")
+
+
 def recording_info(path, top: int = 10) -> dict[str, Any]:
     """Everything ``pfscope info`` shows, as a plain dict (``--json`` prints it)."""
     import pyarrow as pa
