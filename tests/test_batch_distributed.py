@@ -5,7 +5,11 @@ the same files and summary, a failing run does not stop the others, resume skips
 from __future__ import annotations
 
 import json
+import os
+import signal
+import subprocess
 import sys
+import time
 
 import pytest
 
@@ -67,3 +71,53 @@ def test_cluster_without_dask_says_how_to_install_in_one_line(tmp_path, capsys, 
 def test_backend_dask_needs_a_cluster_address(tmp_path, capsys):
     assert main(["batch", "--backend", "dask", "--out", str(tmp_path / "o")]) == 2
     assert "--backend dask needs --cluster" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_sigterm_stops_a_dask_batch_and_the_same_command_resumes(tmp_path):
+    """Ctrl-C or `kill PID` on a batch running on a Dask cluster: queued runs never start,
+    running ones stop at their next frame (files kept as *.incomplete.*), the summary says so,
+    the exit status is 128 + signal, and nothing keeps running on the cluster for this batch."""
+    try:
+        from dask.distributed import Client, LocalCluster
+    except ImportError as e:
+        pytest.skip(f"Dask distributed is not installed ({e})")
+    from test_jobs import _running, _start, _summary, _wait_for, _wait_group_gone
+
+    out = tmp_path / "runs"
+    with LocalCluster(n_workers=2, processes=True, threads_per_worker=1,
+                      dashboard_address=None) as cluster, Client(cluster) as client:
+        argv = [sys.executable, "-m", "pfscope.viewer_app.cli", "batch", "--sources",
+                "synthetic", "--trackers", "passthrough", "--seeds", "0,1,2", "--frames",
+                "1200", "--out", str(out), "--cluster", cluster.scheduler_address]
+        p = _start(argv)
+        try:
+            assert _wait_for(lambda: len(_running(out)) >= 2, 180), "no run started"
+            time.sleep(1.0)
+            t0 = time.time()
+            p.send_signal(signal.SIGTERM)      # `kill PID`
+            _, err = p.communicate(timeout=90)
+            stopped_in = time.time() - t0
+        finally:
+            if p.poll() is None:
+                os.killpg(p.pid, signal.SIGKILL)
+        assert p.returncode == 143, err
+        assert "Traceback" not in err and "stopped by SIGTERM" in err, err
+        assert stopped_in < 40
+        assert _wait_group_gone(p.pid, 10)
+        status = _summary(out)
+        assert sorted(status.values()) == ["interrupted", "interrupted", "not run"], status
+        assert len(_running(out)) == 2 and not list(out.glob("*-seed?.json"))
+        # the cluster is idle: the runs stopped, they did not go on writing into --out
+        assert _wait_for(lambda: not any(client.processing().values()), 10), \
+            client.processing()
+        listing = sorted(f.name for f in out.iterdir())
+        time.sleep(2.0)
+        assert sorted(f.name for f in out.iterdir()) == listing
+
+        # the same command resumes to completion
+        r = subprocess.run(argv, capture_output=True, text=True, timeout=600)
+        assert r.returncode == 0, r.stderr
+        assert "3 runs, 0 already finished, 3 to run" in r.stderr
+        assert set(_summary(out).values()) == {"ok"}
+        assert not _running(out)

@@ -5,7 +5,11 @@ run does not stop the others, resume skips — and the one-line errors around it
 from __future__ import annotations
 
 import json
+import os
+import signal
+import subprocess
 import sys
+import time
 
 import pytest
 
@@ -81,3 +85,45 @@ def test_a_ray_address_picks_the_ray_backend():
     assert _pick_backend(None, None) == (None, "local")
     with pytest.raises(InputError, match="Ray address"):
         _pick_backend("dask", "ray://head:10001")
+
+
+@pytest.mark.slow
+def test_sigterm_stops_a_ray_batch_and_the_same_command_resumes(tmp_path):
+    """`kill PID` (SIGTERM to the batch alone, not to Ray's workers) on a batch that started its
+    own Ray instance: queued tasks are cancelled, running ones stop at once with their files
+    kept as *.incomplete.* (well before the grace period that would cancel them by force), the
+    summary says so, exit 143, and no process of the batch (Ray's included) outlives it."""
+    from pfscope.viewer_app.batch import CLUSTER_GRACE
+
+    pytest.importorskip("ray")
+    from test_jobs import _running, _start, _summary, _wait_for, _wait_group_gone
+
+    out = tmp_path / "runs"
+    argv = [sys.executable, "-m", "pfscope.viewer_app.cli", "batch", "--sources", "synthetic",
+            "--trackers", "passthrough", "--seeds", "0,1,2", "--frames", "1200", "--out",
+            str(out), "--backend", "ray"]
+    env = {k: v for k, v in os.environ.items() if k != "RAY_ADDRESS"}
+    p = _start(argv)
+    try:
+        assert _wait_for(lambda: len(_running(out)) >= 1, 240), "no run started"
+        time.sleep(1.0)
+        t0 = time.time()
+        p.send_signal(signal.SIGTERM)
+        _, err = p.communicate(timeout=90)
+        stopped_in = time.time() - t0
+    finally:
+        if p.poll() is None:
+            os.killpg(p.pid, signal.SIGKILL)
+    assert p.returncode == 143, err
+    assert "Traceback" not in err and "stopped by SIGTERM" in err, err
+    assert stopped_in < CLUSTER_GRACE - 3
+    assert _wait_group_gone(p.pid, 20), "a process of the batch outlived it"
+    status = _summary(out)
+    assert "not run" in status.values() and "ok" not in status.values(), status
+    assert set(status.values()) <= {"interrupted", "not run"}, status
+    assert len(_running(out)) == list(status.values()).count("interrupted")
+
+    r = subprocess.run(argv, capture_output=True, text=True, timeout=600, env=env)
+    assert r.returncode == 0, r.stderr
+    assert set(_summary(out).values()) == {"ok"}
+    assert not _running(out)

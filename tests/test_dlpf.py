@@ -256,7 +256,16 @@ def test_runs_on_pets09_frames():
     # people move in PETS09: after a few frames the parents' motion is not all zero
     pred = find(last.stages, "dlpf/parents/predicted", Points)[0]
     assert (pred.values["m"] > 1.0).any()
-    assert sum(len(ts) for _, ts in res.rows["dlpf"]) > 0   # somebody was confirmed
+    # somebody was confirmed, and on people: the share of confirmed boxes that overlap a
+    # ground-truth box of their frame with IoU >= 0.3.  Measured tracker seeds 0-5: 0.47, 1.0,
+    # 0.60, 0.90, 0.44, 0.63 over 30-63 boxes (seed 0 here; the misses are boxes far taller
+    # than a person)
+    from pfscope.trackers.eval import box_iou
+
+    gt = src.gt
+    on = [bool((box_iou(ts.boxes[i:i + 1], gt.boxes[gt.frame == f]) >= 0.3).any())
+          for f, ts in res.rows["dlpf"] for i in range(len(ts))]
+    assert len(on) >= 10 and np.mean(on) >= 0.35, (len(on), np.mean(on))
 
 
 def test_wrong_frame_size_is_a_clear_error():
@@ -531,7 +540,23 @@ def test_train_classifier_command_trains_holds_out_and_writes_a_usable_model(tmp
     from pfscope.trackers.dlpf.iksvm import IKSVMClassifier
     info = IKSVMClassifier.load(str(out)).info
     assert info["frames"] == "1-32" and info["held_out_frames"] == "33-40"
-    assert 0.0 <= info["holdout_accuracy"] <= 1.0 and info["lookup_max_error"] < 0.05
+    assert info["lookup_max_error"] < 0.05
+    # the held-out accuracy it reports is what the written model scores on the held-out
+    # windows (collected again here, scored from the file), and it beats the trivial rule
+    # "always the majority class" (background: 82 % of the windows); measured seeds 0-2:
+    # accuracy 1.0, AUC 1.0 on 27-29 windows (5 people) each
+    from pfscope.trackers.data.sources import open_source
+    from pfscope.trackers.dlpf.iksvm import collect_samples
+
+    s = collect_samples(open_source("synthetic"), range(1, 41), stride=4, negatives=10, seed=0)
+    held = s.frame > 32
+    yh = s.y[held] > 0
+    assert info["holdout"] == held.sum() and info["holdout_people"] == yh.sum() > 0
+    acc = float(((IKSVMClassifier.load(str(out)).decision(s.X[held]) > 0) == yh).mean())
+    assert info["holdout_accuracy"] == pytest.approx(acc, abs=1.01 / held.sum())
+    majority = max(yh.mean(), 1 - yh.mean())
+    assert acc >= 0.9 and acc > majority, (acc, majority)
+    assert info["holdout_auc"] >= 0.95
     tr = make_tracker("dlpf", model=str(out), **{"parents.n": "60"})
     res = run(_scene(4), [tr])
     assert res.frames == 4

@@ -104,6 +104,9 @@ def test_failures_other_than_bad_input_are_one_line_and_incomplete(tmp_path):
     from pfscope.trackers.phd.tracker import PHDTracker
     from pfscope.viewer_app.cli import main
 
+    from pfscope.trackers.warmup import compile_kernels
+
+    compile_kernels()  # the kernels' warm-up steps a PHD tracker too: not the run under test
     out = tmp_path / "x.rrd"
     orig = PHDTracker.step
 
@@ -131,7 +134,7 @@ def test_unwritable_tracks_path_is_one_line(tmp_path):
     assert not (tmp_path / "x.rrd").exists()
 
 
-def test_busy_serve_port_fails_cleanly(tmp_path):
+def test_busy_serve_port_serves_on_another_port(tmp_path):
     import socket
 
     s = socket.socket()
@@ -146,10 +149,14 @@ def test_busy_serve_port_fails_cleanly(tmp_path):
                 "--quiet", timeout=120)
     finally:
         s.close()
-    assert "Traceback" not in r.stderr
-    assert r.returncode in (0, 1), r.stderr
-    if r.returncode == 1:
-        assert not (tmp_path / "x.rrd").exists()
+    # the default web port taken: the viewer is served on a free one (the URL says which)
+    # and the recording is written, no error
+    assert r.returncode == 0 and "Traceback" not in r.stderr, r.stderr
+    import re
+
+    urls = re.findall(r"web viewer: http://127\.0\.0\.1:(\d+)/", r.stdout + r.stderr)
+    assert urls and all(int(u) != 9090 for u in urls), r.stdout + r.stderr
+    read_rrd(tmp_path / "x.rrd")
 
 
 # ----------------------------------------------------------------------------- never hang
@@ -313,10 +320,73 @@ def test_truncated_video_is_an_error(tmp_path):
     w.release()
     data = path.read_bytes()
     path.write_bytes(data[: len(data) // 3])
+    cap = cv2.VideoCapture(str(path))
+    announced = int(cap.get(cv2.CAP_PROP_FRAME_COUNT))
+    cap.release()
+    if announced != 200:  # decided before the run, not from its outcome
+        pytest.skip(f"this OpenCV build reports {announced} frames for a cut AVI")
     r = cli("record", path, "--tracker", "passthrough", "--detector", "bgsub", "--out",
             tmp_path / "x.rrd", "--quiet")
-    if r.returncode == 0:
-        pytest.skip("this OpenCV build reports no frame count for a cut AVI")
+    assert "video ends after" in one_line_error(r)
+
+
+def _ebml(eid: int, payload: bytes) -> bytes:
+    return eid.to_bytes((eid.bit_length() + 7) // 8, "big") + b"\x01" \
+        + len(payload).to_bytes(7, "big") + payload
+
+
+def _ebml_uint(eid: int, v: int) -> bytes:
+    return _ebml(eid, v.to_bytes(max(1, (v.bit_length() + 7) // 8), "big"))
+
+
+def write_vfr_mkv(path: Path, times_ms: list[int], size=(64, 48)) -> None:
+    """A Matroska file of MJPEG frames shown at ``times_ms`` (a variable frame rate), written
+    element by element (OpenCV's writer only makes constant-rate files); its Duration ends one
+    interval after the last frame, as a muxer writes it."""
+    import struct
+
+    w, h = size
+    header = _ebml(0x1A45DFA3, _ebml_uint(0x4286, 1) + _ebml_uint(0x42F7, 1)
+                   + _ebml_uint(0x42F2, 4) + _ebml_uint(0x42F3, 8) + _ebml(0x4282, b"matroska")
+                   + _ebml_uint(0x4287, 4) + _ebml_uint(0x4285, 2))
+    duration = float(2 * times_ms[-1] - times_ms[-2])
+    info = _ebml(0x1549A966, _ebml_uint(0x2AD7B1, 1_000_000)   # timestamps in ms
+                 + _ebml(0x4489, struct.pack(">d", duration)) + _ebml(0x4D80, b"test")
+                 + _ebml(0x5741, b"test"))
+    tracks = _ebml(0x1654AE6B, _ebml(0xAE, _ebml_uint(0xD7, 1) + _ebml_uint(0x73C5, 1)
+                                     + _ebml_uint(0x83, 1) + _ebml_uint(0x9C, 0)
+                                     + _ebml(0x86, b"V_MJPEG")
+                                     + _ebml(0xE0, _ebml_uint(0xB0, w) + _ebml_uint(0xBA, h))))
+    clusters = b""
+    for k, t in enumerate(times_ms):
+        img = np.full((h, w, 3), (40 + 3 * k) % 255, np.uint8)
+        img[10:30, (2 * k) % (w - 10):(2 * k) % (w - 10) + 10] = 255
+        jpg = cv2.imencode(".jpg", img)[1].tobytes()
+        block = b"\x81" + (0).to_bytes(2, "big") + b"\x80" + jpg   # track 1, keyframe
+        clusters += _ebml(0x1F43B675, _ebml_uint(0xE7, int(t)) + _ebml(0xA3, block))
+    path.write_bytes(header + _ebml(0x18538067, info + tracks + clusters))
+
+
+def test_a_complete_variable_frame_rate_video_is_not_called_truncated(tmp_path):
+    # 20 frames 10 ms apart, then 40 frames 100 ms apart: the header's rate is the fast one,
+    # so its frame count (duration x rate = 420) is far above the 60 frames the file holds
+    path = tmp_path / "vfr.mkv"
+    write_vfr_mkv(path, [10 * k for k in range(20)] + [200 + 100 * k for k in range(40)])
+    cap = cv2.VideoCapture(str(path))
+    announced = int(cap.get(cv2.CAP_PROP_FRAME_COUNT))
+    cap.release()
+    if announced <= 60:
+        pytest.skip(f"this OpenCV build counts {announced} frames: no mismatch to test")
+    r = cli("record", path, "--tracker", "passthrough", "--detector", "bgsub", "--out",
+            tmp_path / "x.rrd", "--quiet")
+    assert r.returncode == 0, r.stderr
+    assert "done: 60 frames" in r.stdout, r.stdout
+    # the same file cut in half still is a truncated video
+    data = path.read_bytes()
+    cut = tmp_path / "cut.mkv"
+    cut.write_bytes(data[: len(data) // 2])
+    r = cli("record", cut, "--tracker", "passthrough", "--detector", "bgsub", "--out",
+            tmp_path / "y.rrd", "--quiet")
     assert "video ends after" in one_line_error(r)
 
 
@@ -383,3 +453,60 @@ def test_record_from_a_thread_and_stop_it(tmp_path):
     r = result["r"]
     assert r.interrupted and r.frames == 5 and r.out.name == "x.incomplete.rrd"
     read_rrd(r.out)
+
+
+@pytest.mark.parametrize("cmd", ["synth", "record"])
+@pytest.mark.parametrize("flag,value", [("--clutter", "1e9"), ("--targets", "100000000")])
+def test_a_scene_too_big_to_hold_is_a_usage_error(tmp_path, cmd, flag, value):
+    r = cli(cmd, flag, value, "--out", tmp_path / "x", timeout=60)
+    assert f"argument {flag}" in one_line_error(r) and "must be <=" in r.stderr
+    assert not (tmp_path / "x").exists()
+
+
+def test_out_of_memory_is_one_line(monkeypatch, capsys):
+    from pfscope.viewer_app import cli as cli_mod
+
+    def boom(args):
+        import numpy as np
+
+        return np.zeros(2 ** 62, np.uint8)  # numpy's own MemoryError (_ArrayMemoryError)
+
+    monkeypatch.setattr(cli_mod, "cmd_synth", boom)
+    assert cli_mod.main(["synth", "--out", "never"]) == 1
+    err = capsys.readouterr().err
+    assert err.startswith("pfscope: run failed: out of memory") and err.count("\n") == 1, err
+
+
+def test_a_video_a_model_and_tunes_outputs_onto_inputs_are_refused(tmp_path):
+    # issue 23 case 6 for the inputs the MOT-folder test does not have: a video file, a model
+    # file (--classifier), and tune's parameters file and study recording
+    video = tmp_path / "v.avi"
+    w = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*"MJPG"), 10, (64, 48))
+    for k in range(5):
+        w.write(np.full((48, 64, 3), 40 * k, np.uint8))
+    w.release()
+    model = tmp_path / "m.pt"
+    model.write_bytes(b"not really a model")
+    root = _toy(tmp_path)
+    gt = root / "gt" / "gt.txt"
+    before = {p: p.read_bytes() for p in (video, model, gt)}
+    runs = [("record", video, "--tracker", "passthrough", "--detector", "bgsub", "--out", video),
+            ("record", video, "--tracker", "passthrough", "--detector", "bgsub", "--out",
+             tmp_path / "x.rrd", "--tracks-out", video),
+            ("record", "--tracker", "dbn-phd", "--classifier", model, "--frames", "2", "--out",
+             model),
+            ("record", "--tracker", "dbn-phd", "--classifier", model, "--frames", "2", "--out",
+             tmp_path / "y.rrd", "--tracks-out", model)]
+    try:
+        import optuna  # noqa: F401
+
+        runs += [("tune", root, "--tracker", "mt", "--trials", "1", "--frames", "1:4", "--out",
+                  gt, "--no-record"),
+                 ("tune", root, "--tracker", "mt", "--trials", "1", "--frames", "1:4",
+                  "--study-out", gt, "--out", tmp_path / "best.toml", "--no-record")]
+    except ImportError:
+        pass
+    for argv in runs:
+        assert "is an input of this run" in one_line_error(cli(*argv, "--force", "--quiet")), argv
+    assert {p: p.read_bytes() for p in before} == before
+    assert not (tmp_path / "best.toml").exists()

@@ -122,6 +122,36 @@ def _worker_sigterm(signum, _frame):
     os._exit(128 + signum)
 
 
+class StopOnSignal:
+    """While inside (main thread only), SIGINT and SIGTERM do not raise: they record the signal
+    (:attr:`signum`, :func:`note_signal`) and call ``on_signal(first)``.  A job whose work runs
+    elsewhere (a Dask or Ray cluster) polls :attr:`signum` to stop its queue; the
+    :class:`JobRunner` stops its pool the same way."""
+
+    def __init__(self, on_signal: Optional[Callable[[bool], None]] = None):
+        self.signum: Optional[int] = None
+        self.on_signal = on_signal
+        self._old: dict = {}
+
+    def handler(self, signum, _frame=None) -> None:
+        first = self.signum is None
+        self.signum = int(signum)
+        note_signal(signum)
+        if self.on_signal is not None:
+            self.on_signal(first)
+
+    def __enter__(self) -> "StopOnSignal":
+        if threading.current_thread() is threading.main_thread():
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                self._old[sig] = signal.signal(sig, self.handler)
+        return self
+
+    def __exit__(self, *exc) -> None:
+        for sig, old in self._old.items():
+            signal.signal(sig, old)
+        self._old.clear()
+
+
 class JobRunner:
     """Runs items through ``fn`` here (``workers <= 1``) or over a spawn process pool, as one
     job that signals stop (module docstring).  Use as a context manager::
@@ -135,21 +165,24 @@ class JobRunner:
         self.workers = max(1, int(workers))
         self.grace = float(grace)
         self.in_process = self.workers <= 1 if in_process is None else bool(in_process)
-        self.signum: Optional[int] = None
         self.pool = None
         self._ctx = None
         self._stop = None
-        self._old: dict = {}
+        self._signals = StopOnSignal(self._on_signal)
 
     # ------------------------------------------------------------------ signals
-    def _handler(self, signum, _frame):
-        first = self.signum is None
-        self.signum = int(signum)
-        note_signal(signum)
+    def _on_signal(self, first: bool) -> None:
         if self._stop is not None:
             self._stop.set()
         if not first and self.in_process:
             raise KeyboardInterrupt  # a second Ctrl-C: really out
+
+    def _handler(self, signum, frame=None) -> None:
+        self._signals.handler(signum, frame)
+
+    @property
+    def signum(self) -> Optional[int]:
+        return self._signals.signum
 
     @property
     def stopping(self) -> bool:
@@ -165,9 +198,7 @@ class JobRunner:
             self._prev_stop, _STOP = _STOP, self._stop
         else:
             self._stop = self._ctx.Event()
-        if threading.current_thread() is threading.main_thread():
-            for sig in (signal.SIGINT, signal.SIGTERM):
-                self._old[sig] = signal.signal(sig, self._handler)
+        self._signals.__enter__()
         return self
 
     def __exit__(self, *exc) -> None:
@@ -175,9 +206,7 @@ class JobRunner:
         try:
             self.close()
         finally:
-            for sig, old in self._old.items():
-                signal.signal(sig, old)
-            self._old.clear()
+            self._signals.__exit__()
             if self.in_process:
                 _STOP = self._prev_stop
 
@@ -272,15 +301,24 @@ class JobRunner:
             return
         pool, self.pool = self.pool, None
         if self.stopping:
-            procs = list(getattr(pool, "_processes", {}).values())
+            # queued items cancelled; an idle worker ends on the pool's shutdown message at
+            # once, a busy one when its item returns (it polls the stop event): wait for that
+            # at most `grace` seconds, then end the rest
+            procs = list((getattr(pool, "_processes", None) or {}).values())
+            pool.shutdown(wait=False, cancel_futures=True)
             t0 = time.monotonic()
             for p in procs:
                 p.join(timeout=max(0.0, self.grace - (time.monotonic() - t0)))
-            self.pool = pool
-            self._terminate()
-            self.pool = None
+            for p in procs:
+                if p.is_alive():
+                    p.terminate()
+            for p in procs:
+                p.join(timeout=3.0)
+                if p.is_alive():
+                    p.kill()
+                    p.join(timeout=2.0)
         pool.shutdown(wait=True, cancel_futures=True)
 
 
-__all__ = ["JobRunner", "Interrupted", "init_worker", "single_thread_env", "stop_requested",
+__all__ = ["JobRunner", "StopOnSignal", "Interrupted", "init_worker", "single_thread_env", "stop_requested",
            "stop_event", "note_signal", "last_signal", "exit_status"]

@@ -40,6 +40,11 @@ on the Ray instance this process is already connected to, else on ``--cluster AD
 part of; an address starting with ``ray://`` implies ``--backend ray``), else on ``$RAY_ADDRESS``,
 else on a Ray instance started here for the batch and stopped after it.  The same files, resume,
 summary and failure rules as with Dask.
+
+Ctrl-C or SIGTERM stops a batch on every backend the same way: queued runs never start,
+running ones stop at their next frame with their files kept as ``*.incomplete.*``, the summary
+says which runs finished, and the exit status is 130 (SIGINT) or 143 (SIGTERM); the same
+command then resumes.
 """
 
 from __future__ import annotations
@@ -177,8 +182,11 @@ def changed_fields(old: dict, new: dict) -> list[str]:
     return out
 
 
-def run_job(job: Job) -> dict:
-    """One run (in a worker process): never raises, returns its result row."""
+def run_job(job: Job, stop=None) -> dict:
+    """One run (in a worker process): never raises, returns its result row.  ``stop`` (an
+    object with ``is_set()``; default: this process's job's stop event) ends it early: not
+    started when already set, else stopped at the next frame with its files kept as
+    ``*.incomplete.*``."""
     from pfscope.trackers.jobs import note_signal, stop_event
 
     from .api import record
@@ -186,7 +194,7 @@ def run_job(job: Job) -> dict:
     t0 = time.perf_counter()
     row = {"run": job.run_id, "source": job.source, "lane": job.lane, "seed": job.seed,
            "rrd": str(job.path(".rrd")), "tracks": str(job.path(".txt"))}
-    ev = stop_event()
+    ev = stop if stop is not None else stop_event()
     if ev is not None and ev.is_set():  # queued when the batch was stopped: do not start
         row.update(status="not run", rrd="", tracks="")
         return row
@@ -198,7 +206,7 @@ def run_job(job: Job) -> dict:
                      tracks_out=job.path(".txt"), frames=job.frames, start=job.start,
                      level=job.level, seed=job.seed, detector=job.detector, preset=job.preset,
                      force=job.force, progress=False, max_points=job.max_points,
-                     stop=stop_event(), **synthetic, **job.options)
+                     stop=ev, **synthetic, **job.options)
         scores = next(iter(res.scores.values()), {}) if res.scores else {}
         row.update(status="interrupted" if res.interrupted else "ok", frames=res.frames,
                    seconds=round(res.seconds, 3), fps=round(res.fps, 2), bytes=res.bytes,
@@ -333,11 +341,11 @@ def _pick_backend(backend, cluster) -> tuple[Optional[str], str]:
 
 def _import_dask():
     try:
-        from dask.distributed import Client, as_completed as dask_as_completed
+        from dask.distributed import Client
     except ImportError:
         raise InputError('--cluster needs Dask distributed: pip install "pfscope[distributed]" '
                          '(or "dask[distributed]")') from None
-    return Client, dask_as_completed
+    return Client
 
 
 def _for_cluster(job: Job) -> Job:
@@ -348,10 +356,31 @@ def _for_cluster(job: Job) -> Job:
     return dataclasses.replace(job, source=src, out_dir=os.path.abspath(job.out_dir))
 
 
-def run_job_on_worker(job: Job) -> dict:
-    """``run_job`` on a Dask worker: single-threaded BLAS/torch first, like the local pool."""
+class _DaskStop:
+    """The batch's stop as a worker sees it: the Dask ``Event`` named ``name`` (set by the
+    client on Ctrl-C/SIGTERM), asked at most once a second."""
+
+    def __init__(self, name: str, every: float = 1.0):
+        self.name, self.every = name, every
+        self._next, self._set = 0.0, False
+
+    def is_set(self) -> bool:
+        if not self._set and time.monotonic() >= self._next:
+            self._next = time.monotonic() + self.every
+            try:
+                from distributed import Event
+
+                self._set = bool(Event(self.name).is_set())
+            except Exception:  # noqa: BLE001 - scheduler gone: the client's cancel ends us
+                pass
+        return self._set
+
+
+def run_job_on_worker(job: Job, stop_name: Optional[str] = None) -> dict:
+    """``run_job`` on a Dask or Ray worker: single-threaded BLAS/torch first, like the local
+    pool; ``stop_name``: the Dask ``Event`` that stops the batch."""
     _init_worker()
-    return run_job(job)
+    return run_job(job, stop=_DaskStop(stop_name) if stop_name else None)
 
 
 def _died(j: Job, e: BaseException) -> dict:
@@ -359,45 +388,81 @@ def _died(j: Job, e: BaseException) -> dict:
             "status": "failed", "error": f"worker died: {type(e).__name__}: {e}"[:300]}
 
 
-def _run_on_cluster(todo: list[Job], address: str, header, report) -> dict[str, dict]:
-    """Submit every job to the Dask cluster at ``address``; rows by run id as they finish."""
-    Client, dask_as_completed = _import_dask()
+#: Seconds a cluster batch stopped by a signal waits for its running runs to finish their
+#: files (as *.incomplete.*) and for its queued ones to report "not run".
+CLUSTER_GRACE = 15.0
+
+
+def _stopped_row(j: Job, e: BaseException) -> dict:
+    """The row of a run that a stop signal cancelled: ``interrupted`` when it had started
+    (its partial files are there), else ``not run``."""
+    started = bool(_leftovers(j))
+    return {**_died(j, e), "status": "interrupted" if started else "not run",
+            **({} if started else {"error": ""})}
+
+
+def _run_on_cluster(todo: list[Job], address: str, header,
+                    report) -> tuple[dict[str, dict], Optional[int]]:
+    """Submit every job to the Dask cluster at ``address``; rows by run id as they finish, and
+    the stop signal if one came.  On Ctrl-C/SIGTERM the batch's Dask ``Event`` is set: queued
+    runs return "not run" without starting, running ones stop at their next frame (files kept
+    as ``*.incomplete.*``); after :data:`CLUSTER_GRACE` seconds what is left is cancelled."""
+    from pfscope.trackers.jobs import StopOnSignal
+
+    Client = _import_dask()
     try:
         client = Client(address, timeout="20s")
     except (OSError, TimeoutError) as e:
         msg = str(e).splitlines()[0] if str(e) else type(e).__name__
         raise InputError(f"--cluster {address}: cannot reach the Dask scheduler ({msg})") from None
+    from dask.distributed import Event
+
     rows: dict[str, dict] = {}
     futs: dict = {}
+    token = f"{os.getpid()}-{time.time_ns()}"
+    stop = Event(f"pfscope-batch-stop-{token}", client=client)
     try:
-        header(f"Dask cluster {address} ({sum(client.nthreads().values())} worker thread(s))")
-        token = f"{os.getpid()}-{time.time_ns()}"
-        for j in todo:
-            fut = client.submit(run_job_on_worker, _for_cluster(j), pure=False, retries=0,
-                                key=f"pfscope-batch-{j.run_id}-{token}")
-            futs[fut] = j
-        unseen = True
-        for i, fut in enumerate(dask_as_completed(list(futs)), start=1):
-            j = futs[fut]
-            try:
-                row = {**fut.result(), "source": j.source}
-            except BaseException as e:  # noqa: BLE001 - a worker died (KilledWorker) or was lost
-                if isinstance(e, KeyboardInterrupt):
-                    raise
-                row = _died(j, e)
-            if row["status"] == "ok" and unseen and not j.path(".json").is_file():
-                unseen = False  # said once: resume needs the workers' files to be seen here
-                print(f"batch: warning: {j.path('.json')} was written by a worker but is not "
-                      "visible here: --out must be a folder every worker shares, or resume "
-                      "will not see finished runs", file=sys.stderr)
-            rows[j.run_id] = row
-            report(i, row)
+        with StopOnSignal() as sigs:
+            header(f"Dask cluster {address} ({sum(client.nthreads().values())} worker thread(s))")
+            for j in todo:
+                fut = client.submit(run_job_on_worker, _for_cluster(j), stop.name, pure=False,
+                                    retries=0, key=f"pfscope-batch-{j.run_id}-{token}")
+                futs[fut] = j
+            unseen = True
+            pending, deadline, i = set(futs), None, 0
+            while pending:
+                if sigs.signum is not None and deadline is None:
+                    stop.set()
+                    deadline = time.monotonic() + CLUSTER_GRACE
+                if deadline is not None and time.monotonic() > deadline:
+                    break
+                done = [f for f in pending if f.done()]
+                if not done:
+                    time.sleep(0.2)
+                    continue
+                pending.difference_update(done)
+                for fut in done:
+                    j = futs[fut]
+                    i += 1
+                    try:
+                        row = {**fut.result(), "source": j.source}
+                    except BaseException as e:  # noqa: BLE001 - KilledWorker, lost worker
+                        row = _stopped_row(j, e) if sigs.signum is not None else _died(j, e)
+                    if row["status"] == "ok" and unseen and not j.path(".json").is_file():
+                        unseen = False  # said once: resume needs the workers' files here
+                        print(f"batch: warning: {j.path('.json')} was written by a worker but "
+                              "is not visible here: --out must be a folder every worker "
+                              "shares, or resume will not see finished runs", file=sys.stderr)
+                    rows[j.run_id] = row
+                    report(i, row)
+            for fut in pending:  # past the grace period: cancelled
+                rows[futs[fut].run_id] = _stopped_row(futs[fut], TimeoutError("cancelled"))
+        return rows, sigs.signum
     finally:
         pending = [f for f in futs if not f.done()]
         if pending:
             client.cancel(pending)
         client.close()
-    return rows
 
 
 def _import_ray():
@@ -408,10 +473,15 @@ def _import_ray():
     return ray
 
 
-def _run_on_ray(todo: list[Job], address: Optional[str], header, report) -> dict[str, dict]:
+def _run_on_ray(todo: list[Job], address: Optional[str], header,
+                report) -> tuple[dict[str, dict], Optional[int]]:
     """Run every job as a Ray task (1 CPU each) on the Ray instance this process is connected
-    to, else on ``address`` / ``$RAY_ADDRESS``, else on one started here (and stopped after)."""
+    to, else on ``address`` / ``$RAY_ADDRESS``, else on one started here (and stopped after).
+    On Ctrl-C/SIGTERM every task not finished is cancelled: a queued one never starts, a
+    running one gets KeyboardInterrupt and keeps its files as ``*.incomplete.*``."""
     import logging
+
+    from pfscope.trackers.jobs import StopOnSignal
 
     ray = _import_ray()
     started = False
@@ -428,26 +498,36 @@ def _run_on_ray(todo: list[Job], address: Optional[str], header, report) -> dict
     rows: dict[str, dict] = {}
     pending: list = []
     try:
-        cpus = int(ray.cluster_resources().get("CPU", 0))
-        where = address or ("a local Ray instance" if started else "the connected Ray cluster")
-        header(f"Ray {where} ({cpus} CPU(s))")
-        task = ray.remote(num_cpus=1, max_retries=0)(run_job_on_worker)
-        refs = {task.remote(_for_cluster(j)): j for j in todo}
-        pending = list(refs)
-        i = 0
-        while pending:
-            done, pending = ray.wait(pending, num_returns=1)
-            for ref in done:
-                j = refs[ref]
-                i += 1
-                try:
-                    row = {**ray.get(ref), "source": j.source}
-                except KeyboardInterrupt:
-                    raise
-                except BaseException as e:  # noqa: BLE001 - a worker died or the task was lost
-                    row = _died(j, e)
-                rows[j.run_id] = row
-                report(i, row)
+        with StopOnSignal() as sigs:
+            cpus = int(ray.cluster_resources().get("CPU", 0))
+            where = address or ("a local Ray instance" if started else "the connected Ray cluster")
+            header(f"Ray {where} ({cpus} CPU(s))")
+            task = ray.remote(num_cpus=1, max_retries=0)(run_job_on_worker)
+            refs = {task.remote(_for_cluster(j)): j for j in todo}
+            pending = list(refs)
+            i, deadline = 0, None
+            while pending:
+                if sigs.signum is not None and deadline is None:
+                    for ref in pending:
+                        ray.cancel(ref, force=False)  # queued: dropped; running: KeyboardInterrupt
+                    deadline = time.monotonic() + CLUSTER_GRACE
+                if deadline is not None and time.monotonic() > deadline:
+                    break
+                done, pending = ray.wait(pending, num_returns=1, timeout=0.2)
+                for ref in done:
+                    j = refs[ref]
+                    i += 1
+                    try:
+                        row = {**ray.get(ref), "source": j.source}
+                    except BaseException as e:  # noqa: BLE001 - cancelled, worker died, lost
+                        if isinstance(e, KeyboardInterrupt):
+                            raise
+                        row = _stopped_row(j, e) if sigs.signum is not None else _died(j, e)
+                    rows[j.run_id] = row
+                    report(i, row)
+            for ref in pending:  # past the grace period
+                rows[refs[ref].run_id] = _stopped_row(refs[ref], TimeoutError("cancelled"))
+        return rows, sigs.signum
     finally:
         for ref in pending:
             try:
@@ -456,7 +536,6 @@ def _run_on_ray(todo: list[Job], address: Optional[str], header, report) -> dict
                 pass
         if started:
             ray.shutdown()
-    return rows
 
 
 def run_batch(jobs: list[Job], out: Path, workers: int, *, quiet: bool = False,
@@ -547,12 +626,15 @@ def _run_batch_locked(jobs, out, workers, *, quiet, stream, cluster, backend) ->
         print(f"batch [{i}/{total}] {row['run']}: {what}{note}  (elapsed {el:.0f} s, ETA "
               f"{eta:.0f} s)", file=stream)
 
+    stopped = None
     if backend == "ray" and todo:
-        rows.update(_run_on_ray(todo, cluster, header, report))
+        got, stopped = _run_on_ray(todo, cluster, header, report)
+        rows.update(got)
     elif backend == "ray":
         header(f"Ray {cluster or 'cluster'}")  # nothing to run: no need to start or connect
     elif cluster and todo:
-        rows.update(_run_on_cluster(todo, cluster, header, report))
+        got, stopped = _run_on_cluster(todo, cluster, header, report)
+        rows.update(got)
     elif cluster:
         header(f"Dask cluster {cluster}")  # nothing to run: no need to connect
     else:
@@ -570,17 +652,17 @@ def _run_batch_locked(jobs, out, workers, *, quiet, stream, cluster, backend) ->
                 rows[j.run_id] = row
                 report(i, row)
             stopped = runner.signum
-        if stopped is not None:
-            for j in todo:
-                rows.setdefault(j.run_id, {"run": j.run_id, "source": j.source, "lane": j.lane,
-                                           "seed": j.seed, "status": "not run"})
-            if not quiet:
-                import signal
+    if stopped is not None:
+        for j in todo:
+            rows.setdefault(j.run_id, {"run": j.run_id, "source": j.source, "lane": j.lane,
+                                       "seed": j.seed, "status": "not run"})
+        if not quiet:
+            import signal
 
-                left = sum(r["status"] == "not run" for r in rows.values())
-                print(f"batch: stopped by {signal.Signals(stopped).name}: {left} queued run(s) "
-                      f"not started; running ones kept as *.incomplete.*; re-run the same "
-                      f"command to resume", file=stream)
+            left = sum(r["status"] == "not run" for r in rows.values())
+            print(f"batch: stopped by {signal.Signals(stopped).name}: {left} queued run(s) "
+                  f"not started; running ones kept as *.incomplete.*; re-run the same "
+                  f"command to resume", file=stream)
     ordered = [rows[j.run_id] for j in jobs]
     write_summary(ordered, out, wall=time.perf_counter() - t0)
     return ordered

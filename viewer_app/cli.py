@@ -56,6 +56,11 @@ POSITIVE_INT = _number(int, low=1, what="a positive integer")
 NONNEG_INT = _number(int, low=0, what="a non-negative integer")
 POSITIVE = _number(float, low=0, low_open=True, what="a positive number")
 NONNEG = _number(float, low=0, what="a non-negative number")
+#: the synthetic scene's people and false detections per frame: bounded so that a typo
+#: (--clutter 1e9) is a usage error, not an allocation of terabytes
+MAX_SCENE = 10_000
+SCENE_TARGETS = _number(int, low=1, high=MAX_SCENE, what="a positive integer")
+SCENE_CLUTTER = _number(float, low=0, high=MAX_SCENE, what="a non-negative number")
 
 
 FRAMES_HELP = "N (the first N frames) or FIRST:LAST (e.g. 380:450; the video's own numbers)"
@@ -150,9 +155,9 @@ def _add_synth_options(p: argparse.ArgumentParser, *, frames_help: str,
                        ranges: bool = False) -> None:
     p.add_argument("--frames", type=FRAMES if ranges else FRAME_COUNT, default=None,
                    help=frames_help + (" or FIRST:LAST (e.g. 380:450)" if ranges else ""))
-    p.add_argument("--targets", type=POSITIVE_INT, default=None,
+    p.add_argument("--targets", type=SCENE_TARGETS, default=None,
                    help="synthetic scene: number of people (default 6)")
-    p.add_argument("--clutter", type=NONNEG, default=None,
+    p.add_argument("--clutter", type=SCENE_CLUTTER, default=None,
                    help="synthetic scene: mean false detections per frame (default 2)")
     p.add_argument("--seed", type=NONNEG_INT, default=0,
                    help="random seed (scene and tracker)")
@@ -486,9 +491,9 @@ def _add_tune_parser(sub, TRACKERS, DETECTORS, LEVELS) -> None:
                     help="drop file detections scoring below this")
     tn.add_argument("--fps", type=POSITIVE, default=None,
                     help="frame rate of an image folder or a video file")
-    tn.add_argument("--targets", type=POSITIVE_INT, default=None,
+    tn.add_argument("--targets", type=SCENE_TARGETS, default=None,
                     help="synthetic scene: number of people (default 6)")
-    tn.add_argument("--clutter", type=NONNEG, default=None,
+    tn.add_argument("--clutter", type=SCENE_CLUTTER, default=None,
                     help="synthetic scene: mean false detections per frame (default 2)")
     tn.add_argument("--out", type=Path, default=Path("best.toml"),
                     help="best parameters, TOML (default best.toml)")
@@ -1277,6 +1282,10 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             sys.stdout.flush()
             sys.stderr.flush()
             os._exit(EXIT_RUN_FAILED)
+        return EXIT_RUN_FAILED
+    except MemoryError as e:  # a size the machine cannot hold: one line, not numpy's trace
+        print(f"pfscope: run failed: out of memory ({str(e).splitlines()[0] if str(e) else 'MemoryError'})",
+              file=sys.stderr)
         return EXIT_RUN_FAILED
     except KeyboardInterrupt:
         print("pfscope: interrupted", file=sys.stderr)

@@ -46,8 +46,14 @@ def _open(path: Path):
     if not path.is_file():
         raise InputError(f"{path}: no such recording")
     check_rrd_header(path)
+    import warnings
+
     try:
-        reader = rr.chunk.RrdReader(str(path))
+        with warnings.catch_warnings():
+            # a file without footer (a killed or cut-short run) is streamed below: Rerun's
+            # "no footer/manifest ... legacy format" warning would only add two lines of noise
+            warnings.filterwarnings("ignore", message=".*no footer")
+            reader = rr.chunk.RrdReader(str(path))
     except Exception as e:  # noqa: BLE001 - any reader error is the file's fault
         raise InputError(f"{path}: not a readable Rerun recording ({e})") from None
     try:
@@ -60,6 +66,24 @@ def _open(path: Path):
         msg = str(e).splitlines()[0] if str(e) else type(e).__name__
         raise InputError(f"{path}: cut short, not readable as it is ({msg[:160]}); try "
                          f"`pfscope repair {path}`") from None
+
+
+def check_readable(path) -> None:
+    """Read every chunk of the recording once: an :class:`InputError` (one line) for a file
+    that is cut short, holds no data or is not a recording, before anything slower (the
+    headless viewer of ``snapshot``) is started on it."""
+    path = Path(path)
+    chunks, _ = _open(path)
+    n = 0
+    try:
+        for _ in chunks:
+            n += 1
+    except Exception as e:  # noqa: BLE001 - cut short inside an entry
+        msg = str(e).splitlines()[0] if str(e) else type(e).__name__
+        raise InputError(f"{path}: cut short, not readable as it is ({msg[:160]}); try "
+                         f"`pfscope repair {path}`") from None
+    if n == 0:
+        raise InputError(f"{path}: holds no recorded data")
 
 
 def recording_info(path, top: int = 10) -> dict[str, Any]:

@@ -216,9 +216,9 @@ def snapshot(rrd, out, *, frame: Optional[int] = None, tab: Optional[str] = None
     rrd, out = Path(rrd), Path(out)
     if not rrd.is_file():
         raise InputError(f"{rrd}: no such recording")
-    from .info import check_rrd_header
+    from .info import check_readable
 
-    check_rrd_header(rrd)
+    check_readable(rrd)   # its header, then every chunk: before the viewer starts
     wanted = list(range(frames[0], frames[1] + 1)) if frames else [frame]
     outs = [series_path(out, f) for f in wanted] if frames else [out]
     for o in outs:

@@ -219,20 +219,36 @@ class VideoFileSource(Source):
         cap = cv2.VideoCapture(str(self.path))
         try:
             k = 0
+            last_ms, step_ms = 0.0, 0.0   # the last frame's container time and interval
             while limit is None or k < limit:
                 ok, img = cap.read()
                 if not ok or img is None:
                     if k == 0:
                         raise InputError(f"{self.path}: frame 1: cannot decode")
-                    if self.length is not None and k < self.length:
+                    if self.length is not None and k < self.length \
+                            and not self._covers_duration(k, last_ms, step_ms):
                         raise InputError(f"{self.path}: frame {k + 1}: the video ends after "
                                          f"{k} of the {self.length} frames its header "
                                          f"announces (truncated file?)")
                     return
                 k += 1
+                ms = cap.get(cv2.CAP_PROP_POS_MSEC)
+                if k > 1 and np.isfinite(ms) and ms > last_ms:
+                    step_ms = ms - last_ms
+                last_ms = ms if np.isfinite(ms) else last_ms
                 yield Frame(k, (k - 1) / self.fps, img)
         finally:
             cap.release()
+
+    def _covers_duration(self, k: int, last_ms: float, step_ms: float) -> bool:
+        """Whether ``k`` frames whose last one shows at ``last_ms`` reach the end of the
+        stream: a variable-frame-rate video has fewer frames than its header's count
+        (duration × the nominal rate) yet ends where the duration says; a truncated one ends
+        early.  Within one frame interval (the last one seen, or the nominal one)."""
+        if k < 2 or last_ms <= 0 or not self.length:
+            return False  # no container times: the frame count is all there is
+        duration_ms = 1000.0 * self.length / self.fps
+        return last_ms + 2.0 * max(step_ms, 1000.0 / self.fps) >= duration_ms
 
 
 class ImageFolderSource(Source):
