@@ -243,7 +243,8 @@ def test_ids_are_parsed_as_integers(tmp_path):
         read_mot(f, "tracks")
 
 
-@pytest.mark.parametrize("argv", [["trackers"], ["synth", "--frames", "2", "--quiet"],
+@pytest.mark.parametrize("argv", [["trackers"], ["--help"], ["info", "--help"],
+                                  ["synth", "--frames", "2", "--quiet"],
                                   ["batch", "--trackers", "passthrough", "--frames", "2",
                                    "--workers", "1", "--quiet"]])
 def test_stdout_to_a_full_device_is_one_line(tmp_path, argv):

@@ -177,6 +177,12 @@ class _Parser(argparse.ArgumentParser):
                                                  f"choose from {choices}")
         super()._check_value(action, value)
 
+    def _print_message(self, message, file=None):
+        # argparse swallows a failed write (help into a full disk would exit 0 having written
+        # nothing): let it reach main(), which says so in one line
+        if message:
+            (file or sys.stderr).write(message)
+
 
 ONLINE_HELP = ("treat the source as a stream: no look at the clip ahead of time (dbn-phd and "
                "phd-bgsub then learn their background from the first frames only, instead of "
@@ -1233,7 +1239,16 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     from pfscope.trackers.jobs import Interrupted
 
     os.environ.setdefault("RERUN_ANALYTICS", "0")
-    args = build_parser().parse_args(argv)
+    try:
+        args = build_parser().parse_args(argv)
+    except BrokenPipeError:  # `pfscope --help | head`: the reader left
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
+    except OSError as e:  # `pfscope --help > /dev/full`: say so, never exit 0 silently
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        print(f"pfscope: error: cannot write ({e.strerror}); nothing more was written",
+              file=sys.stderr)
+        return EXIT_RUN_FAILED
     try:
         if args.command == "record":
             return cmd_record(args)
