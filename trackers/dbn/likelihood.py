@@ -137,6 +137,12 @@ class DBNLikelihood:
         feats = self.frame_features(frame).describe(boxes_xywh)
         return self.model.logits(feats)
 
+    def logits_union(self, boxes_xywh: np.ndarray, frame: Frame) -> np.ndarray:
+        """:meth:`logits` of boxes close together (one crop over their union,
+        :meth:`FrameFeatures.describe_union`)."""
+        feats = self.frame_features(frame).describe_union(boxes_xywh)
+        return self.model.logits(feats)
+
     def log_score(self, logits: np.ndarray) -> np.ndarray:
         """``s(x)`` from the DBN activations (module docstring)."""
         a = np.asarray(logits, dtype=np.float64)

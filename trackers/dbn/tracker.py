@@ -98,6 +98,8 @@ from ..smc.weights import ParticleSet
 from ..types import Detections, Frame, xywh_to_cxcywh
 from .codebook import BackgroundParams, ForegroundModel, blobs_from_mask
 from .likelihood import DBNLikelihood, DBNParams, gaussian_pairs, state_boxes
+from .scale import (PersonScale, SplitParams, box_fill, needs_split, select_windows,
+                    split_candidates)
 
 COUNTS = ("fixed", "per_target")
 BIRTH_WEIGHTS = ("eq10", "intensity")
@@ -151,6 +153,8 @@ class DBNPHDParams:
 
     background: BackgroundParams = part(BackgroundParams, "background subtraction and blobs")
     dbn: DBNParams = part(DBNParams, "the DBN score in the likelihood")
+    split: SplitParams = part(SplitParams, "scene-learnt person size and the split of "
+                                           "multi-person blobs (DBN-PHD only)")
     filter: PHDParams = field(default_factory=_filter_defaults,
                               metadata={"doc": "particle PHD filter (motion, likelihood, "
                                                "clutter, birth)", "paper": None})
@@ -221,6 +225,7 @@ class DBNPHDTracker(_AssociatingTracker):
             self.dbn = DBNLikelihood(model, dp, self.params.filter.likelihood)
         # the filter's parts; its likelihood is the DBN one (or maggio2007's Gaussian)
         self.filter = PHDFilter(self.params.filter, rng, likelihood=self.dbn)
+        self.person_scale = PersonScale(self.params.split)
 
     def prepare(self, source, first: int, last: int) -> None:
         """Offline start (the pipeline calls this for a recorded clip, not with ``--online``):
@@ -245,6 +250,36 @@ class DBNPHDTracker(_AssociatingTracker):
         """The frame's stage log (a benchmark overrides this to time the stages)."""
         return StageLog(self.stages, level)
 
+    def _split(self, boxes, fill, blob_a, mask, frame):
+        """Blobs bigger than the scene's person searched for people (:mod:`.scale`): returns
+        the measurements (split blobs replaced by the windows the DBN kept), their fill and
+        DBN logits, and the number of blobs split.  The person size learns from the accepted
+        blobs that were not split."""
+        sp = self.params.split
+        accept = self.params.dbn.accept
+        scale = self.params.background.scale
+        big = needs_split(boxes, self.person_scale, sp)
+        out_b, out_f, out_a = [boxes[~big]], [fill[~big]], [blob_a[~big]]
+        n_split = 0
+        if big.any():
+            fg_ii = cv2.integral(mask)
+            for i in np.flatnonzero(big):
+                cand = split_candidates(boxes[i], self.person_scale, sp, fg_ii, scale)
+                if len(cand):
+                    a = self.dbn.logits_union(cand, frame)
+                    kept = select_windows(cand, 1.0 / (1.0 + np.exp(-a)), accept, sp.overlap)
+                    if len(kept):
+                        out_b.append(cand[kept])
+                        out_f.append(box_fill(fg_ii, cand[kept], scale))
+                        out_a.append(a[kept])
+                        n_split += 1
+                        continue
+                out_b.append(boxes[i:i + 1])
+                out_f.append(fill[i:i + 1])
+                out_a.append(blob_a[i:i + 1])
+        self.person_scale.add(boxes[~big][blob_a[~big] >= _logit(accept)])
+        return np.concatenate(out_b), np.concatenate(out_f), np.concatenate(out_a), n_split
+
     # ------------------------------------------------------------------------------- step
 
     def step(self, frame: Frame, detections: Optional[Detections],
@@ -267,8 +302,12 @@ class DBNPHDTracker(_AssociatingTracker):
         bp = p.background
         boxes, fill = blobs_from_mask(mask, bp.scale, bp.min_area, bp.max_foreground)
         Z = xywh_to_cxcywh(boxes)
+        n_split = 0
         if self.dbn is not None and len(boxes):
             blob_a = self.dbn.logits(boxes, frame)
+            if p.split.enabled:
+                boxes, fill, blob_a, n_split = self._split(boxes, fill, blob_a, mask, frame)
+                Z = xywh_to_cxcywh(boxes)
             blob_prob = 1.0 / (1.0 + np.exp(-blob_a))
             accepted = blob_prob >= p.dbn.accept
         else:
@@ -276,6 +315,7 @@ class DBNPHDTracker(_AssociatingTracker):
             blob_prob = np.full(len(boxes), np.nan)
             accepted = np.ones(len(boxes), dtype=bool)
         log.scalar("dbn/blobs/count", len(boxes))
+        log.scalar("dbn/blobs/split", n_split)
         log.scalar("dbn/blobs/rejected", int((~accepted).sum()))
         for i in np.flatnonzero(~accepted):
             x, y, w, h = boxes[i]
@@ -380,6 +420,11 @@ class DBNPHDTracker(_AssociatingTracker):
             log.add(Boxes("dbn/clusters/dropped", cb[~k], role="dropped",
                           values={"m": clusters.masses[~k]}))
         return self._associate(frame, clusters.kept_centers, log)
+
+
+def _logit(p: float) -> float:
+    p = min(max(p, 1e-12), 1 - 1e-12)
+    return math.log(p / (1 - p))
 
 
 def _baseline_params() -> DBNPHDParams:
