@@ -41,7 +41,7 @@ colour band with no pixel inside the image is all zeros (the only non-normalised
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 
 import cv2
 import numpy as np
@@ -60,6 +60,10 @@ class FeatureConfig:
     grey_bins: int = 4
     sat_min: float = 0.25      # chromatic pixel: saturation >= this fraction of 255
     val_min: float = 0.2       # ... and value >= this fraction of 255
+    #: > 0: every box is described on the image pyramid level (scales 2^(-k/2), k >= 0) that
+    #: brings its height nearest this many pixels, so a person is described at the same size
+    #: whatever the camera's resolution or distance; 0: one fixed scale for every box
+    box_height: float = 0.0
 
     @property
     def hog_dim(self) -> int:
@@ -147,9 +151,16 @@ class FrameFeatures:
     #: at most this many boxes take the per-box crop route
     crop_max = 32
 
+    #: coarsest pyramid level used when ``cfg.box_height > 0`` (scale 2^(-max_level/2))
+    max_level = 8
+
     def __init__(self, image: np.ndarray, cfg: FeatureConfig = FeatureConfig(),
                  scale: float = 1.0):
         self.cfg = cfg
+        self._full = image
+        self._levels: dict[int, FrameFeatures] = {}
+        if cfg.box_height > 0:           # pyramid mode: levels built on demand
+            scale = 1.0
         self.scale = float(scale)
         if self.scale != 1.0:
             h, w = image.shape[:2]
@@ -158,6 +169,28 @@ class FrameFeatures:
         self.image = image
         self.height, self.width = image.shape[:2]
         self._ii: tuple[np.ndarray, np.ndarray] | None = None
+
+    def levels(self, boxes_xywh: np.ndarray) -> np.ndarray:
+        """(N,) pyramid level k of every box (scale 2^(-k/2)): the one whose scaled height is
+        nearest ``cfg.box_height`` in ratio, never enlarged (k >= 0)."""
+        h = np.maximum(np.asarray(boxes_xywh, dtype=np.float64).reshape(-1, 4)[:, 3], 1e-6)
+        k = np.round(2.0 * np.log2(h / self.cfg.box_height))
+        return np.clip(k, 0, self.max_level).astype(np.int64)
+
+    def _level(self, k: int) -> "FrameFeatures":
+        if k not in self._levels:
+            self._levels[k] = FrameFeatures(self._full, replace(self.cfg, box_height=0.0),
+                                            2.0 ** (-k / 2.0))
+        return self._levels[k]
+
+    def _by_level(self, boxes_xywh: np.ndarray, method: str) -> np.ndarray:
+        b = np.asarray(boxes_xywh, dtype=np.float64).reshape(-1, 4)
+        out = np.zeros((len(b), self.cfg.dim))
+        lv = self.levels(b)
+        for k in np.unique(lv):
+            sel = lv == k
+            out[sel] = getattr(self._level(int(k)), method)(b[sel])
+        return out
 
     @property
     def ii_hog(self) -> np.ndarray:
@@ -188,6 +221,8 @@ class FrameFeatures:
         n = len(np.asarray(boxes_xywh).reshape(-1, 4))
         if n == 0:
             return np.zeros((0, c.dim))
+        if c.box_height > 0:
+            return self._by_level(boxes_xywh, "describe_union")
         if self._ii is not None:
             return self.describe(boxes_xywh)
         yh, xh = self.edges(boxes_xywh, c.hog_rows, c.hog_cols)
@@ -213,6 +248,8 @@ class FrameFeatures:
         n = len(np.asarray(boxes_xywh).reshape(-1, 4))
         if n == 0:
             return np.zeros((0, c.dim))
+        if c.box_height > 0:
+            return self._by_level(boxes_xywh, "describe")
         yh, xh = self.edges(boxes_xywh, c.hog_rows, c.hog_cols)
         yc, xc = self.edges(boxes_xywh, c.colour_rows, 1)
         y0 = np.minimum(yh[:, 0], yc[:, 0])

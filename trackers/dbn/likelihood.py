@@ -33,7 +33,7 @@ The integral histograms of a frame are built once and reused for every call with
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Optional
 
 import numpy as np
@@ -60,7 +60,12 @@ class DBNParams:
                      paper="feng2015 eq. (9)")
     score: str = param("logsigmoid", "log-score s(x): 'logsigmoid' c·log σ(a) (default) or "
                                      "'logit' c·a (eq. (9) literally)")
-    feature_scale: float = param(0.5, "image scale the colour/HOG histograms are taken at")
+    feature_scale: float = param(0.5, "image scale the colour/HOG histograms are taken at "
+                                      "when feature_height is 0")
+    feature_height: float = param(48.0, "every box is described on the image-pyramid level "
+                                        "(scales 2^(-k/2)) that brings its height nearest this "
+                                        "many px, so the person scale comes from the box, not "
+                                        "the video's resolution; 0: one fixed feature_scale")
     accept: float = param(0.5, "a blob is accepted as a person when its DBN probability σ(a) "
                                ">= this; only accepted blobs give births (new-born target "
                                "selection, feng2015 §II)")
@@ -84,6 +89,9 @@ class DBNParams:
                              f"got {self.apply!r}")
         if not self.kappa_clip > 0:
             raise ValueError(f"DBNParams.kappa_clip must be > 0, got {self.kappa_clip!r}")
+        if not self.feature_height >= 0:
+            raise ValueError(f"DBNParams.feature_height must be >= 0, "
+                             f"got {self.feature_height!r}")
         if not 0 < self.feature_scale <= 1:
             raise ValueError(f"DBNParams.feature_scale must be in (0, 1], "
                              f"got {self.feature_scale!r}")
@@ -128,7 +136,8 @@ class DBNLikelihood:
         """The frame's integral histograms, built once per frame."""
         key = (frame.index, id(frame.image))
         if self._key != key or self._ff is None:
-            self._ff = FrameFeatures(frame.image, self.model.features, self.params.feature_scale)
+            cfg = replace(self.model.features, box_height=self.params.feature_height)
+            self._ff = FrameFeatures(frame.image, cfg, self.params.feature_scale)
             self._key = key
         return self._ff
 
