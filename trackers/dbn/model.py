@@ -56,11 +56,6 @@ import torch
 from ..errors import InputError
 from .features import FeatureConfig, FrameFeatures
 
-#: The feature layout ``train-dbn`` uses: every box described at about 48 px tall (the image
-#: pyramid level nearest, :class:`~.features.FeatureConfig`), the size the tracker's default
-#: ``feature_height`` asks for.
-TRAIN_FEATURES = FeatureConfig(box_height=48.0)
-
 FORMAT = "pfscope-dbn"
 VERSION = 1
 
@@ -269,7 +264,7 @@ def train_dbn(X: np.ndarray, y: np.ndarray, **kw) -> DBNModel:
         return _train(X, y, **kw)
 
 
-def _train(X: np.ndarray, y: np.ndarray, *, features: FeatureConfig = TRAIN_FEATURES,
+def _train(X: np.ndarray, y: np.ndarray, *, features: FeatureConfig = FeatureConfig(),
               hidden: tuple[int, ...] = (64, 32), seed: int = 0, pre_epochs: int = 10,
               fine_epochs: int = 30, lr_rbm: float = 0.05, lr: float = 3e-3, batch: int = 64,
               holdout: float = 0.2, holdout_mask: Optional[np.ndarray] = None,
@@ -414,7 +409,7 @@ def _colour_jitter(image: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     return np.clip(image.astype(np.float32) * gain + off, 0, 255).astype(np.uint8)
 
 
-def collect_samples(source, frames: Iterable[int], *, features: FeatureConfig = TRAIN_FEATURES,
+def collect_samples(source, frames: Iterable[int], *, features: FeatureConfig = FeatureConfig(),
                     feature_scale: float = 0.5, background=None, seed: int = 0,
                     stride: int = 2, min_vis: float = 0.5, augment: bool = False,
                     progress: Optional[Callable[[str, int, int], None]] = None,
