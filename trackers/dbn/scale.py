@@ -13,7 +13,7 @@ person must be able to hold a target.  Here the DBN looks inside the blob.
 Person size (:class:`PersonScale`): every DBN-accepted blob whose width is not more than
 ``max_aspect`` of its height adds ``(foot y, height, width / height)``; the expected height at
 a foot row is a line ``h = a + b·y`` (a camera looking down on a ground plane: people further
-away stand higher in the image and look smaller) fitted by least squares, then refitted once
+away stand higher in the image and look smaller) fitted by least squares, then refitted twice
 without the points more than 2.5 robust standard deviations (1.4826 MAD) off; the width is the
 median aspect ratio times the height.  Nothing about the camera or the resolution is assumed:
 before ``min_samples`` blobs were accepted, no blob is split.
@@ -117,7 +117,7 @@ class PersonScale:
 
 
 def _robust_line(y: np.ndarray, h: np.ndarray) -> tuple[float, float]:
-    """``h ≈ a + b·y``: least squares, then once more without points off by > 2.5 robust σ.
+    """``h ≈ a + b·y``: least squares, then twice more without points off by > 2.5 robust σ.
     A flat line (the median) when the rows span too little to fit a slope."""
     def fit(m):
         yy, hh = y[m], h[m]
@@ -128,12 +128,17 @@ def _robust_line(y: np.ndarray, h: np.ndarray) -> tuple[float, float]:
 
     m = np.ones(len(y), bool)
     a, b = fit(m)
-    r = h - (a + b * y)
-    s = 1.4826 * np.median(np.abs(r - np.median(r)))
-    if s > 0:
-        m = np.abs(r) <= 2.5 * s
-        if m.sum() >= 3:
-            a, b = fit(m)
+    for _ in range(2):
+        r = h - (a + b * y)
+        med = np.median(r[m])
+        s = 1.4826 * np.median(np.abs(r[m] - med))
+        if not s > 0:
+            break
+        keep = np.abs(r - med) <= 2.5 * s
+        if keep.sum() < 3:
+            break
+        m = keep
+        a, b = fit(m)
     return a, b
 
 

@@ -185,19 +185,20 @@ def _gated_pairs(states: np.ndarray, Z: np.ndarray, params: PHDParams, confidenc
 
 #: ``--preset paper``: feng2015 as published, differing from the default in exactly these fields
 #: (tests/test_dbn.py checks it): the literal eq. (9) score on every particle, maggio2007's
-#: J_max, and the codebook trained online on the first frames (Kim 2005) instead of our
-#: offline temporal-median start.
+#: J_max, the codebook trained online on the first frames (Kim 2005) instead of our
+#: offline temporal-median start, and no search for people inside big blobs (:mod:`.scale`).
 PAPER_CHANGES: dict[str, object] = {
     "dbn.score": "logit",                  # eq. (9): s = c · a(x)
     "dbn.apply": "particle",               # eq. (9) weighs every particle
     "filter.birth.j_max": PHDParams().birth.j_max,  # maggio2007 §4's J_max
     "background.initial": "online",        # Kim 2005 §2: train on the first N frames
+    "split.enabled": False,                # feng2015 has no rule for multi-person blobs
 }
 
 
 @register(presets={"default": DBNPHDParams(), "paper": DBNPHDParams(
     filter=PHDParams(), dbn=DBNParams(score="logit", apply="particle"),
-    background=BackgroundParams(initial="online"))})
+    background=BackgroundParams(initial="online"), split=SplitParams(enabled=False))})
 class DBNPHDTracker(_AssociatingTracker):
     """DBN-PHD: codebook blobs → particle PHD with a DBN colour+HOG likelihood → K-means →
     graph association."""
