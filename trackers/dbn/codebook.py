@@ -289,6 +289,8 @@ class Codebook:
         self.t += 1
         t = self.t
         x = img.reshape(-1, 3).astype(np.float32)
+        if t > p.train_frames and self.kernel:
+            return self._detect_kernel(x, t)
         xx = np.einsum("pc,pc->p", x, x)
         inten = np.sqrt(xx)
         b = self.book
@@ -304,8 +306,6 @@ class Codebook:
             if t == p.train_frames:
                 b.clear(b.wrap_lambda(t) > p.train_frames / 2.0)   # Kim §2.1 temporal filter
             return fg.reshape(self._shape)
-        if self.kernel:
-            return self._detect_kernel(x, t)
         return self._detect_numpy(x, xx, inten, t)
 
     def _detect_kernel(self, x: np.ndarray, t: int) -> np.ndarray:

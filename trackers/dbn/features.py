@@ -60,9 +60,10 @@ class FeatureConfig:
     grey_bins: int = 4
     sat_min: float = 0.25      # chromatic pixel: saturation >= this fraction of 255
     val_min: float = 0.2       # ... and value >= this fraction of 255
-    #: > 0: every box is described on the image pyramid level (scales 2^(-k/2), k >= 0) that
-    #: brings its height nearest this many pixels, so a person is described at the same size
-    #: whatever the camera's resolution or distance; 0: one fixed scale for every box
+    #: > 0: every box is described on the image pyramid level (scales 2^-k, k >= 0: octaves,
+    #: each a fast exact 2x area reduction) that brings its height nearest this many pixels
+    #: (within a factor sqrt(2)), so a person is described at about the same size whatever the
+    #: camera's resolution or distance; 0: one fixed scale for every box
     box_height: float = 0.0
 
     @property
@@ -151,8 +152,8 @@ class FrameFeatures:
     #: at most this many boxes take the per-box crop route
     crop_max = 32
 
-    #: coarsest pyramid level used when ``cfg.box_height > 0`` (scale 2^(-max_level/2))
-    max_level = 8
+    #: coarsest pyramid level used when ``cfg.box_height > 0`` (scale 2^-max_level)
+    max_level = 5
 
     def __init__(self, image: np.ndarray, cfg: FeatureConfig = FeatureConfig(),
                  scale: float = 1.0):
@@ -171,16 +172,16 @@ class FrameFeatures:
         self._ii: tuple[np.ndarray, np.ndarray] | None = None
 
     def levels(self, boxes_xywh: np.ndarray) -> np.ndarray:
-        """(N,) pyramid level k of every box (scale 2^(-k/2)): the one whose scaled height is
+        """(N,) pyramid level k of every box (scale 2^-k): the one whose scaled height is
         nearest ``cfg.box_height`` in ratio, never enlarged (k >= 0)."""
         h = np.maximum(np.asarray(boxes_xywh, dtype=np.float64).reshape(-1, 4)[:, 3], 1e-6)
-        k = np.round(2.0 * np.log2(h / self.cfg.box_height))
+        k = np.round(np.log2(h / self.cfg.box_height))
         return np.clip(k, 0, self.max_level).astype(np.int64)
 
     def _level(self, k: int) -> "FrameFeatures":
         if k not in self._levels:
             self._levels[k] = FrameFeatures(self._full, replace(self.cfg, box_height=0.0),
-                                            2.0 ** (-k / 2.0))
+                                            2.0 ** -k)
         return self._levels[k]
 
     def _by_level(self, boxes_xywh: np.ndarray, method: str) -> np.ndarray:

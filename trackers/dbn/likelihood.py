@@ -63,9 +63,10 @@ class DBNParams:
     feature_scale: float = param(0.5, "image scale the colour/HOG histograms are taken at "
                                       "when feature_height is 0")
     feature_height: float = param(48.0, "every box is described on the image-pyramid level "
-                                        "(scales 2^(-k/2)) that brings its height nearest this "
-                                        "many px, so the person scale comes from the box, not "
-                                        "the video's resolution; 0: one fixed feature_scale")
+                                        "(scales 1, 1/2, 1/4, ...) that brings its height "
+                                        "nearest this many px, so the person scale comes from "
+                                        "the box, not the video's resolution; 0: one fixed "
+                                        "feature_scale")
     accept: float = param(0.5, "a blob is accepted as a person when its DBN probability σ(a) "
                                ">= this; only accepted blobs give births (new-born target "
                                "selection, feng2015 §II)")
