@@ -783,3 +783,14 @@ def test_pyramid_features_describe_a_person_alike_at_two_resolutions():
     whole = FrameFeatures(img, fixed, 0.5)
     whole._integrals()
     np.testing.assert_allclose(union, whole.describe(boxes), rtol=1e-9, atol=1e-9)
+
+
+def test_numpy_forward_pass_equals_the_torch_network():
+    """DBNModel.logits runs the trained network in numpy (speed); it is the torch network's
+    output to float rounding, on the shipped model and on extreme inputs."""
+    model = dbn_model.default_model()
+    rng = np.random.default_rng(0)
+    X = np.concatenate([rng.random((50, model.features.dim)),
+                        np.zeros((1, model.features.dim)), np.ones((1, model.features.dim))])
+    np.testing.assert_allclose(model.logits(X), model.torch_logits(X), rtol=1e-9, atol=1e-9)
+    assert np.ptp(model.logits(X)) > 1.0                     # not a constant

@@ -52,6 +52,7 @@ from typing import Callable, Iterable, Optional
 
 import numpy as np
 import torch
+from scipy.special import expit
 
 from ..errors import InputError
 from .features import FeatureConfig, FrameFeatures
@@ -140,15 +141,37 @@ class DBNModel:
     features: FeatureConfig
     hidden: tuple[int, ...]
     info: dict = field(default_factory=dict)
+    _layers: Optional[tuple] = field(default=None, init=False, repr=False, compare=False)
 
-    @torch.no_grad()
     def logits(self, X: np.ndarray) -> np.ndarray:
-        """Output activations ``a(x)`` (N,) float64 of feature rows ``X`` (N, D)."""
+        """Output activations ``a(x)`` (N,) float64 of feature rows ``X`` (N, D).
+
+        The forward pass runs in numpy on a copy of the trained weights taken at the first
+        call (the tracker asks for a few rows at a time, several times a frame: torch's
+        per-call dispatch cost more than the products; :meth:`torch_logits` is the same
+        network in torch, equal to float rounding — tested)."""
         X = np.asarray(X, dtype=np.float64)
         if X.ndim != 2 or X.shape[1] != self.features.dim:
             raise ValueError(f"DBN: expected features (N, {self.features.dim}), got {X.shape}")
         if len(X) == 0:
             return np.zeros(0)
+        if self._layers is None:
+            with torch.no_grad():
+                self._layers = (
+                    [(r.W.detach().numpy().copy(), r.b_h.detach().numpy().copy())
+                     for r in self.net.rbms],
+                    self.net.out.weight.detach().numpy()[0].copy(),
+                    float(self.net.out.bias.detach()[0]))
+        rbms, w_out, b_out = self._layers
+        h = X
+        for W, b in rbms:
+            h = expit(h @ W + b)
+        return h @ w_out + b_out
+
+    @torch.no_grad()
+    def torch_logits(self, X: np.ndarray) -> np.ndarray:
+        """:meth:`logits` through the torch network itself."""
+        X = np.asarray(X, dtype=np.float64)
         with single_thread():
             return self.net(torch.from_numpy(X)).numpy().astype(np.float64)
 
