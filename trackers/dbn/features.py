@@ -93,8 +93,10 @@ def bin_maps(image: np.ndarray, cfg: FeatureConfig) -> tuple[np.ndarray, np.ndar
     mag = np.sqrt(gx * gx + gy * gy)
     ang = np.mod(np.arctan2(gy, gx), np.pi)            # unsigned orientation
     ob = np.minimum((ang * (cfg.orientations / np.pi)).astype(np.int64), cfg.orientations - 1)
+    n = H * W
+    pix = np.arange(n)
     hog = np.zeros((H, W, cfg.orientations))
-    np.put_along_axis(hog, ob[..., None], mag[..., None].astype(np.float64), axis=2)
+    hog.reshape(n, -1)[pix, ob.reshape(-1)] = mag.reshape(-1)   # one-hot by orientation bin
 
     hsv = cv2.cvtColor(img, cv2.COLOR_BGR2HSV)          # H in [0, 180), S, V in [0, 255]
     h, s, v = hsv[..., 0].astype(np.int64), hsv[..., 1], hsv[..., 2]
@@ -103,7 +105,7 @@ def bin_maps(image: np.ndarray, cfg: FeatureConfig) -> tuple[np.ndarray, np.ndar
     gb = cfg.hue_bins + np.minimum(v.astype(np.int64) * cfg.grey_bins // 256, cfg.grey_bins - 1)
     cb = np.where(chrom, hb, gb)
     colour = np.zeros((H, W, cfg.colour_bins))
-    np.put_along_axis(colour, cb[..., None], 1.0, axis=2)
+    colour.reshape(n, -1)[pix, cb.reshape(-1)] = 1.0
     return hog, colour
 
 

@@ -121,10 +121,13 @@ def _robust_line(y: np.ndarray, h: np.ndarray) -> tuple[float, float]:
     A flat line (the median) when the rows span too little to fit a slope."""
     def fit(m):
         yy, hh = y[m], h[m]
-        if len(yy) < 3 or np.ptp(yy) < 1e-6 * max(1.0, float(np.abs(yy).max())):
+        my, mh = yy.mean(), hh.mean()
+        dy = yy - my
+        syy = float(dy @ dy)
+        if len(yy) < 3 or syy < 1e-9 * max(1.0, my * my) * len(yy):
             return float(np.median(hh)), 0.0
-        b, a = np.polyfit(yy, hh, 1)
-        return float(a), float(b)
+        b = float(dy @ (hh - mh)) / syy                    # closed-form least squares
+        return float(mh - b * my), b
 
     m = np.ones(len(y), bool)
     a, b = fit(m)
