@@ -44,6 +44,9 @@ from ..types import Frame, cxcywh_to_xywh
 from .features import FrameFeatures
 
 SCORES = ("logsigmoid", "logit")
+#: feature_height for a model that does not record its people's height (the shipped model:
+#: PETS09 people of 60-130 px described at half scale, median about 45 px)
+DEFAULT_BOX_HEIGHT = 48.0
 APPLY = ("particle", "blob", "blob_particle")
 
 
@@ -62,11 +65,13 @@ class DBNParams:
                                      "'logit' c·a (eq. (9) literally)")
     feature_scale: float = param(0.5, "image scale the colour/HOG histograms are taken at "
                                       "when feature_height is 0")
-    feature_height: float = param(48.0, "every box is described on the image-pyramid level "
-                                        "(scales 1, 1/2, 1/4, ...) that brings its height "
-                                        "nearest this many px, so the person scale comes from "
-                                        "the box, not the video's resolution; 0: one fixed "
-                                        "feature_scale")
+    feature_height: float = param(-1.0, "every box is described on the image-pyramid level "
+                                         "(scales 1, 1/2, 1/4, ...) that brings its height "
+                                         "nearest this many px, so the person scale comes "
+                                         "from the box, not the video's resolution; -1: the "
+                                         "people's height in the model's training set (its "
+                                         "info 'box_height'; 48 for a model without it, as "
+                                         "the shipped one); 0: one fixed feature_scale")
     accept: float = param(0.5, "a blob is accepted as a person when its DBN probability σ(a) "
                                ">= this; only accepted blobs give births (new-born target "
                                "selection, feng2015 §II)")
@@ -90,8 +95,8 @@ class DBNParams:
                              f"got {self.apply!r}")
         if not self.kappa_clip > 0:
             raise ValueError(f"DBNParams.kappa_clip must be > 0, got {self.kappa_clip!r}")
-        if not self.feature_height >= 0:
-            raise ValueError(f"DBNParams.feature_height must be >= 0, "
+        if not (self.feature_height >= 0 or self.feature_height == -1):
+            raise ValueError(f"DBNParams.feature_height must be -1 or >= 0, "
                              f"got {self.feature_height!r}")
         if not 0 < self.feature_scale <= 1:
             raise ValueError(f"DBNParams.feature_scale must be in (0, 1], "
@@ -133,11 +138,20 @@ class DBNLikelihood:
         self._key: Optional[tuple] = None
         self._ff: Optional[FrameFeatures] = None
 
+    @property
+    def box_height(self) -> float:
+        """The box height features are described at (``feature_height``; -1: the model's)."""
+        fh = self.params.feature_height
+        if fh < 0:
+            return float((getattr(self.model, "info", None) or {}).get("box_height",
+                                                                       DEFAULT_BOX_HEIGHT))
+        return float(fh)
+
     def frame_features(self, frame: Frame) -> FrameFeatures:
         """The frame's integral histograms, built once per frame."""
         key = (frame.index, id(frame.image))
         if self._key != key or self._ff is None:
-            cfg = replace(self.model.features, box_height=self.params.feature_height)
+            cfg = replace(self.model.features, box_height=self.box_height)
             self._ff = FrameFeatures(frame.image, cfg, self.params.feature_scale)
             self._key = key
         return self._ff
