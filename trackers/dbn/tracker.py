@@ -7,9 +7,12 @@ One frame (stages, in order):
 background  codebook background subtraction (:mod:`.codebook`; MOG2/KNN by parameter) →
             Mask ``dbn/foreground`` (full resolution)
 blobs       morphology + connected components → blobs = the measurements Z_k; each blob's box
-            scored by the DBN: Boxes ``dbn/blobs/accepted`` (role detection) and
-            ``dbn/blobs/rejected`` (role dropped), values ``dbn`` = σ(a), ``fill``; an Event
-            per rejected blob says why (its score against ``accept``)
+            scored by the DBN; a blob bigger than the scene's person (:mod:`.scale`, learnt
+            from the accepted blobs) is searched with person-sized windows the DBN scores,
+            and the windows it keeps replace the blob (Scalar ``dbn/blobs/split``): Boxes
+            ``dbn/blobs/accepted`` (role detection) and ``dbn/blobs/rejected`` (role
+            dropped), values ``dbn`` = σ(a), ``fill``; an Event per rejected blob says why
+            (its score against ``accept``)
 predict     persistent particles moved by maggio2007's motion model, × survival (eqs. (1), (7))
             → Points ``dbn/particles/predicted`` (weights)
 birth       newborn particles around the *accepted* blobs only (DBN new-born selection),
