@@ -808,3 +808,34 @@ def test_numpy_forward_pass_equals_the_torch_network():
                         np.zeros((1, model.features.dim)), np.ones((1, model.features.dim))])
     np.testing.assert_allclose(model.logits(X), model.torch_logits(X), rtol=1e-9, atol=1e-9)
     assert np.ptp(model.logits(X)) > 1.0                     # not a constant
+
+
+def test_weighted_births_let_a_rejected_blob_give_light_newborn():
+    """births.select='weighted': every blob gives births, weighted by the DBN's P(person); a
+    rejected blob's newborn weigh about P(person) of an accepted one's. The default
+    ('accepted', feng2015's new-born selection) gives a rejected blob none."""
+    from pfscope.trackers.types import Frame
+
+    def half_people(boxes, frame):                  # the left blob a person, the right not
+        b = np.asarray(boxes, float).reshape(-1, 4)
+        return np.where(b[:, 0] < 100, 3.0, -3.0)
+
+    img = np.zeros((240, 320, 3), np.uint8)
+    img[100:150, 40:60] = 255
+    img[100:150, 200:220] = 255
+    births = {}
+    for select in ("accepted", "weighted"):
+        tr = make_tracker("dbn-phd", seed=0, **{"births.select": select})
+        tr.dbn.logits = half_people
+        tr.dbn.logits_union = half_people
+        tr.background.mask = lambda frame: frame.image[::2, ::2, 0] // 255
+        res = tr.step(Frame(1, 0.0, img), None, "particles")
+        births[select] = find(res.stages, "dbn/particles/before", Points)[0]  # newborn only
+    acc = births["accepted"]
+    assert len(acc.xy) and np.all(acc.xy[:, 0] < 100)
+    w = births["weighted"]
+    right = w.xy[:, 0] > 100
+    assert right.any() and (~right).any()
+    ratio = w.weights[right].mean() / w.weights[~right].mean()
+    p_right, p_left = 1 / (1 + np.exp(3.0)), 1 / (1 + np.exp(-3.0))
+    assert ratio == pytest.approx(p_right / p_left, rel=0.1)

@@ -136,6 +136,9 @@ class BirthSelection:
     birth_weight: str = param("eq10", "'eq10': every newborn weighs 1/J_k (feng2015 eq. (10)); "
                                       "'intensity': birth_intensity/J_z per blob (maggio2007)",
                               paper="feng2015 eq. (10)")
+    select: str = param("accepted", "'accepted': only DBN-accepted blobs give births "
+                                    "(feng2015 §II new-born selection); 'weighted': every blob "
+                                    "does, its newborn weights times the DBN's P(person)")
 
     def __post_init__(self):
         if self.birth_weight not in BIRTH_WEIGHTS:
@@ -342,12 +345,16 @@ class DBNPHDTracker(_AssociatingTracker):
                            weights=predicted.weights))
 
         log.stage("birth")
-        acc_idx = np.flatnonzero(accepted)
+        weighted = p.births.select == "weighted" and self.dbn is not None
+        acc_idx = np.arange(len(Z)) if weighted else np.flatnonzero(accepted)
         born = birth(predicted, Z[acc_idx], fp, rng)
         newborn = born.particles
         J = len(newborn)
         if J and p.births.birth_weight == "eq10":
             newborn = newborn.with_log_weights(np.full(J, -math.log(J)))   # eq. (10): 1/J_k
+        if J and weighted:              # every blob gives births, weighted by P(person)
+            lp = -np.logaddexp(0.0, -blob_a[acc_idx[born.det_index]])
+            newborn = newborn.with_log_weights(newborn.log_weights + lp)
         log.scalar("dbn/birth/count", J)
         if want_p:
             log.add(Points("dbn/particles/birth", newborn.states[:, :2],
