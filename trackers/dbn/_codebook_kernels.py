@@ -23,7 +23,8 @@ from numba import njit
 def detect(x, t, eps_detect2, eps_train2, alpha, beta, cache_add, cache_forget, stale_delete,
            bv, bvv, bimin, bimax, bf, blam, bp, bq,
            cv, cvv, cimin, cimax, cf, clam, cp, cq, fg):
-    """One detection frame over every pixel (module docstring).  ``x`` (P, 3) float32 pixels;
+    """One detection frame over every pixel (module docstring).  ``x`` (P, 3) pixels (uint8 or
+    float32, read as float32);
     the book ``b*`` (L, P[, 3]) and the cache ``c*`` (Lc, P[, 3]) are updated in place;
     ``fg`` (P,) bool receives the foreground."""
     L = bf.shape[0]
@@ -32,9 +33,9 @@ def detect(x, t, eps_detect2, eps_train2, alpha, beta, cache_add, cache_forget, 
     tiny = np.float32(1e-6)
     one = np.float32(1.0)
     for p in range(P):
-        x0 = x[p, 0]
-        x1 = x[p, 1]
-        x2 = x[p, 2]
+        x0 = np.float32(x[p, 0])
+        x1 = np.float32(x[p, 1])
+        x2 = np.float32(x[p, 2])
         xx = x0 * x0 + x1 * x1 + x2 * x2
         inten = np.sqrt(xx)
         s = -1

@@ -288,9 +288,9 @@ class Codebook:
                              f"is {self._shape[1]}x{self._shape[0]}")
         self.t += 1
         t = self.t
+        if t > p.train_frames and self.kernel:        # the kernel reads the pixels as they are
+            return self._detect_kernel(np.ascontiguousarray(img).reshape(-1, 3), t)
         x = img.reshape(-1, 3).astype(np.float32)
-        if t > p.train_frames and self.kernel:
-            return self._detect_kernel(x, t)
         xx = np.einsum("pc,pc->p", x, x)
         inten = np.sqrt(xx)
         b = self.book
@@ -316,7 +316,7 @@ class Codebook:
         p, b, c = self.params, self.book, self.cache
         fg = np.empty(len(x), bool)
         f32 = np.float32
-        detect(np.ascontiguousarray(x), t, f32(p.eps_detect * p.eps_detect),
+        detect(x, t, f32(p.eps_detect * p.eps_detect),
                f32(p.eps_train * p.eps_train), f32(p.alpha), f32(p.beta), p.cache_add,
                p.cache_forget, p.stale_delete, b.v, b.vv, b.imin, b.imax, b.f, b.lam, b.p, b.q,
                c.v, c.vv, c.imin, c.imax, c.f, c.lam, c.p, c.q, fg)
