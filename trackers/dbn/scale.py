@@ -42,8 +42,9 @@ from ..params import param
 class SplitParams:
     """Scene-learnt person size and the split of multi-person blobs (:mod:`.scale`)."""
 
-    enabled: bool = param(True, "search blobs bigger than one person for people (DBN-PHD "
-                                "only; :mod:`pfscope.trackers.dbn.scale`)")
+    enabled: bool = param(True, "search blobs bigger than one person (learnt from the blobs "
+                                "the DBN accepts) with person-sized windows the DBN scores "
+                                "(DBN-PHD only; no effect without the DBN)")
     min_samples: int = param(20, "accepted blobs needed before the person size is trusted")
     keep: int = param(400, "most recent accepted blobs the person size is fitted on")
     max_aspect: float = param(0.8, "accepted blobs wider than this times their height (two "
