@@ -44,8 +44,8 @@ from ..types import Frame, cxcywh_to_xywh
 from .features import FrameFeatures
 
 SCORES = ("logsigmoid", "logit")
-#: feature_height for a model that does not record its people's height (the shipped model:
-#: PETS09 people of 60-130 px described at half scale, median about 45 px)
+#: feature_height for a model that does not record its people's height (models trained before
+#: train-dbn recorded it; the shipped model records 41.8: PETS09 people at half scale)
 DEFAULT_BOX_HEIGHT = 48.0
 APPLY = ("particle", "blob", "blob_particle")
 
@@ -70,8 +70,9 @@ class DBNParams:
                                          "nearest this many px, so the person scale comes "
                                          "from the box, not the video's resolution; -1: the "
                                          "people's height in the model's training set (its "
-                                         "info 'box_height'; 48 for a model without it, as "
-                                         "the shipped one); 0: one fixed feature_scale")
+                                         "info 'box_height', 41.8 for the shipped one; 48 "
+                                         "for a model without it); 0: one fixed "
+                                         "feature_scale")
     accept: float = param(0.5, "a blob is accepted as a person when its DBN probability σ(a) "
                                ">= this; only accepted blobs give births (new-born target "
                                "selection, feng2015 §II)")

@@ -501,7 +501,8 @@ def collect_samples(source, frames: Iterable[int], *, features: FeatureConfig = 
 
 #: The model DBN-PHD uses when none is given, shipped in the package (package data): trained on
 #: person and non-person crops of the development sequences PETS09-S2L1 and PETS09-S3MF1 by the
-#: command in :data:`SHIPPED_COMMAND` (same seed → same file).
+#: command in :data:`SHIPPED_COMMAND` (same seed → same file; its info records the people's
+#: described height, ``box_height`` 41.8 px, which the tracker describes boxes at).
 SHIPPED = Path(__file__).with_name("people_dbn.pt")
 SHIPPED_COMMAND = ("pfscope train-dbn ../shared/data/PETS09-S2L1 ../shared/data/PETS09-S3MF1 "
                    "--holdout 0 --augment --stride 3 --batch 256 --seed 0 "
