@@ -36,7 +36,7 @@ import time
 from typing import Optional
 
 from _common import (EXIT_NO_DATA, NoData, command_line, machine, open_bench_source,
-                     print_machine, table, write_json)
+                     pets_path, print_machine, table, write_json)
 
 import numpy as np
 
@@ -47,11 +47,15 @@ from pfscope.trackers.pipeline import BaseHook, FrameReport, run
 from pfscope.trackers.report import StageLog
 
 LANES = ("dbn-phd", "phd-bgsub")
+
+#: the stage clock: wall (perf_counter, default) or this thread's CPU time (``--clock cpu``:
+#: on a machine shared with other work, CPU time is what the step would take alone)
+CLOCK = time.perf_counter
 METRICS = ("OSPA", "ME", "MOTA", "IDF1", "FP", "FN")
 
 
 class TimedStageLog(StageLog):
-    """A stage log that notes ``perf_counter`` at every stage change and at the end."""
+    """A stage log that notes the clock (:data:`CLOCK`) at every stage change and at the end."""
 
     def __init__(self, stages, level, sink: dict):
         super().__init__(stages, level)
@@ -60,7 +64,7 @@ class TimedStageLog(StageLog):
         self._cur: Optional[str] = None
 
     def _tick(self, nxt: Optional[str]) -> None:
-        now = time.perf_counter()
+        now = CLOCK()
         if self._cur is not None and self._t is not None:
             self._sink[self._cur] = self._sink.get(self._cur, 0.0) + now - self._t
         self._cur, self._t = nxt, now
@@ -107,10 +111,83 @@ class StepTimes(BaseHook):
             self.seconds.setdefault(lane, []).append(s)
 
 
+class _TimedModel:
+    """The DBN model with its forward pass timed into ``sink['dbn']`` (everything else passed
+    through)."""
+
+    def __init__(self, model, sink: dict):
+        self._model, self._sink = model, sink
+
+    def __getattr__(self, name):
+        return getattr(self._model, name)
+
+    def logits(self, X):
+        t = CLOCK()
+        out = self._model.logits(X)
+        self._sink["dbn"] = self._sink.get("dbn", 0.0) + CLOCK() - t
+        return out
+
+
+def _timed_call(fn, sink: dict, key: str):
+    def call(*a, **kw):
+        t = CLOCK()
+        out = fn(*a, **kw)
+        sink[key] = sink.get(key, 0.0) + CLOCK() - t
+        return out
+    return call
+
+
 def make_lane(name: str, seed: int, options: dict):
     cls = DBNPHDTracker if name == "dbn-phd" else PHDBgsubTracker
     params = make_params(name, None, options)
-    return timed(cls)(params, rng=np.random.default_rng(seed))
+    tr = timed(cls)(params, rng=np.random.default_rng(seed))
+    tr.parts = {}                 # seconds over the run: 'scored' (features + DBN), 'dbn'
+    if tr.dbn is not None:
+        tr.dbn.model = _TimedModel(tr.dbn.model, tr.parts)
+        tr.dbn.logits = _timed_call(tr.dbn.logits, tr.parts, "scored")
+        tr.dbn.logits_union = _timed_call(tr.dbn.logits_union, tr.parts, "scored")
+    return tr
+
+
+#: the per-part profile: the tracker's stages regrouped by what costs (issue 22)
+FILTER_STAGES = ("predict", "birth", "features", "update", "resample", "cluster")
+
+
+def parts_ms(lane: dict, stage_ms: dict) -> dict:
+    """ms/frame of codebook (background stage), colour/HOG features and DBN forward passes
+    (wherever they run), blobs (connected components, person size and split bookkeeping),
+    the PHD filter (predict … cluster, minus any particle scoring) and association."""
+    feat, dbn = lane["features_ms"], lane["dbn_ms"]
+    filt = sum(stage_ms[s] for s in FILTER_STAGES)
+    blobs = stage_ms["blobs"]
+    # features/DBN run in the blobs stage at level tracks; at level particles also in the
+    # features stage: take them out of whichever stage holds them, blobs first
+    in_blobs = min(feat + dbn, blobs)
+    return {"codebook": stage_ms["background"], "features": feat, "dbn": dbn,
+            "blobs": blobs - in_blobs, "filter": filt - (feat + dbn - in_blobs),
+            "associate": stage_ms["associate"]}
+
+
+def whole_process(source: str, tracker: str, level: str, frames: Optional[str]) -> dict:
+    """``pfscope record SOURCE --tracker T --level L`` in a fresh process, wall clock: the
+    whole process (start-up, model load, frame decoding, tracking, scoring, the recording)."""
+    import subprocess
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as d:
+        cmd = [sys.executable, "-m", "pfscope.viewer_app.cli", "record", source, "--tracker",
+               tracker, "--level", level, "--out", f"{d}/run.rrd", "--quiet", "--force"]
+        if frames:
+            cmd += ["--frames", frames]
+        import resource
+
+        r0 = resource.getrusage(resource.RUSAGE_CHILDREN)
+        t0 = time.perf_counter()
+        subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
+        wall = time.perf_counter() - t0
+        r1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (r1.ru_utime - r0.ru_utime) + (r1.ru_stime - r0.ru_stime)
+    return {"command": " ".join(cmd[2:]), "seconds": wall, "cpu_seconds": cpu}
 
 
 def one_run(spec: str, seed: int, start: int, frames: Optional[int], level: Optional[str],
@@ -140,8 +217,13 @@ def one_run(spec: str, seed: int, start: int, frames: Optional[int], level: Opti
            "frames": res.outcome.frames, "wall_seconds": wall, "lanes": {}}
     for name, tr in lanes.items():
         step = np.asarray(hook.seconds[name])
+        nfr = max(1, len(step))
         lane = {"fps": float(1.0 / step.mean()), "ms_per_frame": float(1e3 * step.mean()),
-                "stage_ms": {s: float(1e3 * np.mean(v)) for s, v in tr.stage_seconds.items()}}
+                "stage_ms": {s: float(1e3 * np.mean(v)) for s, v in tr.stage_seconds.items()},
+                "dbn_ms": 1e3 * tr.parts.get("dbn", 0.0) / nfr,
+                "features_ms": 1e3 * (tr.parts.get("scored", 0.0) - tr.parts.get("dbn", 0.0))
+                / nfr}
+        lane["parts_ms"] = parts_ms(lane, lane["stage_ms"])
         sc = res.scores.get(name) or {}
         lane.update({k: (float(sc[k]) if k in sc else None) for k in METRICS})
         out["lanes"][name] = lane
@@ -171,14 +253,25 @@ def main(argv=None) -> int:
                          "--level tracks; 'particles' also scores every gated particle)")
     ap.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                     help="parameter override for both lanes (as pfscope record --set)")
+    ap.add_argument("--clock", choices=("wall", "cpu"), default="wall",
+                    help="stage clock: wall (default) or this thread's CPU time (a loaded "
+                         "machine's stand-in for a quiet one)")
+    ap.add_argument("--whole", action="store_true",
+                    help="also time `pfscope record SOURCE --tracker T --level LEVEL` for both "
+                         "trackers in fresh processes (whole process, frames/s of wall clock)")
     ap.add_argument("--json", default=None, metavar="FILE", help="write every number to FILE")
     a = ap.parse_args(argv)
     start = a.start if a.start is not None else (401 if a.source == "pets" else 1)
+    global CLOCK
+    CLOCK = time.thread_time if a.clock == "cpu" else time.perf_counter
     options = dict(s.split("=", 1) for s in a.set)
     if a.model:
         options["model"] = a.model
     info = machine()
     print_machine(info)
+    from pfscope.trackers.warmup import compile_kernels
+
+    compile_kernels()     # the filter's numba kernels: compiled or loaded before any lane's frame
     runs = []
     try:
         for seed in (int(s) for s in a.seeds.split(",")):
@@ -217,7 +310,37 @@ def main(argv=None) -> int:
     d = [r["lanes"]["dbn-phd"]["ms_per_frame"] / r["lanes"]["phd-bgsub"]["ms_per_frame"]
          for r in runs]
     print(f"\nstep time dbn-phd / phd-bgsub: {np.mean(d):.2f} (same frames, same run)")
+    parts = list(r0["lanes"]["dbn-phd"]["parts_ms"])
+    rows = []
+    for lane in LANES:
+        ms = [np.mean([r["lanes"][lane]["parts_ms"][k] for r in runs]) for k in parts]
+        tot = sum(ms)
+        rows.append([lane, *[f"{m:.1f} ({100 * m / tot:.0f}%)" for m in ms], f"{tot:.1f}"])
+    print(f"\nper-part ms/frame ({a.clock} clock; share of the step): codebook = background model, features = "
+          "colour/HOG of blobs and windows, dbn = forward passes, blobs = components and "
+          "split bookkeeping, filter = predict..cluster")
+    print(table(["lane", *parts, "step"], rows))
+    whole = {}
+    if a.whole:
+        src_arg = str(pets_path()) if a.source == "pets" else a.source
+        whole_n = r0["frames"]
+        span = f"{start}:{start + whole_n - 1}"           # the frames the lanes ran
+        for lane in LANES:
+            whole[lane] = whole_process(src_arg, lane, a.level, span)
+        rows = []
+        for lane in LANES:
+            sec, cpu = whole[lane]["seconds"], whole[lane]["cpu_seconds"]
+            whole[lane]["fps"] = whole_n / sec
+            whole[lane]["fps_cpu"] = whole_n / cpu
+            rows.append([lane, f"{sec:.1f}", f"{whole_n / sec:.1f}", f"{cpu:.1f}",
+                         f"{whole_n / cpu:.1f}", whole[lane]["command"]])
+        print(f"\nwhole process (fresh `pfscope record`, {whole_n} frames, load "
+              f"{__import__('os').getloadavg()[0]:.1f}):")
+        print(table(["tracker", "wall s", "fps", "CPU s", "frames/CPU s", "command"], rows))
+        print(f"whole-process time dbn-phd / phd-bgsub: "
+              f"{whole['dbn-phd']['seconds'] / whole['phd-bgsub']['seconds']:.2f}")
     write_json(a.json, {"command": command_line(), "machine": info, "runs": runs,
+                        "whole_process": whole,
                         "load_at_end": list(__import__("os").getloadavg())})
     return 0
 

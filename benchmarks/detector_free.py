@@ -9,7 +9,7 @@ for a video made by resizing a sequence's frames).
         ../shared/data/PETS09-S2L1 ../shared/data/PETS09-S3MF1 \
         /tmp/pets480.mp4=../shared/data/PETS09-S2L1/gt/gt.txt:0.625
 
-Combined row: CLEAR/identity counts summed over the sequences (MOTA, IDF1 from the sums),
+Combined row: over the sequences given as folders (not the video files), CLEAR/identity counts summed (MOTA, IDF1 from the sums),
 OSPA and its split frame-weighted, ME target-weighted is not available so it is frame-weighted.
 ``--json`` writes every run's scores for later tables.
 """
@@ -56,7 +56,7 @@ def _ospa_split(gt, tracks, frames, c=100.0):
     return loc / nf, card / nf
 
 
-def run_one(spec: str, tracker: str, seed: int, preset=None, options=None):
+def run_one(spec: str, tracker: str, seed: int, preset=None, options=None, frames=None):
     from pfscope.trackers.api import make_tracker
     from pfscope.trackers.data.motio import read_mot, table_from_tracksets
     from pfscope.trackers.data.sources import open_source
@@ -73,7 +73,7 @@ def run_one(spec: str, tracker: str, seed: int, preset=None, options=None):
             gt = replace(gt, boxes=gt.boxes * float(scale))
     t0 = time.perf_counter()
     res = run(src, [make_tracker(tracker, seed=seed, preset=preset, **(options or {}))],
-              score=False)
+              score=False, frames=frames)
     secs = time.perf_counter() - t0
     rows = next(iter(res.rows.values()))
     table = table_from_tracksets(rows)
@@ -106,6 +106,7 @@ def main(argv=None) -> int:
     ap.add_argument("--seeds", default="0,1,2")
     ap.add_argument("--preset", default=None)
     ap.add_argument("--set", dest="sets", action="append", default=[], metavar="K=V")
+    ap.add_argument("--frames", type=int, default=None, help="first N frames of each source")
     ap.add_argument("--json", type=Path, default=None)
     a = ap.parse_args(argv)
     seeds = [int(s) for s in a.seeds.split(",")]
@@ -120,7 +121,7 @@ def main(argv=None) -> int:
             name = Path(spec.partition("=")[0]).name
             runs = []
             for seed in seeds:
-                s = run_one(spec, tr, seed, a.preset, opts)
+                s = run_one(spec, tr, seed, a.preset, opts, a.frames)
                 runs.append(s)
                 allruns.setdefault(tr, {}).setdefault(name, []).append(
                     {k: (float(v) if isinstance(v, (int, float, np.floating, np.integer)) else v)
@@ -131,9 +132,11 @@ def main(argv=None) -> int:
             m = {k: float(np.mean([r[k] for r in runs])) for k in KEYS}
             print(f"{tr:10s} {name:22s} MEAN:   " + "  ".join(f"{k} {m[k]:.3f}" for k in KEYS),
                   flush=True)
+        # the combined row: the sequences given as folders (a video scored against a
+        # rescaled copy of one of them would count that sequence twice)
+        dev = [s for s in a.sources if "=" not in s] or a.sources
         for i, seed in enumerate(seeds):
-            per_seed_combined.append(combine([allruns[tr][Path(s.partition("=")[0]).name][i]
-                                              for s in a.sources]))
+            per_seed_combined.append(combine([allruns[tr][Path(s).name][i] for s in dev]))
         m = {k: float(np.mean([r[k] for r in per_seed_combined])) for k in KEYS}
         print(f"{tr:10s} {'COMBINED':22s} MEAN:   " + "  ".join(f"{k} {m[k]:.3f}" for k in KEYS),
               flush=True)

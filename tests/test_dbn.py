@@ -3,6 +3,7 @@ the likelihood's two routes, Algorithm 3, and the tracker through the one pipeli
 
 from __future__ import annotations
 
+import functools
 import subprocess
 import sys
 
@@ -343,14 +344,21 @@ def test_dbn_cuts_false_positives_and_raises_mota_on_a_noisy_synthetic_scene():
     OSPA is better (44.6 vs 47.9 px) and 4 of 5 seeds are, but seed 5 is 18 px worse, and on
     this test's 40-frame scenes 3 of 6 seeds go each way: not reliable enough to assert.
     What holds on every seed is what the DBN is for — fewer noise tracks and a better MOTA —
-    and that is what this checks, over 3 seeds with a tolerance."""
+    and that is what this checks, over 3 seeds with a tolerance, with a DBN that knows the
+    scene's drawn figures (the shipped model knows PETS people: on these figures it learns a
+    wrong person size from accepted noise blobs and its MOTA gain is +0.03, issue 20 notes)."""
+    from pfscope.trackers.dbn.tracker import DBNPHDTracker
+
+    model = _synthetic_scene_model()
     fp = {"dbn-phd": [], "phd-bgsub": []}
     mota = {"dbn-phd": [], "phd-bgsub": []}
     for seed in (1, 2, 3):
         cfg = SceneConfig(frames=40, targets=4, width=320, height=240, seed=seed,
                           bg_noise=0.6, flicker=0.04)
+        dbn = DBNPHDTracker(make_tracker("dbn-phd", seed=seed).params,
+                            rng=np.random.default_rng(seed), model=model)
         res = run(open_source("synthetic", synthetic_config=cfg),
-                  [make_tracker("dbn-phd", seed=seed), make_tracker("phd-bgsub", seed=seed)])
+                  [dbn, make_tracker("phd-bgsub", seed=seed)])
         for name, fps in fp.items():
             fps.append(res.scores[name]["FP"])
             mota[name].append(res.scores[name]["MOTA"])
@@ -359,14 +367,16 @@ def test_dbn_cuts_false_positives_and_raises_mota_on_a_noisy_synthetic_scene():
     assert np.all(np.array(mota["dbn-phd"]) > np.array(mota["phd-bgsub"]) - 0.05), mota
 
 
+@functools.lru_cache(maxsize=1)
 def _synthetic_scene_model():
     """A DBN trained on the synthetic scene's figures (scene seed 1000, never scored here):
     the model pfscope used by default before it shipped one trained on real people."""
     src = open_source("synthetic", synthetic_config=SceneConfig(
         frames=60, targets=8, seed=1000, name="dbn-training"))
+    stats: dict = {}
     X, y = dbn_model.collect_samples(src, range(6, 61), seed=0, stride=2,
-                                     background=BackgroundParams(initial="online"))
-    return dbn_model.train_dbn(X, y, seed=0, hue_shifts=())
+                                     background=BackgroundParams(initial="online"), stats=stats)
+    return dbn_model.train_dbn(X, y, seed=0, hue_shifts=(), box_height=stats["box_height"])
 
 
 @pytest.mark.slow
@@ -376,7 +386,11 @@ def test_dbn_beats_its_baseline_on_ospa_over_seeds_on_a_noisy_synthetic_scene():
     same filter's without the DBN (README: 44.6 vs 47.9 px; seed 5 alone goes the other way,
     hence the mean over seeds).  The DBN is one trained on the synthetic scene's figures: the
     shipped model knows PETS people, not these drawn figures, and with it the mean OSPA is
-    71 vs 46 px (it rejects the figures; issue 20 notes)."""
+    71 vs 46 px (it rejects the figures; issue 20 notes).  The features are taken at the fixed
+    half scale (``feature_height=0``): the drawn figures have no optical blur, and described at
+    full resolution (the pyramid level their 54 px asks for) they differ from the half-scale
+    figures the model learnt from — with the pyramid the mean OSPA is 50.9 vs 46.1 (issue 20
+    notes; on real video the pyramid is what wins, PETS09 at 480x360: 28.1 -> 21.5)."""
     from pfscope.trackers.dbn.tracker import DBNPHDTracker
 
     model = _synthetic_scene_model()
@@ -384,7 +398,7 @@ def test_dbn_beats_its_baseline_on_ospa_over_seeds_on_a_noisy_synthetic_scene():
     for seed in range(1, 6):
         cfg = SceneConfig(frames=100, targets=6, width=320, height=240, seed=seed,
                           bg_noise=0.6, flicker=0.04)
-        dbn = DBNPHDTracker(make_tracker("dbn-phd", seed=seed).params,
+        dbn = DBNPHDTracker(make_tracker("dbn-phd", seed=seed, feature_height=0).params,
                             rng=np.random.default_rng(seed), model=model)
         res = run(open_source("synthetic", synthetic_config=cfg),
                   [dbn, make_tracker("phd-bgsub", seed=seed)])
@@ -670,3 +684,191 @@ def test_dbn_phd_prepares_its_background_offline_unless_online():
     run(src, [a], frames=5, start=3, score=False)
     run(src, [b], frames=5, offline=False, score=False)
     assert a.prepared == [(3, 7)] and b.prepared == []
+
+
+# ----------------------------------------------------------------------------- issue 20/22
+
+def test_codebook_kernel_equals_the_numpy_reference_frame_after_frame():
+    """The numba detection step (one pass over the pixels) gives the same masks and the same
+    codebooks as the numpy reference, through cache promotion and stale deletion (short
+    cache_add / stale_delete so both happen within the clip)."""
+    rng = np.random.default_rng(3)
+    h, w = 48, 64
+    bg = rng.integers(40, 200, (h, w, 3)).astype(np.float32)
+    bp = BackgroundParams(cache_add=5, cache_forget=3, stale_delete=6, train_frames=4)
+    a, b = Codebook(bp), Codebook(bp, kernel=False)
+    a.prime(np.stack([bg] * 5))
+    b.prime(np.stack([bg] * 5))
+    promoted = False
+    for t in range(30):
+        img = np.clip(bg + rng.normal(0, 3, bg.shape), 0, 255)
+        img[10:30, 5 + t:15 + t] = (250, 20, 20)                    # a mover
+        if t >= 8:
+            img[30:40, 40:50] = (20, 250, 20)                        # something parked
+        img = img.astype(np.uint8)
+        ma, mb = a.apply(img), b.apply(img)
+        np.testing.assert_array_equal(ma, mb)
+        for arr in ("v", "vv", "imin", "imax", "f", "lam", "p", "q"):
+            np.testing.assert_array_equal(getattr(a.book, arr), getattr(b.book, arr), arr)
+            np.testing.assert_array_equal(getattr(a.cache, arr), getattr(b.cache, arr), arr)
+        promoted |= t > 20 and not ma[30:40, 40:50].any()
+    assert promoted                                    # the parked patch joined the background
+    assert ma[10:30, 41:44].all()                      # the mover's leading edge is foreground
+
+
+def test_person_scale_learns_the_height_line_of_the_scene_and_ignores_merged_blobs():
+    """Heights on a perspective line (people further up the image look smaller), 3x the
+    size anything in the defaults assumes, plus wide two-person blobs and a few too-tall ones:
+    the learnt line and aspect are the people's."""
+    from pfscope.trackers.dbn.scale import PersonScale, SplitParams
+
+    rng = np.random.default_rng(0)
+    foot = rng.uniform(200, 900, 60)
+    hgt = 60 + 0.4 * foot + rng.normal(0, 4, 60)          # 140..420 px tall
+    people = np.stack([rng.uniform(0, 500, 60), foot - hgt, 0.4 * hgt, hgt], 1)
+    merged = people[:15].copy()
+    merged[:, 2] *= 2.6                                   # two or three side by side
+    tall = people[15:20].copy()
+    tall[:, 1] -= tall[:, 3]
+    tall[:, 3] *= 2.0                                     # one behind the other
+    ps = PersonScale(SplitParams(min_samples=20))
+    ps.add(people[:10])
+    assert not ps.ready
+    ps.add(np.concatenate([people[10:], merged, tall]))
+    assert ps.ready
+    w, h = ps.size_at(np.array([300.0, 800.0]))
+    np.testing.assert_allclose(h, [180.0, 380.0], rtol=0.05)
+    np.testing.assert_allclose(w / h, 0.4, rtol=0.05)
+
+
+def test_split_windows_are_person_sized_inside_the_blob_and_do_not_overlap():
+    from pfscope.trackers.dbn.scale import (PersonScale, SplitParams, needs_split,
+                                            select_windows, split_candidates)
+
+    sp = SplitParams(min_samples=3)
+    ps = PersonScale(sp)
+    ps.add(np.array([[0, 100, 20, 50], [50, 100, 20, 50], [90, 100, 20, 50.0]]))
+    mask = np.zeros((200, 200), np.uint8)
+    mask[100:150, 40:100] = 1                              # three people merged, 60 x 50
+    blobs = np.array([[40, 100, 60, 50], [0, 100, 22, 50.0]])
+    np.testing.assert_array_equal(needs_split(blobs, ps, sp), [True, False])
+    cand = split_candidates(blobs[0], ps, sp, cv2.integral(mask), 1.0)
+    assert len(cand) >= 3
+    assert np.all(cand[:, 0] >= 40 - 1e-9) and np.all(cand[:, 0] + cand[:, 2] <= 100 + 1e-9)
+    np.testing.assert_allclose(cand[:, 2:], [[20, 50]] * len(cand))
+    # a DBN that likes windows centred on the three people (x = 50, 70, 90)
+    cx = cand[:, 0] + cand[:, 2] / 2
+    prob = np.exp(-np.min(np.abs(cx[:, None] - [50, 70, 90]), axis=1) / 2.0)
+    kept = select_windows(cand, prob, 0.5, sp.overlap)
+    np.testing.assert_allclose(np.sort(cx[kept]), [50, 70, 90], atol=4)
+    assert np.all(prob[kept] >= 0.5)
+
+
+def test_dbn_phd_splits_a_blob_of_people_its_dbn_rejects_as_a_whole():
+    """End to end through the tracker: once the person size is learnt, a merged blob the DBN
+    turns down as a whole becomes one measurement per person (a stub DBN that accepts
+    person-shaped boxes only); without the split it stays one rejected blob."""
+    from pfscope.trackers.dbn.tracker import DBNPHDTracker
+    from pfscope.trackers.types import Frame
+
+    def person_like(boxes, frame):
+        """+4 for a person-shaped box of one colour (one person), else -4."""
+        out = []
+        for x, y, w, h in np.round(np.asarray(boxes, float).reshape(-1, 4)).astype(int):
+            crop = frame.image[y:y + h, x:x + w, 1:].reshape(-1, 2)
+            one = len(crop) and crop.std(axis=0).max() < 10
+            out.append(4.0 if one and abs(w / h - 0.4) < 0.1 else -4.0)
+        return np.array(out)
+
+    counts = {}
+    for enabled in (True, False):
+        tr = make_tracker("dbn-phd", seed=0, **{"split.enabled": enabled,
+                                                 "split.min_samples": 5})
+        assert isinstance(tr, DBNPHDTracker)
+        tr.dbn.logits = person_like
+        tr.dbn.logits_union = person_like
+        tr.background.mask = lambda frame: frame.image[::2, ::2, 0] // 255    # at scale 0.5
+        img = np.zeros((240, 320, 3), np.uint8)
+        for k in range(3):                          # 3 single people, 20 x 50 each
+            img[100:150, 20 + 60 * k:40 + 60 * k] = 255
+        for t in range(1, 8):
+            tr.step(Frame(t, t / 7, img), None)
+        img2 = img.copy()
+        for k, g in enumerate((40, 120, 200)):      # then three side by side: one blob 60 x 50
+            img2[160:210, 200 + 20 * k:220 + 20 * k] = (255, g, 255 - g)
+        res = tr.step(Frame(8, 8 / 7, img2), None)
+        counts[enabled] = find(res.stages, "dbn/blobs/count", Scalar)[0].value
+    assert counts[False] == 4 and counts[True] == 6, counts
+
+
+def test_pyramid_features_describe_a_person_alike_at_two_resolutions():
+    """feature_height: a box is described on the pyramid level nearest 48 px tall, so the same
+    scene at full and at half resolution gives nearly the same features (fixed-scale features
+    differ more), and the level follows the box height, not the image size."""
+    rng = np.random.default_rng(0)
+    img = cv2.GaussianBlur(rng.integers(0, 256, (400, 400, 3), dtype=np.uint8), (0, 0), 3)
+    img[100:292, 150:230] = (40, 90, 200)
+    img[150:200, 170:210] = (220, 220, 220)
+    half = cv2.resize(img, (200, 200), interpolation=cv2.INTER_AREA)
+    box = np.array([[140.0, 90.0, 100.0, 212.0]])
+    pyr = FeatureConfig(box_height=48.0)
+    fixed = FeatureConfig()
+    f_full = FrameFeatures(img, pyr).describe(box)
+    f_half = FrameFeatures(half, pyr).describe(box / 2)
+    g_full = FrameFeatures(img, fixed, 0.5).describe(box)
+    g_half = FrameFeatures(half, fixed, 0.5).describe(box / 2)
+    d_pyr = np.linalg.norm(f_full - f_half)
+    d_fixed = np.linalg.norm(g_full - g_half)
+    assert d_pyr < 0.5 * d_fixed, (d_pyr, d_fixed)
+    ff = FrameFeatures(img, pyr)
+    np.testing.assert_array_equal(ff.levels(np.array([[0, 0, 10, 48], [0, 0, 10, 96],
+                                                      [0, 0, 10, 212], [0, 0, 5, 20]])),
+                                  [0, 1, 2, 0])
+    # the per-blob union crop gives the whole-frame numbers
+    boxes = np.array([[150.0, 100, 40, 96], [170, 110, 40, 96], [160, 120, 44, 100]])
+    union = FrameFeatures(img, fixed, 0.5).describe_union(boxes)
+    whole = FrameFeatures(img, fixed, 0.5)
+    whole._integrals()
+    np.testing.assert_allclose(union, whole.describe(boxes), rtol=1e-9, atol=1e-9)
+
+
+def test_numpy_forward_pass_equals_the_torch_network():
+    """DBNModel.logits runs the trained network in numpy (speed); it is the torch network's
+    output to float rounding, on the shipped model and on extreme inputs."""
+    model = dbn_model.default_model()
+    rng = np.random.default_rng(0)
+    X = np.concatenate([rng.random((50, model.features.dim)),
+                        np.zeros((1, model.features.dim)), np.ones((1, model.features.dim))])
+    np.testing.assert_allclose(model.logits(X), model.torch_logits(X), rtol=1e-9, atol=1e-9)
+    assert np.ptp(model.logits(X)) > 1.0                     # not a constant
+
+
+def test_weighted_births_let_a_rejected_blob_give_light_newborn():
+    """births.select='weighted': every blob gives births, weighted by the DBN's P(person); a
+    rejected blob's newborn weigh about P(person) of an accepted one's. The default
+    ('accepted', feng2015's new-born selection) gives a rejected blob none."""
+    from pfscope.trackers.types import Frame
+
+    def half_people(boxes, frame):                  # the left blob a person, the right not
+        b = np.asarray(boxes, float).reshape(-1, 4)
+        return np.where(b[:, 0] < 100, 3.0, -3.0)
+
+    img = np.zeros((240, 320, 3), np.uint8)
+    img[100:150, 40:60] = 255
+    img[100:150, 200:220] = 255
+    births = {}
+    for select in ("accepted", "weighted"):
+        tr = make_tracker("dbn-phd", seed=0, **{"births.select": select})
+        tr.dbn.logits = half_people
+        tr.dbn.logits_union = half_people
+        tr.background.mask = lambda frame: frame.image[::2, ::2, 0] // 255
+        res = tr.step(Frame(1, 0.0, img), None, "particles")
+        births[select] = find(res.stages, "dbn/particles/before", Points)[0]  # newborn only
+    acc = births["accepted"]
+    assert len(acc.xy) and np.all(acc.xy[:, 0] < 100)
+    w = births["weighted"]
+    right = w.xy[:, 0] > 100
+    assert right.any() and (~right).any()
+    ratio = w.weights[right].mean() / w.weights[~right].mean()
+    p_right, p_left = 1 / (1 + np.exp(3.0)), 1 / (1 + np.exp(-3.0))
+    assert ratio == pytest.approx(p_right / p_left, rel=0.1)

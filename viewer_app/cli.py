@@ -982,11 +982,14 @@ def cmd_train_dbn(args) -> int:
             last_print[0] = now
             print(f"train-dbn: {phase} {i}/{n} ({now - t0:.0f} s)", file=sys.stderr)
 
-    Xs, ys, holds, parts = [], [], [], []
+    Xs, ys, holds, parts, heights = [], [], [], [], []
     for k, (spec, src, lo, hi) in enumerate(ranges):
+        stats: dict = {}
         X, y, f = collect_samples(src, range(lo, hi + 1), stride=args.stride,
                                   seed=args.seed + k, augment=args.augment,
-                                  progress=progress, with_frames=True)
+                                  progress=progress, with_frames=True, stats=stats)
+        if "box_height" in stats:
+            heights.append(stats["box_height"])
         cut = hi - int(round(args.holdout * (hi - lo + 1)))
         Xs.append(X)
         ys.append(y)
@@ -998,7 +1001,8 @@ def cmd_train_dbn(args) -> int:
     if args.batch < 1:
         raise InputError(f"--batch must be >= 1, got {args.batch}")
     model = train_dbn(X, y, seed=args.seed, fine_epochs=args.epochs, holdout_mask=hold,
-                      holdout=0.0, batch=args.batch, progress=progress)
+                      holdout=0.0, batch=args.batch, progress=progress,
+                      box_height=float(np.median(heights)) if heights else None)
     model.info["trained_on"] = "; ".join(parts)
     model.info["augment"] = bool(args.augment)
     args.out.parent.mkdir(parents=True, exist_ok=True)

@@ -233,8 +233,9 @@ class Codebook:
 
     ``apply(image)`` (H, W, 3) uint8 BGR → (H, W) bool raw foreground at the model's scale."""
 
-    def __init__(self, params: BackgroundParams = BackgroundParams()):
+    def __init__(self, params: BackgroundParams = BackgroundParams(), kernel: bool = True):
         self.params = params
+        self.kernel = kernel          # False: the numpy reference detection step (tests)
         self.t = 0
         self._shape: tuple[int, int] | None = None
 
@@ -287,6 +288,8 @@ class Codebook:
                              f"is {self._shape[1]}x{self._shape[0]}")
         self.t += 1
         t = self.t
+        if t > p.train_frames and self.kernel:        # the kernel reads the pixels as they are
+            return self._detect_kernel(np.ascontiguousarray(img).reshape(-1, 3), t)
         x = img.reshape(-1, 3).astype(np.float32)
         xx = np.einsum("pc,pc->p", x, x)
         inten = np.sqrt(xx)
@@ -303,6 +306,26 @@ class Codebook:
             if t == p.train_frames:
                 b.clear(b.wrap_lambda(t) > p.train_frames / 2.0)   # Kim §2.1 temporal filter
             return fg.reshape(self._shape)
+        return self._detect_numpy(x, xx, inten, t)
+
+    def _detect_kernel(self, x: np.ndarray, t: int) -> np.ndarray:
+        """Detection with layered modelling (Kim §3), one numba pass over the pixels
+        (:mod:`._codebook_kernels`; the same rules as :meth:`_detect_numpy`)."""
+        from ._codebook_kernels import detect
+
+        p, b, c = self.params, self.book, self.cache
+        fg = np.empty(len(x), bool)
+        f32 = np.float32
+        detect(x, t, f32(p.eps_detect * p.eps_detect),
+               f32(p.eps_train * p.eps_train), f32(p.alpha), f32(p.beta), p.cache_add,
+               p.cache_forget, p.stale_delete, b.v, b.vv, b.imin, b.imax, b.f, b.lam, b.p, b.q,
+               c.v, c.vv, c.imin, c.imax, c.f, c.lam, c.p, c.q, fg)
+        return fg.reshape(self._shape)
+
+    def _detect_numpy(self, x, xx, inten, t) -> np.ndarray:
+        """The numpy reference of the detection step (Kim §3), slot by slot."""
+        p = self.params
+        b = self.book
         # detection with layered modelling (Kim §3)
         hit, slot = b.first_match(x, xx, inten, p.eps_detect, p.alpha, p.beta)
         b.update_hits(hit, slot, x, inten, t)

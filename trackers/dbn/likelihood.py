@@ -33,7 +33,7 @@ The integral histograms of a frame are built once and reused for every call with
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Optional
 
 import numpy as np
@@ -44,6 +44,9 @@ from ..types import Frame, cxcywh_to_xywh
 from .features import FrameFeatures
 
 SCORES = ("logsigmoid", "logit")
+#: feature_height for a model that does not record its people's height (models trained before
+#: train-dbn recorded it; the shipped model records 41.8: PETS09 people at half scale)
+DEFAULT_BOX_HEIGHT = 48.0
 APPLY = ("particle", "blob", "blob_particle")
 
 
@@ -60,7 +63,16 @@ class DBNParams:
                      paper="feng2015 eq. (9)")
     score: str = param("logsigmoid", "log-score s(x): 'logsigmoid' c·log σ(a) (default) or "
                                      "'logit' c·a (eq. (9) literally)")
-    feature_scale: float = param(0.5, "image scale the colour/HOG histograms are taken at")
+    feature_scale: float = param(0.5, "image scale the colour/HOG histograms are taken at "
+                                      "when feature_height is 0")
+    feature_height: float = param(-1.0, "every box is described on the image-pyramid level "
+                                         "(scales 1, 1/2, 1/4, ...) that brings its height "
+                                         "nearest this many px, so the person scale comes "
+                                         "from the box, not the video's resolution; -1: the "
+                                         "people's height in the model's training set (its "
+                                         "info 'box_height', 41.8 for the shipped one; 48 "
+                                         "for a model without it); 0: one fixed "
+                                         "feature_scale")
     accept: float = param(0.5, "a blob is accepted as a person when its DBN probability σ(a) "
                                ">= this; only accepted blobs give births (new-born target "
                                "selection, feng2015 §II)")
@@ -84,6 +96,9 @@ class DBNParams:
                              f"got {self.apply!r}")
         if not self.kappa_clip > 0:
             raise ValueError(f"DBNParams.kappa_clip must be > 0, got {self.kappa_clip!r}")
+        if not (self.feature_height >= 0 or self.feature_height == -1):
+            raise ValueError(f"DBNParams.feature_height must be -1 or >= 0, "
+                             f"got {self.feature_height!r}")
         if not 0 < self.feature_scale <= 1:
             raise ValueError(f"DBNParams.feature_scale must be in (0, 1], "
                              f"got {self.feature_scale!r}")
@@ -124,17 +139,33 @@ class DBNLikelihood:
         self._key: Optional[tuple] = None
         self._ff: Optional[FrameFeatures] = None
 
+    @property
+    def box_height(self) -> float:
+        """The box height features are described at (``feature_height``; -1: the model's)."""
+        fh = self.params.feature_height
+        if fh < 0:
+            return float((getattr(self.model, "info", None) or {}).get("box_height",
+                                                                       DEFAULT_BOX_HEIGHT))
+        return float(fh)
+
     def frame_features(self, frame: Frame) -> FrameFeatures:
         """The frame's integral histograms, built once per frame."""
         key = (frame.index, id(frame.image))
         if self._key != key or self._ff is None:
-            self._ff = FrameFeatures(frame.image, self.model.features, self.params.feature_scale)
+            cfg = replace(self.model.features, box_height=self.box_height)
+            self._ff = FrameFeatures(frame.image, cfg, self.params.feature_scale)
             self._key = key
         return self._ff
 
     def logits(self, boxes_xywh: np.ndarray, frame: Frame) -> np.ndarray:
         """DBN output activations ``a`` (N,) of boxes (top-left, full-resolution px)."""
         feats = self.frame_features(frame).describe(boxes_xywh)
+        return self.model.logits(feats)
+
+    def logits_union(self, boxes_xywh: np.ndarray, frame: Frame) -> np.ndarray:
+        """:meth:`logits` of boxes close together (one crop over their union,
+        :meth:`FrameFeatures.describe_union`)."""
+        feats = self.frame_features(frame).describe_union(boxes_xywh)
         return self.model.logits(feats)
 
     def log_score(self, logits: np.ndarray) -> np.ndarray:

@@ -52,6 +52,7 @@ from typing import Callable, Iterable, Optional
 
 import numpy as np
 import torch
+from scipy.special import expit
 
 from ..errors import InputError
 from .features import FeatureConfig, FrameFeatures
@@ -140,15 +141,37 @@ class DBNModel:
     features: FeatureConfig
     hidden: tuple[int, ...]
     info: dict = field(default_factory=dict)
+    _layers: Optional[tuple] = field(default=None, init=False, repr=False, compare=False)
 
-    @torch.no_grad()
     def logits(self, X: np.ndarray) -> np.ndarray:
-        """Output activations ``a(x)`` (N,) float64 of feature rows ``X`` (N, D)."""
+        """Output activations ``a(x)`` (N,) float64 of feature rows ``X`` (N, D).
+
+        The forward pass runs in numpy on a copy of the trained weights taken at the first
+        call (the tracker asks for a few rows at a time, several times a frame: torch's
+        per-call dispatch cost more than the products; :meth:`torch_logits` is the same
+        network in torch, equal to float rounding — tested)."""
         X = np.asarray(X, dtype=np.float64)
         if X.ndim != 2 or X.shape[1] != self.features.dim:
             raise ValueError(f"DBN: expected features (N, {self.features.dim}), got {X.shape}")
         if len(X) == 0:
             return np.zeros(0)
+        if self._layers is None:
+            with torch.no_grad():
+                self._layers = (
+                    [(r.W.detach().numpy().copy(), r.b_h.detach().numpy().copy())
+                     for r in self.net.rbms],
+                    self.net.out.weight.detach().numpy()[0].copy(),
+                    float(self.net.out.bias.detach()[0]))
+        rbms, w_out, b_out = self._layers
+        h = X
+        for W, b in rbms:
+            h = expit(h @ W + b)
+        return h @ w_out + b_out
+
+    @torch.no_grad()
+    def torch_logits(self, X: np.ndarray) -> np.ndarray:
+        """:meth:`logits` through the torch network itself."""
+        X = np.asarray(X, dtype=np.float64)
         with single_thread():
             return self.net(torch.from_numpy(X)).numpy().astype(np.float64)
 
@@ -268,7 +291,7 @@ def _train(X: np.ndarray, y: np.ndarray, *, features: FeatureConfig = FeatureCon
               hidden: tuple[int, ...] = (64, 32), seed: int = 0, pre_epochs: int = 10,
               fine_epochs: int = 30, lr_rbm: float = 0.05, lr: float = 3e-3, batch: int = 64,
               holdout: float = 0.2, holdout_mask: Optional[np.ndarray] = None,
-              hue_shifts: tuple[int, ...] = (2, 4, 6),
+              hue_shifts: tuple[int, ...] = (2, 4, 6), box_height: Optional[float] = None,
               progress: Optional[Callable[[str, int, int], None]] = None) -> DBNModel:
     """Training behind :func:`train_dbn`.  A random ``holdout`` fraction (or the samples where
     ``holdout_mask`` is true, e.g. the last frames) is kept out of training and scored
@@ -341,6 +364,8 @@ def _train(X: np.ndarray, y: np.ndarray, *, features: FeatureConfig = FeatureCon
         info["holdout_accuracy"] = float(np.mean((s > 0) == (y[hold] > 0.5)))
         info["holdout_auc"] = roc_auc(s, y[hold])
         info["holdout_positives"] = int(y[hold].sum())
+    if box_height:
+        info["box_height"] = float(box_height)
     model.info = info
     return model
 
@@ -412,6 +437,7 @@ def _colour_jitter(image: np.ndarray, rng: np.random.Generator) -> np.ndarray:
 def collect_samples(source, frames: Iterable[int], *, features: FeatureConfig = FeatureConfig(),
                     feature_scale: float = 0.5, background=None, seed: int = 0,
                     stride: int = 2, min_vis: float = 0.5, augment: bool = False,
+                    stats: Optional[dict] = None,
                     progress: Optional[Callable[[str, int, int], None]] = None,
                     with_frames: bool = False):
     """Features ``X (N, D)`` and labels ``y (N,)`` from a source with ground truth, over
@@ -421,7 +447,9 @@ def collect_samples(source, frames: Iterable[int], *, features: FeatureConfig = 
     boxes (visibility >= ``min_vis`` where known, conf != 0) and the background-subtraction
     blobs that cover one (:func:`sample_boxes`).  Not people: blobs that overlap no gt box,
     random and shifted windows.  ``augment``: every sampled frame's boxes are also described
-    on the mirrored frame and on a colour-jittered copy (:func:`_colour_jitter`)."""
+    on the mirrored frame and on a colour-jittered copy (:func:`_colour_jitter`).  ``stats``
+    (a dict) receives ``box_height``: the median height of the people as described (px at
+    ``feature_scale``), which the tracker's default ``feature_height`` describes boxes at."""
     from .codebook import BackgroundParams, ForegroundModel, blobs_from_mask
 
     from ..data.sources import sample_frames, training_frames
@@ -432,7 +460,7 @@ def collect_samples(source, frames: Iterable[int], *, features: FeatureConfig = 
     fm.prime(sample_frames(source, bp.median_frames, first, last)
              if bp.initial == "median" else [])
     rng = np.random.default_rng(seed)
-    Xs, ys, fs = [], [], []
+    Xs, ys, fs, heights = [], [], [], []
     for frame in source.frames(last):
         mask = fm.mask(frame)
         if frame.index not in chosen:
@@ -445,6 +473,7 @@ def collect_samples(source, frames: Iterable[int], *, features: FeatureConfig = 
         boxes, labels = sample_boxes(frame.image.shape, gt.boxes[r][ok], blobs, rng,
                                      avoid=gt.boxes[r][~ok])
         Xs.append(FrameFeatures(frame.image, features, feature_scale).describe(boxes))
+        heights.append(boxes[labels > 0, 3] * feature_scale)
         ys.append(labels)
         fs.append(np.full(len(labels), frame.index, dtype=np.int64))
         if augment:
@@ -461,6 +490,10 @@ def collect_samples(source, frames: Iterable[int], *, features: FeatureConfig = 
             progress("features", frame.index - first + 1, last - first + 1)
     X = np.concatenate(Xs) if Xs else np.zeros((0, features.dim))
     y = np.concatenate(ys) if ys else np.zeros(0)
+    if stats is not None and heights:
+        h = np.concatenate(heights)
+        if len(h):       # the people's median height as described (px at feature_scale)
+            stats["box_height"] = float(np.median(h))
     if with_frames:
         return X, y, (np.concatenate(fs) if fs else np.zeros(0, dtype=np.int64))
     return X, y
@@ -468,7 +501,8 @@ def collect_samples(source, frames: Iterable[int], *, features: FeatureConfig = 
 
 #: The model DBN-PHD uses when none is given, shipped in the package (package data): trained on
 #: person and non-person crops of the development sequences PETS09-S2L1 and PETS09-S3MF1 by the
-#: command in :data:`SHIPPED_COMMAND` (same seed → same file).
+#: command in :data:`SHIPPED_COMMAND` (same seed → same file; its info records the people's
+#: described height, ``box_height`` 41.8 px, which the tracker describes boxes at).
 SHIPPED = Path(__file__).with_name("people_dbn.pt")
 SHIPPED_COMMAND = ("pfscope train-dbn ../shared/data/PETS09-S2L1 ../shared/data/PETS09-S3MF1 "
                    "--holdout 0 --augment --stride 3 --batch 256 --seed 0 "

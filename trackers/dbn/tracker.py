@@ -7,9 +7,12 @@ One frame (stages, in order):
 background  codebook background subtraction (:mod:`.codebook`; MOG2/KNN by parameter) →
             Mask ``dbn/foreground`` (full resolution)
 blobs       morphology + connected components → blobs = the measurements Z_k; each blob's box
-            scored by the DBN: Boxes ``dbn/blobs/accepted`` (role detection) and
-            ``dbn/blobs/rejected`` (role dropped), values ``dbn`` = σ(a), ``fill``; an Event
-            per rejected blob says why (its score against ``accept``)
+            scored by the DBN; a blob bigger than the scene's person (:mod:`.scale`, learnt
+            from the accepted blobs) is searched with person-sized windows the DBN scores,
+            and the windows it keeps replace the blob (Scalar ``dbn/blobs/split``): Boxes
+            ``dbn/blobs/accepted`` (role detection) and ``dbn/blobs/rejected`` (role
+            dropped), values ``dbn`` = σ(a), ``fill``; an Event per rejected blob says why
+            (its score against ``accept``)
 predict     persistent particles moved by maggio2007's motion model, × survival (eqs. (1), (7))
             → Points ``dbn/particles/predicted`` (weights)
 birth       newborn particles around the *accepted* blobs only (DBN new-born selection),
@@ -98,6 +101,8 @@ from ..smc.weights import ParticleSet
 from ..types import Detections, Frame, xywh_to_cxcywh
 from .codebook import BackgroundParams, ForegroundModel, blobs_from_mask
 from .likelihood import DBNLikelihood, DBNParams, gaussian_pairs, state_boxes
+from .scale import (PersonScale, SplitParams, box_fill, needs_split, select_windows,
+                    split_candidates)
 
 COUNTS = ("fixed", "per_target")
 BIRTH_WEIGHTS = ("eq10", "intensity")
@@ -131,6 +136,9 @@ class BirthSelection:
     birth_weight: str = param("eq10", "'eq10': every newborn weighs 1/J_k (feng2015 eq. (10)); "
                                       "'intensity': birth_intensity/J_z per blob (maggio2007)",
                               paper="feng2015 eq. (10)")
+    select: str = param("accepted", "'accepted': only DBN-accepted blobs give births "
+                                    "(feng2015 §II new-born selection); 'weighted': every blob "
+                                    "does, its newborn weights times the DBN's P(person)")
 
     def __post_init__(self):
         if self.birth_weight not in BIRTH_WEIGHTS:
@@ -151,6 +159,8 @@ class DBNPHDParams:
 
     background: BackgroundParams = part(BackgroundParams, "background subtraction and blobs")
     dbn: DBNParams = part(DBNParams, "the DBN score in the likelihood")
+    split: SplitParams = part(SplitParams, "scene-learnt person size and the split of "
+                                           "multi-person blobs (DBN-PHD only)")
     filter: PHDParams = field(default_factory=_filter_defaults,
                               metadata={"doc": "particle PHD filter (motion, likelihood, "
                                                "clutter, birth)", "paper": None})
@@ -181,19 +191,20 @@ def _gated_pairs(states: np.ndarray, Z: np.ndarray, params: PHDParams, confidenc
 
 #: ``--preset paper``: feng2015 as published, differing from the default in exactly these fields
 #: (tests/test_dbn.py checks it): the literal eq. (9) score on every particle, maggio2007's
-#: J_max, and the codebook trained online on the first frames (Kim 2005) instead of our
-#: offline temporal-median start.
+#: J_max, the codebook trained online on the first frames (Kim 2005) instead of our
+#: offline temporal-median start, and no search for people inside big blobs (:mod:`.scale`).
 PAPER_CHANGES: dict[str, object] = {
     "dbn.score": "logit",                  # eq. (9): s = c · a(x)
     "dbn.apply": "particle",               # eq. (9) weighs every particle
     "filter.birth.j_max": PHDParams().birth.j_max,  # maggio2007 §4's J_max
     "background.initial": "online",        # Kim 2005 §2: train on the first N frames
+    "split.enabled": False,                # feng2015 has no rule for multi-person blobs
 }
 
 
 @register(presets={"default": DBNPHDParams(), "paper": DBNPHDParams(
     filter=PHDParams(), dbn=DBNParams(score="logit", apply="particle"),
-    background=BackgroundParams(initial="online"))})
+    background=BackgroundParams(initial="online"), split=SplitParams(enabled=False))})
 class DBNPHDTracker(_AssociatingTracker):
     """DBN-PHD: codebook blobs → particle PHD with a DBN colour+HOG likelihood → K-means →
     graph association."""
@@ -221,6 +232,7 @@ class DBNPHDTracker(_AssociatingTracker):
             self.dbn = DBNLikelihood(model, dp, self.params.filter.likelihood)
         # the filter's parts; its likelihood is the DBN one (or maggio2007's Gaussian)
         self.filter = PHDFilter(self.params.filter, rng, likelihood=self.dbn)
+        self.person_scale = PersonScale(self.params.split)
 
     def prepare(self, source, first: int, last: int) -> None:
         """Offline start (the pipeline calls this for a recorded clip, not with ``--online``):
@@ -245,6 +257,36 @@ class DBNPHDTracker(_AssociatingTracker):
         """The frame's stage log (a benchmark overrides this to time the stages)."""
         return StageLog(self.stages, level)
 
+    def _split(self, boxes, fill, blob_a, mask, frame):
+        """Blobs bigger than the scene's person searched for people (:mod:`.scale`): returns
+        the measurements (split blobs replaced by the windows the DBN kept), their fill and
+        DBN logits, and the number of blobs split.  The person size learns from the accepted
+        blobs that were not split."""
+        sp = self.params.split
+        accept = self.params.dbn.accept
+        scale = self.params.background.scale
+        big = needs_split(boxes, self.person_scale, sp)
+        out_b, out_f, out_a = [boxes[~big]], [fill[~big]], [blob_a[~big]]
+        n_split = 0
+        if big.any():
+            fg_ii = cv2.integral(mask)
+            for i in np.flatnonzero(big):
+                cand = split_candidates(boxes[i], self.person_scale, sp, fg_ii, scale)
+                if len(cand):
+                    a = self.dbn.logits_union(cand, frame)
+                    kept = select_windows(cand, 1.0 / (1.0 + np.exp(-a)), accept, sp.overlap)
+                    if len(kept):
+                        out_b.append(cand[kept])
+                        out_f.append(box_fill(fg_ii, cand[kept], scale))
+                        out_a.append(a[kept])
+                        n_split += 1
+                        continue
+                out_b.append(boxes[i:i + 1])
+                out_f.append(fill[i:i + 1])
+                out_a.append(blob_a[i:i + 1])
+        self.person_scale.add(boxes[~big][blob_a[~big] >= _logit(accept)])
+        return np.concatenate(out_b), np.concatenate(out_f), np.concatenate(out_a), n_split
+
     # ------------------------------------------------------------------------------- step
 
     def step(self, frame: Frame, detections: Optional[Detections],
@@ -267,8 +309,12 @@ class DBNPHDTracker(_AssociatingTracker):
         bp = p.background
         boxes, fill = blobs_from_mask(mask, bp.scale, bp.min_area, bp.max_foreground)
         Z = xywh_to_cxcywh(boxes)
+        n_split = 0
         if self.dbn is not None and len(boxes):
             blob_a = self.dbn.logits(boxes, frame)
+            if p.split.enabled:
+                boxes, fill, blob_a, n_split = self._split(boxes, fill, blob_a, mask, frame)
+                Z = xywh_to_cxcywh(boxes)
             blob_prob = 1.0 / (1.0 + np.exp(-blob_a))
             accepted = blob_prob >= p.dbn.accept
         else:
@@ -276,6 +322,7 @@ class DBNPHDTracker(_AssociatingTracker):
             blob_prob = np.full(len(boxes), np.nan)
             accepted = np.ones(len(boxes), dtype=bool)
         log.scalar("dbn/blobs/count", len(boxes))
+        log.scalar("dbn/blobs/split", n_split)
         log.scalar("dbn/blobs/rejected", int((~accepted).sum()))
         for i in np.flatnonzero(~accepted):
             x, y, w, h = boxes[i]
@@ -298,12 +345,16 @@ class DBNPHDTracker(_AssociatingTracker):
                            weights=predicted.weights))
 
         log.stage("birth")
-        acc_idx = np.flatnonzero(accepted)
+        weighted = p.births.select == "weighted" and self.dbn is not None
+        acc_idx = np.arange(len(Z)) if weighted else np.flatnonzero(accepted)
         born = birth(predicted, Z[acc_idx], fp, rng)
         newborn = born.particles
         J = len(newborn)
         if J and p.births.birth_weight == "eq10":
             newborn = newborn.with_log_weights(np.full(J, -math.log(J)))   # eq. (10): 1/J_k
+        if J and weighted:              # every blob gives births, weighted by P(person)
+            lp = -np.logaddexp(0.0, -blob_a[acc_idx[born.det_index]])
+            newborn = newborn.with_log_weights(newborn.log_weights + lp)
         log.scalar("dbn/birth/count", J)
         if want_p:
             log.add(Points("dbn/particles/birth", newborn.states[:, :2],
@@ -380,6 +431,11 @@ class DBNPHDTracker(_AssociatingTracker):
             log.add(Boxes("dbn/clusters/dropped", cb[~k], role="dropped",
                           values={"m": clusters.masses[~k]}))
         return self._associate(frame, clusters.kept_centers, log)
+
+
+def _logit(p: float) -> float:
+    p = min(max(p, 1e-12), 1 - 1e-12)
+    return math.log(p / (1 - p))
 
 
 def _baseline_params() -> DBNPHDParams:
