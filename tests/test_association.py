@@ -698,12 +698,12 @@ def test_pair_similarities_are_the_matrix_entries():
     np.testing.assert_allclose(pairs, dense, rtol=1e-13, atol=0)
 
 
-def _gap_rows(support: float, evidence: bool) -> dict:
+def _gap_rows(support: float, evidence: bool, free: int = 0) -> dict:
     """One target walking right, its estimates missing in frames 11-16 (a gap of 7, K = 10);
     with ``evidence`` the frames inside the gap have a detection on the target (the filter
     missed it), else only a false detection far away.  Returns frame → FinalRows."""
     p = AssocParams(depth=10, min_length=3, fill_gaps=True, extend_heads=True,
-                    fill_support=support)
+                    fill_support=support, fill_free=free)
     assoc = GraphAssociator(p)
     rows = {}
     for k in range(1, 30):
@@ -724,10 +724,12 @@ def _gap_rows(support: float, evidence: bool) -> dict:
 
 def test_gap_is_filled_only_with_evidence_on_its_path():
     """fill_support: a gap whose interpolated path has detections on it is filled; the same
-    gap across empty image is linked but not filled; fill_support = 0 fills both."""
+    gap across empty image is linked but not filled; fill_support = 0 fills both, and so does
+    fill_free when the gap (6 missing frames) is no longer than it."""
     inside = set(range(11, 17))
-    for support, evidence, filled in ((0.25, True, True), (0.25, False, False),
-                                      (0.0, False, True)):
-        rows = _gap_rows(support, evidence)
+    for support, evidence, free, filled in ((0.25, True, 0, True), (0.25, False, 0, False),
+                                            (0.0, False, 0, True), (0.25, False, 5, False),
+                                            (0.25, False, 6, True)):
+        rows = _gap_rows(support, evidence, free)
         got = {f for f, fr in rows.items() if fr.filled.any()}
         assert got == (inside if filled else set()), (support, evidence, got)

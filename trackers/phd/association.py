@@ -172,6 +172,8 @@ class AssocParams:
                                      "occluder) overlapping the interpolated box by "
                                      "fill_overlap or more; a path across empty image is "
                                      "not filled (0: fill every gap)")
+    fill_free: int = param(0, "fill_support: a gap of at most this many missing frames "
+                              "is filled without evidence (missed detections in a row)")
     relink_depth: int = param(0, "re-linking (not in paper; 0: off): a confirmed track unseen "
                                  "for more than depth frames stays re-linkable for this many "
                                  "frames; a new track, when confirmed, takes its id if its "
@@ -1018,7 +1020,8 @@ class GraphAssociator:
         obs = OBS_INDEX
         vel = (dst[:, [0, 1]] - src[:, [0, 1]]) / gap[:, None]
         if self.params.fill_support > 0:
-            keep = self._gap_support(src, src_frame, dst, frame, gap) >= self.params.fill_support
+            keep = ((gap - 1 <= self.params.fill_free)
+                    | (self._gap_support(src, src_frame, dst, frame, gap) >= self.params.fill_support))
             if not keep.any():
                 return
             src, src_frame, dst, ids, gap = src[keep], src_frame[keep], dst[keep], ids[keep], gap[keep]
