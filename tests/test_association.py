@@ -696,3 +696,40 @@ def test_pair_similarities_are_the_matrix_entries():
     pairs = similarity_pairs(a, b, rows, cols)
     assert np.isnan(pairs).sum() == np.isnan(dense).sum() > 0
     np.testing.assert_allclose(pairs, dense, rtol=1e-13, atol=0)
+
+
+def _gap_rows(support: float, evidence: bool, free: int = 0) -> dict:
+    """One target walking right, its estimates missing in frames 11-16 (a gap of 7, K = 10);
+    with ``evidence`` the frames inside the gap have a detection on the target (the filter
+    missed it), else only a false detection far away.  Returns frame → FinalRows."""
+    p = AssocParams(depth=10, min_length=3, fill_gaps=True, extend_heads=True,
+                    fill_support=support, fill_free=free)
+    assoc = GraphAssociator(p)
+    rows = {}
+    for k in range(1, 30):
+        x = 50.0 + 3.0 * k
+        hidden = 11 <= k <= 16
+        st = np.zeros((0, 6)) if hidden else np.array([state(x, 100.0, 40, 80, 3.0, 0.0)])
+        dets = [[500.0, 400.0, 40.0, 80.0]]
+        if evidence or not hidden:
+            dets.append([x + 2.0, 101.0, 40.0, 80.0])
+        r = assoc.step(k, st, detections=np.array(dets))
+        for fr in r.finalised:
+            rows[fr.frame] = fr
+    for fr in assoc.flush():
+        rows[fr.frame] = fr
+    assert {int(i) for fr in rows.values() for i in fr.ids} == {1}  # one track across the gap
+    return rows
+
+
+def test_gap_is_filled_only_with_evidence_on_its_path():
+    """fill_support: a gap whose interpolated path has detections on it is filled; the same
+    gap across empty image is linked but not filled; fill_support = 0 fills both, and so does
+    fill_free when the gap (6 missing frames) is no longer than it."""
+    inside = set(range(11, 17))
+    for support, evidence, free, filled in ((0.25, True, 0, True), (0.25, False, 0, False),
+                                            (0.0, False, 0, True), (0.25, False, 5, False),
+                                            (0.25, False, 6, True)):
+        rows = _gap_rows(support, evidence, free)
+        got = {f for f, fr in rows.items() if fr.filled.any()}
+        assert got == (inside if filled else set()), (support, evidence, got)

@@ -165,6 +165,15 @@ class AssocParams:
     fill_overlap: float = param(0.3, "fill_gaps: a gap box overlapping another track's "
                                      "estimate of that frame by this IoU or more is not "
                                      "filled")
+    fill_support: float = param(0.0, "fill_gaps: a linked gap is filled only when at least "
+                                     "this share of its inner frames has evidence on the "
+                                     "interpolated path: a detection of the frame (kept with "
+                                     "extend_heads) or another track's estimate (an "
+                                     "occluder) overlapping the interpolated box by "
+                                     "fill_overlap or more; a path across empty image is "
+                                     "not filled (0: fill every gap)")
+    fill_free: int = param(0, "fill_support: a gap of at most this many missing frames "
+                              "is filled without evidence (missed detections in a row)")
     relink_depth: int = param(0, "re-linking (not in paper; 0: off): a confirmed track unseen "
                                  "for more than depth frames stays re-linkable for this many "
                                  "frames; a new track, when confirmed, takes its id if its "
@@ -1010,6 +1019,13 @@ class GraphAssociator:
         frame = frame[long]
         obs = OBS_INDEX
         vel = (dst[:, [0, 1]] - src[:, [0, 1]]) / gap[:, None]
+        if self.params.fill_support > 0:
+            keep = ((gap - 1 <= self.params.fill_free)
+                    | (self._gap_support(src, src_frame, dst, frame, gap) >= self.params.fill_support))
+            if not keep.any():
+                return
+            src, src_frame, dst, ids, gap = src[keep], src_frame[keep], dst[keep], ids[keep], gap[keep]
+            frame, vel = frame[keep], vel[keep]
         for n, (f, bid, bst, bfill) in enumerate(self._buffer):
             inside = (src_frame < f) & (f < frame)
             if not inside.any():
@@ -1030,6 +1046,29 @@ class GraphAssociator:
             self._buffer[n] = (f, np.concatenate([bid, fid]),
                                np.concatenate([bst, st]),
                                np.concatenate([bfill, np.ones(len(st), dtype=bool)]))
+
+    def _gap_support(self, src: np.ndarray, src_frame: np.ndarray, dst: np.ndarray,
+                     frame: np.ndarray, gap: np.ndarray) -> np.ndarray:
+        """``fill_support``: per edge, the share of the gap's inner frames (buffered ones) whose
+        interpolated box overlaps a detection of the frame or another track's estimate by
+        ``fill_overlap`` or more.  A loop
+        over the buffered frames, vectorised over the edges."""
+        obs = OBS_INDEX
+        dets = {f: d for f, d in self._dets}
+        hits = np.zeros(len(src))
+        for f, bid, bst, bfill in self._buffer:
+            inside = (src_frame < f) & (f < frame)
+            if not inside.any():
+                continue
+            t = ((f - src_frame[inside]) / gap[inside])[:, None]
+            box = (1.0 - t) * src[inside][:, obs] + t * dst[inside][:, obs]
+            ev = bst[~bfill][:, obs]
+            d = dets.get(f)
+            if d is not None and len(d):
+                ev = np.concatenate([ev, d])
+            if len(ev):
+                hits[inside] += _iou(box, ev).max(axis=1) >= self.params.fill_overlap
+        return hits / np.maximum(gap - 1, 1)
 
     def _confirmed_ids(self, ids: np.ndarray, extra_ids=None, extra_len=None) -> np.ndarray:
         """Mask of ``ids`` whose track has at least ``min_length`` vertices (live or just ended)."""

@@ -341,7 +341,7 @@ class _AssociatingTracker:
 PHD_PRACTICAL = PHDTrackerParams(
     filter=PHDParams.of(clutter_model="gate", near_learn=True, score_model="gaussian",
                         p_miss=0.1, revive_odds=1.0),
-    assoc=AssocParams(fill_gaps=True, app_weight=2.0, extend_heads=True),
+    assoc=AssocParams(fill_gaps=True, fill_support=0.25, fill_free=2, app_weight=2.0, extend_heads=True),
     rate=RateParams(per_second=True))
 PHD_SCENE = with_options(PHD_PRACTICAL, {"filter.clutter.clutter_model": "scene"})
 #: The practical default of MT: the same association settings per second (re-linking
