@@ -1046,19 +1046,26 @@ def _tune_sequence(T, path, args):
     frames = args.frames
     if isinstance(frames, int):
         frames = (1, frames)
+    frames, holdout = _tune_ranges(frames, args.holdout, length, source.name)
+    return T.TuneSequence(spec, frames, holdout, source.name)
+
+
+def _tune_ranges(frames, holdout, length: int, name: str):
+    """``tune``'s tuned-on and held-out frame ranges of one sequence of ``length`` frames:
+    default the first half and the rest; each checked against the length, and not
+    overlapping."""
     if frames is None:
         frames = (1, length // 2)
-    holdout = args.holdout
     if holdout is None:
         holdout = (frames[1] + 1, length) if frames[1] < length else \
             ((1, frames[0] - 1) if frames[0] > 1 else None)
     for what, (a, b) in (("--frames", frames), ("--holdout", holdout or (1, 1))):
         if b > length:
-            raise InputError(f"{what} {a}:{b}: {source.name} has {length} frames")
+            raise InputError(f"{what} {a}:{b}: {name} has {length} frames")
     if holdout is not None and holdout[0] <= frames[1] and frames[0] <= holdout[1]:
         raise InputError(f"--holdout {holdout[0]}:{holdout[1]} overlaps the tuned-on frames "
                          f"{frames[0]}:{frames[1]}")
-    return T.TuneSequence(spec, frames, holdout, source.name)
+    return frames, holdout
 
 
 def cmd_tune(args) -> int:
@@ -1119,20 +1126,9 @@ def cmd_tune(args) -> int:
     if length is None:
         raise InputError(f"{args.source}: length unknown; tune needs a sequence with a known "
                          f"number of frames")
-    if frames is None:
-        if length < 2:
-            raise InputError(f"{args.source}: {length} frame(s): too short to tune and hold out")
-        frames = (1, length // 2)
-    holdout = args.holdout
-    if holdout is None:
-        holdout = (frames[1] + 1, length) if frames[1] < length else \
-            ((1, frames[0] - 1) if frames[0] > 1 else None)
-    for what, (a, b) in (("--frames", frames), ("--holdout", holdout or (1, 1))):
-        if b > length:
-            raise InputError(f"{what} {a}:{b}: {source.name} has {length} frames")
-    if holdout is not None and holdout[0] <= frames[1] and frames[0] <= holdout[1]:
-        raise InputError(f"--holdout {holdout[0]}:{holdout[1]} overlaps the tuned-on frames "
-                         f"{frames[0]}:{frames[1]}")
+    if frames is None and length < 2:
+        raise InputError(f"{args.source}: {length} frame(s): too short to tune and hold out")
+    frames, holdout = _tune_ranges(frames, args.holdout, length, source.name)
     from pfscope.trackers.outputs import refuse_inputs
 
     from .run import run_inputs
