@@ -190,6 +190,47 @@ def _frame_class():
     return DetOnlySource
 
 
+def _clutter_boxes(rng, m: int, W: float, H: float) -> np.ndarray:
+    """``m`` uniformly placed false boxes (x, y, w, h) of person-like shape, as both detection
+    scenes draw them."""
+    import numpy as np
+
+    cw = rng.uniform(15, 60, m)
+    ch = cw * rng.uniform(2, 3, m)
+    return np.c_[rng.uniform(0, W, m) - cw / 2, rng.uniform(0, H, m) - ch / 2, cw, ch]
+
+
+def _frame_detections(true_boxes: np.ndarray, clutter_boxes: np.ndarray) -> np.ndarray:
+    """One frame's detections: the detected targets' noisy boxes, then the clutter, sizes
+    floored at 2 px."""
+    import numpy as np
+
+    d = np.vstack([true_boxes, clutter_boxes])
+    d[:, 2:4] = np.maximum(d[:, 2:4], 2.0)
+    return d
+
+
+def _scene_source(name: str, fps: float, frames: int, W: float, H: float, det_frames, det_boxes,
+                  gt_frames, gt_ids, gt_boxes, extra: dict):
+    """The detections-only source of a scene from its per-frame detection and gt arrays."""
+    import numpy as np
+
+    from pfscope.trackers.data.motio import MotTable
+
+    fr = np.concatenate(det_frames).astype(np.int64)
+    boxes = np.vstack(det_boxes)
+    n = len(fr)
+    det = MotTable(frame=fr, id=np.full(n, -1, np.int64), boxes=boxes, score=np.ones(n),
+                   cls=np.ones(n), vis=np.ones(n))
+    gfr = np.asarray(gt_frames, np.int64)
+    ng = len(gfr)
+    gt = MotTable(frame=gfr, id=np.asarray(gt_ids, np.int64), boxes=np.asarray(gt_boxes),
+                  score=np.ones(ng), cls=np.ones(ng), vis=np.ones(ng))
+    cls = _frame_class()
+    return cls(name=name, fps=fps, length=frames, width=int(W), height=int(H), gt=gt, det=det,
+               kind="synthetic", location="built-in", extra=extra)
+
+
 def targets_scene(targets: int, frames: int, seed: int = 0, p_detect: float = 0.9,
                   clutter: float = 5.0):
     """A seeded detections-only scene with ``targets`` people visible on every frame.
@@ -204,7 +245,6 @@ def targets_scene(targets: int, frames: int, seed: int = 0, p_detect: float = 0.
 
     import numpy as np
 
-    from pfscope.trackers.data.motio import MotTable
 
     rng = np.random.default_rng([seed, targets, 7])
     side = math.sqrt(max(targets, 4) / 4.0)
@@ -228,28 +268,13 @@ def targets_scene(targets: int, frames: int, seed: int = 0, p_detect: float = 0.
     fr, boxes = [], []
     for i in range(frames):
         tb = gt_boxes[i][det_mask[i]] + noise[i][det_mask[i]]
-        m = n_cl[i]
-        cw = rng.uniform(15, 60, m)
-        ch = cw * rng.uniform(2, 3, m)
-        cb = np.c_[rng.uniform(0, W, m) - cw / 2, rng.uniform(0, H, m) - ch / 2, cw, ch]
-        b = np.vstack([tb, cb])
-        b[:, 2:4] = np.maximum(b[:, 2:4], 2.0)
+        b = _frame_detections(tb, _clutter_boxes(rng, n_cl[i], W, H))
         fr.append(np.full(len(b), i + 1))
         boxes.append(b)
-    fr = np.concatenate(fr).astype(np.int64)
-    boxes = np.vstack(boxes)
-    n = len(fr)
-    det = MotTable(frame=fr, id=np.full(n, -1, np.int64), boxes=boxes, score=np.ones(n),
-                   cls=np.ones(n), vis=np.ones(n))
-    gfr = np.repeat(np.arange(1, frames + 1), T).astype(np.int64)
-    ng = len(gfr)
-    gt = MotTable(frame=gfr, id=np.tile(np.arange(1, T + 1), frames).astype(np.int64),
-                  boxes=gt_boxes.reshape(-1, 4).copy(), score=np.ones(ng), cls=np.ones(ng),
-                  vis=np.ones(ng))
-    cls = _frame_class()
-    return cls(name=f"targets{T}-seed{seed}", fps=25.0, length=frames, width=int(W),
-               height=int(H), gt=gt, det=det, kind="synthetic", location="built-in",
-               extra={"targets": T, "p_detect": p_detect, "clutter": clutter})
+    return _scene_source(f"targets{T}-seed{seed}", 25.0, frames, W, H, fr, boxes,
+                         np.repeat(np.arange(1, frames + 1), T),
+                         np.tile(np.arange(1, T + 1), frames), gt_boxes.reshape(-1, 4).copy(),
+                         {"targets": T, "p_detect": p_detect, "clutter": clutter})
 
 
 
@@ -266,7 +291,6 @@ def births_scene(targets: int, frames: int, seed: int = 0, p_detect: float = 0.9
 
     import numpy as np
 
-    from pfscope.trackers.data.motio import MotTable
 
     rng = np.random.default_rng([seed, targets, 11])
     W, H, fps = 640.0, 480.0, 25.0
@@ -302,27 +326,12 @@ def births_scene(targets: int, frames: int, seed: int = 0, p_detect: float = 0.9
         gbox.append(b)
         hit = rng.random(T) < p_detect
         tb = b[hit] + rng.standard_normal((int(hit.sum()), 4)) * 0.05 * np.c_[wh, wh][hit]
-        m = rng.poisson(clutter)
-        cw = rng.uniform(15, 60, m)
-        ch = cw * rng.uniform(2, 3, m)
-        cb = np.c_[rng.uniform(0, W, m) - cw / 2, rng.uniform(0, H, m) - ch / 2, cw, ch]
-        d = np.vstack([tb, cb])
-        d[:, 2:4] = np.maximum(d[:, 2:4], 2.0)
+        d = _frame_detections(tb, _clutter_boxes(rng, rng.poisson(clutter), W, H))
         fr.append(np.full(len(d), i + 1))
         boxes.append(d)
-    fr = np.concatenate(fr).astype(np.int64)
-    boxes = np.vstack(boxes)
-    n = len(fr)
-    det = MotTable(frame=fr, id=np.full(n, -1, np.int64), boxes=boxes, score=np.ones(n),
-                   cls=np.ones(n), vis=np.ones(n))
-    gfr = np.concatenate(gfr).astype(np.int64)
-    ng = len(gfr)
-    gt = MotTable(frame=gfr, id=np.concatenate(gid).astype(np.int64), boxes=np.vstack(gbox),
-                  score=np.ones(ng), cls=np.ones(ng), vis=np.ones(ng))
-    cls = _frame_class()
-    return cls(name=f"births{T}-seed{seed}", fps=fps, length=frames, width=int(W),
-               height=int(H), gt=gt, det=det, kind="synthetic", location="built-in",
-               extra={"targets": T, "p_detect": p_detect, "clutter": clutter})
+    return _scene_source(f"births{T}-seed{seed}", fps, frames, W, H, fr, boxes,
+                         np.concatenate(gfr), np.concatenate(gid), np.vstack(gbox),
+                         {"targets": T, "p_detect": p_detect, "clutter": clutter})
 
 # ----------------------------------------------------------------------------- memory, fits
 
