@@ -5,8 +5,6 @@ the same files and summary, a failing run does not stop the others, resume skips
 from __future__ import annotations
 
 import json
-import os
-import signal
 import subprocess
 import sys
 import time
@@ -82,7 +80,8 @@ def test_sigterm_stops_a_dask_batch_and_the_same_command_resumes(tmp_path):
         from dask.distributed import Client, LocalCluster
     except ImportError as e:
         pytest.skip(f"Dask distributed is not installed ({e})")
-    from test_jobs import _running, _start, _summary, _wait_for, _wait_group_gone
+    from test_jobs import (_running, _signal_when_running, _start, _summary, _wait_for,
+                           _wait_group_gone)
 
     out = tmp_path / "runs"
     with LocalCluster(n_workers=2, processes=True, threads_per_worker=1,
@@ -91,16 +90,7 @@ def test_sigterm_stops_a_dask_batch_and_the_same_command_resumes(tmp_path):
                 "synthetic", "--trackers", "passthrough", "--seeds", "0,1,2", "--frames",
                 "1200", "--out", str(out), "--cluster", cluster.scheduler_address]
         p = _start(argv)
-        try:
-            assert _wait_for(lambda: len(_running(out)) >= 2, 180), "no run started"
-            time.sleep(1.0)
-            t0 = time.time()
-            p.send_signal(signal.SIGTERM)      # `kill PID`
-            _, err = p.communicate(timeout=90)
-            stopped_in = time.time() - t0
-        finally:
-            if p.poll() is None:
-                os.killpg(p.pid, signal.SIGKILL)
+        err, stopped_in = _signal_when_running(p, out, 2, 180)
         assert p.returncode == 143, err
         assert "Traceback" not in err and "stopped by SIGTERM" in err, err
         assert stopped_in < 40

@@ -6,10 +6,8 @@ from __future__ import annotations
 
 import json
 import os
-import signal
 import subprocess
 import sys
-import time
 
 import pytest
 
@@ -96,7 +94,7 @@ def test_sigterm_stops_a_ray_batch_and_the_same_command_resumes(tmp_path):
     from pfscope.viewer_app.batch import CLUSTER_GRACE
 
     pytest.importorskip("ray")
-    from test_jobs import _running, _start, _summary, _wait_for, _wait_group_gone
+    from test_jobs import _running, _signal_when_running, _start, _summary, _wait_group_gone
 
     out = tmp_path / "runs"
     argv = [sys.executable, "-m", "pfscope.viewer_app.cli", "batch", "--sources", "synthetic",
@@ -104,16 +102,7 @@ def test_sigterm_stops_a_ray_batch_and_the_same_command_resumes(tmp_path):
             str(out), "--backend", "ray"]
     env = {k: v for k, v in os.environ.items() if k != "RAY_ADDRESS"}
     p = _start(argv)
-    try:
-        assert _wait_for(lambda: len(_running(out)) >= 1, 240), "no run started"
-        time.sleep(1.0)
-        t0 = time.time()
-        p.send_signal(signal.SIGTERM)
-        _, err = p.communicate(timeout=90)
-        stopped_in = time.time() - t0
-    finally:
-        if p.poll() is None:
-            os.killpg(p.pid, signal.SIGKILL)
+    err, stopped_in = _signal_when_running(p, out, 1, 240)
     assert p.returncode == 143, err
     assert "Traceback" not in err and "stopped by SIGTERM" in err, err
     assert stopped_in < CLUSTER_GRACE - 3

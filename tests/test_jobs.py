@@ -73,6 +73,23 @@ def _running(out: Path) -> list[Path]:
     return list(out.glob("*.incomplete.rrd")) if out.exists() else []
 
 
+def _signal_when_running(p, out: Path, runs: int, start_timeout: float,
+                         sig=signal.SIGTERM) -> tuple[str, float]:
+    """Once ``runs`` runs of the batch ``p`` are writing into ``out``, send ``sig`` to its main
+    process and wait for it to end; returns its stderr and the seconds it took to stop.  The
+    whole group is killed if it is still there (a failing test leaves nothing behind)."""
+    try:
+        assert _wait_for(lambda: len(_running(out)) >= runs, start_timeout), "no run started"
+        time.sleep(1.0)
+        t0 = time.time()
+        p.send_signal(sig)                 # `kill PID`: the main process alone
+        _, err = p.communicate(timeout=90)
+        return err, time.time() - t0
+    finally:
+        if p.poll() is None:
+            os.killpg(p.pid, signal.SIGKILL)
+
+
 def _summary(out: Path) -> dict:
     return {r["run"]: r["status"] for r in json.loads((out / "summary.json").read_text())["runs"]}
 
