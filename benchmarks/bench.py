@@ -752,6 +752,8 @@ def bench_endtoend(args) -> dict:
                             "stonesoup_version": S.version(), "rows": res}
 
     # first run after an install vs a warm run, each a fresh process
+    if args.e2e_no_first_run:
+        return out
     exe = str(Path(sys.executable).with_name("pfscope"))
     with tempfile.TemporaryDirectory(prefix="pfscope-e2e-") as tmp:
         cache = str(Path(tmp) / "numba-cache")
@@ -826,6 +828,9 @@ def parse_args(argv=None):
                      help="frames per run (full: 60; quick: 40)")
     e2e.add_argument("--e2e-warm-repeat", type=int, metavar="N",
                      help="warm first runs, median (full: 3; quick: 1)")
+    e2e.add_argument("--e2e-no-first-run", action="store_true",
+                     help="skip the cold/warm first-run processes (quick iterations on the "
+                          "per-step table)")
     ap.add_argument("--tiny", action="store_true", help=argparse.SUPPRESS)  # the smoke test
     ap.add_argument("--memory-child", nargs=2, type=int, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)

@@ -17,6 +17,7 @@ from pfscope.trackers.phd.filter import (
 )
 from pfscope.trackers.phd.gating import tail_radius2
 from pfscope.trackers.smc import ParticleSet
+from pfscope.trackers.smc import random as R
 from pfscope.trackers.smc.resampling import _systematic_index
 
 OBS = [0, 1, 4, 5]
@@ -48,9 +49,11 @@ def test_propagate_kernel_is_the_numpy_model_bit_for_bit():
     rng = np.random.default_rng(0)
     x = _states(rng, 500)
     x[:10, 4:6] = 0.5                                  # clipped to min_size
-    eps = rng.standard_normal((500, 4))
     out = np.empty_like(x)
-    K.propagate_into(x, eps, 0.03, 0.1, 0.5, 1.0, out)
+    K.propagate_into(x, R.stream(123), 0.03, 0.1, 0.5, 1.0, out)
+    eps = np.empty(500 * 4)                            # the same stream, 4 normals a particle
+    R.fill_normal(R.stream(123), eps)
+    eps = eps.reshape(500, 4)
     want = x.copy()
     size = x[:, 4:6]
     acc = 0.03 * size * eps[:, 0:2]
@@ -61,31 +64,49 @@ def test_propagate_kernel_is_the_numpy_model_bit_for_bit():
     assert np.all(out[:, 4:6] >= 1.0)
 
 
-def test_birth_fill_is_the_numpy_birth_bit_for_bit():
-    rng = np.random.default_rng(1)
-    Z = np.c_[rng.uniform(0, 600, 7), rng.uniform(0, 400, 7), rng.uniform(3, 60, 7),
-              rng.uniform(8, 150, 7)]
-    j = np.array([0, 5, 1, 0, 30, 2, 11])
-    lw_det = rng.normal(-5, 1, 7)
-    n = int(j.sum())
-    eps, theta, sp = rng.standard_normal((n, 4)), rng.uniform(0, 2 * np.pi, n), rng.normal(0, 1, n)
+def _birth(Z, j, lw_det, key, spread=1.3, mean=0.05, std=0.1, min_size=4.0):
     lk = LikelihoodParams()
-    states, log_w, det = K.birth_fill(Z, j, lw_det, eps, theta, sp,
-                                      lk.sigma_obs, lk.sigma_obs_min, lk.sigma_obs_pos_ratio,
-                                      1.3, 0.05, 0.1, 4.0)
-    d = np.repeat(np.arange(7), j)
-    zr = Z[d]
-    obs = zr + 1.3 * obs_std(zr[:, 2:4], lk) * eps
-    speed = (0.05 + 0.1 * sp) * np.sqrt(zr[:, 2] * zr[:, 3])
-    want = np.empty((n, 6))
-    want[:, OBS] = obs
-    want[:, 2], want[:, 3] = speed * np.cos(theta), speed * np.sin(theta)
-    want[:, 4:6] = np.maximum(want[:, 4:6], 4.0)
-    np.testing.assert_array_equal(states[:, OBS], want[:, OBS])
-    # the kernel's cos/sin are libm's; numpy's may be its own SIMD ones on some CPUs (≤ 4 ulp)
-    np.testing.assert_allclose(states[:, 2:4], want[:, 2:4], rtol=4e-15, atol=1e-15)
+    n = int(j.sum())
+    states, log_w, det = np.empty((n, 6)), np.empty(n), np.empty(n, np.int64)
+    K.birth_fill(Z, j, lw_det, R.stream(key), lk.sigma_obs, lk.sigma_obs_min,
+                 lk.sigma_obs_pos_ratio, spread, mean, std, min_size, states, log_w, det)
+    return states, log_w, det
+
+
+def test_birth_fill_draws_the_newborn_distribution():
+    """Each detection's newborn: (y, w, h) ~ N(z, (spread σ(z))²), speed / sqrt(w h) ~
+    N(mean, std²) along a uniform direction; det and weights exact; same key, same newborn."""
+    rng = np.random.default_rng(1)
+    Z = np.c_[rng.uniform(0, 600, 4), rng.uniform(0, 400, 4), rng.uniform(20, 60, 4),
+              rng.uniform(40, 150, 4)]
+    j = np.array([0, 20000, 1, 30000])
+    lw_det = rng.normal(-5, 1, 4)
+    states, log_w, det = _birth(Z, j, lw_det, 7)
+    d = np.repeat(np.arange(4), j)
     np.testing.assert_array_equal(det, d)
     np.testing.assert_array_equal(log_w, lw_det[d])
+    lk = LikelihoodParams()
+    for z in (1, 3):
+        s = states[d == z]
+        q = (s[:, OBS] - Z[z]) / (1.3 * obs_std(Z[z, 2:4], lk))
+        assert np.abs(q.mean(0)).max() < 4 / np.sqrt(j[z])          # ~4 standard errors
+        assert np.abs(q.std(0) - 1).max() < 0.03
+        v = s[:, 2:4] / np.sqrt(Z[z, 2] * Z[z, 3])
+        speed = np.hypot(v[:, 0], v[:, 1])
+        # a signed Gaussian amplitude along a uniform direction: E|v| = E|N(0.05, 0.1²)|,
+        # E v = 0, E cos² θ = 1/2
+        assert abs(np.mean(speed ** 2) - (0.05 ** 2 + 0.1 ** 2)) < 0.05 * 0.0125
+        assert np.abs(v.mean(0)).max() < 4 * 0.112 / np.sqrt(j[z])
+        c2 = v[:, 0] ** 2 / speed ** 2
+        assert abs(c2.mean() - 0.5) < 4 * 0.354 / np.sqrt(j[z])
+    again, _, _ = _birth(Z, j, lw_det, 7)
+    np.testing.assert_array_equal(again, states)
+    other, _, _ = _birth(Z, j, lw_det, 8)
+    assert not np.array_equal(other, states)
+    small = Z.copy()
+    small[:, 2:4] = 3.0                                # boxes below min_size get clipped
+    s, _, _ = _birth(small, j, lw_det, 7)
+    assert s[:, 4:6].min() == 4.0
 
 
 # ----------------------------------------------------------------------------- grid, M(z)

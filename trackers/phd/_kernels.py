@@ -5,22 +5,22 @@ The numpy versions were already gated and vectorised; what was left was numpy's 
 and its temporaries (one (pairs,) or (N, K) array per arithmetic step).  Each kernel here is one
 or two passes over the particles with no temporary larger than O(N + N_z + grid):
 
-- :func:`propagate_into` — the size-aware motion model on pre-drawn normals (predict).
+- :func:`propagate_into` — the size-aware motion model, its normals drawn inside (predict).
 - :func:`grid_build` / :func:`grid_span` — a uniform grid on the particles' positions (counting
   sort by cell), so a detection visits only the particles in the cells its gate box touches.
 - :func:`mass_near_kernel` — M(z) of the birth allocation, the predicted mass in z's gate.
-- :func:`birth_fill` — the newborn states from pre-drawn random numbers.
+- :func:`birth_fill` — the newborn states, their random numbers drawn inside.
 - :func:`gauss_update` — eq. (5) with the Gaussian g(z|x) evaluated on the fly inside each
   detection's gate: C(z) by an online log-sum-exp per detection, then each particle's bracket
   ``p_M + Σ_z ψ/(κ + C)`` by an online log-sum-exp per particle; no pair arrays.
 - (systematic resampling, one walk over the CDF: ``trackers.smc.resampling._systematic_index``)
 - (the K-means kernels: :mod:`._kmeans_kernels`)
 
-Every random number is still drawn by the caller from its ``numpy.random.Generator``, in the
-same order and shapes as before, so a seed keeps its meaning.  The kernels do their arithmetic
-in the same order as the numpy code they replace where that is cheap (propagate, birth, the
-K-means distances and weighted sums: bit for bit the same floats); the update's sums run in a
-different order (float reordering only).  No kernel uses ``fastmath``.  They use numpy's error
+The random numbers of predict and birth are drawn inside the kernels from a stream keyed by one
+word of the caller's ``numpy.random.Generator`` (:mod:`~trackers.smc.random`: SplitMix64 and a
+ziggurat), with no (N, k) temporaries; the seed still fixes every draw.  The K-means kernels
+do their arithmetic in the same order as the numpy code they replace (bit for bit the same
+floats); the update's sums run in a different order (float reordering only).  No kernel uses ``fastmath``.  They use numpy's error
 model (every divisor is positive, so no zero-division branches to compile), and the helpers only
 kernels call have no CPython wrapper: less to compile on the first run after an install.
 """
@@ -32,29 +32,37 @@ import math
 import numpy as np
 from numba import njit
 
+from ..smc.random import normal, uniform
+
 _HALF_LOG_2PI_4 = 2.0 * math.log(2.0 * math.pi)     # 0.5 · OBS_DIM · log(2π), OBS_DIM = 4
 
 
 # ----------------------------------------------------------------------------- predict
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
-def propagate_into(x, eps, sigma_v, sigma_size, accel_to_position, min_size, out):
-    """``out`` (N, 6) = f(x) with the normals ``eps`` (N, 4): ``a = σ_v (w, h) ε₀₁``,
-    ``y += v + c a``, ``v += a``, ``(w, h) = max((w, h) + σ_s (w, h) ε₂₃, min_size)``
-    (:func:`~.motion.propagate`, same operation order)."""
+def propagate_into(x, st, sigma_v, sigma_size, accel_to_position, min_size, out):
+    """``out[:N]`` (N, 6) = f(x) with four normals ``ε`` per particle drawn in order from the
+    stream ``st`` (:mod:`~trackers.smc.random`): ``a = σ_v (w, h) ε₀₁``, ``y += v + c a``,
+    ``v += a``, ``(w, h) = max((w, h) + σ_s (w, h) ε₂₃, min_size)`` (:func:`~.motion.propagate`)."""
+    s = st[0]
     for i in range(x.shape[0]):
+        s, e0 = normal(s)
+        s, e1 = normal(s)
+        s, e2 = normal(s)
+        s, e3 = normal(s)
         w = x[i, 4]
         h = x[i, 5]
-        a0 = sigma_v * w * eps[i, 0]
-        a1 = sigma_v * h * eps[i, 1]
+        a0 = sigma_v * w * e0
+        a1 = sigma_v * h * e1
         out[i, 0] = x[i, 0] + (x[i, 2] + accel_to_position * a0)
         out[i, 1] = x[i, 1] + (x[i, 3] + accel_to_position * a1)
         out[i, 2] = x[i, 2] + a0
         out[i, 3] = x[i, 3] + a1
-        nw = w + sigma_size * w * eps[i, 2]
-        nh = h + sigma_size * h * eps[i, 3]
+        nw = w + sigma_size * w * e2
+        nh = h + sigma_size * h * e3
         out[i, 4] = nw if not nw < min_size else min_size
         out[i, 5] = nh if not nh < min_size else min_size
+    st[0] = s
 
 
 # ----------------------------------------------------------------------------- grid index
@@ -179,17 +187,14 @@ def mass_near_kernel(states, w, Z, std_z, r2, cell_x, cell_y):
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
-def birth_fill(Z, j, lw_det, eps, theta, speed_n, sigma_obs, sigma_min, pos_ratio,
-               spread, speed_mean, speed_std, min_size):
-    """The J = Σ j newborn: detection z's ``j[z]`` rows get ``(y, w, h) = z + spread σ(z) ε``,
-    velocity ``(mean + std n) sqrt(w_z h_z) (cos θ, sin θ)``, sizes clipped to ``min_size``,
-    log-weight ``lw_det[z]``.  ``eps`` (J, 4), ``theta``/``speed_n`` (J,) the caller's
-    draws (``math.cos``/``math.sin`` here: libm's, without two (J,) temporaries).  Returns
-    ``(states (J, 6), log_w (J,), det (J,))`` (the numpy birth's operations, same order)."""
-    n = eps.shape[0]
-    states = np.empty((n, 6), np.float64)
-    log_w = np.empty(n, np.float64)
-    det = np.empty(n, np.int64)
+def birth_fill(Z, j, lw_det, st, sigma_obs, sigma_min, pos_ratio, spread, speed_mean,
+               speed_std, min_size, states, log_w, det):
+    """The J = Σ j newborn into ``states[:J]`` (J, 6), ``log_w[:J]``, ``det[:J]``: detection
+    z's ``j[z]`` rows get ``(y, w, h) = z + spread σ(z) ε``, velocity
+    ``(mean + std n) sqrt(w_z h_z) (cos θ, sin θ)``, sizes clipped to ``min_size``, log-weight
+    ``lw_det[z]``.  Draws per newborn from the stream ``st``, in order: the four normals ε, a
+    point uniform in the unit disc (polar method: θ uniform without cos/sin), the normal n."""
+    s = st[0]
     k = 0
     for z in range(Z.shape[0]):
         sw = max(sigma_obs * Z[z, 2], sigma_min)
@@ -200,19 +205,32 @@ def birth_fill(Z, j, lw_det, eps, theta, speed_n, sigma_obs, sigma_min, pos_rati
         s3 = spread * sh
         scale = math.sqrt(Z[z, 2] * Z[z, 3])
         for _ in range(j[z]):
-            states[k, 0] = Z[z, 0] + s0 * eps[k, 0]
-            states[k, 1] = Z[z, 1] + s1 * eps[k, 1]
-            ww = Z[z, 2] + s2 * eps[k, 2]
-            hh = Z[z, 3] + s3 * eps[k, 3]
+            s, e0 = normal(s)
+            s, e1 = normal(s)
+            s, e2 = normal(s)
+            s, e3 = normal(s)
+            states[k, 0] = Z[z, 0] + s0 * e0
+            states[k, 1] = Z[z, 1] + s1 * e1
+            ww = Z[z, 2] + s2 * e2
+            hh = Z[z, 3] + s3 * e3
             states[k, 4] = ww if not ww < min_size else min_size
             states[k, 5] = hh if not hh < min_size else min_size
-            speed = (speed_mean + speed_std * speed_n[k]) * scale
-            states[k, 2] = speed * math.cos(theta[k])
-            states[k, 3] = speed * math.sin(theta[k])
+            while True:
+                s, u = uniform(s)
+                s, v = uniform(s)
+                u = 2.0 * u - 1.0
+                v = 2.0 * v - 1.0
+                q = u * u + v * v
+                if 0.0 < q < 1.0:
+                    break
+            s, n = normal(s)
+            speed = (speed_mean + speed_std * n) * scale / math.sqrt(q)
+            states[k, 2] = speed * u
+            states[k, 3] = speed * v
             log_w[k] = lw_det[z]
             det[k] = z
             k += 1
-    return states, log_w, det
+    st[0] = s
 
 
 # ----------------------------------------------------------------------------- update

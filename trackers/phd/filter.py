@@ -92,6 +92,7 @@ from .clutter import NearClutter, clutter_share
 from .gating import DEFAULT_BUDGET, LogGPairs, gate_pairs, tail_radius2
 from ..smc.resampling import SCHEMES
 from ..smc.resampling import resample as _resample_set
+from ..smc.random import key_from, stream
 from ..smc.weights import ParticleSet, logsumexp
 from ..types import Frame
 
@@ -610,13 +611,20 @@ class SceneModel:
 
 # ----------------------------------------------------------------------------- the four stages
 
-def predict(ps: ParticleSet, mp: MotionParams, rng: np.random.Generator) -> ParticleSet:
+def predict(ps: ParticleSet, mp: MotionParams, rng: np.random.Generator,
+            out: Optional[tuple[np.ndarray, np.ndarray]] = None) -> ParticleSet:
     """Persistent particles at k: ``x ~ f(.|x_{k-1})`` (q = f, so eq. (4) reduces to the
-    survival factor, no spawning β), ``ω_{k|k-1} = e · ω_{k-1}`` (eqs. (1), (2), (4))."""
+    survival factor, no spawning β), ``ω_{k|k-1} = e · ω_{k-1}`` (eqs. (1), (2), (4)).
+    ``out`` = (states (M, 6), log-weights (M,)) with M >= N: written into (their first N rows),
+    so the newborn can follow in the same arrays (:meth:`PHDFilter.step`)."""
+    n = len(ps)
+    S, L = out if out is not None else (None, np.empty(n))
     states = motion.propagate(ps.states, rng, sigma_v=mp.sigma_v, sigma_size=mp.sigma_size,
-                              accel_to_position=mp.accel_to_position, min_size=mp.min_size)
+                              accel_to_position=mp.accel_to_position, min_size=mp.min_size,
+                              out=S)
     log_e = math.log(mp.p_survival) if mp.p_survival > 0 else -np.inf
-    return ParticleSet(states, ps.log_weights + log_e, ps.labels, ps.extra)
+    lw = np.add(ps.log_weights, log_e, out=L[:n])
+    return ParticleSet(states, lw, ps.labels, ps.extra)
 
 
 @dataclass(frozen=True)
@@ -695,33 +703,43 @@ def log_birth_weight(Z: np.ndarray, params: PHDParams,
     return math.log(bp.birth_odds) + np.asarray(log_kappa) - log_pd - log_gbar
 
 
+def max_births(n_z: int, bp: BirthParams) -> int:
+    """The most newborn :func:`allocate_births` can give ``n_z`` detections."""
+    return min(n_z * bp.j_max, bp.max_births_per_frame)
+
+
 def birth(predicted: ParticleSet, Z, params: PHDParams, rng: np.random.Generator,
           log_kappa: Optional[np.ndarray] = None,
-          revive: Optional[np.ndarray] = None) -> BirthResult:
+          revive: Optional[np.ndarray] = None,
+          out: Optional[tuple[np.ndarray, np.ndarray]] = None) -> BirthResult:
     """Draw J_k newborn particles around the detections (maggio2007 §2; readings in the module
     docstring): ``J_z = J_max max(0, 1 − M(z))`` (capped per frame, :func:`allocate_births`),
     each detection's newborn carrying total weight ``birth_intensity`` (or the weight set by
     ``birth_odds`` from ``log_kappa``, :func:`log_birth_weight`); ``revive`` (N_z,) bool marks
-    the detections that get ``revive_odds`` instead of ``birth_odds``.
-    Draw order: (J, 4) normals, J direction uniforms, J speed normals."""
+    the detections that get ``revive_odds`` instead of ``birth_odds``.  Takes one word of
+    ``rng``, the key of the stream the kernel draws from (:func:`._kernels.birth_fill`).
+    ``out`` = (states (M, 6), log-weights (M,)) with M >= :func:`max_births`: the newborn are
+    written into their first J rows."""
     Z = as_observations(Z)
     bp, lk = params.birth, params.likelihood
     m_near = mass_near(predicted, Z, bp, lk)
     j = allocate_births(m_near, bp)
     n = int(j.sum())
-    eps = rng.standard_normal((n, OBS_DIM))
-    theta = rng.uniform(0.0, 2.0 * math.pi, n)
-    speed_n = rng.standard_normal(n)
+    st = stream(key_from(rng))
     # eq. (4), newborn branch, with γ_z ∝ p_z: every newborn of z weighs birth_intensity / J_z.
     lw_det = log_birth_weight(Z, params, log_kappa) - np.log(np.maximum(j, 1))
     if revive is not None and bp.revive_odds > bp.birth_odds > 0 and log_kappa is not None:
         lw_det = lw_det + np.where(revive, math.log(bp.revive_odds / bp.birth_odds), 0.0)
-    # one fused pass (numba): (y, w, h) = z + spread σ(z) ε, speed (mean + std n) sqrt(w h)
-    # in direction θ, sizes clipped to min_size
-    states, log_w, det = _kernels.birth_fill(
-        Z, j, lw_det, eps, theta, speed_n, lk.sigma_obs,
-        lk.sigma_obs_min, lk.sigma_obs_pos_ratio, bp.birth_spread, bp.birth_speed_mean,
-        bp.birth_speed_std, params.motion.min_size)
+    if out is not None and len(out[0]) >= n and len(out[1]) >= n:
+        states, log_w = out[0][:n], out[1][:n]
+    else:
+        states, log_w = np.empty((n, STATE_DIM)), np.empty(n)
+    det = np.empty(n, np.int64)
+    # one fused pass (numba) drawing its own numbers: (y, w, h) = z + spread σ(z) ε, speed
+    # (mean + std n) sqrt(w h) in a uniform direction, sizes clipped to min_size
+    _kernels.birth_fill(Z, j, lw_det, st, lk.sigma_obs, lk.sigma_obs_min,
+                        lk.sigma_obs_pos_ratio, bp.birth_spread, bp.birth_speed_mean,
+                        bp.birth_speed_std, params.motion.min_size, states, log_w, det)
     return BirthResult(ParticleSet(states, log_w), j, m_near, det)
 
 
@@ -1061,10 +1079,23 @@ class PHDFilter:
         scores = getattr(Z, "scores", None)
         Z = as_observations(Z)
         p = self.params
-        predicted = predict(self.particles, p.motion, self.rng)
+        prev = self.particles
+        # the persistent particles then the newborn in one pair of arrays: no concatenation
+        n = len(prev)
+        fused = prev.labels is None and prev.extra is None
+        buf = None
+        if fused:
+            cap = n + max_births(len(Z), p.birth)
+            buf = (np.empty((cap, STATE_DIM)), np.empty(cap))
+        predicted = predict(prev, p.motion, self.rng, buf)
         log_kappa_geo, log_kappa = self.scene.log_kappa(Z, scores, frame, predicted)
-        born = birth(predicted, Z, p, self.rng, log_kappa_geo, revive)
-        candidates = predicted.concat(born.particles)
+        born = birth(predicted, Z, p, self.rng, log_kappa_geo, revive,
+                     None if buf is None else (buf[0][n:], buf[1][n:]))
+        m = n + len(born.particles)
+        if fused and born.particles.states.base is buf[0]:
+            candidates = ParticleSet(buf[0][:m], buf[1][:m])
+        else:
+            candidates = predicted.concat(born.particles)
         if type(self.likelihood) is GaussianLikelihood:
             # maggio2007's Gaussian: evaluated inside the update's fused kernel
             log_g: LogG = GatedGaussian(Z, self.likelihood.params,

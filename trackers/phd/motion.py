@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..smc.random import key_from, stream
 from ._kernels import propagate_into
 
 #: maggio2007 §4 defaults.
@@ -34,21 +35,27 @@ MIN_SIZE = 1.0        # pixels
 
 def propagate(states: np.ndarray, rng: np.random.Generator, *, sigma_v: float = SIGMA_V,
               sigma_size: float = SIGMA_SIZE, accel_to_position: float = ACCEL_TO_POSITION,
-              min_size: float = MIN_SIZE) -> np.ndarray:
-    """Draw ``x_k ~ f(. | x_{k-1})`` for every row of ``states`` (N, 6); returns a new (N, 6).
+              min_size: float = MIN_SIZE, out: np.ndarray | None = None) -> np.ndarray:
+    """Draw ``x_k ~ f(. | x_{k-1})`` for every row of ``states`` (N, 6); returns a new (N, 6)
+    (or the first N rows of ``out``, an (M >= N, 6) float64 array it writes into).
 
     Noise std is proportional to each particle's own size at k-1 (maggio2007 §2, §4).
-    Consumes exactly one ``rng.standard_normal((N, 4))`` draw."""
+    Takes one word of ``rng`` (the key of the stream the kernel draws its 4 N normals from,
+    :mod:`~trackers.smc.random`); none when there are no particles."""
     x = np.asarray(states, dtype=np.float64)
     if x.ndim != 2 or x.shape[1] != 6:
         raise ValueError(f"propagate: expected states (N, 6), got {x.shape}")
     n = len(x)
-    out = np.empty_like(x)
+    if out is None:
+        out = np.empty_like(x)
+    elif out.dtype != np.float64 or out.ndim != 2 or out.shape[1] != 6 or len(out) < n:
+        raise ValueError(f"propagate: out must be float64 (>= {n}, 6), got {out.shape}")
+    out = out[:n]
     if n == 0:
         return out
-    eps = rng.standard_normal((n, 4))
-    # one fused pass (numba): a = σ_v (w, h) ε, y += v + c a, v += a (first order on position),
-    # (w, h) += σ_size (w, h) ε clipped to min_size (zero order on size)
-    propagate_into(x, eps, float(sigma_v), float(sigma_size), float(accel_to_position),
-                   float(min_size), out)
+    # one fused pass (numba) drawing its own normals ε: a = σ_v (w, h) ε, y += v + c a,
+    # v += a (first order on position), (w, h) += σ_size (w, h) ε clipped to min_size (zero
+    # order on size)
+    propagate_into(x, stream(key_from(rng)), float(sigma_v), float(sigma_size),
+                   float(accel_to_position), float(min_size), out)
     return out

@@ -42,6 +42,27 @@ def _systematic_index(lw, log_mass, u0, n):
     return idx
 
 
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def _systematic_take(states, lw, log_mass, u0, n):
+    """:func:`_systematic_index` and the ancestors' rows of ``states`` (N, D) in the same walk:
+    returns ``(idx (n,), states[idx] (n, D))`` with no exp or gather pass of its own."""
+    N = lw.shape[0]
+    D = states.shape[1]
+    idx = np.empty(n, np.int64)
+    out = np.empty((n, D), np.float64)
+    j = 0
+    c = math.exp(lw[0] - log_mass) if N > 1 else 1.0
+    for k in range(n):
+        u = (u0 + k) / n
+        while j < N - 1 and c <= u:
+            j += 1
+            c = c + math.exp(lw[j] - log_mass) if j < N - 1 else 1.0
+        idx[k] = j
+        for d in range(D):
+            out[k, d] = states[j, d]
+    return idx, out
+
+
 def _cdf(w: np.ndarray) -> np.ndarray:
     c = np.cumsum(w)
     c[-1] = 1.0  # guard against round-off leaving the last bin short of 1
@@ -126,8 +147,11 @@ def resample(ps: ParticleSet, n: int, rng: np.random.Generator,
     n = int(n)
     if len(ps) == 0 or n == 0 or not np.isfinite(ps.log_mass):
         return ps.take(np.zeros(0, dtype=np.int64))
-    if scheme == "systematic" and n > 0:    # the log-mass is known: one pass fewer
-        idx = _systematic_index(ps.log_weights, ps.log_mass, float(rng.random()), n)
-    else:
-        idx = resample_indices(ps.log_weights, n, rng, scheme)
-    return ps.take(idx).with_log_weights(np.full(n, ps.log_mass - np.log(n)))
+    lw = np.full(n, ps.log_mass - np.log(n))
+    if scheme == "systematic":      # the log-mass is known: one walk that also copies the rows
+        idx, states = _systematic_take(ps.states, ps.log_weights, ps.log_mass,
+                                       float(rng.random()), n)
+        return ParticleSet(states, lw, None if ps.labels is None else ps.labels[idx],
+                           None if ps.extra is None else ps.extra[idx])
+    idx = resample_indices(ps.log_weights, n, rng, scheme)
+    return ps.take(idx).with_log_weights(lw)
