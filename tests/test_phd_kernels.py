@@ -167,12 +167,15 @@ def _dense_reference(ps, Z, lk, log_kappa, p_miss, r2):
 @pytest.mark.parametrize("source", ["detection", "particle"])
 @pytest.mark.parametrize("p_miss", [0.0, 0.05, 1.0])
 @pytest.mark.parametrize("kappa", ["gate", "zero", "mixed"])
-def test_gauss_update_equals_the_dense_eq5_on_the_gate(source, p_miss, kappa):
+@pytest.mark.parametrize("spread", [False, True])
+def test_gauss_update_equals_the_dense_eq5_on_the_gate(source, p_miss, kappa, spread):
     rng = np.random.default_rng([len(source), int(p_miss * 100), len(kappa)])
     x = _states(rng, 1500, far=15)
     Z = _dets_near(rng, x, 25)
     lw = rng.normal(-7, 2, 1500)
     lw[:20] = -np.inf                                  # dead particles
+    if spread:                                         # weights e^-900 apart: the log route
+        lw[20:200] -= 900.0
     ps = ParticleSet(x, lw)
     lk = LikelihoodParams(obs_std_source=source)
     log_kappa = rng.normal(-14, 1, 25)
@@ -190,6 +193,8 @@ def test_gauss_update_equals_the_dense_eq5_on_the_gate(source, p_miss, kappa):
     np.testing.assert_allclose(got.c_z, want.c_z, rtol=1e-10, atol=1e-300)
     np.testing.assert_allclose(got.per_det_mass, want.per_det_mass, rtol=1e-10, atol=1e-14)
     assert got.miss_mass == pytest.approx(want.miss_mass)
+    # the mass the kernel summed is the log-sum-exp of its weights
+    assert got.particles.log_mass == pytest.approx(want.particles.log_mass, rel=1e-12)
     if p_miss < 1:
         assert np.count_nonzero(got.c_z > 0) >= 20     # the detections did win mass
 

@@ -237,6 +237,21 @@ def birth_fill(Z, j, lw_det, st, sigma_obs, sigma_min, pos_ratio, spread, speed_
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
       no_cpython_wrapper=True)
+def _gate_d2_inv(states, i, Z, j, inv, k, r2):
+    """:func:`_gate_d2` with the inverse stds ``inv`` (multiplications, not divisions)."""
+    q0 = (states[i, 0] - Z[j, 0]) * inv[k, 0]
+    q1 = (states[i, 1] - Z[j, 1]) * inv[k, 1]
+    d2 = q0 * q0 + q1 * q1
+    if not d2 <= r2:
+        return np.inf
+    q2 = (states[i, 4] - Z[j, 2]) * inv[k, 2]
+    q3 = (states[i, 5] - Z[j, 3]) * inv[k, 3]
+    d2 = d2 + q2 * q2 + q3 * q3
+    return d2 if d2 <= r2 else np.inf
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
 def _lse_add(m, s, a):
     """Online log-sum-exp: the pair (shift m, sum s) with log Σ = m + log s, plus term a."""
     if s == 0.0:
@@ -244,6 +259,11 @@ def _lse_add(m, s, a):
     if a <= m:
         return m, s + math.exp(a - m)
     return a, s * math.exp(m - a) + 1.0
+
+
+#: the linear-domain route of :func:`gauss_update` needs every finite weight within e^-600 of
+#: the largest (no underflow) and every factor ψ/(κ + C) / g below e^600 (no overflow)
+_LIN_RANGE = 600.0
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
@@ -254,8 +274,15 @@ def gauss_update(states, lw, Z, std, log_norm, by_det, log_kappa, log_pd, log_pm
 
     ``std`` (N_z, 4) and ``log_norm`` (N_z,) = ``Σ log σ`` per detection (``by_det``) or
     (N, 4) / (N,) per particle.  ``log g = −d²/2 − log_norm − 2 log 2π``.  Returns
-    ``(ok, new_lw (N,), log_c (N_z,))`` with ``log C(z) = log Σ_i (1 − p_M) g(z|x_i) ω_i`` and
-    ``new_lw = lw + log[p_M + Σ_z ψ_z/(κ_z + C_z)]`` (κ = C = 0: the term is 0)."""
+    ``(ok, new_lw (N,), log_c (N_z,), log_mass)`` with
+    ``log C(z) = log Σ_i (1 − p_M) g(z|x_i) ω_i``, ``new_lw = lw + log[p_M + Σ_z ψ_z/(κ_z + C_z)]``
+    (κ = C = 0: the term is 0) and ``log_mass = log Σ_i exp(new_lw_i)``.  The Mahalanobis
+    distances multiply by the inverse stds (float reordering against the dense reference).
+
+    Two routes, the same sums: with per-detection stds and weights within e^600 of each other
+    (every PHD frame), in linear space -- ``e^{−d²/2}`` once per pair serves both C(z) and the
+    bracket, the weights ``e^{lw − max}`` once per particle, one log per particle; otherwise
+    in log space (online log-sum-exps: two exps per pair)."""
     n = states.shape[0]
     nz = Z.shape[0]
     log_c = np.empty(nz, np.float64)
@@ -265,7 +292,11 @@ def gauss_update(states, lw, Z, std, log_norm, by_det, log_kappa, log_pd, log_pm
     ok, x0, y0, cx, cy, ni, nj, order, starts = grid_build(states[:, 0], states[:, 1],
                                                            cell_x, cell_y)
     if not ok:
-        return False, new_lw, log_c
+        return False, new_lw, log_c, -np.inf
+    inv = np.empty_like(std)
+    for k in range(std.shape[0]):
+        for d in range(4):
+            inv[k, d] = 1.0 / std[k, d]
     r = math.sqrt(r2)
     hx_all = 0.0
     hy_all = 0.0
@@ -273,15 +304,29 @@ def gauss_update(states, lw, Z, std, log_norm, by_det, log_kappa, log_pd, log_pm
         for i in range(n):
             hx_all = max(hx_all, std[i, 0])
             hy_all = max(hy_all, std[i, 1])
-    sh = np.zeros(n, np.float64)
-    sm = np.zeros(n, np.float64)
-    if log_pm > -np.inf:
+    # the linear route: weights relative to the largest, e_i = exp(lw_i − top)
+    top = -np.inf
+    low = np.inf
+    for i in range(n):
+        if lw[i] > -np.inf:
+            top = max(top, lw[i])
+            low = min(low, lw[i])
+    linear = by_det and top > -np.inf and top - low <= _LIN_RANGE and top < np.inf
+    e = np.empty(n if linear else 0, np.float64)
+    b = np.empty(n if linear else 0, np.float64)
+    pm = math.exp(log_pm)
+    if linear:
+        for i in range(n):
+            e[i] = math.exp(lw[i] - top)
+            b[i] = pm
+    sh = np.zeros(0 if linear else n, np.float64)
+    sm = np.zeros(0 if linear else n, np.float64)
+    if not linear and log_pm > -np.inf:
         for i in range(n):
             sh[i] = log_pm
             sm[i] = 1.0
-    # one detection at a time: its gated pairs once (C(z) by an online log-sum-exp, the pairs'
-    # log ψ kept in a buffer of at most N), then ψ/(κ + C) into each of those particles'
-    # brackets — the same terms in the same order as two sweeps over every detection
+    # one detection at a time: its gated pairs once (C(z); the pairs' e^{−d²/2} or log ψ kept
+    # in a buffer of at most N), then ψ/(κ + C) into each of those particles' brackets
     buf_i = np.empty(n, np.int64)
     buf_v = np.empty(n, np.float64)
     for j in range(nz):
@@ -300,32 +345,66 @@ def gauss_update(states, lw, Z, std, log_norm, by_det, log_kappa, log_pd, log_pm
             for p in range(starts[ci * nj + j0], starts[ci * nj + j1 + 1]):
                 i = order[p]
                 k = j if by_det else i
-                d2 = _gate_d2(states, i, Z, j, std, k, r2)
+                d2 = _gate_d2_inv(states, i, Z, j, inv, k, r2)
                 if not d2 <= r2:
                     continue
-                log_psi = log_pd + (-0.5 * d2 - log_norm[k] - _HALF_LOG_2PI_4)
                 buf_i[nb] = i
-                buf_v[nb] = log_psi
+                if linear:
+                    g = math.exp(-0.5 * d2)
+                    buf_v[nb] = g
+                    s += g * e[i]
+                else:
+                    log_psi = log_pd + (-0.5 * d2 - log_norm[k] - _HALF_LOG_2PI_4)
+                    buf_v[nb] = log_psi
+                    a = log_psi + lw[i]
+                    if a > -np.inf:
+                        m, s = _lse_add(m, s, a)
                 nb += 1
-                a = log_psi + lw[i]
-                if a > -np.inf:
-                    m, s = _lse_add(m, s, a)
-        if s > 0.0:
-            log_c[j] = m + math.log(s)
-        else:
+        if not (s > 0.0 and log_pd > -np.inf):
             continue                      # C = 0: ψ = 0 on every pair of z
+        log_scale = log_pd - log_norm[j] - _HALF_LOG_2PI_4    # log ψ = log_scale − d²/2
+        if linear:
+            log_c[j] = math.log(s) + top + log_scale
+        else:
+            log_c[j] = m + math.log(s)
         lk = log_kappa[j]
         lc = log_c[j]
         hi = max(lk, lc)
         log_den = hi + math.log1p(math.exp(min(lk, lc) - hi))
-        for q in range(nb):
-            t = buf_v[q] - log_den
-            if t > -np.inf:
-                i = buf_i[q]
-                sh[i], sm[i] = _lse_add(sh[i], sm[i], t)
+        if linear:
+            log_f = log_scale - log_den   # ψ/(κ + C) = f e^{−d²/2}
+            if log_f <= _LIN_RANGE:
+                f = math.exp(log_f)
+                for q in range(nb):
+                    b[buf_i[q]] += f * buf_v[q]
+            else:
+                for q in range(nb):
+                    b[buf_i[q]] += math.exp(math.log(buf_v[q]) + log_f)
+        else:
+            for q in range(nb):
+                t = buf_v[q] - log_den
+                if t > -np.inf:
+                    i = buf_i[q]
+                    sh[i], sm[i] = _lse_add(sh[i], sm[i], t)
+    if linear:
+        tot = 0.0
+        for i in range(n):
+            if b[i] > 0.0:
+                new_lw[i] = lw[i] + math.log(b[i])
+            else:
+                new_lw[i] = -np.inf
+            tot += e[i] * b[i]
+        return True, new_lw, log_c, (top + math.log(tot)) if tot > 0.0 else -np.inf
+    top = -np.inf
     for i in range(n):
         if sm[i] > 0.0:
             new_lw[i] = lw[i] + (sh[i] + math.log(sm[i]))
         else:
             new_lw[i] = -np.inf
-    return True, new_lw, log_c
+        top = max(top, new_lw[i])
+    if not top > -np.inf:
+        return True, new_lw, log_c, -np.inf
+    tot = 0.0
+    for i in range(n):
+        tot += math.exp(new_lw[i] - top)
+    return True, new_lw, log_c, top + math.log(tot)

@@ -121,6 +121,11 @@ class ParticleSet:
         place: every operation returns a new set)."""
         return float(logsumexp(self.log_weights))
 
+    def known_log_mass(self, log_mass: float) -> None:
+        """Record ``log_mass`` when the code that made the weights already summed them (the
+        PHD update's kernel): :attr:`log_mass` then needs no pass of its own."""
+        self.__dict__["log_mass"] = float(log_mass)
+
     @property
     def mass(self) -> float:
         """Total weight ``exp(logsumexp(log_weights))`` (0 for an empty set)."""
