@@ -274,9 +274,10 @@ def gauss_update(states, lw, Z, std, log_norm, by_det, log_kappa, log_pd, log_pm
 
     ``std`` (N_z, 4) and ``log_norm`` (N_z,) = ``Σ log σ`` per detection (``by_det``) or
     (N, 4) / (N,) per particle.  ``log g = −d²/2 − log_norm − 2 log 2π``.  Returns
-    ``(ok, new_lw (N,), log_c (N_z,), log_mass)`` with
+    ``(ok, new_lw (N,), log_c (N_z,), log_mass, log_pred)`` with
     ``log C(z) = log Σ_i (1 − p_M) g(z|x_i) ω_i``, ``new_lw = lw + log[p_M + Σ_z ψ_z/(κ_z + C_z)]``
-    (κ = C = 0: the term is 0) and ``log_mass = log Σ_i exp(new_lw_i)``.  The Mahalanobis
+    (κ = C = 0: the term is 0), ``log_mass = log Σ_i exp(new_lw_i)`` and ``log_pred`` the same
+    sum over ``lw`` (the predicted mass M_{k|k-1}).  The Mahalanobis
     distances multiply by the inverse stds (float reordering against the dense reference).
 
     Two routes, the same sums: with per-detection stds and weights within e^600 of each other
@@ -292,7 +293,7 @@ def gauss_update(states, lw, Z, std, log_norm, by_det, log_kappa, log_pd, log_pm
     ok, x0, y0, cx, cy, ni, nj, order, starts = grid_build(states[:, 0], states[:, 1],
                                                            cell_x, cell_y)
     if not ok:
-        return False, new_lw, log_c, -np.inf
+        return False, new_lw, log_c, -np.inf, -np.inf
     inv = np.empty_like(std)
     for k in range(std.shape[0]):
         for d in range(4):
@@ -315,10 +316,16 @@ def gauss_update(states, lw, Z, std, log_norm, by_det, log_kappa, log_pd, log_pm
     e = np.empty(n if linear else 0, np.float64)
     b = np.empty(n if linear else 0, np.float64)
     pm = math.exp(log_pm)
+    tot_pred = 0.0
     if linear:
         for i in range(n):
             e[i] = math.exp(lw[i] - top)
             b[i] = pm
+            tot_pred += e[i]
+    else:
+        for i in range(n):
+            tot_pred += math.exp(lw[i] - top) if top > -np.inf else 0.0
+    log_pred = top + math.log(tot_pred) if tot_pred > 0.0 else -np.inf
     sh = np.zeros(0 if linear else n, np.float64)
     sm = np.zeros(0 if linear else n, np.float64)
     if not linear and log_pm > -np.inf:
@@ -394,7 +401,7 @@ def gauss_update(states, lw, Z, std, log_norm, by_det, log_kappa, log_pd, log_pm
             else:
                 new_lw[i] = -np.inf
             tot += e[i] * b[i]
-        return True, new_lw, log_c, (top + math.log(tot)) if tot > 0.0 else -np.inf
+        return True, new_lw, log_c, (top + math.log(tot)) if tot > 0.0 else -np.inf, log_pred
     top = -np.inf
     for i in range(n):
         if sm[i] > 0.0:
@@ -403,8 +410,8 @@ def gauss_update(states, lw, Z, std, log_norm, by_det, log_kappa, log_pd, log_pm
             new_lw[i] = -np.inf
         top = max(top, new_lw[i])
     if not top > -np.inf:
-        return True, new_lw, log_c, -np.inf
+        return True, new_lw, log_c, -np.inf, log_pred
     tot = 0.0
     for i in range(n):
         tot += math.exp(new_lw[i] - top)
-    return True, new_lw, log_c, top + math.log(tot)
+    return True, new_lw, log_c, top + math.log(tot), log_pred

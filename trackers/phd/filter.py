@@ -864,14 +864,13 @@ def _update_gaussian(particles: ParticleSet, g: GatedGaussian, log_kappa: np.nda
     if n_z == 0 or n == 0:
         return _missed_only(particles, log_kappa, p_miss)
     log_pm, log_pd = _log_probs(p_miss)
-    m_pred = particles.mass
     kappa = np.exp(log_kappa)
     lk = g.params
     by_det = lk.obs_std_source == "detection"
     std = obs_std(Z[:, 2:4] if by_det else particles.states[:, 4:6], lk)
     log_norm = np.log(std).sum(-1)
     cell = _grid_cell(std if by_det else np.max(std[:, :2], axis=0, keepdims=True), g.r2)
-    ok, new_lw, log_c, log_mass = _kernels.gauss_update(
+    ok, new_lw, log_c, log_mass, log_pred = _kernels.gauss_update(
         particles.states, lw, Z, std, log_norm, by_det, log_kappa, log_pd, log_pm,
         float(g.r2), cell[0], cell[1])
     if not ok:
@@ -880,7 +879,9 @@ def _update_gaussian(particles: ParticleSet, g: GatedGaussian, log_kappa: np.nda
     log_den = np.where(np.isfinite(log_den), log_den, 0.0)              # κ = C = 0: term is 0
     out = ParticleSet(particles.states, new_lw, particles.labels, particles.extra)
     out.known_log_mass(log_mass)                                        # the kernel summed it
-    return UpdateResult(out, np.exp(log_c), kappa, np.exp(log_c - log_den), p_miss * m_pred)
+    particles.known_log_mass(log_pred)
+    return UpdateResult(out, np.exp(log_c), kappa, np.exp(log_c - log_den),
+                        p_miss * math.exp(log_pred))
 
 
 def _update_pairs(particles: ParticleSet, chunks: Iterable[LogGPairs], log_kappa: np.ndarray,
