@@ -20,9 +20,10 @@ The random numbers of predict and birth are drawn inside the kernels from a stre
 word of the caller's ``numpy.random.Generator`` (:mod:`~trackers.smc.random`: SplitMix64 and a
 ziggurat), with no (N, k) temporaries; the seed still fixes every draw.  The K-means kernels
 do their arithmetic in the same order as the numpy code they replace (bit for bit the same
-floats); the update's sums run in a different order (float reordering only).  No kernel uses ``fastmath``.  They use numpy's error
-model (every divisor is positive, so no zero-division branches to compile), and the helpers only
-kernels call have no CPython wrapper: less to compile on the first run after an install.
+floats); the update's sums run in a different order, in linear space when the weights allow
+(float reordering only).  No kernel uses ``fastmath``.  They use numpy's error model (every
+divisor is positive, so no zero-division branches to compile), and the helpers only kernels
+call have no CPython wrapper: less to compile on the first run after an install.
 """
 
 from __future__ import annotations
