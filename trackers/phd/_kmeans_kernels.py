@@ -474,6 +474,46 @@ def _unstable_near_moved(centers, space, moved, stable, reach_c):
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def prepare(states, log_w):
+    """The inputs of :func:`lloyd` from the particles, in one pass (numpy's spelling took five
+    passes and as many temporaries): ``lmax`` the largest log-weight (when it is not finite,
+    nothing else is computed), ``w`` (N,) the weights relative to it ``exp(log_w − lmax)``, ``shift`` (6,) the mean
+    position ``(y1, y2)`` (zeros elsewhere), ``S`` (N, 6) the states minus it and ``X`` (N, 4)
+    its ``(y1, y2, w, h)``.  The same floats as ``np.max``, ``np.exp``,
+    ``states[:, :2].mean(axis=0)`` (an axis-0 sum, row by row) and the subtraction."""
+    n = states.shape[0]
+    lmax = -np.inf
+    for i in range(n):
+        if log_w[i] > lmax:
+            lmax = log_w[i]
+        elif log_w[i] != log_w[i]:                 # NaN: np.max's answer
+            lmax = np.nan
+            break
+    shift = np.zeros(6, np.float64)
+    w = np.empty(n, np.float64)
+    S = np.empty((n, 6), np.float64)
+    X = np.empty((n, 4), np.float64)
+    if n == 0 or not np.isfinite(lmax):
+        return lmax, w, shift, S, X
+    a0 = 0.0
+    a1 = 0.0
+    for i in range(n):
+        w[i] = math.exp(log_w[i] - lmax)
+        a0 += states[i, 0]
+        a1 += states[i, 1]
+    shift[0] = a0 / n
+    shift[1] = a1 / n
+    for i in range(n):
+        for d in range(6):
+            S[i, d] = states[i, d] - shift[d]
+        X[i, 0] = S[i, 0]
+        X[i, 1] = S[i, 1]
+        X[i, 2] = S[i, 4]
+        X[i, 3] = S[i, 5]
+    return lmax, w, shift, S, X
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
 def lloyd(X, S, w, centers, max_iter, tol, sigma_obs, sigma_min, pos_ratio, grid_min):
     """Weighted Lloyd iterations (maggio2007 §3) from ``centers`` (K, 6) until the labels are
     stable, no centre's (y1, y2, w, h) moved more than ``tol`` (> 0), or ``max_iter``

@@ -817,9 +817,12 @@ class GraphAssociator:
             if sc is not None:
                 er, ec = np.nonzero(sc.allowed)
                 e_gain, e_weight = sc.gain[er, ec], sc.weight[er, ec]
+                pick = np.zeros((T, M), dtype=bool)      # (dense: T × M is small here)
+                pick[rows, cols] = True
+                chosen = pick[er, ec]
             else:
                 er, ec, e_gain, e_weight = ep.rows, ep.cols, ep.gain, ep.weight
-            chosen = np.isin(er * M + ec, rows * M + cols)
+                chosen = np.isin(er * M + ec, rows * M + cols)
             # each edge's source is the tail as it was before this frame: for a matched tail that
             # vertex has just moved to _prev
             matched_tail = np.zeros(T, dtype=bool)
@@ -1026,7 +1029,12 @@ class GraphAssociator:
                 return
             src, src_frame, dst, ids, gap = src[keep], src_frame[keep], dst[keep], ids[keep], gap[keep]
             frame, vel = frame[keep], vel[keep]
+        lo, hi = int(src_frame.min()), int(frame.max())
         for n, (f, bid, bst, bfill) in enumerate(self._buffer):
+            if f <= lo:                 # (the buffer is in frame order: only the frames
+                continue                # strictly inside some gap need a look)
+            if f >= hi:
+                break
             inside = (src_frame < f) & (f < frame)
             if not inside.any():
                 continue
@@ -1056,7 +1064,12 @@ class GraphAssociator:
         obs = OBS_INDEX
         dets = {f: d for f, d in self._dets}
         hits = np.zeros(len(src))
+        lo, hi = int(src_frame.min()), int(frame.max())
         for f, bid, bst, bfill in self._buffer:
+            if f <= lo:
+                continue
+            if f >= hi:
+                break
             inside = (src_frame < f) & (f < frame)
             if not inside.any():
                 continue
