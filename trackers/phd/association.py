@@ -114,6 +114,7 @@ import numpy as np
 
 from ..types import cxcywh_to_xywh
 from ..params import param
+from . import _assoc_kernels
 from .appearance import DIM as APP_DIM, AppearanceModel, similarity, similarity_pairs
 from .filter import STATE_DIM, obs_std
 from .gating import GridIndex, expand_runs
@@ -339,15 +340,20 @@ def _edge_model(tail_states: np.ndarray, v: np.ndarray, b: np.ndarray, c: np.nda
 
 def score_edges(tail_states: np.ndarray, v: np.ndarray, b: np.ndarray, c: np.ndarray,
                 gaps: np.ndarray, new_states: np.ndarray, params: AssocParams) -> EdgeScores:
-    """Gains and weights of every (tail, new vertex) edge, vectorised over all pairs."""
-    T, M = len(tail_states), len(new_states)
-    mean, var, log_det, floor = _edge_model(tail_states, v, b, c, gaps, params)
-    z = new_states[:, OBS_INDEX]
-    res = z[None, :, :] - mean[:, None, :]
-    d2 = np.sum(res ** 2 / var[:, None, :], axis=-1).reshape(T, M)
-    gain = -0.5 * d2 - 0.5 * log_det[:, None]
-    weight = gain - floor[:, None]
-    return EdgeScores(gain=gain, d2=d2, floor=floor, weight=weight, allowed=d2 <= params.gate_d2)
+    """Gains and weights of every (tail, new vertex) edge: :func:`_edge_model` and the
+    Mahalanobis distances of all pairs in one numba pass (:func:`._assoc_kernels.edge_scores`,
+    the same floats as the numpy spelling)."""
+    f64 = np.float64
+    gain, d2, weight, allowed, floor = _assoc_kernels.edge_scores(
+        np.ascontiguousarray(tail_states, dtype=f64), np.ascontiguousarray(v, dtype=f64),
+        np.ascontiguousarray(b, dtype=f64), np.ascontiguousarray(c, dtype=f64),
+        np.ascontiguousarray(np.broadcast_to(gaps, (len(tail_states),)), dtype=f64),
+        np.ascontiguousarray(np.asarray(new_states, dtype=f64)[:, OBS_INDEX]),
+        int(params.depth), float(params.gate_d2), float(params.sigma_v),
+        float(params.sigma_size), float(params.sigma_obs), float(params.sigma_obs_min),
+        float(params.sigma_obs_pos_ratio), float(params.accel_to_position),
+        float(params.accel_to_position ** 2))
+    return EdgeScores(gain=gain, d2=d2, floor=floor, weight=weight, allowed=allowed)
 
 
 def propagate_damped(tail_states: np.ndarray, v: np.ndarray, b: np.ndarray, c: np.ndarray,
