@@ -65,8 +65,49 @@ def _nearest_dense(X, i, centers, inv):
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
       no_cpython_wrapper=True)
 def _assign_dense(X, centers, inv, labels, dmin):
+    """:func:`_nearest_dense` of every particle: the same d² floats and labels, the centres'
+    coordinates laid out by column so the K distances of a particle are one vector loop."""
+    K = centers.shape[0]
+    if K == 0:
+        return
+    cc = np.empty((8, K), np.float64)
+    for c in range(K):
+        cc[0, c] = centers[c, 0]
+        cc[1, c] = centers[c, 1]
+        cc[2, c] = centers[c, 4]
+        cc[3, c] = centers[c, 5]
+        cc[4, c] = inv[c, 0]
+        cc[5, c] = inv[c, 1]
+        cc[6, c] = inv[c, 2]
+        cc[7, c] = inv[c, 3]
+    c0 = cc[0]
+    c1 = cc[1]
+    c2 = cc[2]
+    c3 = cc[3]
+    i0 = cc[4]
+    i1 = cc[5]
+    i2 = cc[6]
+    i3 = cc[7]
+    d = np.empty(K, np.float64)
     for i in range(X.shape[0]):
-        labels[i], dmin[i] = _nearest_dense(X, i, centers, inv)
+        x0 = X[i, 0]
+        x1 = X[i, 1]
+        x2 = X[i, 2]
+        x3 = X[i, 3]
+        for c in range(K):
+            a0 = x0 - c0[c]
+            a1 = x1 - c1[c]
+            a2 = x2 - c2[c]
+            a3 = x3 - c3[c]
+            d[c] = (((a0 * a0) * i0[c] + (a1 * a1) * i1[c]) + (a2 * a2) * i2[c]) + (a3 * a3) * i3[c]
+        lab = 0
+        best = d[0]
+        for c in range(1, K):
+            if d[c] < best:
+                best = d[c]
+                lab = c
+        labels[i] = lab
+        dmin[i] = best
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
