@@ -72,3 +72,29 @@ def edge_scores(tail, v, b, c, gaps, z, depth, gate_d2, sv, ss, so, so_min, rati
             weight[t, j] = gn - floor[t]
             allowed[t, j] = d <= gate_d2
     return gain, d2, weight, allowed, floor
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def iou(a, b):
+    """(A, B) intersection over union of centre boxes ``a`` (A, 4), ``b`` (B, 4)
+    ``(cx, cy, w, h)``: :func:`.association._iou`, the same floats as its numpy spelling."""
+    A = a.shape[0]
+    B = b.shape[0]
+    out = np.empty((A, B), np.float64)
+    for i in range(A):
+        aw = a[i, 2] / 2
+        ah = a[i, 3] / 2
+        area_a = a[i, 2] * a[i, 3]
+        for j in range(B):
+            bw = b[j, 2] / 2
+            bh = b[j, 3] / 2
+            lo0 = max(a[i, 0] - aw, b[j, 0] - bw)
+            lo1 = max(a[i, 1] - ah, b[j, 1] - bh)
+            hi0 = min(a[i, 0] + aw, b[j, 0] + bw)
+            hi1 = min(a[i, 1] + ah, b[j, 1] + bh)
+            e0 = hi0 - lo0
+            e1 = hi1 - lo1
+            inter = (e0 if e0 > 0.0 else 0.0) * (e1 if e1 > 0.0 else 0.0)
+            union = area_a + b[j, 2] * b[j, 3] - inter
+            out[i, j] = inter / (union if union > 1e-12 else 1e-12)
+    return out

@@ -528,12 +528,10 @@ def sparse_max_weight_matching(rows: np.ndarray, cols: np.ndarray,
 
 
 def _iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """(A, B) intersection over union of centre boxes ``(cx, cy, w, h)``."""
-    lo = np.maximum(a[:, None, :2] - a[:, None, 2:] / 2, b[None, :, :2] - b[None, :, 2:] / 2)
-    hi = np.minimum(a[:, None, :2] + a[:, None, 2:] / 2, b[None, :, :2] + b[None, :, 2:] / 2)
-    inter = np.prod(np.clip(hi - lo, 0.0, None), axis=-1)
-    union = np.prod(a[:, 2:], -1)[:, None] + np.prod(b[:, 2:], -1)[None, :] - inter
-    return inter / np.maximum(union, 1e-12)
+    """(A, B) intersection over union of centre boxes ``(cx, cy, w, h)``
+    (:func:`._assoc_kernels.iou`)."""
+    return _assoc_kernels.iou(np.ascontiguousarray(a, dtype=np.float64).reshape(-1, 4),
+                              np.ascontiguousarray(b, dtype=np.float64).reshape(-1, 4))
 
 
 def boxes_xywh(states: np.ndarray) -> np.ndarray:
@@ -1019,11 +1017,11 @@ class GraphAssociator:
         """Add interpolated rows to the buffered frames strictly between each chosen edge's ends
         (``src`` at ``src_frame`` → ``dst`` at ``frame``, one frame or one per edge).  A loop
         over the buffered frames (at most ``depth``), vectorised over the edges."""
-        frame = np.broadcast_to(np.asarray(frame, dtype=np.int64), np.shape(src_frame))
         gap = frame - src_frame
         long = gap > 1
         if not long.any() or not self._buffer:
             return
+        frame = np.broadcast_to(np.asarray(frame, dtype=np.int64), np.shape(src_frame))
         src, src_frame, dst, ids, gap = src[long], src_frame[long], dst[long], ids[long], gap[long]
         frame = frame[long]
         obs = OBS_INDEX
