@@ -110,6 +110,23 @@ def _assign_dense(X, centers, inv, labels, dmin):
         dmin[i] = best
 
 
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
+def _assign_first(X, centers, inv, labels, dmin, m, reach):
+    """The first assignment of the grid search (:func:`_assign` with no previous labels) by
+    looking at every centre (:func:`_assign_dense`'s vector loop: the same labels and d²),
+    with each particle's ``reach`` (``e + sqrt(d²)``, e its distance to its centre in the space
+    scaled by sqrt(m)) for the later iterations.  Cheaper than the grid's first search while
+    the centres are few (:data:`_FIRST_DENSE_MAX`)."""
+    K = centers.shape[0]
+    _assign_dense(X, centers, inv, labels, dmin)
+    rm, cs = _metric(centers, m)
+    for i in range(X.shape[0]):
+        r = _scaled(X, i, rm, cs, labels[i]) + math.sqrt(dmin[i])
+        reach[i] = r if r <= np.inf else np.inf          # NaN: no bound
+    return K
+
+
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
 def _scaled(X, i, rm, cs, c):
     """Euclidean distance of particle i to centre c in the space scaled by ``rm`` (4,)."""
@@ -177,6 +194,10 @@ def _slack(pu, pv, x0, y0, g, r):
     """Float slack of a ring bound: the cell edges and the point are O(|coordinates|)."""
     return 1e-9 * (1.0 + abs(pu) + abs(pv) + abs(x0) + abs(y0) + g * r)
 
+
+#: Up to this many centres the first Lloyd assignment looks at every centre (a vector loop)
+#: rather than searching the grid (same labels and d²; cheaper for a few tens of centres).
+_FIRST_DENSE_MAX = 48
 
 #: A centre with more centres than this in its 3 × 3 block of cells gets no neighbour list
 #: (its particles use the ring search), so the lists stay O(K) in memory however crowded.
@@ -617,7 +638,10 @@ def lloyd(X, S, w, centers, max_iter, tol, sigma_obs, sigma_min, pos_ratio, grid
                     stable[c] = same_space and not moved[c]
                 if same_space:
                     _unstable_near_moved(centers, space, moved, stable, reach_c)
-            _assign(X, centers, inv, labels, new, dmin, grid_min, space, stable, reach)
+            if it == 1 and K <= _FIRST_DENSE_MAX:
+                _assign_first(X, centers, inv, new, dmin, space, reach)
+            else:
+                _assign(X, centers, inv, labels, new, dmin, grid_min, space, stable, reach)
         if it > 1:
             for c in range(K):
                 touched[c] = False

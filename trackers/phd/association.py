@@ -745,10 +745,11 @@ class GraphAssociator:
             self._app, self._app_n = self._app[keep], self._app_n[keep]
         if len(self._lost_ids):
             keep = frame - self._lost_frame <= p.relink_depth
-            self._lost_ids, self._lost, self._lost_frame = (self._lost_ids[keep], self._lost[keep],
-                                                            self._lost_frame[keep])
-            self._lost_vbc, self._lost_len = self._lost_vbc[keep], self._lost_len[keep]
-            self._lost_app, self._lost_app_n = self._lost_app[keep], self._lost_app_n[keep]
+            if not keep.all():
+                self._lost_ids, self._lost, self._lost_frame = (
+                    self._lost_ids[keep], self._lost[keep], self._lost_frame[keep])
+                self._lost_vbc, self._lost_len = self._lost_vbc[keep], self._lost_len[keep]
+                self._lost_app, self._lost_app_n = self._lost_app[keep], self._lost_app_n[keep]
         use_app = features is not None and p.app_weight > 0
         feats = self._check_features(features, M) if use_app else np.full((M, APP_DIM), np.nan)
         if use_app:
@@ -794,15 +795,18 @@ class GraphAssociator:
         self._tail[rows] = new[cols]
         self._tail_frame[rows] = frame
         self._length[rows] += 1
-        self._ids = np.concatenate([self._ids, new_ids])  # stays sorted: new ids are the largest
-        self._tail = np.concatenate([self._tail, new[unmatched]])
-        self._tail_frame = np.concatenate([self._tail_frame, np.full(n_new, frame, dtype=np.int64)])
-        self._prev = np.concatenate([self._prev, np.full((n_new, STATE_DIM), np.nan)])
-        self._prev_frame = np.concatenate([self._prev_frame, np.full(n_new, -1, dtype=np.int64)])
-        self._length = np.concatenate([self._length, np.ones(n_new, dtype=np.int64)])
-        self._first = np.concatenate([self._first, new[unmatched]])
-        self._first_frame = np.concatenate([self._first_frame,
-                                            np.full(n_new, frame, dtype=np.int64)])
+        if n_new:   # (most frames of a steady scene start no track: nothing to append)
+            self._ids = np.concatenate([self._ids, new_ids])  # stays sorted: new ids are the largest
+            self._tail = np.concatenate([self._tail, new[unmatched]])
+            self._tail_frame = np.concatenate([self._tail_frame,
+                                               np.full(n_new, frame, dtype=np.int64)])
+            self._prev = np.concatenate([self._prev, np.full((n_new, STATE_DIM), np.nan)])
+            self._prev_frame = np.concatenate([self._prev_frame,
+                                               np.full(n_new, -1, dtype=np.int64)])
+            self._length = np.concatenate([self._length, np.ones(n_new, dtype=np.int64)])
+            self._first = np.concatenate([self._first, new[unmatched]])
+            self._first_frame = np.concatenate([self._first_frame,
+                                                np.full(n_new, frame, dtype=np.int64)])
         if use_app and len(rows):
             one = gaps[rows] == 1  # consecutive vertices of one track: the same target
             if one.any():
@@ -813,8 +817,10 @@ class GraphAssociator:
             mix = (1.0 - p.app_alpha) * old + p.app_alpha * f
             self._app[rows] = np.where(np.isfinite(old), np.where(np.isfinite(f), mix, old), f)
             self._app_n[rows] += np.isfinite(f[:, 0])
-        self._app = np.concatenate([self._app, feats[unmatched]])
-        self._app_n = np.concatenate([self._app_n, np.isfinite(feats[unmatched, 0]).astype(float)])
+        if n_new:
+            self._app = np.concatenate([self._app, feats[unmatched]])
+            self._app_n = np.concatenate([self._app_n,
+                                          np.isfinite(feats[unmatched, 0]).astype(float)])
 
         # 4. edges for the observer: admissible pairs only
         if sc is not None or ep is not None:
