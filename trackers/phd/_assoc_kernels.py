@@ -31,23 +31,24 @@ def _var4(tail, t, v, b, c, i, sv, ss, so, so_min, ratio, cc, cc2, out):
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
-def edge_scores(tail, v, b, c, gaps, z, depth, gate_d2, sv, ss, so, so_min, ratio, cc, cc2):
+def edge_scores(tail, v, b, c, gaps, z, depth, gate_d2, sv, ss, so, so_min, ratio, cc, cc2,
+                two_pi):
     """Every (tail, new vertex) edge: ``tail`` (T, 6), ``v``, ``b``, ``c`` (T, 2) from
     :func:`.association.tail_velocity`, ``gaps`` (T,) float, ``z`` (M, 4) the new vertices'
-    ``(y1, y2, w, h)``.  Returns ``gain, d2, weight`` (T, M), ``allowed`` (T, M) bool and
-    ``floor`` (T,), as :func:`.association.score_edges`."""
+    ``(y1, y2, w, h)``, ``depth`` (float) the graph depth, ``two_pi`` ``2.0 * np.pi``.  Returns
+    ``gain, d2, weight`` (T, M) and ``floor`` (T,), as :func:`.association.score_edges`
+    (``allowed`` is ``d2 <= gate_d2``).  (Few allocation spellings and no bool array: each is
+    one more compile on the first run.)"""
     T = tail.shape[0]
     M = z.shape[0]
     gain = np.empty((T, M), np.float64)
     d2 = np.empty((T, M), np.float64)
     weight = np.empty((T, M), np.float64)
-    allowed = np.empty((T, M), np.bool_)
     floor = np.empty(T, np.float64)
     var = np.empty(4, np.float64)
     lg = np.empty(4, np.float64)
-    two_pi = 2.0 * np.pi
     for t in range(T):
-        _var4(tail, t, v, b, c, float(depth), sv, ss, so, so_min, ratio, cc, cc2, var)
+        _var4(tail, t, v, b, c, depth, sv, ss, so, so_min, ratio, cc, cc2, var)
         for k in range(4):
             lg[k] = math.log(two_pi * var[k])
         floor[t] = -0.5 * gate_d2 - 0.5 * (((lg[0] + lg[1]) + lg[2]) + lg[3])
@@ -70,8 +71,7 @@ def edge_scores(tail, v, b, c, gaps, z, depth, gate_d2, sv, ss, so, so_min, rati
             gn = -0.5 * d - 0.5 * log_det
             gain[t, j] = gn
             weight[t, j] = gn - floor[t]
-            allowed[t, j] = d <= gate_d2
-    return gain, d2, weight, allowed, floor
+    return gain, d2, weight, floor
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)

@@ -344,16 +344,16 @@ def score_edges(tail_states: np.ndarray, v: np.ndarray, b: np.ndarray, c: np.nda
     Mahalanobis distances of all pairs in one numba pass (:func:`._assoc_kernels.edge_scores`,
     the same floats as the numpy spelling)."""
     f64 = np.float64
-    gain, d2, weight, allowed, floor = _assoc_kernels.edge_scores(
+    gain, d2, weight, floor = _assoc_kernels.edge_scores(
         np.ascontiguousarray(tail_states, dtype=f64), np.ascontiguousarray(v, dtype=f64),
         np.ascontiguousarray(b, dtype=f64), np.ascontiguousarray(c, dtype=f64),
         np.ascontiguousarray(np.broadcast_to(gaps, (len(tail_states),)), dtype=f64),
         np.ascontiguousarray(np.asarray(new_states, dtype=f64)[:, OBS_INDEX]),
-        int(params.depth), float(params.gate_d2), float(params.sigma_v),
+        float(params.depth), float(params.gate_d2), float(params.sigma_v),
         float(params.sigma_size), float(params.sigma_obs), float(params.sigma_obs_min),
         float(params.sigma_obs_pos_ratio), float(params.accel_to_position),
-        float(params.accel_to_position ** 2))
-    return EdgeScores(gain=gain, d2=d2, floor=floor, weight=weight, allowed=allowed)
+        float(params.accel_to_position ** 2), 2.0 * np.pi)
+    return EdgeScores(gain=gain, d2=d2, floor=floor, weight=weight, allowed=d2 <= params.gate_d2)
 
 
 def propagate_damped(tail_states: np.ndarray, v: np.ndarray, b: np.ndarray, c: np.ndarray,
