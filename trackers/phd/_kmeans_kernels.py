@@ -646,17 +646,20 @@ def lloyd(X, S, w, centers, max_iter, tol, sigma_obs, sigma_min, pos_ratio, grid
             for c in range(K):
                 touched[c] = False
             changed = False
-            for i in range(n):
+            for i in range(n):                  # (the comparison and the copy in one pass)
                 if new[i] != labels[i]:
                     changed = True
                     touched[new[i]] = True
                     touched[labels[i]] = True
+                    labels[i] = new[i]
             if not changed:
                 done = True
                 break
-        for i in range(n):
-            labels[i] = new[i]
-        # sums of the touched clusters, over their members in particle order
+        else:
+            for i in range(n):
+                labels[i] = new[i]
+        # sums of the touched clusters, over their members in particle order (and the
+        # reaches, the grid search's only, in the same pass)
         for c in range(K):
             if touched[c]:
                 m[c] = 0.0
@@ -670,9 +673,7 @@ def lloyd(X, S, w, centers, max_iter, tol, sigma_obs, sigma_min, pos_ratio, grid
                 m[c] += wi
                 for d in range(D):
                     sums[c, d] += S[i, d] * wi
-        if grid_min is not None:                # (the reaches: the grid search's only)
-            for i in range(n):
-                c = labels[i]
+            if grid_min is not None:
                 reach_c[c] = max(reach_c[c], reach[i])
         step = 0.0
         for c in range(K):
