@@ -175,12 +175,13 @@ def test_a_compile_during_the_frames_says_so_in_one_line():
 def _signatures():
     from numba.core.registry import CPUDispatcher
 
+    import pfscope.trackers.phd._assoc_kernels as AK
     import pfscope.trackers.phd._kernels as K
     import pfscope.trackers.phd._kmeans_kernels as KM
     import pfscope.trackers.smc.resampling as R
 
     return {f"{m.__name__}.{n}": set(map(str, d.signatures))
-            for m in (K, KM, R) for n, d in vars(m).items() if isinstance(d, CPUDispatcher)}
+            for m in (K, KM, AK, R) for n, d in vars(m).items() if isinstance(d, CPUDispatcher)}
 
 
 def test_compile_kernels_covers_a_run():
@@ -195,8 +196,9 @@ def test_compile_kernels_covers_a_run():
 
     compile_kernels()
     before = _signatures()
-    # the kernels called from Python: M(z), the update, the K-means, systematic resampling
-    assert sum(map(len, before.values())) >= 4
+    # the kernels called from Python: M(z), the update, the K-means, the association's edge
+    # scores and IoU, systematic resampling
+    assert sum(map(len, before.values())) >= 6
     for preset in ("practical", "paper"):
         tr = tracker_info("phd").cls(make_params("phd", preset, {}),
                                      rng=np.random.default_rng(0))

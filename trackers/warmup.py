@@ -70,6 +70,15 @@ def compile_kernels(presets=("practical", "paper"), phd: bool = True) -> float:
             clutter = np.column_stack([rng.uniform(0, 600, (3, 2)), np.full((3, 2), 35.0)])
             dets = Detections(np.vstack([boxes, clutter]), np.linspace(0.2, 1.0, 11))
             tr.step(Frame(k + 1, k / 25.0, image), dets)
+    # the association's kernels (edge scores, the IoU of gap filling): its tracks need more
+    # than four frames of estimates
+    from .phd.association import AssocParams, _iou, score_edges, tail_velocity
+
+    s = np.array([[100.0, 100.0, 1.0, 0.0, 30.0, 70.0]])
+    ap = AssocParams()
+    v, b, c = tail_velocity(s, s, np.zeros(1, dtype=np.int64), ap)
+    score_edges(s, v, b, c, np.ones(1, dtype=np.int64), s, ap)
+    _iou(s[:, [0, 1, 4, 5]], s[:, [0, 1, 4, 5]])
     _ready = _ready | {key}
     return time.perf_counter() - t0
 

@@ -65,8 +65,66 @@ def _nearest_dense(X, i, centers, inv):
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
       no_cpython_wrapper=True)
 def _assign_dense(X, centers, inv, labels, dmin):
+    """:func:`_nearest_dense` of every particle: the same d² floats and labels, the centres'
+    coordinates laid out by column so the K distances of a particle are one vector loop."""
+    K = centers.shape[0]
+    if K == 0:
+        return
+    cc = np.empty((8, K), np.float64)
+    for c in range(K):
+        cc[0, c] = centers[c, 0]
+        cc[1, c] = centers[c, 1]
+        cc[2, c] = centers[c, 4]
+        cc[3, c] = centers[c, 5]
+        cc[4, c] = inv[c, 0]
+        cc[5, c] = inv[c, 1]
+        cc[6, c] = inv[c, 2]
+        cc[7, c] = inv[c, 3]
+    c0 = cc[0]
+    c1 = cc[1]
+    c2 = cc[2]
+    c3 = cc[3]
+    i0 = cc[4]
+    i1 = cc[5]
+    i2 = cc[6]
+    i3 = cc[7]
+    d = np.empty(K, np.float64)
     for i in range(X.shape[0]):
-        labels[i], dmin[i] = _nearest_dense(X, i, centers, inv)
+        x0 = X[i, 0]
+        x1 = X[i, 1]
+        x2 = X[i, 2]
+        x3 = X[i, 3]
+        for c in range(K):
+            a0 = x0 - c0[c]
+            a1 = x1 - c1[c]
+            a2 = x2 - c2[c]
+            a3 = x3 - c3[c]
+            d[c] = (((a0 * a0) * i0[c] + (a1 * a1) * i1[c]) + (a2 * a2) * i2[c]) + (a3 * a3) * i3[c]
+        lab = 0
+        best = d[0]
+        for c in range(1, K):
+            if d[c] < best:
+                best = d[c]
+                lab = c
+        labels[i] = lab
+        dmin[i] = best
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
+def _assign_first(X, centers, inv, labels, dmin, m, reach):
+    """The first assignment of the grid search (:func:`_assign` with no previous labels) by
+    looking at every centre (:func:`_assign_dense`'s vector loop: the same labels and d²),
+    with each particle's ``reach`` (``e + sqrt(d²)``, e its distance to its centre in the space
+    scaled by sqrt(m)) for the later iterations.  Cheaper than the grid's first search while
+    the centres are few (:data:`_FIRST_DENSE_MAX`)."""
+    K = centers.shape[0]
+    _assign_dense(X, centers, inv, labels, dmin)
+    rm, cs = _metric(centers, m)
+    for i in range(X.shape[0]):
+        r = _scaled(X, i, rm, cs, labels[i]) + math.sqrt(dmin[i])
+        reach[i] = r if r <= np.inf else np.inf          # NaN: no bound
+    return K
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
@@ -136,6 +194,10 @@ def _slack(pu, pv, x0, y0, g, r):
     """Float slack of a ring bound: the cell edges and the point are O(|coordinates|)."""
     return 1e-9 * (1.0 + abs(pu) + abs(pv) + abs(x0) + abs(y0) + g * r)
 
+
+#: Up to this many centres the first Lloyd assignment looks at every centre (a vector loop)
+#: rather than searching the grid (same labels and d²; cheaper for a few tens of centres).
+_FIRST_DENSE_MAX = 48
 
 #: A centre with more centres than this in its 3 × 3 block of cells gets no neighbour list
 #: (its particles use the ring search), so the lists stay O(K) in memory however crowded.
@@ -474,6 +536,46 @@ def _unstable_near_moved(centers, space, moved, stable, reach_c):
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def prepare(states, log_w):
+    """The inputs of :func:`lloyd` from the particles, in one pass (numpy's spelling took five
+    passes and as many temporaries): ``lmax`` the largest log-weight (when it is not finite,
+    nothing else is computed), ``w`` (N,) the weights relative to it ``exp(log_w − lmax)``, ``shift`` (6,) the mean
+    position ``(y1, y2)`` (zeros elsewhere), ``S`` (N, 6) the states minus it and ``X`` (N, 4)
+    its ``(y1, y2, w, h)``.  The same floats as ``np.max``, ``np.exp``,
+    ``states[:, :2].mean(axis=0)`` (an axis-0 sum, row by row) and the subtraction."""
+    n = states.shape[0]
+    lmax = -np.inf
+    for i in range(n):
+        if log_w[i] > lmax:
+            lmax = log_w[i]
+        elif log_w[i] != log_w[i]:                 # NaN: np.max's answer
+            lmax = np.nan
+            break
+    shift = np.zeros(6, np.float64)
+    w = np.empty(n, np.float64)
+    S = np.empty((n, 6), np.float64)
+    X = np.empty((n, 4), np.float64)
+    if n == 0 or not lmax - lmax == 0.0:          # (not finite; no np.isfinite to compile)
+        return lmax, w, shift, S, X
+    a0 = 0.0
+    a1 = 0.0
+    for i in range(n):
+        w[i] = math.exp(log_w[i] - lmax)
+        a0 += states[i, 0]
+        a1 += states[i, 1]
+    shift[0] = a0 / n
+    shift[1] = a1 / n
+    for i in range(n):
+        for d in range(6):
+            S[i, d] = states[i, d] - shift[d]
+        X[i, 0] = S[i, 0]
+        X[i, 1] = S[i, 1]
+        X[i, 2] = S[i, 4]
+        X[i, 3] = S[i, 5]
+    return lmax, w, shift, S, X
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
 def lloyd(X, S, w, centers, max_iter, tol, sigma_obs, sigma_min, pos_ratio, grid_min):
     """Weighted Lloyd iterations (maggio2007 §3) from ``centers`` (K, 6) until the labels are
     stable, no centre's (y1, y2, w, h) moved more than ``tol`` (> 0), or ``max_iter``
@@ -536,22 +638,28 @@ def lloyd(X, S, w, centers, max_iter, tol, sigma_obs, sigma_min, pos_ratio, grid
                     stable[c] = same_space and not moved[c]
                 if same_space:
                     _unstable_near_moved(centers, space, moved, stable, reach_c)
-            _assign(X, centers, inv, labels, new, dmin, grid_min, space, stable, reach)
+            if it == 1 and K <= _FIRST_DENSE_MAX:
+                _assign_first(X, centers, inv, new, dmin, space, reach)
+            else:
+                _assign(X, centers, inv, labels, new, dmin, grid_min, space, stable, reach)
         if it > 1:
             for c in range(K):
                 touched[c] = False
             changed = False
-            for i in range(n):
+            for i in range(n):                  # (the comparison and the copy in one pass)
                 if new[i] != labels[i]:
                     changed = True
                     touched[new[i]] = True
                     touched[labels[i]] = True
+                    labels[i] = new[i]
             if not changed:
                 done = True
                 break
-        for i in range(n):
-            labels[i] = new[i]
-        # sums of the touched clusters, over their members in particle order
+        else:
+            for i in range(n):
+                labels[i] = new[i]
+        # sums of the touched clusters, over their members in particle order (and the
+        # reaches, the grid search's only, in the same pass)
         for c in range(K):
             if touched[c]:
                 m[c] = 0.0
@@ -565,9 +673,7 @@ def lloyd(X, S, w, centers, max_iter, tol, sigma_obs, sigma_min, pos_ratio, grid
                 m[c] += wi
                 for d in range(D):
                     sums[c, d] += S[i, d] * wi
-        if grid_min is not None:                # (the reaches: the grid search's only)
-            for i in range(n):
-                c = labels[i]
+            if grid_min is not None:
                 reach_c[c] = max(reach_c[c], reach[i])
         step = 0.0
         for c in range(K):

@@ -114,6 +114,7 @@ import numpy as np
 
 from ..types import cxcywh_to_xywh
 from ..params import param
+from . import _assoc_kernels
 from .appearance import DIM as APP_DIM, AppearanceModel, similarity, similarity_pairs
 from .filter import STATE_DIM, obs_std
 from .gating import GridIndex, expand_runs
@@ -339,14 +340,19 @@ def _edge_model(tail_states: np.ndarray, v: np.ndarray, b: np.ndarray, c: np.nda
 
 def score_edges(tail_states: np.ndarray, v: np.ndarray, b: np.ndarray, c: np.ndarray,
                 gaps: np.ndarray, new_states: np.ndarray, params: AssocParams) -> EdgeScores:
-    """Gains and weights of every (tail, new vertex) edge, vectorised over all pairs."""
-    T, M = len(tail_states), len(new_states)
-    mean, var, log_det, floor = _edge_model(tail_states, v, b, c, gaps, params)
-    z = new_states[:, OBS_INDEX]
-    res = z[None, :, :] - mean[:, None, :]
-    d2 = np.sum(res ** 2 / var[:, None, :], axis=-1).reshape(T, M)
-    gain = -0.5 * d2 - 0.5 * log_det[:, None]
-    weight = gain - floor[:, None]
+    """Gains and weights of every (tail, new vertex) edge: :func:`_edge_model` and the
+    Mahalanobis distances of all pairs in one numba pass (:func:`._assoc_kernels.edge_scores`,
+    the same floats as the numpy spelling)."""
+    f64 = np.float64
+    gain, d2, weight, floor = _assoc_kernels.edge_scores(
+        np.ascontiguousarray(tail_states, dtype=f64), np.ascontiguousarray(v, dtype=f64),
+        np.ascontiguousarray(b, dtype=f64), np.ascontiguousarray(c, dtype=f64),
+        np.ascontiguousarray(np.broadcast_to(gaps, (len(tail_states),)), dtype=f64),
+        np.ascontiguousarray(np.asarray(new_states, dtype=f64)[:, OBS_INDEX]),
+        float(params.depth), float(params.gate_d2), float(params.sigma_v),
+        float(params.sigma_size), float(params.sigma_obs), float(params.sigma_obs_min),
+        float(params.sigma_obs_pos_ratio), float(params.accel_to_position),
+        float(params.accel_to_position ** 2), 2.0 * np.pi)
     return EdgeScores(gain=gain, d2=d2, floor=floor, weight=weight, allowed=d2 <= params.gate_d2)
 
 
@@ -522,12 +528,10 @@ def sparse_max_weight_matching(rows: np.ndarray, cols: np.ndarray,
 
 
 def _iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """(A, B) intersection over union of centre boxes ``(cx, cy, w, h)``."""
-    lo = np.maximum(a[:, None, :2] - a[:, None, 2:] / 2, b[None, :, :2] - b[None, :, 2:] / 2)
-    hi = np.minimum(a[:, None, :2] + a[:, None, 2:] / 2, b[None, :, :2] + b[None, :, 2:] / 2)
-    inter = np.prod(np.clip(hi - lo, 0.0, None), axis=-1)
-    union = np.prod(a[:, 2:], -1)[:, None] + np.prod(b[:, 2:], -1)[None, :] - inter
-    return inter / np.maximum(union, 1e-12)
+    """(A, B) intersection over union of centre boxes ``(cx, cy, w, h)``
+    (:func:`._assoc_kernels.iou`)."""
+    return _assoc_kernels.iou(np.ascontiguousarray(a, dtype=np.float64).reshape(-1, 4),
+                              np.ascontiguousarray(b, dtype=np.float64).reshape(-1, 4))
 
 
 def boxes_xywh(states: np.ndarray) -> np.ndarray:
@@ -741,10 +745,11 @@ class GraphAssociator:
             self._app, self._app_n = self._app[keep], self._app_n[keep]
         if len(self._lost_ids):
             keep = frame - self._lost_frame <= p.relink_depth
-            self._lost_ids, self._lost, self._lost_frame = (self._lost_ids[keep], self._lost[keep],
-                                                            self._lost_frame[keep])
-            self._lost_vbc, self._lost_len = self._lost_vbc[keep], self._lost_len[keep]
-            self._lost_app, self._lost_app_n = self._lost_app[keep], self._lost_app_n[keep]
+            if not keep.all():
+                self._lost_ids, self._lost, self._lost_frame = (
+                    self._lost_ids[keep], self._lost[keep], self._lost_frame[keep])
+                self._lost_vbc, self._lost_len = self._lost_vbc[keep], self._lost_len[keep]
+                self._lost_app, self._lost_app_n = self._lost_app[keep], self._lost_app_n[keep]
         use_app = features is not None and p.app_weight > 0
         feats = self._check_features(features, M) if use_app else np.full((M, APP_DIM), np.nan)
         if use_app:
@@ -790,15 +795,18 @@ class GraphAssociator:
         self._tail[rows] = new[cols]
         self._tail_frame[rows] = frame
         self._length[rows] += 1
-        self._ids = np.concatenate([self._ids, new_ids])  # stays sorted: new ids are the largest
-        self._tail = np.concatenate([self._tail, new[unmatched]])
-        self._tail_frame = np.concatenate([self._tail_frame, np.full(n_new, frame, dtype=np.int64)])
-        self._prev = np.concatenate([self._prev, np.full((n_new, STATE_DIM), np.nan)])
-        self._prev_frame = np.concatenate([self._prev_frame, np.full(n_new, -1, dtype=np.int64)])
-        self._length = np.concatenate([self._length, np.ones(n_new, dtype=np.int64)])
-        self._first = np.concatenate([self._first, new[unmatched]])
-        self._first_frame = np.concatenate([self._first_frame,
-                                            np.full(n_new, frame, dtype=np.int64)])
+        if n_new:   # (most frames of a steady scene start no track: nothing to append)
+            self._ids = np.concatenate([self._ids, new_ids])  # stays sorted: new ids are the largest
+            self._tail = np.concatenate([self._tail, new[unmatched]])
+            self._tail_frame = np.concatenate([self._tail_frame,
+                                               np.full(n_new, frame, dtype=np.int64)])
+            self._prev = np.concatenate([self._prev, np.full((n_new, STATE_DIM), np.nan)])
+            self._prev_frame = np.concatenate([self._prev_frame,
+                                               np.full(n_new, -1, dtype=np.int64)])
+            self._length = np.concatenate([self._length, np.ones(n_new, dtype=np.int64)])
+            self._first = np.concatenate([self._first, new[unmatched]])
+            self._first_frame = np.concatenate([self._first_frame,
+                                                np.full(n_new, frame, dtype=np.int64)])
         if use_app and len(rows):
             one = gaps[rows] == 1  # consecutive vertices of one track: the same target
             if one.any():
@@ -809,17 +817,22 @@ class GraphAssociator:
             mix = (1.0 - p.app_alpha) * old + p.app_alpha * f
             self._app[rows] = np.where(np.isfinite(old), np.where(np.isfinite(f), mix, old), f)
             self._app_n[rows] += np.isfinite(f[:, 0])
-        self._app = np.concatenate([self._app, feats[unmatched]])
-        self._app_n = np.concatenate([self._app_n, np.isfinite(feats[unmatched, 0]).astype(float)])
+        if n_new:
+            self._app = np.concatenate([self._app, feats[unmatched]])
+            self._app_n = np.concatenate([self._app_n,
+                                          np.isfinite(feats[unmatched, 0]).astype(float)])
 
         # 4. edges for the observer: admissible pairs only
         if sc is not None or ep is not None:
             if sc is not None:
                 er, ec = np.nonzero(sc.allowed)
                 e_gain, e_weight = sc.gain[er, ec], sc.weight[er, ec]
+                pick = np.zeros((T, M), dtype=bool)      # (dense: T × M is small here)
+                pick[rows, cols] = True
+                chosen = pick[er, ec]
             else:
                 er, ec, e_gain, e_weight = ep.rows, ep.cols, ep.gain, ep.weight
-            chosen = np.isin(er * M + ec, rows * M + cols)
+                chosen = np.isin(er * M + ec, rows * M + cols)
             # each edge's source is the tail as it was before this frame: for a matched tail that
             # vertex has just moved to _prev
             matched_tail = np.zeros(T, dtype=bool)
@@ -1010,11 +1023,11 @@ class GraphAssociator:
         """Add interpolated rows to the buffered frames strictly between each chosen edge's ends
         (``src`` at ``src_frame`` → ``dst`` at ``frame``, one frame or one per edge).  A loop
         over the buffered frames (at most ``depth``), vectorised over the edges."""
-        frame = np.broadcast_to(np.asarray(frame, dtype=np.int64), np.shape(src_frame))
         gap = frame - src_frame
         long = gap > 1
         if not long.any() or not self._buffer:
             return
+        frame = np.broadcast_to(np.asarray(frame, dtype=np.int64), np.shape(src_frame))
         src, src_frame, dst, ids, gap = src[long], src_frame[long], dst[long], ids[long], gap[long]
         frame = frame[long]
         obs = OBS_INDEX
@@ -1026,7 +1039,12 @@ class GraphAssociator:
                 return
             src, src_frame, dst, ids, gap = src[keep], src_frame[keep], dst[keep], ids[keep], gap[keep]
             frame, vel = frame[keep], vel[keep]
+        lo, hi = int(src_frame.min()), int(frame.max())
         for n, (f, bid, bst, bfill) in enumerate(self._buffer):
+            if f <= lo:                 # (the buffer is in frame order: only the frames
+                continue                # strictly inside some gap need a look)
+            if f >= hi:
+                break
             inside = (src_frame < f) & (f < frame)
             if not inside.any():
                 continue
@@ -1056,7 +1074,12 @@ class GraphAssociator:
         obs = OBS_INDEX
         dets = {f: d for f, d in self._dets}
         hits = np.zeros(len(src))
+        lo, hi = int(src_frame.min()), int(frame.max())
         for f, bid, bst, bfill in self._buffer:
+            if f <= lo:
+                continue
+            if f >= hi:
+                break
             inside = (src_frame < f) & (f < frame)
             if not inside.any():
                 continue

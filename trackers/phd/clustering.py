@@ -166,24 +166,20 @@ def kmeans_peaks(ps: ParticleSet, Z, T: float = 0.6, *, params: PHDParams | None
                         origin)
 
     # Weights relative to the largest keep the means exact even when masses underflow.
-    lw = ps.log_weights
-    lmax = float(np.max(lw))
+    # Positions are centred (not the sizes: they set the metric) so the expanded distance
+    # loses no precision on large images; centres stay in these coordinates until the end.
+    # (One kernel pass: _kmeans_kernels.prepare.)
+    lmax, w_rel, shift, S, X = _kmeans_kernels.prepare(
+        np.ascontiguousarray(states, dtype=np.float64),
+        np.ascontiguousarray(ps.log_weights, dtype=np.float64))
     if not np.isfinite(lmax):
         K = len(init)
         return Clusters(init, np.zeros(K), np.zeros(n, dtype=np.int64), np.zeros(K, dtype=bool),
                         origin)
-    w_rel = np.exp(lw - lmax)
     scale = np.exp(lmax)
     if len(init) == 0:
         init = (w_rel @ states / w_rel.sum())[None, :]
         origin = np.array([ORIGIN_EXTRA], dtype=np.int64)
-
-    # Centre the positions (not the sizes: they set the metric) so the expanded distance
-    # loses no precision on large images.  Centres stay in these coordinates until the end.
-    shift = np.zeros(STATE_DIM)
-    shift[:2] = states[:, :2].mean(axis=0)
-    S = states - shift
-    X = np.ascontiguousarray(S[:, OBS_COLS])
     centers, labels, masses, dmin, n_iter = _lloyd(X, S, w_rel, init - shift, params,
                                                    max_iter, tol)
     masses = masses * scale
@@ -233,6 +229,6 @@ def kmeans_peaks(ps: ParticleSet, Z, T: float = 0.6, *, params: PHDParams | None
         origin = np.append(origin, ORIGIN_SPLIT)
         n_splits += 1
     kept = masses >= T
-    return Clusters(centers + shift, masses, labels.astype(np.int64), kept, origin, n_splits,
+    return Clusters(centers + shift, masses, labels.astype(np.int64, copy=False), kept, origin, n_splits,
                     n_iter)
 
