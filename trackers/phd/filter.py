@@ -483,6 +483,13 @@ class SceneModel:
         self.people = NearClutter(self.cl, self.lk) if learn else None
         self._parts: Optional[tuple] = None
 
+    def set_likelihood(self, lk: LikelihoodParams) -> None:
+        """New observation-noise widths for the clutter volumes (PHDFilter.set_params)."""
+        self.lk = lk
+        for part in (self.place, self.people):
+            if part is not None:
+                part.lk = lk
+
     def structured(self) -> float:
         """'learn': the share of the clutter that is structured (near people or repeated in
         place) rather than random, from the EM averages (.clutter)."""
@@ -1060,9 +1067,14 @@ class PHDFilter:
     def set_params(self, params: PHDParams) -> None:
         """New settings from the next frame on, keeping the particles and the online estimates
         (the per-second conversion of :mod:`.tracker` uses it once the frame rate is known).
-        The likelihood's settings (``params.likelihood``) must not change."""
+        The likelihood's settings (``params.likelihood``) may change only for the Gaussian
+        likelihood (a width learnt online, :mod:`.scene_noise`)."""
         if params.likelihood != self.params.likelihood:
-            raise ValueError("PHDFilter.set_params: the likelihood settings cannot change")
+            if type(self.likelihood) is not GaussianLikelihood:
+                raise ValueError("PHDFilter.set_params: the likelihood settings cannot change "
+                                 "for a likelihood other than the Gaussian")
+            self.likelihood = GaussianLikelihood(params.likelihood)
+            self.scene.set_likelihood(params.likelihood)
         self.params = params
         self.scene.cl, self.scene.sp = params.clutter, params.score
 

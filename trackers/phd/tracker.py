@@ -59,6 +59,7 @@ from .association import (EST_CONF, GAP_CONF, AssocParams, AssocResult, FinalRow
 from .appearance import box_features
 from .clustering import Clusters, kmeans_peaks
 from .filter import STATE_DIM, PHDFilter, PHDParams, PHDStepResult, _check
+from .scene_noise import DetectorJitter, NoiseParams, learnt_width
 
 
 @dataclass(frozen=True)
@@ -195,6 +196,8 @@ class PHDTrackerParams:
     clusters: ClusterParams = part(ClusterParams, "modified K-means peaks")
     assoc: AssocParams = part(AssocParams, "graph-matching association")
     rate: RateParams = part(RateParams, "settings per second (practical preset)")
+    noise: NoiseParams = part(NoiseParams, "likelihood width learnt from the detector's "
+                                           "jitter (not in paper)")
 
     def derived_from(self) -> dict:
         return rate_derived(self)
@@ -370,6 +373,20 @@ class PHDTracker(_AssociatingTracker):
         self.params = params if params is not None else PHDTrackerParams()
         super().__init__(self.params.assoc)
         self.filter = PHDFilter(self.params.filter, rng, likelihood=likelihood)
+        np_ = self.params.noise
+        self.jitter = (DetectorJitter(np_, self.params.filter.likelihood.sigma_obs)
+                       if np_.learn_width > 0 and likelihood is None else None)
+
+    def _learn_width(self, frame: Frame, dets: Detections) -> None:
+        """``noise.learn_width``: measure the detector's jitter on this frame's detections and
+        give the filter the likelihood width it calls for (:mod:`.scene_noise`)."""
+        fp = self.active.filter
+        self.jitter.see(frame.index, xywh_to_cxcywh(dets.boxes), fp.clutter.clutter_memory)
+        width = learnt_width(fp.likelihood.sigma_obs, self.jitter.jitter,
+                             self.params.noise.learn_width)
+        want = replace(fp, likelihood=replace(fp.likelihood, sigma_obs=width))
+        if want != self.filter.params:
+            self.filter.set_params(want)
 
     def _retime_filter(self, ratio: float) -> None:
         self.filter.set_params(self.active.filter)
@@ -386,6 +403,8 @@ class PHDTracker(_AssociatingTracker):
              level: Optional[str] = None) -> StepResult:
         dets = detections if detections is not None else Detections.empty()
         self._retime(frame)
+        if self.jitter is not None:
+            self._learn_width(frame, dets)
         log = StageLog(self.stages, level)
         revive = None
         if self.active.filter.birth.revive_odds > 0 and len(dets):
