@@ -473,13 +473,29 @@ def scene_truth(source) -> dict:
     space: ``p_detect``, ``clutter_rate`` (per frame), ``clutter_density`` = rate / (image area ×
     area of the clutter's (w, h) support) -- the clutter spread uniformly over the image and
     that support (the uniform density of the same support and rate) -- ``box_noise``, and
-    ``targets`` (all present from frame 1 to the end: no births after frame 1)."""
+    ``targets`` (present on frame 1) and ``birth_rate`` (targets appearing per frame after it:
+    0 on :func:`targets_scene`, whose targets stay to the end)."""
     ex = source.extra
     area = float(source.width) * float(source.height)
     return {"targets": int(ex["targets"]), "p_detect": float(ex["p_detect"]),
             "clutter_rate": float(ex["clutter"]),
             "clutter_density": float(ex["clutter"]) / (area * clutter_size_area()),
-            "box_noise": BOX_NOISE}
+            "box_noise": BOX_NOISE, "birth_rate": _birth_rate(source)}
+
+
+def _birth_rate(source) -> float:
+    """Targets appearing per frame after the first (new gt ids; 0 on :func:`targets_scene`)."""
+    import numpy as np
+
+    gt = source.gt
+    if gt is None or not len(gt.frame):
+        return 0.0
+    first = {}
+    for f, i in zip(gt.frame.tolist(), gt.id.tolist()):
+        first.setdefault(i, f)
+    f0, f1 = int(gt.frame.min()), int(gt.frame.max())
+    new = sum(1 for f in first.values() if f > f0)
+    return new / max(f1 - f0, 1)
 
 
 def ospa_parts(est, gt, c: float = 100.0) -> dict:

@@ -40,6 +40,15 @@ pfscope's PHD filter's, written with Stone Soup components:
   (V = image area × clutter size area, ∫ g K_z = N(0; 0, R(z) + Σ_K(z)) on (cx, cy, w, h),
   geometric mean over the frame's detections).
 
+  The birth intensity after frame 1 is the scene's true birth rate (``truth["birth_rate"]``:
+  new ids per frame after the first, 0 on ``targets_scene``), at least ``birth_floor``.
+- ``extract="measurement"``: the estimates are read per detection, as in Ristic, Clark and Vo
+  (2010, "Improved SMC implementation of the PHD filter") and Stone Soup's ``SMCPHDInitiator``:
+  detection z's share of the updated PHD, ``W_z = Σ_i w_i^z`` (the updater's weights per
+  hypothesis), and where ``W_z > 0.5`` one estimate at the mean of the particles weighted by
+  ``w_i^z``.  ``extract="kmeans"`` (the default) leaves the estimates to the benchmark
+  (k-means of round(mass) centres of the resampled particles).
+
 ``fps``: the per-frame settings are those of the pfscope lane's preset at this frame rate
 (``params.at_fps``: the ``practical`` preset's are per second); None: the preset's fields as
 given (``paper``).
@@ -142,7 +151,8 @@ class StoneSoupPHDLane:
                  mean_size: float = 40.0, clutter_rate: float = 5.0,
                  clutter: str = "pfscope", fps: float | None = None,
                  truth: dict | None = None, birth: str = "pfscope",
-                 birth_floor: float = 0.04):
+                 birth_floor: float = 0.04, extract: str = "kmeans",
+                 extract_threshold: float = 0.5):
         from stonesoup.models.transition.linear import (
             CombinedLinearGaussianTransitionModel,
             ConstantVelocity,
@@ -165,7 +175,13 @@ class StoneSoupPHDLane:
             raise ValueError(f"birth must be 'pfscope' or 'truth', got {birth!r}")
         if birth == "truth" and clutter != "oracle":
             raise ValueError("birth='truth' needs clutter='oracle'")
+        if extract not in ("kmeans", "measurement"):
+            raise ValueError(f"extract must be 'kmeans' or 'measurement', got {extract!r}")
         self.birth = birth
+        self.extract = extract
+        self.extract_threshold = float(extract_threshold)
+        #: (N, 2) per-measurement estimates of the frame (``extract="measurement"``), else None
+        self.estimates = None
         self.birth_floor = float(birth_floor)
         np.random.seed(seed)
         self.budget_from = budget_from
@@ -189,7 +205,7 @@ class StoneSoupPHDLane:
             birth_probability=0.1, birth_rate=0.01, birth_sampler=self.sampler)
         lo, hi = size_range
         volume = float(width) * float(height) * (hi - lo) ** 2
-        cls = SMCPHDUpdater if noise else _no_noise_class()
+        cls = _updater_class(noise)
         p_detect = 1.0 - fp.likelihood.p_miss
         intensity = clutter_rate / volume
         if self.truth is not None:
@@ -211,14 +227,16 @@ class StoneSoupPHDLane:
     def config(self) -> dict:
         return {"tracker": self.name, "noise": self.noise, "clutter": self.clutter,
                 "prob_detect": float(self.updater.prob_detect),
-                "truth": self.truth, "birth": self.birth, "birth_floor": self.birth_floor}
+                "truth": self.truth, "birth": self.birth, "birth_floor": self.birth_floor,
+                "extract": self.extract, "extract_threshold": self.extract_threshold}
 
     def _birth_rate(self, frame_index: int, Z: np.ndarray) -> float:
         """Total newborn mass of the frame: pfscope's 0.01 per detection, or (``birth='truth'``)
         the uniform true birth B_k over V carried by kernels around the detections."""
         if self.birth == "pfscope" or not len(Z):
             return 0.01 * len(Z)
-        B = float(self.truth["targets"]) if frame_index <= 1 else self.birth_floor
+        B = (float(self.truth["targets"]) if frame_index <= 1 else
+             max(float(self.truth.get("birth_rate", 0.0)), self.birth_floor))
         V = float(self.truth["clutter_rate"]) / float(self.truth["clutter_density"])
         lk, sp = self.lk, self.sampler.spread
         log_int = []
@@ -286,11 +304,51 @@ class StoneSoupPHDLane:
             hyps.append(SingleHypothesis(prediction, Detection(z.reshape(4, 1), timestamp=ts,
                                                                measurement_model=model)))
         self.state = self.updater.update(MultipleHypothesis(hyps))
+        if self.extract == "measurement":
+            self.estimates = _per_measurement(prediction, self.updater.last_log_weights,
+                                              self.extract_threshold)
         lw = np.asarray(self.state.log_weight, dtype=float)
         self.mass = float(np.exp(np.logaddexp.reduce(lw))) if len(lw) else 0.0
         sv = np.asarray(self.state.state_vector, dtype=float)
         self.states = sv[[0, 2, 1, 3, 4, 5]].T
         return StepResult(TrackSet(np.zeros(0, np.int64), np.zeros((0, 4))))
+
+
+def _per_measurement(prediction, log_w: np.ndarray, threshold: float) -> np.ndarray:
+    """Per-measurement estimates (Ristic, Clark, Vo 2010): ``log_w`` (particles, 1 + N_z) are
+    the update's log weights per hypothesis (column 0 the missed detection); detection j gives
+    an estimate where its share ``W_j = Σ_i w_ij`` exceeds ``threshold``, at the particles'
+    (x, y) mean weighted by ``w_ij``.  Returns (n, 2)."""
+    from scipy.special import logsumexp
+
+    if log_w is None or log_w.shape[1] < 2:
+        return np.zeros((0, 2))
+    lw = log_w[:, 1:]
+    tot = logsumexp(lw, axis=0)
+    keep = np.flatnonzero(np.exp(tot) > threshold)
+    if not len(keep):
+        return np.zeros((0, 2))
+    sv = np.asarray(prediction.state_vector, dtype=float)
+    w = np.exp(lw[:, keep] - tot[keep])                 # (particles, kept), columns sum to 1
+    return np.c_[sv[0] @ w, sv[2] @ w]
+
+
+def _updater_class(noise: bool):
+    """``SMCPHDUpdater`` (``noise=False``: without the noise draw in its likelihood) that keeps
+    the last update's log weights per hypothesis (``last_log_weights``) for the per-measurement
+    extraction; the update itself is Stone Soup's, unchanged."""
+    from stonesoup.updater.particle import SMCPHDUpdater
+
+    base = SMCPHDUpdater if noise else _no_noise_class()
+
+    class KeepingSMCPHDUpdater(base):
+        last_log_weights = None
+
+        def get_log_weights_per_hypothesis(self, hypotheses):
+            self.last_log_weights = super().get_log_weights_per_hypothesis(hypotheses)
+            return self.last_log_weights
+
+    return KeepingSMCPHDUpdater
 
 
 def _no_noise_class():

@@ -733,3 +733,35 @@ def test_gap_is_filled_only_with_evidence_on_its_path():
         rows = _gap_rows(support, evidence, free)
         got = {f for f, fr in rows.items() if fr.filled.any()}
         assert got == (inside if filled else set()), (support, evidence, got)
+
+
+def _head_rows(head_skip: int) -> set:
+    """One target walking right, detected in frames 1-24 except 5 and 6 (two misses in a row),
+    its estimates starting only at frame 10 (the frames PHD-MT's mass takes to reach T), and a
+    false detection far away every frame.  Returns the frames the track has a row in."""
+    p = AssocParams(depth=10, min_length=3, fill_gaps=True, extend_heads=True,
+                    head_skip=head_skip)
+    assoc = GraphAssociator(p)
+    got = set()
+    for k in range(1, 25):
+        x = 50.0 + 3.0 * k
+        st = np.array([state(x, 100.0, 40, 80, 3.0, 0.0)]) if k >= 10 else np.zeros((0, 6))
+        dets = [[500.0, 400.0, 40.0, 80.0]]
+        if k not in (5, 6):
+            dets.append([x + 1.0, 101.0, 40.0, 80.0])
+        r = assoc.step(k, st, detections=np.array(dets))
+        got |= {fr.frame for fr in r.finalised if len(fr.ids)}
+    got |= {fr.frame for fr in assoc.flush() if len(fr.ids)}
+    return got
+
+
+def test_track_heads_cross_as_many_missed_frames_as_head_skip():
+    """extend_heads walks back from a track's first estimate through the detections; a frame
+    without one stops it unless head_skip allows crossing it: two misses in a row stop the
+    walk at head_skip 0 and 1, and head_skip 2 (practical's) crosses them and walks on as far
+    as the held-back frames go (the report lag, depth = 10: frames 2-11 when the track is
+    confirmed at frame 12)."""
+    late = set(range(10, 25))
+    assert _head_rows(0) == late | {7, 8, 9}
+    assert _head_rows(1) == late | {7, 8, 9}
+    assert _head_rows(2) == late | {2, 3, 4, 7, 8, 9}

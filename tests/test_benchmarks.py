@@ -105,7 +105,7 @@ def test_bench_runs_tiny_and_writes_json(tmp_path):
         assert row["ss_noise_ms"] > 0 and row["ss_nonoise_ms"] > 0
         for v in row["ospa_mean"].values():
             assert 0 <= v <= 100
-        lanes = {"ss_noise", "ss_nonoise", "ss_oracle", "ss_oracle-birth"}
+        lanes = {"ss_noise", "ss_nonoise", "ss_oracle", "ss_oracle-birth", "ss_standard"}
         assert set(row["mean_mass"]) == {"pf"} | lanes
         assert set(row["ospa_mean"]) == {"pf_tracks", "pf_live", "pf_clusters",
                                          "pf_kmeans"} | lanes
@@ -180,3 +180,36 @@ def test_oracle_births_count_the_targets_where_pfscope_births_count_the_clutter(
     m = {k: float(np.mean(v[10:])) for k, v in r["mass"].items()}
     assert m["ss_oracle"] > 1.5 * 4
     assert 0.75 * 4 < m["ss_oracle-birth"] < 1.25 * 4
+
+
+def test_scene_truth_birth_rate_counts_the_newcomers(common):
+    """The true birth rate given to the lanes with true births: none on targets_scene (every
+    target stays), the new ids per frame on births_scene."""
+    assert common.scene_truth(common.targets_scene(4, 50, seed=0))["birth_rate"] == 0.0
+    src = common.births_scene(16, 200, seed=0)
+    gt = src.gt
+    new = len(set(gt.id.tolist())) - int(np.sum(gt.frame == 1))
+    rate = common.scene_truth(src)["birth_rate"]
+    assert rate == pytest.approx(new / 199) and rate > 0.05
+
+
+def test_per_measurement_estimates_take_the_detections_above_half_a_target(common):
+    """Stone Soup lane's per-measurement extraction (Ristic et al. 2010): a detection whose
+    share of the updated PHD exceeds 0.5 gives one estimate at its weighted particle mean;
+    one below gives none, and the missed-detection column never does."""
+    pytest.importorskip("stonesoup")
+    import _stonesoup as S
+
+    class Pred:                       # state (x, vx, y, vy, w, h) x 4 particles
+        state_vector = np.array([[10.0, 30.0, 100.0, 200.0], [0] * 4, [20.0, 40.0, 5.0, 5.0],
+                                 [0] * 4, [30.0] * 4, [80.0] * 4])
+
+    w = np.zeros((4, 3))
+    w[:, 0] = [0.9, 0.9, 0.9, 0.9]    # missed detection: 3.6 of mass, never an estimate
+    w[:, 1] = [0.3, 0.3, 0.0, 0.0]    # detection 1 owns 0.6 of the two first particles
+    w[:, 2] = [0.0, 0.0, 0.2, 0.2]    # detection 2 owns 0.4: below half a target
+    with np.errstate(divide="ignore"):
+        est = S._per_measurement(Pred, np.log(w), 0.5)
+    np.testing.assert_allclose(est, [[20.0, 30.0]])
+    with np.errstate(divide="ignore"):
+        assert len(S._per_measurement(Pred, np.log(w), 0.3)) == 2
