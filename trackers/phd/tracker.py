@@ -59,6 +59,7 @@ from .association import (EST_CONF, GAP_CONF, AssocParams, AssocResult, FinalRow
 from .appearance import box_features
 from .clustering import Clusters, kmeans_peaks
 from .filter import STATE_DIM, PHDFilter, PHDParams, PHDStepResult, _check
+from .scene_motion import SceneMotion
 
 
 @dataclass(frozen=True)
@@ -121,6 +122,10 @@ class RateParams:
                                      "seconds (→ relink_tau = relink_tau_s · fps)")
     app_memory_s: float = param(2.0, "averaging time of a track's colour model, seconds "
                                      "(→ app_alpha = 1 − exp(−dt / app_memory_s))")
+    learn_motion: bool = param(False, "PHD-MT: raise the filter's acceleration and size noise "
+                                      "above accel_per_s, size_per_s by what the scene's "
+                                      "detections show the motion model misses (learnt "
+                                      "online, phd.scene_motion; never below the preset)")
 
     def __post_init__(self):
         for name in ("fallback_fps", "gap_s", "memory_s", "relink_tau_s", "app_memory_s"):
@@ -342,7 +347,7 @@ PHD_PRACTICAL = PHDTrackerParams(
     filter=PHDParams.of(clutter_model="gate", near_learn=True, score_model="gaussian",
                         p_miss=0.1, revive_odds=1.0),
     assoc=AssocParams(fill_gaps=True, fill_support=0.25, fill_free=2, app_weight=2.0, extend_heads=True),
-    rate=RateParams(per_second=True))
+    rate=RateParams(per_second=True, learn_motion=True))
 PHD_SCENE = with_options(PHD_PRACTICAL, {"filter.clutter.clutter_model": "scene"})
 #: The practical default of MT: the same association settings per second (re-linking
 #: included).  No gap filling: MT links clutter into tracks across gaps, and filling them
@@ -370,6 +375,22 @@ class PHDTracker(_AssociatingTracker):
         self.params = params if params is not None else PHDTrackerParams()
         super().__init__(self.params.assoc)
         self.filter = PHDFilter(self.params.filter, rng, likelihood=likelihood)
+        lk = self.params.filter.likelihood
+        self.scene_motion = (SceneMotion(lk.sigma_obs * lk.sigma_obs_pos_ratio)
+                             if self.params.rate.per_second and self.params.rate.learn_motion
+                             else None)
+
+    def _learn_motion(self, detections: Detections) -> None:
+        """The filter's motion noise: the preset's at this frame rate, raised to what the
+        scene's detections measure (:mod:`.scene_motion`)."""
+        sm = self.scene_motion
+        sm.observe(xywh_to_cxcywh(detections.boxes))
+        base = self.active.filter.motion
+        sv, ss = sm.sigma_v(), sm.sigma_size()
+        motion = replace(base, sigma_v=max(base.sigma_v, sv or 0.0),
+                         sigma_size=max(base.sigma_size, ss or 0.0))
+        if motion != self.filter.params.motion:
+            self.filter.set_params(replace(self.filter.params, motion=motion))
 
     def _retime_filter(self, ratio: float) -> None:
         self.filter.set_params(self.active.filter)
@@ -386,6 +407,8 @@ class PHDTracker(_AssociatingTracker):
              level: Optional[str] = None) -> StepResult:
         dets = detections if detections is not None else Detections.empty()
         self._retime(frame)
+        if self.scene_motion is not None:
+            self._learn_motion(dets)
         log = StageLog(self.stages, level)
         revive = None
         if self.active.filter.birth.revive_odds > 0 and len(dets):
