@@ -51,7 +51,9 @@ class NoiseParams:
     learn_width: float = param(0.0, "0: the likelihood width filter.likelihood.sigma_obs as "
                                     "given; c > 0: sigma_obs = max(given, c × the detector's "
                                     "box-size jitter measured online between consecutive "
-                                    "frames; not in paper)")
+                                    "frames; not in paper; with rate.learn_motion on as well, the "
+                                    "acceleration is read off the jitter while the width is "
+                                    "still learnt: set rate.learn_motion=false with it)")
     pair_iou: float = param(0.3, "learn_width: detections of consecutive frames that are each "
                                  "other's best overlap with at least this IoU are one person "
                                  "seen twice")

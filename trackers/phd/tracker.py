@@ -59,6 +59,7 @@ from .association import (EST_CONF, GAP_CONF, AssocParams, AssocResult, FinalRow
 from .appearance import box_features
 from .clustering import Clusters, kmeans_peaks
 from .filter import STATE_DIM, PHDFilter, PHDParams, PHDStepResult, _check
+from .scene_motion import SceneMotion
 from .scene_noise import DetectorJitter, NoiseParams, learnt_width
 
 
@@ -122,6 +123,10 @@ class RateParams:
                                      "seconds (→ relink_tau = relink_tau_s · fps)")
     app_memory_s: float = param(2.0, "averaging time of a track's colour model, seconds "
                                      "(→ app_alpha = 1 − exp(−dt / app_memory_s))")
+    learn_motion: bool = param(False, "PHD-MT: raise the filter's acceleration and size noise "
+                                      "above accel_per_s, size_per_s by what the scene's "
+                                      "detections show the motion model misses (learnt "
+                                      "online, phd.scene_motion; never below the preset)")
 
     def __post_init__(self):
         for name in ("fallback_fps", "gap_s", "memory_s", "relink_tau_s", "app_memory_s"):
@@ -348,7 +353,7 @@ PHD_PRACTICAL = PHDTrackerParams(
                         p_miss=0.1, revive_odds=1.0),
     assoc=AssocParams(fill_gaps=True, fill_support=0.25, fill_free=2, app_weight=2.0, extend_heads=True,
                       head_skip=2),
-    rate=RateParams(per_second=True))
+    rate=RateParams(per_second=True, learn_motion=True))
 PHD_SCENE = with_options(PHD_PRACTICAL, {"filter.clutter.clutter_model": "scene"})
 #: The practical default of MT: the same association settings per second (re-linking
 #: included).  No gap filling: MT links clutter into tracks across gaps, and filling them
@@ -379,15 +384,32 @@ class PHDTracker(_AssociatingTracker):
         np_ = self.params.noise
         self.jitter = (DetectorJitter(np_, self.params.filter.likelihood.sigma_obs)
                        if np_.learn_width > 0 and likelihood is None else None)
+        lk = self.params.filter.likelihood
+        self.scene_motion = (SceneMotion(lk.sigma_obs * lk.sigma_obs_pos_ratio)
+                             if self.params.rate.per_second and self.params.rate.learn_motion
+                             else None)
 
-    def _learn_width(self, frame: Frame, dets: Detections) -> None:
-        """``noise.learn_width``: measure the detector's jitter on this frame's detections and
-        give the filter the likelihood width it calls for (:mod:`.scene_noise`)."""
+    def _learn_scene(self, frame: Frame, dets: Detections) -> None:
+        """What the scene's detections teach the filter, on top of the preset at this frame
+        rate: the likelihood width the detector's jitter calls for (``noise.learn_width``,
+        :mod:`.scene_noise`) and the motion noise raised to what the scene measures
+        (``rate.learn_motion``, :mod:`.scene_motion`)."""
         fp = self.active.filter
-        self.jitter.see(frame.index, xywh_to_cxcywh(dets.boxes), fp.clutter.clutter_memory)
-        width = learnt_width(fp.likelihood.sigma_obs, self.jitter.jitter,
-                             self.params.noise.learn_width)
-        want = replace(fp, likelihood=replace(fp.likelihood, sigma_obs=width))
+        boxes = xywh_to_cxcywh(dets.boxes)
+        want = fp
+        if self.jitter is not None:
+            self.jitter.see(frame.index, boxes, fp.clutter.clutter_memory)
+            width = learnt_width(fp.likelihood.sigma_obs, self.jitter.jitter,
+                                 self.params.noise.learn_width)
+            want = replace(want, likelihood=replace(fp.likelihood, sigma_obs=width))
+        if self.scene_motion is not None:
+            sm = self.scene_motion
+            sm.observe(boxes)
+            # the residuals the likelihood explains: the learnt width's when there is one
+            sm.pos_std = want.likelihood.sigma_obs * want.likelihood.sigma_obs_pos_ratio
+            sv, ss = sm.sigma_v(), sm.sigma_size()
+            want = replace(want, motion=replace(fp.motion, sigma_v=max(fp.motion.sigma_v, sv or 0.0),
+                                                sigma_size=max(fp.motion.sigma_size, ss or 0.0)))
         if want != self.filter.params:
             self.filter.set_params(want)
 
@@ -406,8 +428,8 @@ class PHDTracker(_AssociatingTracker):
              level: Optional[str] = None) -> StepResult:
         dets = detections if detections is not None else Detections.empty()
         self._retime(frame)
-        if self.jitter is not None:
-            self._learn_width(frame, dets)
+        if self.jitter is not None or self.scene_motion is not None:
+            self._learn_scene(frame, dets)
         log = StageLog(self.stages, level)
         revive = None
         if self.active.filter.birth.revive_odds > 0 and len(dets):

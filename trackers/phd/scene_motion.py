@@ -1,0 +1,148 @@
+"""The scene's motion noise learnt online from the detections (not in maggio2007).
+
+The filter's motion model (:mod:`.motion`) has one acceleration noise ``σ_v`` and one size
+noise ``σ_size`` per frame, as fractions of the box size; the ``practical`` preset gives them
+per second (``rate.accel_per_s``, ``rate.size_per_s``).  One pair does not fit every scene: in
+a street seen from a moving car (ego-motion, people walking towards the camera) boxes jump by
+a quarter of their width from one frame to the next and grow by 5-10 % a frame, while people
+seen by a fixed camera move smoothly.  With the smooth scene's noise the prediction never
+reaches the next detection in the moving scene, and every frame is a new birth.
+
+:class:`SceneMotion` measures, from the detections alone, how far the filter's own model
+misses, and raises ``σ_v`` and ``σ_size`` above the preset by the excess (covariance
+matching):
+
+- **pairs and triplets** -- a detection of frame k and one of frame k−1 are linked when each
+  is the other's nearest (distance in box sizes: ``Δx / w``, ``Δy / h``) within
+  :data:`LINK_DIST` box sizes and their heights differ by less than :data:`LINK_LOG_SIZE`
+  (log ratio); a link of k−1 → k that continues a link of k−2 → k−1 makes a triplet;
+- **acceleration** -- the triplet's second difference ``d = z_k − 2 z_{k−1} + z_{k−2}``
+  (per axis over w, h) is the residual of the constant-velocity prediction from two
+  detections.  Under the model its variance is ``½ σ_v² + 6 σ_y²`` (the acceleration of two
+  frames, ``(1 − c)² + c² = ½`` for ``c = ½``, and the observation noise ``σ_y`` of the
+  likelihood, three detections with weights 1, −2, 1), so ``σ_v² = 2 (s² − 6 σ_y²)`` with ``s``
+  the measured robust spread, larger axis: only the part the observation noise cannot explain
+  is motion;
+- **size** -- over a triplet, the log size change across two frames ``log(w_k / w_{k−2})`` and
+  across one ``log(w_k / w_{k−1})`` (w and h pooled): the detector's size jitter adds the same
+  ``2 σ_n²`` to both variances, while the random walk adds ``σ_size²`` a frame and a steady
+  growth ``g`` a frame adds ``g²`` and ``4 g²``, so ``s₂² − s₁² = σ_size² + 3 g²`` is the motion
+  alone -- what a zero-order size model must cover (a detector whose sizes come from a fixed
+  pyramid of scales jitters a lot and moves nothing here);
+- **robust spread** -- ``√(π/2) × mean |x|`` with ``|x|`` winsorised at its :data:`TRIM`
+  quantile, over the last :data:`WINDOW` samples (clutter links and mismatches are the tail);
+  nothing is changed before :data:`MIN_SAMPLES` triplets.
+
+The result is never below the preset (``max``): a smooth scene keeps its settings exactly.
+Deterministic, no randomness; memory bounded by :data:`WINDOW`.  The links compare every
+detection of a frame with every one of the previous frame (a few dozen each on real scenes);
+a pair of frames with more than :data:`MAX_PAIRS` such pairs (a clutter storm) is not linked,
+so the cost per frame stays bounded whatever the detector outputs.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from typing import Optional
+
+import numpy as np
+
+#: detections of two frames are linked within this many box sizes (Δx / w, Δy / h)
+LINK_DIST = 1.0
+#: ... and when their heights differ by less than this (|log h_k / h_{k−1}|)
+LINK_LOG_SIZE = 0.4
+#: two frames whose detections make more pairs than this are not linked (bounded cost)
+MAX_PAIRS = 250_000
+#: samples kept (the most recent), per statistic
+WINDOW = 300
+#: samples needed before the measured noise is used
+MIN_SAMPLES = 30
+#: std of a zero-mean Gaussian from the mean of |x|
+MEAN_ABS_TO_STD = math.sqrt(math.pi / 2)
+#: |x| is winsorised at this quantile before the mean (the tail: clutter links, mismatches)
+TRIM = 0.9
+
+
+def link(prev: np.ndarray, cur: np.ndarray) -> np.ndarray:
+    """Mutual nearest neighbours of two frames' detections ``(cx, cy, w, h)`` (N_p, 4), (N_c, 4):
+    for each of ``cur`` the index of its link in ``prev``, −1 where none (module docstring)."""
+    out = np.full(len(cur), -1, dtype=np.int64)
+    if not len(prev) or not len(cur) or len(prev) * len(cur) > MAX_PAIRS:
+        return out
+    dx = (cur[:, None, 0] - prev[None, :, 0]) / cur[:, None, 2]
+    dy = (cur[:, None, 1] - prev[None, :, 1]) / cur[:, None, 3]
+    d = np.hypot(dx, dy)
+    d = np.where(np.abs(np.log(cur[:, None, 3] / prev[None, :, 3])) < LINK_LOG_SIZE, d, np.inf)
+    j = np.argmin(d, axis=1)                        # cur -> nearest prev
+    i = np.argmin(d, axis=0)                        # prev -> nearest cur
+    rows = np.arange(len(cur))
+    ok = (i[j] == rows) & (d[rows, j] < LINK_DIST)
+    out[ok] = j[ok]
+    return out
+
+
+def robust_std(x: np.ndarray) -> float:
+    """``√(π/2) × mean |x|`` with ``|x|`` winsorised at its :data:`TRIM` quantile: the std of
+    a zero-mean Gaussian, insensitive to a tail (clutter links), and smooth where a detector's
+    sizes come in steps (a median of |x| would jump between 0 and one step)."""
+    if not len(x):
+        return 0.0
+    a = np.abs(np.asarray(x, dtype=np.float64))
+    return MEAN_ABS_TO_STD * float(np.mean(np.minimum(a, np.quantile(a, TRIM))))
+
+
+class SceneMotion:
+    """Online estimate of the per-frame acceleration and size noise (module docstring).
+    ``observe(Z)`` once per frame with the detections ``(cx, cy, w, h)``; :meth:`sigma_v` and
+    :meth:`sigma_size` then give the measured noise (None until enough samples)."""
+
+    def __init__(self, pos_std: float):
+        #: the likelihood's position std as a fraction of the box size (σ_y / w)
+        self.pos_std = float(pos_std)
+        self._prev = np.zeros((0, 4))
+        self._prev_link = np.zeros(0, dtype=np.int64)
+        self._prev_prev = np.zeros((0, 4))
+        self.accel: deque = deque(maxlen=WINDOW)    # (2,) second differences over (w, h)
+        self.size: deque = deque(maxlen=WINDOW)     # (1-frame, 2-frame) log size changes
+
+    def observe(self, Z: np.ndarray) -> None:
+        """One frame's detections (N, 4) ``(cx, cy, w, h)``; an empty frame breaks the links."""
+        Z = np.asarray(Z, dtype=np.float64).reshape(-1, 4)
+        j = link(self._prev, Z)
+        has = np.flatnonzero(j >= 0)
+        if len(has):
+            p = self._prev[j[has]]
+            # triplets: the link k−1 → k continues a link k−2 → k−1
+            jj = self._prev_link[j[has]] if len(self._prev_link) else np.full(len(has), -1)
+            tri = jj >= 0
+            if tri.any():
+                z, q, r = Z[has[tri]], p[tri], self._prev_prev[jj[tri]]
+                d = (z[:, :2] - 2.0 * q[:, :2] + r[:, :2]) / q[:, 2:4]
+                self.accel.extend(d.tolist())
+                one = np.log(z[:, 2:4] / q[:, 2:4]).ravel()
+                two = np.log(z[:, 2:4] / r[:, 2:4]).ravel()
+                self.size.extend(np.stack([one, two], axis=1).tolist())
+        self._prev_prev, self._prev, self._prev_link = self._prev, Z, j
+
+    def sigma_v(self) -> Optional[float]:
+        """Measured acceleration std per frame (fraction of w, h), 0 when the observation
+        noise explains the residuals; None before :data:`MIN_SAMPLES` triplets."""
+        if len(self.accel) < MIN_SAMPLES:
+            return None
+        a = np.asarray(self.accel)
+        s = max(robust_std(a[:, 0]), robust_std(a[:, 1]))
+        return math.sqrt(max(0.0, 2.0 * (s * s - 6.0 * self.pos_std ** 2)))
+
+    def sigma_size(self) -> Optional[float]:
+        """Measured size-change std per frame (fraction of w, h), 0 when the detector's
+        jitter explains the changes; None before :data:`MIN_SAMPLES` triplets."""
+        if len(self.size) < 2 * MIN_SAMPLES:
+            return None
+        s = np.asarray(self.size)
+        one, two = robust_std(s[:, 0]), robust_std(s[:, 1])
+        # the difference of two sampled variances is noisy (Var(ŝ²) ≈ 2 s⁴ / n each): only
+        # its excess over two standard errors is motion, or a jittery detector whose boxes do
+        # not change size at all would read as a size noise of ~0.07-0.1 from sampling alone
+        margin = 2.0 * math.sqrt(2.0 * (one ** 4 + two ** 4) / len(s))
+        return math.sqrt(max(0.0, two * two - one * one - margin))
