@@ -1,6 +1,7 @@
 """The progress line shows the recent frame rate (issue 22), on a fake clock."""
 
 import io
+import os
 
 from pfscope.viewer_app.run import Progress
 
@@ -218,3 +219,26 @@ def test_a_dlpf_run_warms_only_the_resampling_kernel(monkeypatch):
     prepare_kernels([_Lane("phd")], stream=io.StringIO(), delay=5.0)
     prepare_kernels([_Lane("dlpf"), _Lane("dbn-phd")], stream=io.StringIO(), delay=5.0)
     assert asked == [False, True, True]
+
+
+def test_first_run_helper_fills_the_cache(tmp_path):
+    """On a first run (empty numba cache) the warm-up starts a helper process that compiles the
+    K-means kernels into the cache (this process then loads them); on a later run (filled
+    cache) it starts none."""
+    import subprocess
+    import sys
+
+    code = ("import os\n"
+            "from pfscope.trackers import warmup as W\n"
+            "from pfscope.trackers.phd import _kmeans_kernels as K\n"
+            "os.cpu_count = lambda: 2\n"
+            "print(W._cache_cold(K.lloyd))\n"
+            "h = W._start_helper()\n"
+            "print(h is not None)\n"
+            "W._join(h)\n"
+            "print(h.returncode, W._cache_cold(K.lloyd), W._start_helper() is None)\n")
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
+                         timeout=600)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.split() == ["True", "True", "0", "False", "True"]
