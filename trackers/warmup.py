@@ -74,12 +74,12 @@ def _compile_association() -> None:
 def _compile_helper_share() -> None:
     """The helper process's share (:func:`_start_helper`), on a made-up particle cloud around
     the walkers as the filter leaves it (C-ordered float64 states and log-weights, mass ≈ 1
-    per walker): first the filter's kernels this process reaches last (the resampling walk,
-    M(z) -- it compiles them before this one gets there), then the K-means kernels and the
-    association's."""
+    per walker): first the filter's kernel this process reaches last (the resampling walk:
+    compiled before this one gets there), then the K-means kernels and the association's.
+    (M(z) is this process's: its grid is compiled with the update's.)"""
     from .api import make_params
     from .phd.clustering import kmeans_peaks
-    from .phd.filter import mass_near, resample
+    from .phd.filter import resample
     from .smc import ParticleSet
 
     rng = np.random.default_rng(1)
@@ -93,7 +93,6 @@ def _compile_helper_share() -> None:
     ps = ParticleSet(states, np.full(n, np.log(len(Z) / n)))
     fp = params.filter
     resample(ps, fp.resampling, rng)
-    mass_near(ps, Z, fp.birth, fp.likelihood)
     cp = params.clusters
     kmeans_peaks(ps, Z, cp.T, params=params.filter, split_rule=cp.split_rule)
     _compile_association()

@@ -884,9 +884,15 @@ def _update_gaussian(particles: ParticleSet, g: GatedGaussian, log_kappa: np.nda
     std = obs_std(Z[:, 2:4] if by_det else particles.states[:, 4:6], lk)
     log_norm = np.log(std).sum(-1)
     cell = _grid_cell(std if by_det else np.max(std[:, :2], axis=0, keepdims=True), g.r2)
-    ok, new_lw, log_c, log_mass, log_pred = _kernels.gauss_update(
-        particles.states, lw, Z, std, log_norm, by_det, log_kappa, log_pd, log_pm,
-        float(g.r2), cell[0], cell[1])
+    done = False
+    if by_det:      # the linear route alone (weights within e^600: every PHD frame)
+        ok, done, new_lw, log_c, log_mass, log_pred = _kernels.gauss_update_linear(
+            particles.states, lw, Z, std, log_norm, log_kappa, log_pd, log_pm,
+            float(g.r2), cell[0], cell[1])
+    if not done:
+        ok, new_lw, log_c, log_mass, log_pred = _kernels.gauss_update(
+            particles.states, lw, Z, std, log_norm, by_det, log_kappa, log_pd, log_pm,
+            float(g.r2), cell[0], cell[1])
     if not ok:
         raise ValueError("update: non-finite particle positions")
     log_den = np.logaddexp(log_kappa, log_c)
