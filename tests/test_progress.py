@@ -242,3 +242,30 @@ def test_first_run_helper_fills_the_cache(tmp_path):
                          timeout=600)
     assert out.returncode == 0, out.stderr[-2000:]
     assert out.stdout.split() == ["True", "True", "0", "False", "True"]
+
+
+def test_early_helper_only_for_the_phd_kernels(monkeypatch):
+    """`pfscope record` starts the first-run helper as soon as it knows its trackers, only
+    when one calls the PHD kernels, once; the warm-up then waits for that helper instead of
+    starting another."""
+    from pfscope.trackers import warmup as W
+
+    started = []
+
+    class Fake:
+        def poll(self):
+            return 0
+
+        def wait(self, timeout=None):
+            started.append("joined")
+
+    monkeypatch.setattr(W, "_early", None)
+    monkeypatch.setattr(W, "_start_helper", lambda: started.append("start") or Fake())
+    W.start_helper_early(["mt", "dlpf"])
+    assert started == []
+    W.start_helper_early(["mt", "phd"])
+    W.start_helper_early(["phd"])
+    assert started == ["start"]
+    monkeypatch.setattr(W, "_ready", frozenset())
+    W.compile_kernels()
+    assert started == ["start", "joined"] and W._early is None

@@ -127,6 +127,31 @@ def _start_helper() -> "subprocess.Popen | None":
         return None
 
 
+_early: "subprocess.Popen | None" = None     # the helper started by start_helper_early
+
+
+def start_helper_early(names) -> None:
+    """Start the first-run helper (:func:`_start_helper`) as soon as the app knows it will run
+    trackers ``names`` (registered names) that call the PHD kernels, so it compiles while the
+    app still sets up; :func:`compile_kernels` then waits for it.  Stopped at exit if never
+    waited for (a run that fails before its first frame)."""
+    global _early
+    if _early is not None or not any(n in KERNEL_TRACKERS and n not in RESAMPLE_ONLY
+                                     for n in names):
+        return
+    _early = _start_helper()
+    if _early is not None:
+        import atexit
+
+        atexit.register(_stop_early)
+
+
+def _stop_early() -> None:
+    if _early is not None and _early.poll() is None:
+        _early.kill()
+        _early.wait()
+
+
 def _join(helper: "subprocess.Popen | None", timeout: float = 300.0) -> None:
     """Wait for the helper (stop it after ``timeout`` s: this process then compiles what it
     has not cached)."""
@@ -153,7 +178,7 @@ def compile_kernels(presets=("practical", "paper"), phd: bool = True,
     kernel (DLPF's; the PHD filter's resampling copies the rows in its own walk), default
     ``not phd``.  Once per process: later calls return 0 at once (the kernels stay compiled
     in the process)."""
-    global _ready
+    global _ready, _early
     index = (not phd) if index is None else index
     key = (presets if phd else ()) + (("resample",) if index else ())
     if key in _ready or (not phd and any("resample" in k for k in _ready)):
@@ -171,7 +196,7 @@ def compile_kernels(presets=("practical", "paper"), phd: bool = True,
         _ready = _ready | {key}
         return time.perf_counter() - t0
     image = blank_image(480, 640)
-    helper = _start_helper()
+    helper, _early = (_early, None) if _early is not None else (_start_helper(), None)
     if helper is not None:
         # the filter's kernels here (two frames: the second has particles to predict and
         # M(z) to measure) while the helper compiles the K-means and association ones
@@ -190,4 +215,4 @@ def compile_kernels(presets=("practical", "paper"), phd: bool = True,
 
 
 __all__ = ["KERNEL_TRACKERS", "RESAMPLE_ONLY", "uses_kernels", "phd_kernels_needed",
-           "index_kernel_needed", "compile_kernels"]
+           "index_kernel_needed", "compile_kernels", "start_helper_early"]

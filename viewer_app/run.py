@@ -436,6 +436,9 @@ def record(source: Source, out: Path, opts: RecordOptions, *, trackers: Optional
                   for ln in lanes]
     except ValueError as e:
         raise InputError(str(e)) from None
+    from pfscope.trackers.warmup import start_helper_early
+
+    start_helper_early([ln.tracker for ln in lanes])   # first run: compiles while we set up
     refuse_inputs([(Path(out), "recording"), (opts.tracks_out, "tracks file")],
                   run_inputs(source, params, opts.inputs))
     out = check_output(Path(out), opts.force)
