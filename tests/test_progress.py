@@ -269,3 +269,20 @@ def test_early_helper_only_for_the_phd_kernels(monkeypatch):
     monkeypatch.setattr(W, "_ready", frozenset())
     W.compile_kernels()
     assert started == ["start", "joined"] and W._early is None
+
+
+def test_record_starts_the_helper_before_the_parser(monkeypatch):
+    """`pfscope record` names its tracker to the first-run helper before building the parser
+    (which imports every tracker); other commands, and a --params file (which names the
+    tracker itself), leave it to the later start."""
+    from pfscope.trackers import warmup as W
+    from pfscope.viewer_app import cli
+
+    asked = []
+    monkeypatch.setattr(W, "start_helper_early", lambda names: asked.append(list(names)))
+    cli._early_compile(["record", "--force", "--out", "x.rrd"])
+    cli._early_compile(["record", "--tracker", "dlpf", "--frames", "5"])
+    cli._early_compile(["record", "--params", "p.toml"])
+    cli._early_compile(["eval", "--tracker", "phd"])
+    cli._early_compile([])
+    assert asked == [["phd"], ["dlpf"]]
