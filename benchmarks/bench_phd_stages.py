@@ -11,13 +11,13 @@ for a MOT folder).  One run per repeat has three lanes, stepped one after the ot
 frame:
 
 - ``stages``: :class:`StageTimedPHDTracker`, a :class:`~trackers.phd.tracker.PHDTracker`
-  subclass whose ``step`` calls the filter's pure stage functions itself, in the order of
-  :meth:`trackers.phd.filter.PHDFilter.step`, each between two ``time.perf_counter()`` calls:
-  ``predict`` → ``birth`` → ``update`` (the concatenation of persistent and newborn particles,
-  the likelihood matrix ``log g``, ``log κ`` and eq. (5), as in ``PHDFilter.step``) →
-  ``resample`` → ``cluster`` (:func:`~trackers.phd.clustering.kmeans_peaks`) → ``associate``
-  (:meth:`~trackers.phd.association.GraphAssociator.step` on the kept centres); the stage data
-  and the step result are built as ``PHDTracker.step`` builds them, outside the clocks;
+  whose ``step`` runs with ``bench.py``'s stage clocks installed (:func:`_common.phd_clocks`:
+  each of the filter's stage functions ``predict`` → ``birth`` → ``update`` (from the end of
+  birth: the gated likelihood and eq. (5)) → ``resample``, then ``cluster``
+  (:func:`~trackers.phd.clustering.kmeans_peaks`) and ``associate``
+  (:meth:`~trackers.phd.association.GraphAssociator.step`) between two
+  ``time.perf_counter()`` calls); the stage data and the step result are built outside the
+  clocks;
 - ``mt``: the MT baseline (:class:`~trackers.phd.tracker.MTTracker`: the same association on
   the raw detections), timed by the pipeline (``FrameReport.step_seconds``);
 - ``phd``: the plain ``PHDTracker``, timed by the pipeline.  A hook checks every frame that
@@ -53,13 +53,9 @@ import numpy as np
 
 from pfscope.trackers.api import Rows, StepResult, make_params, make_tracker, params_config
 from pfscope.trackers.errors import InputError
-from pfscope.trackers.phd.clustering import kmeans_peaks
-from pfscope.trackers.phd.filter import (PHDStepResult, as_observations, birth, gated_log_g,
-                                         log_clutter_density, predict, resample, update)
 from pfscope.trackers.phd.tracker import PHDTracker
 from pfscope.trackers.pipeline import BaseHook, FrameReport, RunInfo
 from pfscope.trackers.pipeline import run as run_pipeline
-from pfscope.trackers.report import StageLog
 from pfscope.trackers.types import Detections, Frame, TrackSet
 
 STAGES = ("predict", "birth", "update", "resample", "cluster", "associate")
@@ -72,71 +68,34 @@ LANE_STAGES, LANE_MT, LANE_PHD = "stages", "mt", "phd"
 
 PRESET = "paper"   # explicit: the registry's first preset need not be the paper's
 
-class _TimedAssociator:
-    """The tracker's :class:`GraphAssociator` with a clock around ``step`` (everything else is
-    forwarded), so the ``associate`` stage is the association alone, not the stage data built
-    around it."""
-
-    def __init__(self, inner):
-        self._inner = inner
-        self.seconds = 0.0
-
-    def step(self, frame: int, states):
-        t0 = time.perf_counter()
-        res = self._inner.step(frame, states)
-        self.seconds = time.perf_counter() - t0
-        return res
-
-    def __getattr__(self, name):
-        return getattr(self._inner, name)
-
-
 class StageTimedPHDTracker(PHDTracker):
     """PHD-MT whose ``step`` times each stage.
 
-    It is ``PHDTracker.step`` with the body of ``PHDFilter.step`` written out, so that each of
-    predict / birth / update / resample / K-means / association sits between two
-    ``time.perf_counter()`` calls; the same functions are called in the same order with the
-    same generator, so the particles, tracks and rows are those of ``PHDTracker`` (checked
-    frame by frame by :class:`ReplicationCheck`).  ``times`` holds one row of six seconds per
-    step, ``counts`` the particle counts (after resampling, in the update, newborn) and kept
+    It runs ``PHDTracker.step`` itself, with the clocks of ``bench.py`` (:func:`_common.phd_clocks`:
+    the filter's stage functions, ``kmeans_peaks`` and ``GraphAssociator.step`` wrapped in two
+    ``time.perf_counter()`` calls) installed for this lane's step only, so the particles, tracks
+    and rows are those of ``PHDTracker`` (checked frame by frame by :class:`ReplicationCheck`)
+    whatever the step's body becomes.  ``times`` holds one row of six seconds per step,
+    ``counts`` the particle counts (after resampling, in the update, newborn) and kept
     clusters."""
 
     def __init__(self, params=None, *, rng: np.random.Generator):
         super().__init__(params, rng=rng)
-        self.associator = _TimedAssociator(self.associator)
+        self._clock = C.Clock()
         self.times: list[tuple[float, ...]] = []
         self.counts: list[tuple[int, int, int, int]] = []
 
     def step(self, frame: Frame, detections: Optional[Detections],
              level: Optional[str] = None) -> StepResult:
-        dets = detections if detections is not None else Detections.empty()
-        log = StageLog(self.stages, level)
-        f, p, cp = self.filter, self.filter.params, self.params.clusters
-        pc = time.perf_counter
-        Z = as_observations(dets)  # input conversion, outside the stages (negligible)
-        t0 = pc()
-        predicted = predict(f.particles, p.motion, f.rng)
-        t1 = pc()
-        born = birth(predicted, Z, p, f.rng)
-        t2 = pc()
-        candidates = predicted.concat(born.particles)
-        log_g = gated_log_g(f.likelihood, candidates.states, Z, frame, p)  # as PHDFilter.step
-        log_kappa = log_clutter_density(Z, p.clutter, p.likelihood)
-        updated = update(candidates, log_g, log_kappa, p.likelihood.p_miss)
-        t3 = pc()
-        resampled = resample(updated.particles, p.resampling, f.rng)
-        t4 = pc()
-        f.particles = resampled
-        clusters = kmeans_peaks(resampled, Z, cp.T, params=p, split_rule=cp.split_rule)
-        t5 = pc()
-        r = PHDStepResult(Z, predicted, born, updated, resampled, updated.particles.mass)
-        self._report_filter(dets, r, clusters, log)
-        result = self._associate(frame, clusters.kept_centers, log)
-        self.times.append((t1 - t0, t2 - t1, t3 - t2, t4 - t3, t5 - t4,
-                           self.associator.seconds))
-        self.counts.append((len(resampled), len(updated.particles), len(born.particles),
-                            int(clusters.kept.sum())))
+        n_prev = len(self.filter.particles)
+        with C.phd_clocks(self._clock):
+            result = super().step(frame, detections, level)
+        clock = self._clock
+        st = clock.take()
+        self.times.append(tuple(st.get(s, 0.0) for s in STAGES))
+        kept = 0 if clock.clusters is None else int(clock.clusters.kept.sum())
+        self.counts.append((len(self.filter.particles), n_prev + clock.births, clock.births,
+                            kept))
         return result
 
 

@@ -1,6 +1,7 @@
 """The progress line shows the recent frame rate (issue 22), on a fake clock."""
 
 import io
+import os
 
 from pfscope.viewer_app.run import Progress
 
@@ -218,3 +219,70 @@ def test_a_dlpf_run_warms_only_the_resampling_kernel(monkeypatch):
     prepare_kernels([_Lane("phd")], stream=io.StringIO(), delay=5.0)
     prepare_kernels([_Lane("dlpf"), _Lane("dbn-phd")], stream=io.StringIO(), delay=5.0)
     assert asked == [False, True, True]
+
+
+def test_first_run_helper_fills_the_cache(tmp_path):
+    """On a first run (empty numba cache) the warm-up starts a helper process that compiles the
+    K-means kernels into the cache (this process then loads them); on a later run (filled
+    cache) it starts none."""
+    import subprocess
+    import sys
+
+    code = ("import os\n"
+            "from pfscope.trackers import warmup as W\n"
+            "from pfscope.trackers.phd import _kmeans_kernels as K\n"
+            "os.cpu_count = lambda: 2\n"
+            "print(W._cache_cold(K.lloyd))\n"
+            "h = W._start_helper()\n"
+            "print(h is not None)\n"
+            "W._join(h)\n"
+            "print(h.returncode, W._cache_cold(K.lloyd), W._start_helper() is None)\n")
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
+                         timeout=600)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.split() == ["True", "True", "0", "False", "True"]
+
+
+def test_early_helper_only_for_the_phd_kernels(monkeypatch):
+    """`pfscope record` starts the first-run helper as soon as it knows its trackers, only
+    when one calls the PHD kernels, once; the warm-up then waits for that helper instead of
+    starting another."""
+    from pfscope.trackers import warmup as W
+
+    started = []
+
+    class Fake:
+        def poll(self):
+            return 0
+
+        def wait(self, timeout=None):
+            started.append("joined")
+
+    monkeypatch.setattr(W, "_early", None)
+    monkeypatch.setattr(W, "_start_helper", lambda: started.append("start") or Fake())
+    W.start_helper_early(["mt", "dlpf"])
+    assert started == []
+    W.start_helper_early(["mt", "phd"])
+    W.start_helper_early(["phd"])
+    assert started == ["start"]
+    monkeypatch.setattr(W, "_ready", frozenset())
+    W.compile_kernels()
+    assert started == ["start", "joined"] and W._early is None
+
+
+def test_record_starts_the_helper_before_the_parser(monkeypatch):
+    """`pfscope record` names its tracker to the first-run helper before building the parser
+    (which imports every tracker); other commands, and a --params file (which names the
+    tracker itself), leave it to the later start."""
+    from pfscope.trackers import warmup as W
+    from pfscope.viewer_app import cli
+
+    asked = []
+    monkeypatch.setattr(W, "start_helper_early", lambda names: asked.append(list(names)))
+    cli._early_compile(["record", "--force", "--out", "x.rrd"])
+    cli._early_compile(["record", "--tracker", "dlpf", "--frames", "5"])
+    cli._early_compile(["record", "--params", "p.toml"])
+    cli._early_compile(["eval", "--tracker", "phd"])
+    cli._early_compile([])
+    assert asked == [["phd"], ["dlpf"]]

@@ -12,11 +12,19 @@ that many detections) is left out: it is most of the compile, and most scenes ne
 It compiles on the first frame that does (the app says so then: ``viewer_app.run``'s
 ``compile_notices``) and is cached like the rest.
 
+On the first run (numba's cache holds no K-means kernel yet) and a machine with a second core,
+a child process compiles the K-means and association kernels into the cache while this one
+compiles the filter's, then this one loads them (:func:`_start_helper`): the compile's wall
+time drops by about the helper's share (its CPU time does not).
+
 ``uses_kernels(tracker)`` tells which trackers call the kernels (by their registered name).
 """
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
 import time
 
 import numpy as np
@@ -38,40 +46,22 @@ def phd_kernels_needed(trackers) -> bool:
                for t in trackers)
 
 
-def compile_kernels(presets=("practical", "paper"), phd: bool = True) -> float:
-    """Call every kernel once on made-up data (a compile on the first run after an install,
-    a load from numba's cache afterwards); returns the seconds it took.  ``phd=False``: only
-    the resampling kernel (DLPF's one).  Once per process: later calls return 0 at once (the
-    kernels stay compiled in the process)."""
-    global _ready
-    key = presets if phd else ("resample",)
-    if key in _ready or (not phd and _ready):
-        return 0.0
-    from .api import make_params
-    from .phd.tracker import PHDTracker
-    from .smc.resampling import resample_indices
-    from .types import Detections, Frame, blank_image
+def _walkers(k: int, rng: np.random.Generator):
+    """Frame ``k``'s made-up detections: eight walkers and three clutter boxes, fewer than
+    INDEX_MIN_CENTERS detections (the dense K-means), enough mass for several clusters
+    (splits included)."""
+    from .types import Detections
 
-    t0 = time.perf_counter()
-    rng = np.random.default_rng(0)
-    resample_indices(np.log(np.full(16, 1 / 16)), 16, rng, "systematic")
-    if not phd:
-        _ready = _ready | {key}
-        return time.perf_counter() - t0
-    image = blank_image(480, 640)
-    # eight walkers and some clutter, enough mass for several clusters (splits included),
-    # fewer than INDEX_MIN_CENTERS detections: the dense K-means
     start = np.column_stack([np.linspace(40, 560, 8), np.full(8, 200.0)])
-    for preset in presets:
-        tr = PHDTracker(make_params("phd", preset, {}), rng=np.random.default_rng(0))
-        for k in range(4):
-            xy = start + [4.0 * k, 1.0 * k]
-            boxes = np.column_stack([xy, np.full(8, 30.0), np.full(8, 70.0)])
-            clutter = np.column_stack([rng.uniform(0, 600, (3, 2)), np.full((3, 2), 35.0)])
-            dets = Detections(np.vstack([boxes, clutter]), np.linspace(0.2, 1.0, 11))
-            tr.step(Frame(k + 1, k / 25.0, image), dets)
-    # the association's kernels (edge scores, the IoU of gap filling): its tracks need more
-    # than four frames of estimates
+    xy = start + [4.0 * k, 1.0 * k]
+    boxes = np.column_stack([xy, np.full(8, 30.0), np.full(8, 70.0)])
+    clutter = np.column_stack([rng.uniform(0, 600, (3, 2)), np.full((3, 2), 35.0)])
+    return Detections(np.vstack([boxes, clutter]), np.linspace(0.2, 1.0, 11))
+
+
+def _compile_association() -> None:
+    """The association's kernels (edge scores, the IoU of gap filling): the warm-up's tracks
+    need more than its four frames of estimates to reach them."""
     from .phd.association import AssocParams, _iou, score_edges, tail_velocity
 
     s = np.array([[100.0, 100.0, 1.0, 0.0, 30.0, 70.0]])
@@ -79,9 +69,150 @@ def compile_kernels(presets=("practical", "paper"), phd: bool = True) -> float:
     v, b, c = tail_velocity(s, s, np.zeros(1, dtype=np.int64), ap)
     score_edges(s, v, b, c, np.ones(1, dtype=np.int64), s, ap)
     _iou(s[:, [0, 1, 4, 5]], s[:, [0, 1, 4, 5]])
+
+
+def _compile_helper_share() -> None:
+    """The helper process's share (:func:`_start_helper`), on a made-up particle cloud around
+    the walkers as the filter leaves it (C-ordered float64 states and log-weights, mass ≈ 1
+    per walker): first the filter's kernel this process reaches last (the resampling walk:
+    compiled before this one gets there), then the K-means kernels and the association's.
+    (M(z) is this process's: its grid is compiled with the update's.)"""
+    from .api import make_params
+    from .phd.clustering import kmeans_peaks
+    from .phd.filter import resample
+    from .smc import ParticleSet
+
+    rng = np.random.default_rng(1)
+    params = make_params("phd", "practical", {})
+    Z = _walkers(0, rng).observations()
+    n = 1500 * len(Z)
+    states = np.empty((n, 6))
+    src = np.repeat(np.arange(len(Z)), n // len(Z))
+    states[:, [0, 1, 4, 5]] = Z[src] + rng.normal(0.0, 3.0, (n, 4))
+    states[:, 2:4] = rng.normal(0.0, 1.0, (n, 2))
+    ps = ParticleSet(states, np.full(n, np.log(len(Z) / n)))
+    fp = params.filter
+    resample(ps, fp.resampling, rng)
+    cp = params.clusters
+    kmeans_peaks(ps, Z, cp.T, params=params.filter, split_rule=cp.split_rule)
+    _compile_association()
+
+
+def _cache_cold(dispatcher) -> bool:
+    """True when numba's cache has no index for ``dispatcher`` (a first run); False when it
+    has one or cannot be told (numba's private layout changed: no helper then)."""
+    try:
+        return not os.path.exists(dispatcher._cache._cache_file._index_path)
+    except Exception:
+        return False
+
+
+def _start_helper() -> "subprocess.Popen | None":
+    """A child process compiling :func:`_compile_helper_share` into numba's cache
+    (the same ``NUMBA_CACHE_DIR`` and interpreter), started only on a first run on a machine
+    with a second core; None otherwise (or when it cannot start: this process then compiles
+    everything itself, as it would anyway)."""
+    if (os.cpu_count() or 1) < 2:
+        return None
+    from .phd import _kmeans_kernels
+
+    if not _cache_cold(_kmeans_kernels.lloyd):
+        return None
+    try:
+        return subprocess.Popen(
+            [sys.executable, "-c", "from pfscope.trackers.warmup import "
+             "_compile_helper_share as f; f()"],
+            stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    except OSError:
+        return None
+
+
+_early: "subprocess.Popen | None" = None     # the helper started by start_helper_early
+
+
+def start_helper_early(names) -> None:
+    """Start the first-run helper (:func:`_start_helper`) as soon as the app knows it will run
+    trackers ``names`` (registered names) that call the PHD kernels, so it compiles while the
+    app still sets up; :func:`compile_kernels` then waits for it.  Stopped at exit if never
+    waited for (a run that fails before its first frame)."""
+    global _early
+    if _early is not None or not any(n in KERNEL_TRACKERS and n not in RESAMPLE_ONLY
+                                     for n in names):
+        return
+    _early = _start_helper()
+    if _early is not None:
+        import atexit
+
+        atexit.register(_stop_early)
+
+
+def _stop_early() -> None:
+    if _early is not None and _early.poll() is None:
+        _early.kill()
+        _early.wait()
+
+
+def _join(helper: "subprocess.Popen | None", timeout: float = 300.0) -> None:
+    """Wait for the helper (stop it after ``timeout`` s: this process then compiles what it
+    has not cached)."""
+    if helper is None:
+        return
+    try:
+        helper.wait(timeout)
+    except subprocess.TimeoutExpired:
+        helper.kill()
+        helper.wait()
+
+
+def index_kernel_needed(trackers) -> bool:
+    """True when one of ``trackers`` resamples by ancestor indices (DLPF), a kernel the PHD
+    filter does not call."""
+    return any(getattr(t, "name", None) in RESAMPLE_ONLY for t in trackers)
+
+
+def compile_kernels(presets=("practical", "paper"), phd: bool = True,
+                    index: bool | None = None) -> float:
+    """Call every kernel once on made-up data (a compile on the first run after an install,
+    a load from numba's cache afterwards); returns the seconds it took.  ``phd=False``: only
+    the resampling kernel (DLPF's one).  ``index``: also the systematic resampling's index
+    kernel (DLPF's; the PHD filter's resampling copies the rows in its own walk), default
+    ``not phd``.  Once per process: later calls return 0 at once (the kernels stay compiled
+    in the process)."""
+    global _ready, _early
+    index = (not phd) if index is None else index
+    key = (presets if phd else ()) + (("resample",) if index else ())
+    if key in _ready or (not phd and any("resample" in k for k in _ready)):
+        return 0.0
+    from .api import make_params
+    from .phd.tracker import PHDTracker
+    from .smc.resampling import resample_indices
+    from .types import Frame, blank_image
+
+    t0 = time.perf_counter()
+    rng = np.random.default_rng(0)
+    if index:
+        resample_indices(np.log(np.full(16, 1 / 16)), 16, rng, "systematic")
+    if not phd:
+        _ready = _ready | {key}
+        return time.perf_counter() - t0
+    image = blank_image(480, 640)
+    helper, _early = (_early, None) if _early is not None else (_start_helper(), None)
+    if helper is not None:
+        # the filter's kernels here (two frames: the second has particles to predict and
+        # M(z) to measure) while the helper compiles the K-means and association ones
+        tr = PHDTracker(make_params("phd", presets[0], {}), rng=np.random.default_rng(0))
+        own = np.random.default_rng(2)
+        for k in range(2):
+            tr.filter.step(_walkers(k, own), Frame(k + 1, k / 25.0, image))
+        _join(helper)
+    for preset in presets:
+        tr = PHDTracker(make_params("phd", preset, {}), rng=np.random.default_rng(0))
+        for k in range(4):
+            tr.step(Frame(k + 1, k / 25.0, image), _walkers(k, rng))
+    _compile_association()
     _ready = _ready | {key}
     return time.perf_counter() - t0
 
 
 __all__ = ["KERNEL_TRACKERS", "RESAMPLE_ONLY", "uses_kernels", "phd_kernels_needed",
-           "compile_kernels"]
+           "index_kernel_needed", "compile_kernels", "start_helper_early"]

@@ -1235,10 +1235,34 @@ def cmd_tune(args) -> int:
     return _interrupted_status() if rec_res is not None and rec_res.interrupted else 0
 
 
+def _early_compile(argv: list) -> None:
+    """``record`` of a tracker that runs the PHD kernels, on a first run (empty numba cache):
+    start the compile helper (:func:`pfscope.trackers.warmup.start_helper_early`) before the
+    parser imports every tracker (~2 s), so it compiles meanwhile.  Only the plain
+    ``--tracker NAME`` form is read here (with ``--params`` the file names the tracker:
+    ``record`` starts the helper itself later)."""
+    if not argv or argv[0] != "record":
+        return
+    pre = argparse.ArgumentParser(add_help=False)
+    pre.add_argument("--tracker")
+    pre.add_argument("--params")
+    try:
+        known, _ = pre.parse_known_args(argv[1:])
+    except SystemExit:        # malformed: the real parser says why
+        return
+    if known.params:
+        return
+    from pfscope.trackers.api import DEFAULT_TRACKER
+    from pfscope.trackers.warmup import start_helper_early
+
+    start_helper_early([known.tracker or DEFAULT_TRACKER])
+
+
 def main(argv: Optional[Sequence[str]] = None) -> int:
     from pfscope.trackers.jobs import Interrupted
 
     os.environ.setdefault("RERUN_ANALYTICS", "0")
+    _early_compile(list(sys.argv[1:] if argv is None else argv))
     try:
         args = build_parser().parse_args(argv)
     except BrokenPipeError:  # `pfscope --help | head`: the reader left

@@ -319,7 +319,8 @@ def prepare_kernels(trackers, *, enabled: bool = True, stream=None, delay: float
     the seconds so far (a terminal), or once with its total (a log): "compiling" once numba
     has compiled something (its ``numba:compile`` event: a real compile, not a cache load),
     "loading" until then.  Returns the seconds."""
-    from pfscope.trackers.warmup import compile_kernels, phd_kernels_needed, uses_kernels
+    from pfscope.trackers.warmup import (compile_kernels, index_kernel_needed,
+                                         phd_kernels_needed, uses_kernels)
 
     if not any(uses_kernels(t) for t in trackers):
         return 0.0
@@ -344,7 +345,8 @@ def prepare_kernels(trackers, *, enabled: bool = True, stream=None, delay: float
     notice.start()
     try:
         with event.install_listener("numba:compile", Compiling()):
-            compile_kernels(phd=phd_kernels_needed(trackers))
+            compile_kernels(phd=phd_kernels_needed(trackers),
+                            index=index_kernel_needed(trackers))
     finally:
         secs = notice.stop()
     return secs
@@ -434,6 +436,9 @@ def record(source: Source, out: Path, opts: RecordOptions, *, trackers: Optional
                   for ln in lanes]
     except ValueError as e:
         raise InputError(str(e)) from None
+    from pfscope.trackers.warmup import start_helper_early
+
+    start_helper_early([ln.tracker for ln in lanes])   # first run: compiles while we set up
     refuse_inputs([(Path(out), "recording"), (opts.tracks_out, "tracks file")],
                   run_inputs(source, params, opts.inputs))
     out = check_output(Path(out), opts.force)

@@ -268,6 +268,91 @@ _LIN_RANGE = 600.0
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def gauss_update_linear(states, lw, Z, std, log_norm, log_kappa, log_pd, log_pm, r2,
+                        cell_x, cell_y):
+    """:func:`gauss_update`'s linear route alone (per-detection stds), the same floats:
+    ``(ok, done, new_lw, log_c, log_mass, log_pred)``; ``done`` False when the weights span
+    more than e^600 (nothing computed: call :func:`gauss_update`).  A run whose weights never
+    spread that wide compiles this kernel only, not the log-space route (first-run compile)."""
+    n = states.shape[0]
+    nz = Z.shape[0]
+    log_c = np.empty(nz, np.float64)
+    for j in range(nz):
+        log_c[j] = -np.inf
+    top = -np.inf
+    low = np.inf
+    for i in range(n):
+        if lw[i] > -np.inf:
+            top = max(top, lw[i])
+            low = min(low, lw[i])
+    if not (top > -np.inf and top - low <= _LIN_RANGE and top < np.inf):
+        return True, False, lw, log_c, -np.inf, -np.inf
+    new_lw = lw.copy()
+    ok, x0, y0, cx, cy, ni, nj, order, starts = grid_build(states[:, 0], states[:, 1],
+                                                           cell_x, cell_y)
+    if not ok:
+        return False, True, new_lw, log_c, -np.inf, -np.inf
+    inv = np.empty_like(std)
+    for k in range(std.shape[0]):
+        for d in range(4):
+            inv[k, d] = 1.0 / std[k, d]
+    r = math.sqrt(r2)
+    e = np.empty(n, np.float64)
+    b = np.empty(n, np.float64)
+    pm = math.exp(log_pm)
+    tot_pred = 0.0
+    for i in range(n):
+        e[i] = math.exp(lw[i] - top)
+        b[i] = pm
+        tot_pred += e[i]
+    log_pred = top + math.log(tot_pred) if tot_pred > 0.0 else -np.inf
+    buf_i = np.empty(n, np.int64)
+    buf_v = np.empty(n, np.float64)
+    for j in range(nz):
+        hx = r * std[j, 0] * (1.0 + 1e-6) + 1e-9
+        hy = r * std[j, 1] * (1.0 + 1e-6) + 1e-9
+        i0, i1 = grid_span(Z[j, 0] - hx, Z[j, 0] + hx, x0, cx, ni)
+        j0, j1 = grid_span(Z[j, 1] - hy, Z[j, 1] + hy, y0, cy, nj)
+        s = 0.0
+        nb = 0
+        for ci in range(i0, i1 + 1):
+            for p in range(starts[ci * nj + j0], starts[ci * nj + j1 + 1]):
+                i = order[p]
+                d2 = _gate_d2_inv(states, i, Z, j, inv, j, r2)
+                if not d2 <= r2:
+                    continue
+                buf_i[nb] = i
+                g = math.exp(-0.5 * d2)
+                buf_v[nb] = g
+                s += g * e[i]
+                nb += 1
+        if not (s > 0.0 and log_pd > -np.inf):
+            continue                      # C = 0: ψ = 0 on every pair of z
+        log_scale = log_pd - log_norm[j] - _HALF_LOG_2PI_4    # log ψ = log_scale − d²/2
+        log_c[j] = math.log(s) + top + log_scale
+        lk = log_kappa[j]
+        lc = log_c[j]
+        hi = max(lk, lc)
+        log_den = hi + math.log1p(math.exp(min(lk, lc) - hi))
+        log_f = log_scale - log_den       # ψ/(κ + C) = f e^{−d²/2}
+        if log_f <= _LIN_RANGE:
+            f = math.exp(log_f)
+            for q in range(nb):
+                b[buf_i[q]] += f * buf_v[q]
+        else:
+            for q in range(nb):
+                b[buf_i[q]] += math.exp(math.log(buf_v[q]) + log_f)
+    tot = 0.0
+    for i in range(n):
+        if b[i] > 0.0:
+            new_lw[i] = lw[i] + math.log(b[i])
+        else:
+            new_lw[i] = -np.inf
+        tot += e[i] * b[i]
+    return True, True, new_lw, log_c, (top + math.log(tot)) if tot > 0.0 else -np.inf, log_pred
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
 def gauss_update(states, lw, Z, std, log_norm, by_det, log_kappa, log_pd, log_pm, r2,
                  cell_x, cell_y):
     """Eq. (5) of maggio2007 with the Gaussian g(z|x) of §2/§4 on the pairs inside the gate
@@ -284,7 +369,14 @@ def gauss_update(states, lw, Z, std, log_norm, by_det, log_kappa, log_pd, log_pm
     Two routes, the same sums: with per-detection stds and weights within e^600 of each other
     (every PHD frame), in linear space -- ``e^{−d²/2}`` once per pair serves both C(z) and the
     bracket, the weights ``e^{lw − max}`` once per particle, one log per particle; otherwise
-    in log space (online log-sum-exps: two exps per pair)."""
+    in log space (online log-sum-exps: two exps per pair).  The linear route is
+    :func:`gauss_update_linear` (called first here; :func:`..filter.update` calls it alone
+    when it can, so a first run compiles the log route only if a frame needs it)."""
+    if by_det:
+        ok, done, new_lw, log_c, log_mass, log_pred = gauss_update_linear(
+            states, lw, Z, std, log_norm, log_kappa, log_pd, log_pm, r2, cell_x, cell_y)
+        if done:
+            return ok, new_lw, log_c, log_mass, log_pred
     n = states.shape[0]
     nz = Z.shape[0]
     log_c = np.empty(nz, np.float64)
@@ -306,35 +398,22 @@ def gauss_update(states, lw, Z, std, log_norm, by_det, log_kappa, log_pd, log_pm
         for i in range(n):
             hx_all = max(hx_all, std[i, 0])
             hy_all = max(hy_all, std[i, 1])
-    # the linear route: weights relative to the largest, e_i = exp(lw_i − top)
     top = -np.inf
-    low = np.inf
     for i in range(n):
         if lw[i] > -np.inf:
             top = max(top, lw[i])
-            low = min(low, lw[i])
-    linear = by_det and top > -np.inf and top - low <= _LIN_RANGE and top < np.inf
-    e = np.empty(n if linear else 0, np.float64)
-    b = np.empty(n if linear else 0, np.float64)
-    pm = math.exp(log_pm)
     tot_pred = 0.0
-    if linear:
-        for i in range(n):
-            e[i] = math.exp(lw[i] - top)
-            b[i] = pm
-            tot_pred += e[i]
-    else:
-        for i in range(n):
-            tot_pred += math.exp(lw[i] - top) if top > -np.inf else 0.0
+    for i in range(n):
+        tot_pred += math.exp(lw[i] - top) if top > -np.inf else 0.0
     log_pred = top + math.log(tot_pred) if tot_pred > 0.0 else -np.inf
-    sh = np.zeros(0 if linear else n, np.float64)
-    sm = np.zeros(0 if linear else n, np.float64)
-    if not linear and log_pm > -np.inf:
+    sh = np.zeros(n, np.float64)
+    sm = np.zeros(n, np.float64)
+    if log_pm > -np.inf:
         for i in range(n):
             sh[i] = log_pm
             sm[i] = 1.0
-    # one detection at a time: its gated pairs once (C(z); the pairs' e^{−d²/2} or log ψ kept
-    # in a buffer of at most N), then ψ/(κ + C) into each of those particles' brackets
+    # one detection at a time: its gated pairs once (C(z); their log ψ kept in a buffer of at
+    # most N), then ψ/(κ + C) into each of those particles' brackets
     buf_i = np.empty(n, np.int64)
     buf_v = np.empty(n, np.float64)
     for j in range(nz):
@@ -357,52 +436,24 @@ def gauss_update(states, lw, Z, std, log_norm, by_det, log_kappa, log_pd, log_pm
                 if not d2 <= r2:
                     continue
                 buf_i[nb] = i
-                if linear:
-                    g = math.exp(-0.5 * d2)
-                    buf_v[nb] = g
-                    s += g * e[i]
-                else:
-                    log_psi = log_pd + (-0.5 * d2 - log_norm[k] - _HALF_LOG_2PI_4)
-                    buf_v[nb] = log_psi
-                    a = log_psi + lw[i]
-                    if a > -np.inf:
-                        m, s = _lse_add(m, s, a)
+                log_psi = log_pd + (-0.5 * d2 - log_norm[k] - _HALF_LOG_2PI_4)
+                buf_v[nb] = log_psi
+                a = log_psi + lw[i]
+                if a > -np.inf:
+                    m, s = _lse_add(m, s, a)
                 nb += 1
         if not (s > 0.0 and log_pd > -np.inf):
             continue                      # C = 0: ψ = 0 on every pair of z
-        log_scale = log_pd - log_norm[j] - _HALF_LOG_2PI_4    # log ψ = log_scale − d²/2
-        if linear:
-            log_c[j] = math.log(s) + top + log_scale
-        else:
-            log_c[j] = m + math.log(s)
+        log_c[j] = m + math.log(s)
         lk = log_kappa[j]
         lc = log_c[j]
         hi = max(lk, lc)
         log_den = hi + math.log1p(math.exp(min(lk, lc) - hi))
-        if linear:
-            log_f = log_scale - log_den   # ψ/(κ + C) = f e^{−d²/2}
-            if log_f <= _LIN_RANGE:
-                f = math.exp(log_f)
-                for q in range(nb):
-                    b[buf_i[q]] += f * buf_v[q]
-            else:
-                for q in range(nb):
-                    b[buf_i[q]] += math.exp(math.log(buf_v[q]) + log_f)
-        else:
-            for q in range(nb):
-                t = buf_v[q] - log_den
-                if t > -np.inf:
-                    i = buf_i[q]
-                    sh[i], sm[i] = _lse_add(sh[i], sm[i], t)
-    if linear:
-        tot = 0.0
-        for i in range(n):
-            if b[i] > 0.0:
-                new_lw[i] = lw[i] + math.log(b[i])
-            else:
-                new_lw[i] = -np.inf
-            tot += e[i] * b[i]
-        return True, new_lw, log_c, (top + math.log(tot)) if tot > 0.0 else -np.inf, log_pred
+        for q in range(nb):
+            t = buf_v[q] - log_den
+            if t > -np.inf:
+                i = buf_i[q]
+                sh[i], sm[i] = _lse_add(sh[i], sm[i], t)
     top = -np.inf
     for i in range(n):
         if sm[i] > 0.0:
