@@ -28,18 +28,8 @@ def _systematic_index(lw, log_mass, u0, n):
     """Ancestors (n,) of systematic resampling: ``u_k = (u0 + k) / n`` against the CDF of
     ``exp(lw − log_mass)`` (its last bin forced to 1, summed in order as ``np.cumsum``), the
     first bin whose CDF exceeds ``u_k`` (``searchsorted(side="right")``: zero-weight bins are
-    never picked)."""
-    N = lw.shape[0]
-    idx = np.empty(n, np.int64)
-    j = 0
-    c = math.exp(lw[0] - log_mass) if N > 1 else 1.0
-    for k in range(n):
-        u = (u0 + k) / n
-        while j < N - 1 and c <= u:
-            j += 1
-            c = c + math.exp(lw[j] - log_mass) if j < N - 1 else 1.0
-        idx[k] = j
-    return idx
+    never picked). The walk of :func:`_systematic_take` with no columns to copy."""
+    return _systematic_take(np.empty((lw.shape[0], 0), np.float64), lw, log_mass, u0, n)[0]
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
