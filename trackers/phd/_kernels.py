@@ -138,6 +138,19 @@ def grid_span(lo, hi, origin, cell, n_cells):
     return c0, c1
 
 
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
+def gate_cells(zx, zy, sx, sy, r, x0, cx, ni, y0, cy, nj):
+    """Grid cells ``(i0, i1, j0, j1)`` of the gate box around a detection at ``(zx, zy)``:
+    ``r`` stds ``(sx, sy)`` each side, widened by a hair so that a particle exactly on the
+    gate's edge is never left out by rounding."""
+    hx = r * sx * (1.0 + 1e-6) + 1e-9
+    hy = r * sy * (1.0 + 1e-6) + 1e-9
+    i0, i1 = grid_span(zx - hx, zx + hx, x0, cx, ni)
+    j0, j1 = grid_span(zy - hy, zy + hy, y0, cy, nj)
+    return i0, i1, j0, j1
+
+
 # ----------------------------------------------------------------------------- birth
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
@@ -173,10 +186,8 @@ def mass_near_kernel(states, w, Z, std_z, r2, cell_x, cell_y):
         return False, out
     r = math.sqrt(r2)
     for j in range(nz):
-        hx = r * std_z[j, 0] * (1.0 + 1e-6) + 1e-9
-        hy = r * std_z[j, 1] * (1.0 + 1e-6) + 1e-9
-        i0, i1 = grid_span(Z[j, 0] - hx, Z[j, 0] + hx, x0, cx, ni)
-        j0, j1 = grid_span(Z[j, 1] - hy, Z[j, 1] + hy, y0, cy, nj)
+        i0, i1, j0, j1 = gate_cells(Z[j, 0], Z[j, 1], std_z[j, 0], std_z[j, 1], r,
+                                    x0, cx, ni, y0, cy, nj)
         s = 0.0
         for ci in range(i0, i1 + 1):
             for p in range(starts[ci * nj + j0], starts[ci * nj + j1 + 1]):
@@ -309,10 +320,8 @@ def gauss_update_linear(states, lw, Z, std, log_norm, log_kappa, log_pd, log_pm,
     buf_i = np.empty(n, np.int64)
     buf_v = np.empty(n, np.float64)
     for j in range(nz):
-        hx = r * std[j, 0] * (1.0 + 1e-6) + 1e-9
-        hy = r * std[j, 1] * (1.0 + 1e-6) + 1e-9
-        i0, i1 = grid_span(Z[j, 0] - hx, Z[j, 0] + hx, x0, cx, ni)
-        j0, j1 = grid_span(Z[j, 1] - hy, Z[j, 1] + hy, y0, cy, nj)
+        i0, i1, j0, j1 = gate_cells(Z[j, 0], Z[j, 1], std[j, 0], std[j, 1], r,
+                                    x0, cx, ni, y0, cy, nj)
         s = 0.0
         nb = 0
         for ci in range(i0, i1 + 1):
@@ -417,14 +426,8 @@ def gauss_update(states, lw, Z, std, log_norm, by_det, log_kappa, log_pd, log_pm
     buf_i = np.empty(n, np.int64)
     buf_v = np.empty(n, np.float64)
     for j in range(nz):
-        if by_det:
-            hx = r * std[j, 0] * (1.0 + 1e-6) + 1e-9
-            hy = r * std[j, 1] * (1.0 + 1e-6) + 1e-9
-        else:
-            hx = r * hx_all * (1.0 + 1e-6) + 1e-9
-            hy = r * hy_all * (1.0 + 1e-6) + 1e-9
-        i0, i1 = grid_span(Z[j, 0] - hx, Z[j, 0] + hx, x0, cx, ni)
-        j0, j1 = grid_span(Z[j, 1] - hy, Z[j, 1] + hy, y0, cy, nj)
+        sx, sy = (std[j, 0], std[j, 1]) if by_det else (hx_all, hy_all)
+        i0, i1, j0, j1 = gate_cells(Z[j, 0], Z[j, 1], sx, sy, r, x0, cx, ni, y0, cy, nj)
         m = -np.inf
         s = 0.0
         nb = 0
