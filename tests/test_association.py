@@ -765,3 +765,28 @@ def test_track_heads_cross_as_many_missed_frames_as_head_skip():
     assert _head_rows(0) == late | {7, 8, 9}
     assert _head_rows(1) == late | {7, 8, 9}
     assert _head_rows(2) == late | {2, 3, 4, 7, 8, 9}
+
+
+def test_without_edge_arrays_the_tracks_are_the_same():
+    """``step(..., edges=False)`` (a caller that does not show the edges) leaves the edge
+    arrays empty and changes nothing else: the same ids, lengths and bounded-lag rows, gap
+    filling with its evidence test included."""
+    def run(edges):
+        assoc = GraphAssociator(AssocParams(depth=8, fill_gaps=True, fill_support=0.25,
+                                            fill_free=1))
+        out, n_edges = [], 0
+        for k, states in _contested_scene(np.random.default_rng(5), 60):
+            r = assoc.step(k, states, edges=edges)
+            n_edges += len(r.edges_src_id) + len(r.chosen) + len(r.edges_src)
+            out.append((r.ids.copy(), r.lengths.copy(), r.confirmed.copy())
+                       + tuple(x for f in r.finalised for x in (f.ids, f.states, f.filled)))
+        out.append(tuple(x for f in assoc.flush() for x in (f.ids, f.states, f.filled)))
+        return out, n_edges
+
+    with_edges, n = run(True)
+    without, n0 = run(False)
+    assert n > 100 and n0 == 0
+    assert any(f.any() for x in with_edges[:-1] for f in x[5::3])     # some gaps were filled
+    for x, y in zip(with_edges, without, strict=True):
+        for u, w in zip(x, y, strict=True):
+            np.testing.assert_array_equal(u, w)

@@ -393,3 +393,20 @@ def test_dense_lloyd_compiles_none_of_the_grid_search(tmp_path):
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
                          timeout=600, check=True).stdout.split()
     assert out == ["0", "0", "1"]
+
+
+def test_farthest_member_is_numpys_per_cluster_argmax():
+    """``farthest``: every cluster's member with the largest d² in one pass, as
+    ``members[argmax(dmin[members])]`` (first of ties, first NaN), -1 for an empty cluster."""
+    rng = np.random.default_rng(3)
+    for trial in range(40):
+        n, K = int(rng.integers(0, 60)), int(rng.integers(1, 8))
+        labels = rng.integers(0, K, n).astype(np.int64)
+        dmin = rng.integers(0, 4, n).astype(np.float64)       # many ties
+        if trial % 3 == 0 and n:
+            dmin[rng.integers(0, n, 2)] = np.nan
+        got = KM.farthest(labels, dmin, K)
+        for j in range(K):
+            members = np.flatnonzero(labels == j)
+            want = members[np.argmax(dmin[members])] if len(members) else -1
+            assert got[j] == want

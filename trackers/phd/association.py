@@ -720,12 +720,15 @@ class GraphAssociator:
         return f
 
     # ---- one frame
-    def step(self, frame: int, states, features=None, detections=None) -> AssocResult:
+    def step(self, frame: int, states, features=None, detections=None, *,
+             edges: bool = True) -> AssocResult:
         """Extend the path cover with the estimates of ``frame``; ``states (M, 6)``, NaN velocity
         meaning unknown; ``features (M, D)``: their colour features
         (:func:`.appearance.box_features`, NaN rows unknown), used when ``app_weight > 0``;
         ``detections (N, 4)`` ``(cx, cy, w, h)``: the frame's detections, read by
-        ``extend_heads`` (PHD-MT, whose estimates are not the detections)."""
+        ``extend_heads`` (PHD-MT, whose estimates are not the detections).  ``edges=False``:
+        the result's edge arrays are left empty (a caller that does not show them saves
+        building them; the tracks are the same)."""
         new = self._check(frame, states)
         frame = int(frame)
         self._last_frame = frame
@@ -823,7 +826,7 @@ class GraphAssociator:
                                           np.isfinite(feats[unmatched, 0]).astype(float)])
 
         # 4. edges for the observer: admissible pairs only
-        if sc is not None or ep is not None:
+        if edges and (sc is not None or ep is not None):
             if sc is not None:
                 er, ec = np.nonzero(sc.allowed)
                 e_gain, e_weight = sc.gain[er, ec], sc.weight[er, ec]
@@ -837,20 +840,24 @@ class GraphAssociator:
             # vertex has just moved to _prev
             matched_tail = np.zeros(T, dtype=bool)
             matched_tail[rows] = True
-            edges = dict(edges_src=np.where(matched_tail[er][:, None], self._prev[er], self._tail[er]),
-                         edges_src_id=self._ids[er], edges_dst_index=ec.astype(np.int64),
-                         edges_gain=e_gain, edges_weight=e_weight,
-                         edges_gap=gaps[er].astype(np.int64), chosen=chosen)
+            edge_arrays = dict(edges_src=np.where(matched_tail[er][:, None], self._prev[er],
+                                                  self._tail[er]),
+                               edges_src_id=self._ids[er], edges_dst_index=ec.astype(np.int64),
+                               edges_gain=e_gain, edges_weight=e_weight,
+                               edges_gap=gaps[er].astype(np.int64), chosen=chosen)
         else:
-            edges = dict(edges_src=np.zeros((0, STATE_DIM)), edges_src_id=np.zeros(0, dtype=np.int64),
-                         edges_dst_index=np.zeros(0, dtype=np.int64), edges_gain=np.zeros(0),
-                         edges_weight=np.zeros(0), edges_gap=np.zeros(0, dtype=np.int64),
-                         chosen=np.zeros(0, dtype=bool))
+            edge_arrays = dict(edges_src=np.zeros((0, STATE_DIM)),
+                               edges_src_id=np.zeros(0, dtype=np.int64),
+                               edges_dst_index=np.zeros(0, dtype=np.int64), edges_gain=np.zeros(0),
+                               edges_weight=np.zeros(0), edges_gap=np.zeros(0, dtype=np.int64),
+                               chosen=np.zeros(0, dtype=bool))
 
         # 5. gap filling: rows for the frames strictly inside each chosen edge of gap > 1
         if p.fill_gaps and len(rows):
-            self._fill_gaps(self._prev[rows], self._prev_frame[rows], new[cols], frame,
-                            self._ids[rows])
+            long = gaps[rows] > 1     # (the frame of the tail each matched vertex continued)
+            if long.any():
+                r, c = rows[long], cols[long]
+                self._fill_gaps(self._prev[r], self._prev_frame[r], new[c], frame, self._ids[r])
 
         # 5b. re-linking: a track confirmed now may continue a recently ended one (renames it
         # in the live arrays, the buffer and ``ids``)
@@ -875,7 +882,7 @@ class GraphAssociator:
 
         return AssocResult(frame=frame, states=new, ids=ids, lengths=lengths, confirmed=confirmed,
                            ended=ended_ids, finalised=tuple(finalised), relinked=relinked,
-                           **edges)
+                           **edge_arrays)
 
     def _remember_lost(self, expired: np.ndarray) -> None:
         """Keep the expiring confirmed tracks re-linkable (``relink_depth``)."""
@@ -1033,12 +1040,19 @@ class GraphAssociator:
         obs = OBS_INDEX
         vel = (dst[:, [0, 1]] - src[:, [0, 1]]) / gap[:, None]
         if self.params.fill_support > 0:
-            keep = ((gap - 1 <= self.params.fill_free)
-                    | (self._gap_support(src, src_frame, dst, frame, gap) >= self.params.fill_support))
+            # a gap of at most fill_free missing frames is filled anyway: the evidence is
+            # looked up for the longer ones only (one edge's support is its own)
+            keep = gap - 1 <= self.params.fill_free
+            look = ~keep
+            if look.any():
+                keep[look] = (self._gap_support(src[look], src_frame[look], dst[look],
+                                                frame[look], gap[look])
+                              >= self.params.fill_support)
             if not keep.any():
                 return
             src, src_frame, dst, ids, gap = src[keep], src_frame[keep], dst[keep], ids[keep], gap[keep]
             frame, vel = frame[keep], vel[keep]
+        src_o, dst_o = src[:, obs], dst[:, obs]
         lo, hi = int(src_frame.min()), int(frame.max())
         for n, (f, bid, bst, bfill) in enumerate(self._buffer):
             if f <= lo:                 # (the buffer is in frame order: only the frames
@@ -1050,7 +1064,7 @@ class GraphAssociator:
                 continue
             t = ((f - src_frame[inside]) / gap[inside])[:, None]
             st = np.full((int(inside.sum()), STATE_DIM), np.nan)
-            st[:, obs] = (1.0 - t) * src[inside][:, obs] + t * dst[inside][:, obs]
+            st[:, obs] = (1.0 - t) * src_o[inside] + t * dst_o[inside]
             st[:, 2:4] = vel[inside]
             fid = ids[inside]
             # a box another track's estimate already covers is not filled (the gap is then

@@ -184,15 +184,15 @@ def kmeans_peaks(ps: ParticleSet, Z, T: float = 0.6, *, params: PHDParams | None
                                                    max_iter, tol)
     masses = masses * scale
     final = np.zeros(len(centers), dtype=bool)
+    far_of = _kmeans_kernels.farthest(labels, dmin, len(centers))   # each cluster's farthest member
     n_splits = 0
     for _ in range(max_splits):
         cand = (masses > split_above) & ~final
         if not cand.any():
             break
         j = int(np.argmax(np.where(cand, masses, -np.inf)))
-        members = np.flatnonzero(labels == j)
-        far = members[np.argmax(dmin[members])]      # members of j: dmin is d² to centre j
-        if dmin[far] <= 0.0:           # every sample on the centre: nothing to split
+        far = int(far_of[j])           # j's member farthest from its centre (-1: none)
+        if far < 0 or dmin[far] <= 0.0:     # no member, or all on the centre: nothing to split
             final[j] = True
             continue
         # The trial runs on cluster j and its neighbours only: the clusters whose centres lie
@@ -228,6 +228,7 @@ def kmeans_peaks(ps: ParticleSet, Z, T: float = 0.6, *, params: PHDParams | None
         final = np.append(final, False)
         origin = np.append(origin, ORIGIN_SPLIT)
         n_splits += 1
+        far_of = _kmeans_kernels.farthest(labels, dmin, len(centers))
     kept = masses >= T
     return Clusters(centers + shift, masses, labels.astype(np.int64, copy=False), kept, origin, n_splits,
                     n_iter)

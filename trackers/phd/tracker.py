@@ -295,7 +295,8 @@ class _AssociatingTracker:
             self.associator.area = float(frame.width * frame.height)
         if self.associator.params.app_weight > 0 and frame.has_pixels:
             feats = box_features(frame.image, states)
-        res = self.associator.step(frame.index, states, feats, detections)
+        res = self.associator.step(frame.index, states, feats, detections,
+                                   edges=log.wants("clusters"))
         self._report_association(frame, res, log)
         keep = res.confirmed
         return StepResult(TrackSet(res.ids[keep], res.boxes[keep]),
