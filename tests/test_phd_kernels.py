@@ -410,3 +410,25 @@ def test_farthest_member_is_numpys_per_cluster_argmax():
             members = np.flatnonzero(labels == j)
             want = members[np.argmax(dmin[members])] if len(members) else -1
             assert got[j] == want
+
+
+def test_prepare_is_numpys_spelling_with_runs_of_equal_weights():
+    """``prepare`` (the K-means inputs in one pass) gives numpy's floats: the max, the relative
+    weights ``exp(log_w − max)`` -- also for runs of equal log-weights (as resampling leaves
+    them, where the kernel takes the exp once per run) and ``-inf`` -- the mean position and
+    the shifted states."""
+    rng = np.random.default_rng(4)
+    for trial in range(20):
+        n = int(rng.integers(1, 300))
+        states = rng.normal(300.0, 80.0, (n, 6))
+        log_w = np.repeat(rng.normal(-5.0, 2.0, n), rng.integers(1, 6, n))[:n]
+        if trial % 4 == 0:
+            log_w[rng.integers(0, n, 3)] = -np.inf
+        lmax, w, shift, S, X = KM.prepare(states, log_w)
+        assert lmax == np.max(log_w)
+        np.testing.assert_array_equal(w, np.exp(log_w - np.max(log_w)))
+        want_shift = np.zeros(6)
+        want_shift[:2] = states[:, :2].mean(axis=0)
+        np.testing.assert_array_equal(shift, want_shift)
+        np.testing.assert_array_equal(S, states - want_shift)
+        np.testing.assert_array_equal(X, (states - want_shift)[:, [0, 1, 4, 5]])

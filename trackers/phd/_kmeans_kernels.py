@@ -563,7 +563,8 @@ def prepare(states, log_w):
     passes and as many temporaries): ``lmax`` the largest log-weight (when it is not finite,
     nothing else is computed), ``w`` (N,) the weights relative to it ``exp(log_w − lmax)``, ``shift`` (6,) the mean
     position ``(y1, y2)`` (zeros elsewhere), ``S`` (N, 6) the states minus it and ``X`` (N, 4)
-    its ``(y1, y2, w, h)``.  The same floats as ``np.max``, ``np.exp``,
+    its ``(y1, y2, w, h)``.  The same floats as ``np.max``, ``np.exp`` (taken once per run of
+    equal log-weights),
     ``states[:, :2].mean(axis=0)`` (an axis-0 sum, row by row) and the subtraction."""
     n = states.shape[0]
     lmax = -np.inf
@@ -581,8 +582,15 @@ def prepare(states, log_w):
         return lmax, w, shift, S, X
     a0 = 0.0
     a1 = 0.0
+    # a run of equal log-weights (after resampling every particle has the same one) takes
+    # the exp once: the same float for the same argument
+    lp = np.nan
+    wp = 0.0
     for i in range(n):
-        w[i] = math.exp(log_w[i] - lmax)
+        if log_w[i] != lp:
+            lp = log_w[i]
+            wp = math.exp(lp - lmax)
+        w[i] = wp
         a0 += states[i, 0]
         a1 += states[i, 1]
     shift[0] = a0 / n
