@@ -169,7 +169,8 @@ def test_appearance_reads_real_pixels_only():
         tr = make_tracker("phd", seed=0, **options)
         seen = []
         step = tr.associator.step
-        tr.associator.step = lambda k, st, feats=None, *a: (seen.append(feats), step(k, st, feats, *a))[1]
+        tr.associator.step = lambda k, st, feats=None, *a, **kw: (
+            seen.append(feats), step(k, st, feats, *a, **kw))[1]
         for k in range(1, 6):
             tr.step(Frame(k, (k - 1) / 10.0, image), dets)
         return seen, tr.associator.area
