@@ -84,7 +84,8 @@ from ..types import Detections, Frame, TrackSet
 from . import children as ch
 from . import motion as mo
 from . import parents as pa
-from .classifier import HOGWindowClassifier, load_classifier, person_boxes, window_boxes
+from .classifier import (HOGWindowClassifier, load_classifier, opencv_threads, person_boxes,
+                         window_boxes)
 from .confirm import Confirmer
 from .scale import ScalePrior
 
@@ -425,6 +426,16 @@ class DLPFTracker:
     # ------------------------------------------------------------------ the step
     def step(self, frame: Frame, detections: Optional[Detections],
              level: Optional[str] = None) -> StepResult:
+        # with classifier.threads > 1 the step spreads its work over its own threads; OpenCV's
+        # internal ones (warpAffine, LK, colour conversions split over row bands) then only
+        # contend with them for the same cores: off for the step, restored after it (results
+        # do not depend on it; tests/test_dlpf.py)
+        if self.params.classifier.threads <= 1:
+            return self._step(frame, level)
+        with opencv_threads(1):
+            return self._step(frame, level)
+
+    def _step(self, frame: Frame, level: Optional[str]) -> StepResult:
         P = self.params
         img = to_bgr(check_image(frame, "dlpf"))
         grey = to_gray(img)
