@@ -182,7 +182,8 @@ class ClassifierParams:
                                      "mode too")
     threads: int = param(2, "threads that compute the pyramid's HOG blocks ('pyramid' mode; "
                             "each region's blocks by one thread, so the scores and the tracks "
-                            "are the same for any value; 1 = none)")
+                            "are the same for any value; 1 = none; more than 1: OpenCV's own "
+                            "threads are off during the step)")
     model: str = param("", "classifier file from 'pfscope train-classifier' (an intersection-"
                            "kernel SVM, jung2013 §2.1); empty: OpenCV's pre-trained people SVM.  "
                            "Its margins are on another scale: use it with hit_threshold=0 "
