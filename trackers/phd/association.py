@@ -175,9 +175,9 @@ class AssocParams:
                                      "not filled (0: fill every gap)")
     fill_free: int = param(0, "fill_support: a gap of at most this many missing frames "
                               "is filled without evidence (missed detections in a row)")
-    fill_err: float = param(0.0, "fill_gaps: a gap row is kept without evidence (a "
-                                 "detection or another track's estimate overlapping it by "
-                                 "fill_overlap) only where the straight line's error std "
+    fill_err: float = param(0.0, "fill_gaps: a gap row no detection of its frame overlaps "
+                                 "by fill_overlap (detections kept with extend_heads) is "
+                                 "kept only where the straight line's error std "
                                  "there, under the scene's measured acceleration "
                                  "(GraphAssociator.scene_sigma_v; interpolation_std), is at "
                                  "most this fraction of the box size (0: off; not in paper)")
