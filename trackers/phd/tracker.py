@@ -352,7 +352,7 @@ PHD_PRACTICAL = PHDTrackerParams(
     filter=PHDParams.of(clutter_model="gate", near_learn=True, score_model="gaussian",
                         p_miss=0.1, revive_odds=1.0),
     assoc=AssocParams(fill_gaps=True, fill_support=0.25, fill_free=2, app_weight=2.0, extend_heads=True,
-                      head_skip=2),
+                      head_skip=2, fill_err=1 / 6),
     rate=RateParams(per_second=True, learn_motion=True))
 PHD_SCENE = with_options(PHD_PRACTICAL, {"filter.clutter.clutter_model": "scene"})
 #: The practical default of MT: the same association settings per second (re-linking
@@ -408,6 +408,7 @@ class PHDTracker(_AssociatingTracker):
             # the residuals the likelihood explains: the learnt width's when there is one
             sm.pos_std = want.likelihood.sigma_obs * want.likelihood.sigma_obs_pos_ratio
             sv, ss = sm.sigma_v(), sm.sigma_size()
+            self.associator.scene_sigma_v = sv or 0.0
             want = replace(want, motion=replace(fp.motion, sigma_v=max(fp.motion.sigma_v, sv or 0.0),
                                                 sigma_size=max(fp.motion.sigma_size, ss or 0.0)))
         if want != self.filter.params:
