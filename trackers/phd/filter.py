@@ -89,6 +89,7 @@ from ..params import param, part, with_options
 from . import _kernels, motion
 from .clutter import PlaceClutter
 from .clutter import NearClutter, clutter_share
+from .scene_motion import Chains
 from .gating import DEFAULT_BUDGET, LogGPairs, gate_pairs, tail_radius2
 from ..smc.resampling import SCHEMES
 from ..smc.resampling import resample as _resample_set
@@ -199,7 +200,16 @@ class ScoreParams:
     ``p(s | target) / p(s | clutter)`` of its score s, two Gaussians of one pooled variance
     fitted online (EM: each detection counts as target by the mass it won, C/(κ + C)); the
     ratio is 1 until targets score higher than clutter on average.  Scores need no scale: the fit
-    is per detector, on whatever the detector outputs."""
+    is per detector, on whatever the detector outputs.
+
+    Bootstrap by persistence (``persist_frames`` > 0): the mass a detection wins is a poor
+    label while the filter holds no target (a scene where every newborn cloud misses the next
+    detection keeps ``won`` near the birth odds, and the two classes never separate).  A
+    detection that continues a chain of mutually nearest detections over ``persist_frames``
+    earlier frames (:class:`~.scene_motion.Chains`) is then counted as a target too: its
+    target weight is ``1 − (1 − won)(1 − chained)``, the rest is clutter.  On the development
+    set chained detections score like the matched ones and unchained like the false ones
+    (a noisy label: the fitted ratio is smaller than the true one, never reversed)."""
 
     score_model: str = param("none", "'none': scores ignored (paper); 'gaussian': p_D and κ "
                                      "as functions of the score (online two-class fit)")
@@ -207,12 +217,18 @@ class ScoreParams:
                                      "start at the scores of the first frame: ratio 1)")
     max_log_ratio: float = param(4.6, "|log p(s|target)/p(s|clutter)| is clipped here "
                                       "(4.6 ≈ a factor 100)")
+    persist_frames: int = param(0, "> 0: a detection that continues a chain of mutually "
+                                   "nearest detections over this many earlier frames counts "
+                                   "as a target in the score fit even when it won no mass "
+                                   "(learns the score classes before any track; "
+                                   "phd.scene_motion.Chains); 0: mass only")
 
     def __post_init__(self):
         _check(self, "score_model", self.score_model in ("none", "gaussian"),
                "'none' or 'gaussian'")
         _check(self, "score_prior", self.score_prior > 0, "> 0")
         _check(self, "max_log_ratio", self.max_log_ratio >= 0, ">= 0")
+        _check(self, "persist_frames", self.persist_frames >= 0, ">= 0")
 
 
 @dataclass(frozen=True)
@@ -481,6 +497,9 @@ class SceneModel:
         self.extent: Optional[np.ndarray] = None       # (x0, y0, x1, y1) of all detections
         self.score_sums: Optional[np.ndarray] = None   # (2, 3): class (target, clutter) × S0..S2
         self.score_floor = 1e-12
+        # persistence label of this frame's detections for the score fit (ScoreParams)
+        self.chains = Chains()
+        self._persist: Optional[np.ndarray] = None
         # 'learn': the repeated-in-place part of κ (.clutter), this frame's parts for learn()
         learn = self.cl.clutter_model == "learn"
         self.place = PlaceClutter(self.cl, self.lk) if learn else None
@@ -560,6 +579,9 @@ class SceneModel:
                 log_kappa = log_used
         else:
             log_kappa = log_clutter_density(Z, self.cl, self.lk)
+        if self.uses_scores and self.sp.persist_frames > 0:
+            self.chains.observe(Z)
+            self._persist = self.chains.length >= self.sp.persist_frames
         if self.uses_scores and scores is not None and len(Z):
             return log_kappa, log_kappa - self.log_score_ratio(scores)
         return log_kappa, log_kappa
@@ -616,7 +638,9 @@ class SceneModel:
             s = np.asarray(scores, dtype=np.float64)
             r = np.empty((2, len(won)))                          # (2, N_z): won, 1 - won
             r[0] = won
-            np.subtract(1.0, won, out=r[1])
+            if self._persist is not None and len(self._persist) == len(won):
+                r[0] = np.where(self._persist, 1.0, won)         # 1 − (1 − won)(1 − chained)
+            np.subtract(1.0, r[0], out=r[1])
             new = np.empty((2, 3))
             new[:, 0], new[:, 1], new[:, 2] = r.sum(1), r @ s, r @ (s * s)
             d = 1.0 - 1.0 / self.cl.clutter_memory
