@@ -391,13 +391,13 @@ class PHDTracker(_AssociatingTracker):
         #: (preset settings, learnt values, filter settings) of the last _learn_scene
         self._scene_last: Optional[tuple] = None
 
-    def _learn_scene(self, frame: Frame, dets: Detections) -> None:
+    def _learn_scene(self, frame: Frame, boxes: np.ndarray) -> None:
         """What the scene's detections teach the filter, on top of the preset at this frame
         rate: the likelihood width the detector's jitter calls for (``noise.learn_width``,
         :mod:`.scene_noise`) and the motion noise raised to what the scene measures
-        (``rate.learn_motion``, :mod:`.scene_motion`)."""
+        (``rate.learn_motion``, :mod:`.scene_motion`).  ``boxes``: the frame's detections
+        ``(cx, cy, w, h)``."""
         fp = self.active.filter
-        boxes = xywh_to_cxcywh(dets.boxes)
         want = fp
         if self.jitter is not None:
             self.jitter.see(frame.index, boxes, fp.clutter.clutter_memory)
@@ -440,12 +440,13 @@ class PHDTracker(_AssociatingTracker):
              level: Optional[str] = None) -> StepResult:
         dets = detections if detections is not None else Detections.empty()
         self._retime(frame)
+        z = xywh_to_cxcywh(dets.boxes)      # read-only below: one conversion a frame
         if self.jitter is not None or self.scene_motion is not None:
-            self._learn_scene(frame, dets)
+            self._learn_scene(frame, z)
         log = StageLog(self.stages, level)
         revive = None
         if self.active.filter.birth.revive_odds > 0 and len(dets):
-            revive = self.associator.returning(frame.index, xywh_to_cxcywh(dets.boxes))
+            revive = self.associator.returning(frame.index, z)
         r = self.filter.step(dets, frame, revive)
         cp = self.params.clusters
         clusters = kmeans_peaks(r.resampled, r.observations, cp.T, params=self.filter.params,
