@@ -109,21 +109,21 @@ def robust_stds(x: np.ndarray) -> np.ndarray:
 
 class _Ring:
     """The most recent :data:`WINDOW` samples of ``width`` statistics, one row per statistic
-    (a numpy ring: no per-frame conversion of Python lists; each statistic contiguous)."""
+    (a numpy ring: no per-frame conversion of Python lists; each statistic contiguous).  Every
+    sample is stored twice, at ``i`` and ``i + WINDOW``, so the window oldest first is one slice
+    (no copy)."""
 
     def __init__(self, width: int):
-        self.buf = np.empty((width, WINDOW))
+        self.buf = np.empty((width, 2 * WINDOW))
         self.n = 0          # samples written in all
 
     def extend(self, cols: np.ndarray) -> None:
         """Append samples ``cols`` (width, m)."""
         cols = cols[:, -WINDOW:]
         m = cols.shape[1]
-        k = self.n % WINDOW
-        if k + m <= WINDOW:
-            self.buf[:, k:k + m] = cols
-        else:
-            self.buf[:, (k + np.arange(m)) % WINDOW] = cols
+        at = (self.n + np.arange(m)) % WINDOW
+        self.buf[:, at] = cols
+        self.buf[:, at + WINDOW] = cols
         self.n += m
 
     def rows(self) -> np.ndarray:
@@ -131,7 +131,7 @@ class _Ring:
         if self.n <= WINDOW:
             return self.buf[:, :self.n]
         k = self.n % WINDOW
-        return np.concatenate((self.buf[:, k:], self.buf[:, :k]), axis=1)
+        return self.buf[:, k:k + WINDOW]
 
     def __len__(self) -> int:
         return min(self.n, WINDOW)
@@ -150,8 +150,9 @@ class SceneMotion:
         self._prev_prev = np.zeros((0, 4))
         self.accel = _Ring(2)    # second differences over (w, h)
         self.size = _Ring(2)     # (1-frame, 2-frame) log size changes
-        # the robust spreads of the last window read, kept until a sample comes in
-        self._spread: dict[str, tuple[int, np.ndarray]] = {}
+        # the robust spreads of the windows, kept until a sample comes in (_spreads)
+        self._spread: dict[str, np.ndarray] = {}
+        self._spread_key: Optional[tuple[int, int]] = None
 
     def observe(self, Z: np.ndarray) -> None:
         """One frame's detections (N, 4) ``(cx, cy, w, h)``; an empty frame breaks the links."""
@@ -169,17 +170,26 @@ class SceneMotion:
                 d = (z[:, :2] - 2.0 * q[:, :2] + r[:, :2]) / qs
                 self.accel.extend(d.T)
                 zs = z[:, 2:4]
-                self.size.extend(np.log(np.stack([(zs / qs).ravel(), (zs / r[:, 2:4]).ravel()])))
+                # rows (1-frame, 2-frame) of (w, h) pairs per triplet, written in place
+                two = np.empty((2, len(z), 2))
+                np.divide(zs, qs, out=two[0])
+                np.divide(zs, r[:, 2:4], out=two[1])
+                self.size.extend(np.log(two, out=two).reshape(2, -1))
         self._prev_prev, self._prev, self._prev_link = self._prev, Z, j
 
     def _spreads(self, name: str) -> np.ndarray:
-        """:func:`robust_stds` of ring ``name``'s window (recomputed only when it changed)."""
-        ring = getattr(self, name)
-        got = self._spread.get(name)
-        if got is None or got[0] != ring.n:
-            got = (ring.n, robust_stds(ring.rows()))
-            self._spread[name] = got
-        return got[1]
+        """:func:`robust_stds` of ring ``name``'s window, recomputed only when a ring changed
+        (both rings in one call when their windows are as long: every frame once full)."""
+        key = (self.accel.n, self.size.n)
+        if self._spread_key != key:
+            a, s = self.accel.rows(), self.size.rows()
+            if a.shape[1] == s.shape[1]:
+                both = robust_stds(np.concatenate((a, s)))
+                self._spread = {"accel": both[:2], "size": both[2:]}
+            else:
+                self._spread = {"accel": robust_stds(a), "size": robust_stds(s)}
+            self._spread_key = key
+        return self._spread[name]
 
     def sigma_v(self) -> Optional[float]:
         """Measured acceleration std per frame (fraction of w, h), 0 when the observation
