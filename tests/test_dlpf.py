@@ -471,6 +471,46 @@ def test_classifier_threads_change_no_score():
         HOGWindowClassifier(threads=0)
 
 
+
+def test_step_turns_opencv_threads_off_and_restores_them(monkeypatch):
+    """With classifier.threads > 1 the step runs OpenCV single-threaded (its own threads split
+    the work) and restores OpenCV's setting after it, also when the step fails; the tracks
+    equal those of the one-thread classifier under OpenCV's own threads."""
+    import cv2
+
+    from pfscope.trackers.dlpf import tracker as T
+    from pfscope.trackers.errors import InputError
+
+    seen = []
+    real = T.DLPFTracker._step
+
+    def spy(self, frame, level):
+        seen.append((self.params.classifier.threads, cv2.getNumThreads()))
+        return real(self, frame, level)
+
+    monkeypatch.setattr(T.DLPFTracker, "_step", spy)
+    before = cv2.getNumThreads()
+    cv2.setNumThreads(2)
+    try:
+        rows = {}
+        for threads in (1, 2):
+            tr = make_tracker("dlpf", seed=4, **{"parents.n": "120",
+                                                  "classifier.threads": str(threads)})
+            rows[threads] = run(_scene(10), [tr], level="tracks").rows["dlpf"]
+            assert cv2.getNumThreads() == 2
+        assert {s for s in seen} == {(1, 2), (2, 1)}
+        assert len(rows[1]) == len(rows[2])
+        for (fa, ta), (fb, tb) in zip(rows[1], rows[2]):
+            assert fa == fb and np.array_equal(ta.ids, tb.ids)
+            assert np.array_equal(ta.boxes, tb.boxes)
+        tr = make_tracker("dlpf", seed=4)
+        with pytest.raises(InputError):   # a failing step restores the setting too
+            tr.step(Frame(1, 0.0, np.zeros((0, 0, 3), np.uint8)), None)
+        assert cv2.getNumThreads() == 2
+    finally:
+        cv2.setNumThreads(before)
+
+
 # ------------------------------------------------------------------ IKSVM (Maji et al. 2008)
 
 def _toy_iksvm(bins=64):

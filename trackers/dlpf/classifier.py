@@ -54,7 +54,8 @@ from __future__ import annotations
 
 import math
 import threading
-from typing import Optional
+from contextlib import contextmanager
+from typing import Iterator, Optional
 
 import cv2
 import numpy as np
@@ -387,6 +388,20 @@ def load_classifier(path: str = "", *, mode: str = "pyramid", scale_step: float 
     return clf
 
 
+@contextmanager
+def opencv_threads(n: int) -> Iterator[None]:
+    """OpenCV's own worker threads set to ``n`` (``cv2.setNumThreads``: process-wide) inside the
+    block, restored after it.  For code that already splits its work over its own threads:
+    OpenCV's pool would split each call again over the same cores.  OpenCV's results do not
+    depend on its thread count (each output row or point is computed the same way)."""
+    before = cv2.getNumThreads()
+    cv2.setNumThreads(int(n))
+    try:
+        yield
+    finally:
+        cv2.setNumThreads(before)
+
+
 def _pack(k: np.ndarray, cu: np.ndarray, cv: np.ndarray) -> np.ndarray:
     """One int64 key per (level, cell column, cell row) (each well inside ±2^20)."""
     return ((k + (1 << 20)) << 42) | ((cu + (1 << 20)) << 21) | (cv + (1 << 20))
@@ -489,5 +504,5 @@ def sliding_window_count(width: int, height: int, *, win_stride=(8, 8), padding=
     return total
 
 
-__all__ = ["HOGWindowClassifier", "load_classifier", "window_boxes", "person_boxes", "sliding_window_count",
+__all__ = ["HOGWindowClassifier", "load_classifier", "opencv_threads", "window_boxes", "person_boxes", "sliding_window_count",
            "WIN_W", "WIN_H"]

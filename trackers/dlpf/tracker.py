@@ -84,7 +84,8 @@ from ..types import Detections, Frame, TrackSet
 from . import children as ch
 from . import motion as mo
 from . import parents as pa
-from .classifier import HOGWindowClassifier, load_classifier, person_boxes, window_boxes
+from .classifier import (HOGWindowClassifier, load_classifier, opencv_threads, person_boxes,
+                         window_boxes)
 from .confirm import Confirmer
 from .scale import ScalePrior
 
@@ -181,7 +182,8 @@ class ClassifierParams:
                                      "mode too")
     threads: int = param(2, "threads that compute the pyramid's HOG blocks ('pyramid' mode; "
                             "each region's blocks by one thread, so the scores and the tracks "
-                            "are the same for any value; 1 = none)")
+                            "are the same for any value; 1 = none; more than 1: OpenCV's own "
+                            "threads are off during the step)")
     model: str = param("", "classifier file from 'pfscope train-classifier' (an intersection-"
                            "kernel SVM, jung2013 §2.1); empty: OpenCV's pre-trained people SVM.  "
                            "Its margins are on another scale: use it with hit_threshold=0 "
@@ -425,6 +427,16 @@ class DLPFTracker:
     # ------------------------------------------------------------------ the step
     def step(self, frame: Frame, detections: Optional[Detections],
              level: Optional[str] = None) -> StepResult:
+        # with classifier.threads > 1 the step spreads its work over its own threads; OpenCV's
+        # internal ones (warpAffine, LK, colour conversions split over row bands) then only
+        # contend with them for the same cores: off for the step, restored after it (results
+        # do not depend on it; tests/test_dlpf.py)
+        if self.params.classifier.threads <= 1:
+            return self._step(frame, level)
+        with opencv_threads(1):
+            return self._step(frame, level)
+
+    def _step(self, frame: Frame, level: Optional[str]) -> StepResult:
         P = self.params
         img = to_bgr(check_image(frame, "dlpf"))
         grey = to_gray(img)

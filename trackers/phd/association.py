@@ -175,6 +175,12 @@ class AssocParams:
                                      "not filled (0: fill every gap)")
     fill_free: int = param(0, "fill_support: a gap of at most this many missing frames "
                               "is filled without evidence (missed detections in a row)")
+    fill_err: float = param(0.0, "fill_gaps: a gap row no detection of its frame overlaps "
+                                 "by fill_overlap (detections kept with extend_heads) is "
+                                 "kept only where the straight line's error std "
+                                 "there, under the scene's measured acceleration "
+                                 "(GraphAssociator.scene_sigma_v; interpolation_std), is at "
+                                 "most this fraction of the box size (0: off; not in paper)")
     relink_depth: int = param(0, "re-linking (not in paper; 0: off): a confirmed track unseen "
                                  "for more than depth frames stays re-linkable for this many "
                                  "frames; a new track, when confirmed, takes its id if its "
@@ -225,6 +231,8 @@ class AssocParams:
             raise ValueError(f"AssocParams.app_weight must be >= 0, got {self.app_weight}")
         if not 0.0 < self.app_alpha <= 1.0:
             raise ValueError(f"AssocParams.app_alpha must be in (0, 1], got {self.app_alpha}")
+        if not self.fill_err >= 0:
+            raise ValueError(f"AssocParams.fill_err must be >= 0, got {self.fill_err}")
         if not self.relink_tau > 0:
             raise ValueError(f"AssocParams.relink_tau must be > 0, got {self.relink_tau}")
 
@@ -275,6 +283,17 @@ def tail_velocity(tail_states: np.ndarray, prev_states: np.ndarray, prev_gap: np
         v[one] = 0.0
         c[one] = (params.speed_prior * tail_states[one, 4:6]) ** 2
     return v, b, c
+
+
+def interpolation_std(sigma_v: float, t, gap) -> np.ndarray:
+    """Error std (fraction of the box size) of the straight line between two estimates ``gap``
+    frames apart, ``t`` frames after the first, when the target's velocity changes by white
+    noise of std ``sigma_v`` per frame (the motion model of :func:`propagate`): the position
+    given both ends (velocity unknown) is an integrated-Brownian bridge of variance
+    ``σ_v² t² (gap − t)² / (3 gap)`` (0 at both ends, ``σ_v² gap³ / 48`` half-way)."""
+    t = np.asarray(t, dtype=np.float64)
+    gap = np.asarray(gap, dtype=np.float64)
+    return sigma_v * t * (gap - t) / np.sqrt(3.0 * np.maximum(gap, 1.0))
 
 
 def propagate(tail_states: np.ndarray, v: np.ndarray, b: np.ndarray, c: np.ndarray,
@@ -660,6 +679,10 @@ class GraphAssociator:
         self._buffer: deque[tuple[int, np.ndarray, np.ndarray, np.ndarray]] = deque()
         #: detections (cx, cy, w, h) of the held-back frames, beside ``_buffer`` (extend_heads)
         self._dets: deque[tuple[int, np.ndarray]] = deque()
+        #: acceleration std per frame (fraction of w, h) measured on the scene's detections
+        #: beyond what their noise explains (set by the tracker from
+        #: :class:`.scene_motion.SceneMotion`; ~0 on the still cameras measured): ``fill_err``
+        self.scene_sigma_v = 0.0
 
     # ---- introspection
     @property
@@ -1053,10 +1076,13 @@ class GraphAssociator:
             st[:, obs] = (1.0 - t) * src[inside][:, obs] + t * dst[inside][:, obs]
             st[:, 2:4] = vel[inside]
             fid = ids[inside]
+            if self.params.fill_err > 0:
+                likely = self._likely_rows(f, st, f - src_frame[inside], gap[inside])
+                st, fid = st[likely], fid[likely]
             # a box another track's estimate already covers is not filled (the gap is then
             # the other track's frame: filling it would report one target twice)
             est = bst[~bfill]
-            if len(est):
+            if len(est) and len(st):
                 free = _iou(st[:, obs], est[:, obs]).max(axis=1) < self.params.fill_overlap
                 st, fid = st[free], fid[free]
             if not len(st):
@@ -1064,6 +1090,19 @@ class GraphAssociator:
             self._buffer[n] = (f, np.concatenate([bid, fid]),
                                np.concatenate([bst, st]),
                                np.concatenate([bfill, np.ones(len(st), dtype=bool)]))
+
+    def _likely_rows(self, f: int, st: np.ndarray, t: np.ndarray, gap: np.ndarray) -> np.ndarray:
+        """``fill_err``: mask of the gap rows ``st`` of frame ``f`` (``t`` frames into gaps of
+        ``gap``) whose straight line is likely right -- its error std
+        (:func:`interpolation_std` under ``scene_sigma_v``) at most ``fill_err`` -- or that a
+        detection of the frame (kept with extend_heads) overlaps by ``fill_overlap``."""
+        keep = interpolation_std(self.scene_sigma_v, t, gap) <= self.params.fill_err
+        if keep.all():
+            return keep
+        d = next((d for g, d in self._dets if g == f), None)
+        if d is not None and len(d):
+            keep |= _iou(st[:, OBS_INDEX], d).max(axis=1) >= self.params.fill_overlap
+        return keep
 
     def _gap_support(self, src: np.ndarray, src_frame: np.ndarray, dst: np.ndarray,
                      frame: np.ndarray, gap: np.ndarray) -> np.ndarray:

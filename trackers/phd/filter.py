@@ -89,6 +89,7 @@ from ..params import param, part, with_options
 from . import _kernels, motion
 from .clutter import PlaceClutter
 from .clutter import NearClutter, clutter_share
+from .scene_motion import Chains
 from .gating import DEFAULT_BUDGET, LogGPairs, gate_pairs, tail_radius2
 from ..smc.resampling import SCHEMES
 from ..smc.resampling import resample as _resample_set
@@ -199,7 +200,21 @@ class ScoreParams:
     ``p(s | target) / p(s | clutter)`` of its score s, two Gaussians of one pooled variance
     fitted online (EM: each detection counts as target by the mass it won, C/(κ + C)); the
     ratio is 1 until targets score higher than clutter on average.  Scores need no scale: the fit
-    is per detector, on whatever the detector outputs."""
+    is per detector, on whatever the detector outputs.
+
+    Bootstrap by persistence (``persist_frames`` > 0): the mass a detection wins is a poor
+    label while the filter holds no target (a scene where every newborn cloud misses the next
+    detection keeps ``won`` near the birth odds, and the two classes never separate).  A second
+    fit of the same two Gaussians labels the detections by persistence instead: target when it
+    continues a chain of mutually nearest detections over ``persist_frames`` earlier frames
+    (:class:`~.scene_motion.Chains`), clutter otherwise.  Both labellings are noisy versions
+    of the true classes, and label noise pulls the fitted class means together, so the fit
+    whose means lie further apart (in within-class stds, d') has the cleaner labels: the
+    ratio comes from that one.  Where the filter tracks, the mass separates the classes
+    better (persistent false detections -- a detector firing on the same spot -- are labelled
+    target by persistence); where it holds nothing yet, persistence does.  On the development
+    set chained detections score like the ones matched to a person and unchained like the
+    false ones."""
 
     score_model: str = param("none", "'none': scores ignored (paper); 'gaussian': p_D and κ "
                                      "as functions of the score (online two-class fit)")
@@ -207,12 +222,18 @@ class ScoreParams:
                                      "start at the scores of the first frame: ratio 1)")
     max_log_ratio: float = param(4.6, "|log p(s|target)/p(s|clutter)| is clipped here "
                                       "(4.6 ≈ a factor 100)")
+    persist_frames: int = param(0, "> 0: a detection that continues a chain of mutually "
+                                   "nearest detections over this many earlier frames counts "
+                                   "as a target in the score fit even when it won no mass "
+                                   "(learns the score classes before any track; "
+                                   "phd.scene_motion.Chains); 0: mass only")
 
     def __post_init__(self):
         _check(self, "score_model", self.score_model in ("none", "gaussian"),
                "'none' or 'gaussian'")
         _check(self, "score_prior", self.score_prior > 0, "> 0")
         _check(self, "max_log_ratio", self.max_log_ratio >= 0, ">= 0")
+        _check(self, "persist_frames", self.persist_frames >= 0, ">= 0")
 
 
 @dataclass(frozen=True)
@@ -481,6 +502,10 @@ class SceneModel:
         self.extent: Optional[np.ndarray] = None       # (x0, y0, x1, y1) of all detections
         self.score_sums: Optional[np.ndarray] = None   # (2, 3): class (target, clutter) × S0..S2
         self.score_floor = 1e-12
+        # persistence label of this frame's detections for the score fit (ScoreParams)
+        self.chains = Chains()
+        self._persist: Optional[np.ndarray] = None
+        self.persist_sums: Optional[np.ndarray] = None   # as score_sums, labelled by persistence
         # 'learn': the repeated-in-place part of κ (.clutter), this frame's parts for learn()
         learn = self.cl.clutter_model == "learn"
         self.place = PlaceClutter(self.cl, self.lk) if learn else None
@@ -560,6 +585,9 @@ class SceneModel:
                 log_kappa = log_used
         else:
             log_kappa = log_clutter_density(Z, self.cl, self.lk)
+        if self.uses_scores and self.sp.persist_frames > 0:
+            self.chains.observe(Z)
+            self._persist = self.chains.length >= self.sp.persist_frames
         if self.uses_scores and scores is not None and len(Z):
             return log_kappa, log_kappa - self.log_score_ratio(scores)
         return log_kappa, log_kappa
@@ -574,7 +602,9 @@ class SceneModel:
         return count / len(Z)
 
     def log_score_ratio(self, scores: np.ndarray) -> np.ndarray:
-        """``log p(s|target) − log p(s|clutter)``, clipped to ±max_log_ratio."""
+        """``log p(s|target) − log p(s|clutter)``, clipped to ±max_log_ratio: the fit on the
+        mass, or the fit on persistence when that one separates the classes more
+        (:class:`ScoreParams`)."""
         s = np.asarray(scores, dtype=np.float64)
         if self.score_sums is None:
             mu, var = float(s.mean()), float(s.var())
@@ -582,19 +612,34 @@ class SceneModel:
             var = max(var, self.score_floor)
             n0 = self.sp.score_prior
             self.score_sums = np.array([[n0, n0 * mu, n0 * (mu * mu + var)]] * 2)
-        S = self.score_sums
-        mean = S[:, 1] / S[:, 0]
-        # one pooled within-class variance: the log-ratio is then linear in s, and it is used
-        # only while targets score higher than clutter on average (a higher score means a
+            if self.sp.persist_frames > 0:
+                self.persist_sums = self.score_sums.copy()
+        best = self._two_class_fit(self.score_sums)
+        if self.persist_sums is not None:
+            other = self._two_class_fit(self.persist_sums)
+            if best is None or (other is not None and other[0] > best[0]):
+                best = other
+        # used only while targets score higher than clutter on average (a higher score means a
         # more likely target, the detector's convention); otherwise the scores carry no
         # information yet (e.g. no target seen) and the ratio is 1.
-        if not mean[0] > mean[1]:
+        if best is None:
             return np.zeros(len(s))
+        _, slope, mid = best
+        c = self.sp.max_log_ratio
+        return np.clip(slope * (s - mid), -c, c)
+
+    def _two_class_fit(self, S: np.ndarray) -> Optional[tuple[float, float, float]]:
+        """Two Gaussians of one pooled within-class variance from the sums ``S`` (class ×
+        S0..S2): ``(d'², slope, midpoint)`` of the log-ratio ``slope · (s − midpoint)`` (linear
+        in s), d' = the separation of the means in within-class stds; None unless the target
+        mean is the higher."""
+        mean = S[:, 1] / S[:, 0]
+        if not mean[0] > mean[1]:
+            return None
         var = max(float((S[:, 2] - S[:, 1] ** 2 / S[:, 0]).sum() / S[:, 0].sum()),
                   self.score_floor)
-        log_ratio = (mean[0] - mean[1]) / var * (s - 0.5 * (mean[0] + mean[1]))
-        c = self.sp.max_log_ratio
-        return np.clip(log_ratio, -c, c)
+        gap = mean[0] - mean[1]
+        return gap * gap / var, gap / var, 0.5 * (mean[0] + mean[1])
 
     def learn(self, scores: Optional[np.ndarray], won: np.ndarray) -> None:
         """After the update: ``won`` (N_z,) = C/(κ + C), each detection's target share."""
@@ -617,10 +662,19 @@ class SceneModel:
             r = np.empty((2, len(won)))                          # (2, N_z): won, 1 - won
             r[0] = won
             np.subtract(1.0, won, out=r[1])
-            new = np.empty((2, 3))
-            new[:, 0], new[:, 1], new[:, 2] = r.sum(1), r @ s, r @ (s * s)
             d = 1.0 - 1.0 / self.cl.clutter_memory
-            self.score_sums = d * self.score_sums + new
+            self.score_sums = d * self.score_sums + _class_sums(r, s)
+            if self.persist_sums is not None and self._persist is not None \
+                    and len(self._persist) == len(s):
+                q = np.stack([self._persist, ~self._persist]).astype(np.float64)
+                self.persist_sums = d * self.persist_sums + _class_sums(q, s)
+
+
+def _class_sums(r: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """(2, 3): per class (rows of the weights ``r`` (2, N)) the weighted S0, S1, S2 of ``s``."""
+    new = np.empty((2, 3))
+    new[:, 0], new[:, 1], new[:, 2] = r.sum(1), r @ s, r @ (s * s)
+    return new
 
 
 # ----------------------------------------------------------------------------- the four stages

@@ -137,6 +137,34 @@ class _Ring:
         return min(self.n, WINDOW)
 
 
+class Chains:
+    """Chains of mutually nearest detections over consecutive frames (:func:`link`), the
+    pairing :class:`SceneMotion` measures the motion on and the persistence label of the score
+    model (:class:`~.filter.SceneModel`).  ``observe(Z)`` once per frame; :attr:`length` then
+    holds, per detection of that frame, how many consecutive earlier frames its chain spans
+    (0: it continues nothing).  A person detected frame after frame makes a long chain; random
+    clutter seldom finds a mutual nearest neighbour of similar size within one box size in the
+    previous frame, so it mostly continues nothing (false detections that repeat in place make
+    chains too: :mod:`.clutter`'s place model is what tells those apart).  Deterministic; an
+    empty frame breaks every chain."""
+
+    def __init__(self):
+        self.prev = np.zeros((0, 4))                    # last frame's detections
+        self.prev_link = np.zeros(0, dtype=np.int64)    # their links into the frame before
+        self.length = np.zeros(0, dtype=np.int64)       # chain length of the last frame's
+
+    def observe(self, Z: np.ndarray) -> np.ndarray:
+        """This frame's detections (N, 4) ``(cx, cy, w, h)``: their links into the previous
+        frame (:func:`link`, −1 where none); :attr:`length` and :attr:`prev` move on."""
+        Z = np.asarray(Z, dtype=np.float64).reshape(-1, 4)
+        j = link(self.prev, Z)
+        length = np.zeros(len(Z), dtype=np.int64)
+        has = j >= 0
+        length[has] = self.length[j[has]] + 1
+        self.prev, self.prev_link, self.length = Z, j, length
+        return j
+
+
 class SceneMotion:
     """Online estimate of the per-frame acceleration and size noise (module docstring).
     ``observe(Z)`` once per frame with the detections ``(cx, cy, w, h)``; :meth:`sigma_v` and
@@ -145,8 +173,7 @@ class SceneMotion:
     def __init__(self, pos_std: float):
         #: the likelihood's position std as a fraction of the box size (σ_y / w)
         self.pos_std = float(pos_std)
-        self._prev = np.zeros((0, 4))
-        self._prev_link = np.zeros(0, dtype=np.int64)
+        self.chains = Chains()
         self._prev_prev = np.zeros((0, 4))
         self.accel = _Ring(2)    # second differences over (w, h)
         self.size = _Ring(2)     # (1-frame, 2-frame) log size changes
@@ -157,15 +184,17 @@ class SceneMotion:
     def observe(self, Z: np.ndarray) -> None:
         """One frame's detections (N, 4) ``(cx, cy, w, h)``; an empty frame breaks the links."""
         Z = np.asarray(Z, dtype=np.float64).reshape(-1, 4)
-        j = link(self._prev, Z)
+        ch = self.chains
+        prev, prev_link = ch.prev, ch.prev_link
+        j = ch.observe(Z)
         has = np.flatnonzero(j >= 0)
         if len(has):
             jh = j[has]
             # triplets: the link k−1 → k continues a link k−2 → k−1
-            jj = self._prev_link[jh] if len(self._prev_link) else np.full(len(has), -1)
+            jj = prev_link[jh] if len(prev_link) else np.full(len(has), -1)
             tri = jj >= 0
             if tri.any():
-                z, q, r = Z[has[tri]], self._prev[jh[tri]], self._prev_prev[jj[tri]]
+                z, q, r = Z[has[tri]], prev[jh[tri]], self._prev_prev[jj[tri]]
                 qs = q[:, 2:4]
                 d = (z[:, :2] - 2.0 * q[:, :2] + r[:, :2]) / qs
                 self.accel.extend(d.T)
@@ -175,7 +204,7 @@ class SceneMotion:
                 np.divide(zs, qs, out=two[0])
                 np.divide(zs, r[:, 2:4], out=two[1])
                 self.size.extend(np.log(two, out=two).reshape(2, -1))
-        self._prev_prev, self._prev, self._prev_link = self._prev, Z, j
+        self._prev_prev = prev
 
     def _spreads(self, name: str) -> np.ndarray:
         """:func:`robust_stds` of ring ``name``'s window, recomputed only when a ring changed
