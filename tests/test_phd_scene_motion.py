@@ -173,3 +173,32 @@ def test_a_clutter_storm_is_not_linked():
     z = np.c_[rng.uniform(0, 1000, (n, 2)), np.full((n, 2), 30.0)]
     assert (link(z, z + 1.0) == -1).all()
     assert (link(z[:10], z[:10] + 1.0) == np.arange(10)).all()
+
+
+def test_robust_spread_is_the_winsorised_mean_of_the_last_window_oldest_first():
+    """robust_stds (each row) is √(π/2) × mean of |x| clipped at np.quantile(|x|, TRIM), the
+    same floats as the formula; the window is the last WINDOW samples, and the estimate follows
+    the samples as they come in (it is kept only while none arrive)."""
+    from pfscope.trackers.phd import scene_motion as S
+
+    rng = np.random.default_rng(3)
+    for n in (1, 2, 7, 10, 299, 300):
+        x = rng.standard_t(3, size=(2, n))
+        a = np.abs(x)
+        want = [S.MEAN_ABS_TO_STD * float(np.mean(np.minimum(r, np.quantile(r, S.TRIM))))
+                for r in a]
+        assert S.robust_stds(x).tolist() == want
+        assert S.robust_std(x[1]) == want[1]
+    ring = S._Ring(2)
+    seen = []
+    for m in (120, 7, 250, 1, 400, 33):
+        cols = rng.normal(size=(2, m))
+        ring.extend(cols)
+        seen.append(cols)
+        assert np.array_equal(ring.rows(), np.concatenate(seen, axis=1)[:, -S.WINDOW:])
+    sm = SceneMotion(0.01)
+    sm.accel.extend(rng.normal(0, 0.1, (2, S.MIN_SAMPLES)))
+    first = sm.sigma_v()
+    assert sm.sigma_v() == first
+    sm.accel.extend(rng.normal(0, 0.5, (2, S.MIN_SAMPLES)))
+    assert sm.sigma_v() > 1.5 * first

@@ -85,39 +85,53 @@ def robust_std(x: np.ndarray) -> float:
     """``√(π/2) × mean |x|`` with ``|x|`` winsorised at its :data:`TRIM` quantile: the std of
     a zero-mean Gaussian, insensitive to a tail (clutter links), and smooth where a detector's
     sizes come in steps (a median of |x| would jump between 0 and one step)."""
-    if not len(x):
-        return 0.0
+    return float(robust_stds(np.asarray(x, dtype=np.float64).reshape(1, -1))[0])
+
+
+def robust_stds(x: np.ndarray) -> np.ndarray:
+    """:func:`robust_std` of each row of ``x`` (k, n), in one pass of numpy calls (the same
+    floats: the quantile per row, each row's mean summed along its own contiguous row)."""
     a = np.abs(np.asarray(x, dtype=np.float64))
+    n = a.shape[1]
+    if not n:
+        return np.zeros(len(a))
     # np.quantile(a, TRIM) (its 'linear' rule) by a partial sort: a tenth of its time
-    pos = TRIM * (len(a) - 1)
+    pos = TRIM * (n - 1)
     lo = int(math.floor(pos))
-    hi = min(lo + 1, len(a) - 1)
-    part = np.partition(a, (lo, hi))
-    t, d = pos - lo, part[hi] - part[lo]
-    q = part[hi] - d * (1.0 - t) if t >= 0.5 else part[lo] + d * t   # numpy's own lerp
-    return MEAN_ABS_TO_STD * float(np.mean(np.minimum(a, q)))
+    hi = min(lo + 1, n - 1)
+    part = np.partition(a, (lo, hi), axis=1)
+    t, d = pos - lo, part[:, hi] - part[:, lo]
+    q = part[:, hi] - d * (1.0 - t) if t >= 0.5 else part[:, lo] + d * t   # numpy's own lerp
+    np.minimum(a, q[:, None], out=a)
+    # np.mean's own steps (a sum along each row, then / n) without its wrapper
+    return MEAN_ABS_TO_STD * (np.add.reduce(a, axis=1) / n)
 
 
 class _Ring:
-    """The most recent :data:`WINDOW` rows of ``width`` floats (a numpy ring: no per-frame
-    conversion of Python lists)."""
+    """The most recent :data:`WINDOW` samples of ``width`` statistics, one row per statistic
+    (a numpy ring: no per-frame conversion of Python lists; each statistic contiguous).  Every
+    sample is stored twice, at ``i`` and ``i + WINDOW``, so the window oldest first is one slice
+    (no copy)."""
 
     def __init__(self, width: int):
-        self.buf = np.empty((WINDOW, width))
-        self.n = 0          # rows written in all
+        self.buf = np.empty((width, 2 * WINDOW))
+        self.n = 0          # samples written in all
 
-    def extend(self, rows: np.ndarray) -> None:
-        rows = rows[-WINDOW:]
-        at = (self.n + np.arange(len(rows))) % WINDOW
-        self.buf[at] = rows
-        self.n += len(rows)
+    def extend(self, cols: np.ndarray) -> None:
+        """Append samples ``cols`` (width, m)."""
+        cols = cols[:, -WINDOW:]
+        m = cols.shape[1]
+        at = (self.n + np.arange(m)) % WINDOW
+        self.buf[:, at] = cols
+        self.buf[:, at + WINDOW] = cols
+        self.n += m
 
     def rows(self) -> np.ndarray:
-        """Oldest first (the sums then add in the same order as over a list)."""
+        """(width, n) oldest first (the sums then add in the same order as over a list)."""
         if self.n <= WINDOW:
-            return self.buf[:self.n]
+            return self.buf[:, :self.n]
         k = self.n % WINDOW
-        return np.concatenate((self.buf[k:], self.buf[:k]))
+        return self.buf[:, k:k + WINDOW]
 
     def __len__(self) -> int:
         return min(self.n, WINDOW)
@@ -163,6 +177,9 @@ class SceneMotion:
         self._prev_prev = np.zeros((0, 4))
         self.accel = _Ring(2)    # second differences over (w, h)
         self.size = _Ring(2)     # (1-frame, 2-frame) log size changes
+        # the robust spreads of the windows, kept until a sample comes in (_spreads)
+        self._spread: dict[str, np.ndarray] = {}
+        self._spread_key: Optional[tuple[int, int]] = None
 
     def observe(self, Z: np.ndarray) -> None:
         """One frame's detections (N, 4) ``(cx, cy, w, h)``; an empty frame breaks the links."""
@@ -172,26 +189,44 @@ class SceneMotion:
         j = ch.observe(Z)
         has = np.flatnonzero(j >= 0)
         if len(has):
-            p = prev[j[has]]
+            jh = j[has]
             # triplets: the link k−1 → k continues a link k−2 → k−1
-            jj = prev_link[j[has]] if len(prev_link) else np.full(len(has), -1)
+            jj = prev_link[jh] if len(prev_link) else np.full(len(has), -1)
             tri = jj >= 0
             if tri.any():
-                z, q, r = Z[has[tri]], p[tri], self._prev_prev[jj[tri]]
-                d = (z[:, :2] - 2.0 * q[:, :2] + r[:, :2]) / q[:, 2:4]
-                self.accel.extend(d)
-                one = np.log(z[:, 2:4] / q[:, 2:4]).ravel()
-                two = np.log(z[:, 2:4] / r[:, 2:4]).ravel()
-                self.size.extend(np.stack([one, two], axis=1))
+                z, q, r = Z[has[tri]], prev[jh[tri]], self._prev_prev[jj[tri]]
+                qs = q[:, 2:4]
+                d = (z[:, :2] - 2.0 * q[:, :2] + r[:, :2]) / qs
+                self.accel.extend(d.T)
+                zs = z[:, 2:4]
+                # rows (1-frame, 2-frame) of (w, h) pairs per triplet, written in place
+                two = np.empty((2, len(z), 2))
+                np.divide(zs, qs, out=two[0])
+                np.divide(zs, r[:, 2:4], out=two[1])
+                self.size.extend(np.log(two, out=two).reshape(2, -1))
         self._prev_prev = prev
+
+    def _spreads(self, name: str) -> np.ndarray:
+        """:func:`robust_stds` of ring ``name``'s window, recomputed only when a ring changed
+        (both rings in one call when their windows are as long: every frame once full)."""
+        key = (self.accel.n, self.size.n)
+        if self._spread_key != key:
+            a, s = self.accel.rows(), self.size.rows()
+            if a.shape[1] == s.shape[1]:
+                both = robust_stds(np.concatenate((a, s)))
+                self._spread = {"accel": both[:2], "size": both[2:]}
+            else:
+                self._spread = {"accel": robust_stds(a), "size": robust_stds(s)}
+            self._spread_key = key
+        return self._spread[name]
 
     def sigma_v(self) -> Optional[float]:
         """Measured acceleration std per frame (fraction of w, h), 0 when the observation
         noise explains the residuals; None before :data:`MIN_SAMPLES` triplets."""
         if len(self.accel) < MIN_SAMPLES:
             return None
-        a = self.accel.rows()
-        s = max(robust_std(a[:, 0]), robust_std(a[:, 1]))
+        sx, sy = self._spreads("accel").tolist()
+        s = max(sx, sy)
         return math.sqrt(max(0.0, 2.0 * (s * s - 6.0 * self.pos_std ** 2)))
 
     def sigma_size(self) -> Optional[float]:
@@ -199,10 +234,9 @@ class SceneMotion:
         jitter explains the changes; None before :data:`MIN_SAMPLES` triplets."""
         if len(self.size) < 2 * MIN_SAMPLES:
             return None
-        s = self.size.rows()
-        one, two = robust_std(s[:, 0]), robust_std(s[:, 1])
+        one, two = self._spreads("size").tolist()
         # the difference of two sampled variances is noisy (Var(ŝ²) ≈ 2 s⁴ / n each): only
         # its excess over two standard errors is motion, or a jittery detector whose boxes do
         # not change size at all would read as a size noise of ~0.07-0.1 from sampling alone
-        margin = 2.0 * math.sqrt(2.0 * (one ** 4 + two ** 4) / len(s))
+        margin = 2.0 * math.sqrt(2.0 * (one ** 4 + two ** 4) / len(self.size))
         return math.sqrt(max(0.0, two * two - one * one - margin))

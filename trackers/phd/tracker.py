@@ -392,14 +392,16 @@ class PHDTracker(_AssociatingTracker):
         self.scene_motion = (SceneMotion(lk.sigma_obs * lk.sigma_obs_pos_ratio)
                              if self.params.rate.per_second and self.params.rate.learn_motion
                              else None)
+        #: (preset settings, learnt values, filter settings) of the last _learn_scene
+        self._scene_last: Optional[tuple] = None
 
-    def _learn_scene(self, frame: Frame, dets: Detections) -> None:
+    def _learn_scene(self, frame: Frame, boxes: np.ndarray) -> None:
         """What the scene's detections teach the filter, on top of the preset at this frame
         rate: the likelihood width the detector's jitter calls for (``noise.learn_width``,
         :mod:`.scene_noise`) and the motion noise raised to what the scene measures
-        (``rate.learn_motion``, :mod:`.scene_motion`)."""
+        (``rate.learn_motion``, :mod:`.scene_motion`).  ``boxes``: the frame's detections
+        ``(cx, cy, w, h)``."""
         fp = self.active.filter
-        boxes = xywh_to_cxcywh(dets.boxes)
         want = fp
         if self.jitter is not None:
             self.jitter.see(frame.index, boxes, fp.clutter.clutter_memory)
@@ -413,10 +415,20 @@ class PHDTracker(_AssociatingTracker):
             sm.pos_std = want.likelihood.sigma_obs * want.likelihood.sigma_obs_pos_ratio
             sv, ss = sm.sigma_v(), sm.sigma_size()
             self.associator.scene_sigma_v = sv or 0.0
-            want = replace(want, motion=replace(fp.motion, sigma_v=max(fp.motion.sigma_v, sv or 0.0),
-                                                sigma_size=max(fp.motion.sigma_size, ss or 0.0)))
+            sv, ss = max(fp.motion.sigma_v, sv or 0.0), max(fp.motion.sigma_size, ss or 0.0)
+            # the same settings as the last frame's: nothing to build or compare (two
+            # dataclass replaces and a deep comparison, ~0.1 ms a frame)
+            key = (want.likelihood.sigma_obs, sv, ss)
+            last = self._scene_last
+            if last is not None and last[0] is fp and last[1] == key \
+                    and last[2] is self.filter.params:
+                return
+            want = replace(want, motion=replace(fp.motion, sigma_v=sv, sigma_size=ss))
+        else:
+            key = (want.likelihood.sigma_obs,)
         if want != self.filter.params:
             self.filter.set_params(want)
+        self._scene_last = (fp, key, self.filter.params)
 
     def _retime_filter(self, ratio: float) -> None:
         self.filter.set_params(self.active.filter)
@@ -433,12 +445,13 @@ class PHDTracker(_AssociatingTracker):
              level: Optional[str] = None) -> StepResult:
         dets = detections if detections is not None else Detections.empty()
         self._retime(frame)
+        z = xywh_to_cxcywh(dets.boxes)      # read-only below: one conversion a frame
         if self.jitter is not None or self.scene_motion is not None:
-            self._learn_scene(frame, dets)
+            self._learn_scene(frame, z)
         log = StageLog(self.stages, level)
         revive = None
         if self.active.filter.birth.revive_odds > 0 and len(dets):
-            revive = self.associator.returning(frame.index, xywh_to_cxcywh(dets.boxes))
+            revive = self.associator.returning(frame.index, z)
         r = self.filter.step(dets, frame, revive)
         cp = self.params.clusters
         clusters = kmeans_peaks(r.resampled, r.observations, cp.T, params=self.filter.params,
