@@ -4,8 +4,11 @@ the likelihood's two routes, Algorithm 3, and the tracker through the one pipeli
 from __future__ import annotations
 
 import functools
+import os
+import pickle
 import subprocess
 import sys
+import zipfile
 
 import cv2
 import numpy as np
@@ -16,6 +19,7 @@ from pfscope.trackers.data.sources import open_source
 from pfscope.trackers.data.synthetic import SceneConfig
 from pfscope.trackers.dbn.codebook import BackgroundParams, Codebook, blobs_from_mask
 from pfscope.trackers.dbn.features import FeatureConfig, FrameFeatures, describe_brute_force
+from pfscope.trackers.dbn import weights as dbn_weights
 from pfscope.trackers.dbn.tracker import resample_alg3
 from pfscope.trackers.errors import InputError
 from pfscope.trackers.pipeline import run
@@ -162,10 +166,41 @@ def test_model_save_load_round_trip(tmp_path):
     m = _small_model(0)
     path = m.save(tmp_path / "m.pt")
     assert path.stat().st_size < 2_000_000
-    back = dbn_model.load_model(path)
     X, _ = _toy_features(1, 50)
-    np.testing.assert_array_equal(m.logits(X), back.logits(X))
-    assert back.features == m.features and back.info["seed"] == 0
+    # torch's loader and the tracker's torch-free one (weights.load_weights) read the same net
+    for back in (dbn_model.load_model(path), dbn_weights.load_weights(path)):
+        np.testing.assert_array_equal(m.logits(X), back.logits(X))
+        assert back.features == m.features and back.hidden == m.hidden
+        assert back.info == dbn_model.load_model(path).info and back.info["seed"] == 0
+
+
+def test_the_tracker_reads_its_model_without_torch():
+    # the shipped model's weights equal torch's reading of it, and a DBN-PHD tracker is built
+    # (model read) in a process that never imports torch
+    X = np.random.default_rng(0).random((40, dbn_model.default_model().features.dim))
+    np.testing.assert_array_equal(dbn_weights.default_weights().logits(X),
+                                  dbn_model.default_model().logits(X))
+    code = ("import sys; from pfscope.trackers.api import make_tracker; "
+            "t = make_tracker('dbn-phd', seed=0); assert t.dbn is not None; "
+            "print('torch' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "False"
+
+
+def test_a_model_file_runs_no_code(tmp_path):
+    # a pickle naming any global but the tensor rebuild and storages is refused, not run
+    class Evil:
+        def __reduce__(self):
+            return (os.makedirs, (str(tmp_path / "ran"),))
+
+    evil = tmp_path / "evil.pt"
+    with zipfile.ZipFile(evil, "w") as z:
+        z.writestr("evil/data.pkl", pickle.dumps({"format": "pfscope-dbn", "x": Evil()}))
+    with pytest.raises(InputError, match="not a pfscope DBN model"):
+        dbn_weights.load_weights(evil)
+    assert not (tmp_path / "ran").exists()
 
 
 def test_a_bad_model_file_gives_one_clear_line(tmp_path):
@@ -184,10 +219,11 @@ def test_a_bad_model_file_gives_one_clear_line(tmp_path):
     for path, words in ((junk, "not a pfscope DBN model"), (wrong, "format tag"),
                         (old, "version 999"), (broken, "does not match"),
                         (tmp_path / "missing.pt", "no such")):
-        with pytest.raises(InputError) as e:
-            dbn_model.load_model(path)
-        msg = str(e.value)
-        assert str(path) in msg and words in msg and "\n" not in msg
+        for load in (dbn_model.load_model, dbn_weights.load_weights):
+            with pytest.raises(InputError) as e:
+                load(path)
+            msg = str(e.value)
+            assert str(path) in msg and words in msg and "\n" not in msg, (load, msg)
     with pytest.raises(InputError, match="no such DBN model"):
         make_tracker("dbn-phd", model=str(tmp_path / "missing.pt"))
 
@@ -316,6 +352,8 @@ def test_baseline_runs_without_the_dbn(monkeypatch):
 
     monkeypatch.setattr(dbn_model, "default_model", no_dbn)
     monkeypatch.setattr(dbn_model, "load_model", no_dbn)
+    monkeypatch.setattr(dbn_weights, "default_weights", no_dbn)
+    monkeypatch.setattr(dbn_weights, "load_weights", no_dbn)
     res = run(_scene(), [make_tracker("phd-bgsub", seed=0)], level="particles")
     assert res.outcome.status == "completed" and res.frames == 30
     # every foreground blob is a person to it: precision measured 0.76-0.79, recall

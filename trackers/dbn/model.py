@@ -52,13 +52,10 @@ from typing import Callable, Iterable, Optional
 
 import numpy as np
 import torch
-from scipy.special import expit
 
 from ..errors import InputError
 from .features import FeatureConfig, FrameFeatures
-
-FORMAT = "pfscope-dbn"
-VERSION = 1
+from .weights import FORMAT, SHIPPED, VERSION, check_rows, check_state, forward, shipped
 
 
 @contextmanager
@@ -150,9 +147,7 @@ class DBNModel:
         call (the tracker asks for a few rows at a time, several times a frame: torch's
         per-call dispatch cost more than the products; :meth:`torch_logits` is the same
         network in torch, equal to float rounding — tested)."""
-        X = np.asarray(X, dtype=np.float64)
-        if X.ndim != 2 or X.shape[1] != self.features.dim:
-            raise ValueError(f"DBN: expected features (N, {self.features.dim}), got {X.shape}")
+        X = check_rows(X, self.features.dim)
         if len(X) == 0:
             return np.zeros(0)
         if self._layers is None:
@@ -162,11 +157,7 @@ class DBNModel:
                      for r in self.net.rbms],
                     self.net.out.weight.detach().numpy()[0].copy(),
                     float(self.net.out.bias.detach()[0]))
-        rbms, w_out, b_out = self._layers
-        h = X
-        for W, b in rbms:
-            h = expit(h @ W + b)
-        return h @ w_out + b_out
+        return forward(self._layers, X)
 
     @torch.no_grad()
     def torch_logits(self, X: np.ndarray) -> np.ndarray:
@@ -214,21 +205,15 @@ def load_model(path) -> DBNModel:
     except Exception as e:  # noqa: BLE001 - any unreadable file is the user's input
         msg = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
         raise InputError(f"{path}: not a pfscope DBN model ({msg[:120]})") from None
-    if not isinstance(st, dict) or st.get("format") != FORMAT:
-        raise InputError(f"{path}: not a pfscope DBN model (no '{FORMAT}' format tag)")
-    if st.get("version") != VERSION:
-        raise InputError(f"{path}: DBN model version {st.get('version')!r}, this pfscope reads "
-                         f"version {VERSION}; retrain it with `pfscope train-dbn`")
+    cfg, hidden, info = check_state(path, st)
     try:
-        cfg = FeatureConfig(**st["features"])
-        hidden = tuple(int(h) for h in st["hidden"])
         net = DBN(cfg.dim, hidden, torch.Generator().manual_seed(0))
         net.load_state_dict(st["weights"])
     except Exception as e:  # noqa: BLE001
         raise InputError(f"{path}: DBN model does not match its layout "
                          f"({type(e).__name__}: {str(e).splitlines()[0][:120]})") from None
     net.eval()
-    return DBNModel(net, cfg, hidden, dict(st.get("info") or {}))
+    return DBNModel(net, cfg, hidden, info)
 
 
 # ----------------------------------------------------------------------------- training
@@ -503,7 +488,6 @@ def collect_samples(source, frames: Iterable[int], *, features: FeatureConfig = 
 #: person and non-person crops of the development sequences PETS09-S2L1 and PETS09-S3MF1 by the
 #: command in :data:`SHIPPED_COMMAND` (same seed → same file; its info records the people's
 #: described height, ``box_height`` 41.8 px, which the tracker describes boxes at).
-SHIPPED = Path(__file__).with_name("people_dbn.pt")
 SHIPPED_COMMAND = ("pfscope train-dbn ../shared/data/PETS09-S2L1 ../shared/data/PETS09-S3MF1 "
                    "--holdout 0 --augment --stride 3 --batch 256 --seed 0 "
                    "--out trackers/dbn/people_dbn.pt")

@@ -75,7 +75,8 @@ per measurement.  Two readings:
   (``s(x) − max_{x' gated to z} s(x')``: the best particle of every blob keeps factor 1, so
   the score shapes the cloud inside a blob without moving the blob's total against κ).
 
-torch is loaded only when the tracker is built with the DBN on (never by the registry).
+The tracker reads its model's weights without torch (:mod:`.weights`); torch is loaded only
+to train one (``pfscope train-dbn``).
 """
 
 from __future__ import annotations
@@ -226,9 +227,10 @@ class DBNPHDTracker(_AssociatingTracker):
         self.dbn: Optional[DBNLikelihood] = None
         if dp.use_dbn:
             if model is None:
-                from .model import default_model, load_model  # torch, on demand
+                # the weights in numpy, read without importing torch (~2.6 s of CPU)
+                from .weights import default_weights, load_weights
 
-                model = load_model(dp.model) if dp.model else default_model()
+                model = load_weights(dp.model) if dp.model else default_weights()
             self.dbn = DBNLikelihood(model, dp, self.params.filter.likelihood)
         # the filter's parts; its likelihood is the DBN one (or maggio2007's Gaussian)
         self.filter = PHDFilter(self.params.filter, rng, likelihood=self.dbn)

@@ -55,9 +55,10 @@ DEFAULT_BUDGET = 1_000_000
 def tail_radius2(tail: float, dof: int = 4) -> float:
     """Squared Mahalanobis radius ``r²`` with ``P(χ²_dof > r²) = tail`` (``isf``, accurate for
     tiny tails where ``ppf(1 − tail)`` would round)."""
-    from scipy.stats import chi2  # slow to import; once per value
+    # scipy.stats.chi2.isf's own formula (the same float) without importing scipy.stats
+    from scipy.special import chdtri
 
-    return float(chi2.isf(tail, dof))
+    return float(chdtri(dof, tail))
 
 
 @dataclass(frozen=True)
