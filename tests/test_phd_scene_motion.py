@@ -202,3 +202,20 @@ def test_robust_spread_is_the_winsorised_mean_of_the_last_window_oldest_first():
     assert sm.sigma_v() == first
     sm.accel.extend(rng.normal(0, 0.5, (2, S.MIN_SAMPLES)))
     assert sm.sigma_v() > 1.5 * first
+
+
+def test_phd_mt_links_each_frame_once_for_learner_and_score_model():
+    # practical PHD-MT: the scene learner and the score model's persistence labels read one
+    # Chains, linked once a frame (a second observe of the same frame does not move it on)
+    tr = make_tracker("phd", seed=0)
+    assert tr.filter.scene.chains is tr.scene_motion.chains
+    img = blank_image(240, 320)
+    for k in range(1, 6):
+        boxes = np.array([[20.0 + 5 * k, 50.0, 20.0, 50.0], [200.0 - 4 * k, 60.0, 22.0, 55.0]])
+        tr.step(Frame(k, k / 25.0, img), Detections(boxes, np.array([0.9, 0.8])))
+    ch = tr.scene_motion.chains
+    # both people continue their chain over the four earlier frames (not 8: one link a frame)
+    assert ch.length.tolist() == [4, 4]
+    before = ch.length.copy()
+    ch.observe(np.array([[0.0, 0.0, 1.0, 1.0]]), key=5)
+    assert ch.length.tolist() == before.tolist()

@@ -588,7 +588,8 @@ class SceneModel:
         else:
             log_kappa = log_clutter_density(Z, self.cl, self.lk)
         if self.uses_scores and self.sp.persist_frames > 0:
-            self.chains.observe(Z)
+            # a no-op when the frame was linked already (PHD-MT shares its scene learner's)
+            self.chains.observe(Z, None if frame is None else frame.index)
             self._persist = self.chains.length >= self.sp.persist_frames
         if self.uses_scores and scores is not None and len(Z):
             return log_kappa, log_kappa - self.log_score_ratio(scores)

@@ -146,16 +146,24 @@ class Chains:
     clutter seldom finds a mutual nearest neighbour of similar size within one box size in the
     previous frame, so it mostly continues nothing (false detections that repeat in place make
     chains too: :mod:`.clutter`'s place model is what tells those apart).  Deterministic; an
-    empty frame breaks every chain."""
+    empty frame breaks every chain.  One instance may serve several readers (PHD-MT's scene
+    learner and its score model link the same detections): a second ``observe`` with the
+    frame's ``key`` already seen returns that frame's links without moving on."""
 
     def __init__(self):
         self.prev = np.zeros((0, 4))                    # last frame's detections
         self.prev_link = np.zeros(0, dtype=np.int64)    # their links into the frame before
         self.length = np.zeros(0, dtype=np.int64)       # chain length of the last frame's
+        self.key = None                                 # the last frame's key (observe)
 
-    def observe(self, Z: np.ndarray) -> np.ndarray:
+    def observe(self, Z: np.ndarray, key=None) -> np.ndarray:
         """This frame's detections (N, 4) ``(cx, cy, w, h)``: their links into the previous
-        frame (:func:`link`, −1 where none); :attr:`length` and :attr:`prev` move on."""
+        frame (:func:`link`, −1 where none); :attr:`length` and :attr:`prev` move on.  ``key``
+        (e.g. the frame index): when it equals the last call's, the frame was observed
+        already and its links are returned as they are."""
+        if key is not None and key == self.key:
+            return self.prev_link
+        self.key = key
         Z = np.asarray(Z, dtype=np.float64).reshape(-1, 4)
         j = link(self.prev, Z)
         length = np.zeros(len(Z), dtype=np.int64)
@@ -181,12 +189,14 @@ class SceneMotion:
         self._spread: dict[str, np.ndarray] = {}
         self._spread_key: Optional[tuple[int, int]] = None
 
-    def observe(self, Z: np.ndarray) -> None:
-        """One frame's detections (N, 4) ``(cx, cy, w, h)``; an empty frame breaks the links."""
+    def observe(self, Z: np.ndarray, key=None) -> None:
+        """One frame's detections (N, 4) ``(cx, cy, w, h)``; an empty frame breaks the links.
+        ``key``: the frame's key for :class:`Chains` (shared with a reader that observes the
+        same frame after this)."""
         Z = np.asarray(Z, dtype=np.float64).reshape(-1, 4)
         ch = self.chains
         prev, prev_link = ch.prev, ch.prev_link
-        j = ch.observe(Z)
+        j = ch.observe(Z, key)
         has = np.flatnonzero(j >= 0)
         if len(has):
             jh = j[has]

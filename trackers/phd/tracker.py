@@ -392,6 +392,10 @@ class PHDTracker(_AssociatingTracker):
         self.scene_motion = (SceneMotion(lk.sigma_obs * lk.sigma_obs_pos_ratio)
                              if self.params.rate.per_second and self.params.rate.learn_motion
                              else None)
+        if self.scene_motion is not None:
+            # the score model's persistence labels link the same detections each frame: one
+            # Chains for both (observed first in _learn_scene, keyed by the frame index)
+            self.filter.scene.chains = self.scene_motion.chains
         #: (preset settings, learnt values, filter settings) of the last _learn_scene
         self._scene_last: Optional[tuple] = None
 
@@ -410,7 +414,7 @@ class PHDTracker(_AssociatingTracker):
             want = replace(want, likelihood=replace(fp.likelihood, sigma_obs=width))
         if self.scene_motion is not None:
             sm = self.scene_motion
-            sm.observe(boxes)
+            sm.observe(boxes, frame.index)
             # the residuals the likelihood explains: the learnt width's when there is one
             sm.pos_std = want.likelihood.sigma_obs * want.likelihood.sigma_obs_pos_ratio
             sv, ss = sm.sigma_v(), sm.sigma_size()
