@@ -67,3 +67,15 @@ def read_rrd(path, footer: bool = True) -> dict:
 
 def rows_at(rec: dict, entity: str, frame: int) -> list:
     return [c for t, c in rec.get(entity, []) if t.get("frame") == frame]
+
+
+def imported_in_fresh_process(code: str, module: str) -> bool:
+    """Run ``code`` in a fresh interpreter and tell whether it left ``module`` imported (a
+    start-up that must not pay for a heavy import)."""
+    import subprocess
+    import sys
+
+    out = subprocess.run([sys.executable, "-c", f"{code}\nimport sys; print({module!r} in sys.modules)"],
+                         capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    return out.stdout.strip().splitlines()[-1] == "True"

@@ -1,11 +1,10 @@
 """The gate radii are chi-square quantiles computed without importing scipy.stats (its import
 cost ~1.4 s of CPU at every start-up): the same floats as scipy.stats.chi2."""
 
-import subprocess
-import sys
-
 import numpy as np
 from scipy.stats import chi2
+
+from conftest import imported_in_fresh_process
 
 from pfscope.trackers.phd.filter import gate_threshold
 from pfscope.trackers.phd.gating import tail_radius2
@@ -20,10 +19,7 @@ def test_gate_radii_equal_scipy_stats_chi2():
 
 
 def test_radii_do_not_import_scipy_stats():
-    code = ("import sys; from pfscope.trackers.phd.filter import gate_threshold; "
+    code = ("from pfscope.trackers.phd.filter import gate_threshold; "
             "from pfscope.trackers.phd.gating import tail_radius2; "
-            "gate_threshold(0.99, 4); tail_radius2(1e-6, 4); print('scipy.stats' in sys.modules)")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                         timeout=120)
-    assert out.returncode == 0, out.stderr
-    assert out.stdout.strip() == "False"
+            "gate_threshold(0.99, 4); tail_radius2(1e-6, 4)")
+    assert not imported_in_fresh_process(code, "scipy.stats")
