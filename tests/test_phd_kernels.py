@@ -395,6 +395,32 @@ def test_dense_lloyd_compiles_none_of_the_grid_search(tmp_path):
     assert out == ["0", "0", "1"]
 
 
+
+def test_first_run_helper_compiles_no_zeros_or_builtin_minmax_overloads(tmp_path):
+    """The first-run helper's share (resampling walk, dense K-means, association kernels:
+    ``warmup._compile_helper_share``) allocates with ``np.empty`` and spells ``max``/``min``
+    out, so numba compiles none of ``np.zeros``' overloads (nor their zero fills) and no
+    builtin max/min overload for it (~1 s of CPU of the first run).  A fresh process with an
+    empty numba cache, numba's compile events recorded."""
+    import os
+    import subprocess
+    import sys
+
+    code = ("from numba.core import event as ev\n"
+            "with ev.install_recorder('numba:compile') as r:\n"
+            "    from pfscope.trackers.warmup import _compile_helper_share\n"
+            "    _compile_helper_share()\n"
+            "names = {getattr(getattr(e.data['dispatcher'], 'py_func', None), '__qualname__',\n"
+            "                 '?') for _, e in r.buffer if e.is_start}\n"
+            "print('\\n'.join(sorted(names)))\n")
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)}
+    names = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True,
+                           text=True, timeout=900, check=True).stdout.split()
+    assert {"lloyd", "prepare", "farthest", "edge_scores", "iou"} <= set(names)
+    unwanted = [n for n in names
+                if n.split(".")[0] in ("ol_np_zeros", "ol_array_zero_fill", "ol_max", "ol_min")]
+    assert unwanted == []
+
 def test_farthest_member_is_numpys_per_cluster_argmax():
     """``farthest``: every cluster's member with the largest d² in one pass, as
     ``members[argmax(dmin[members])]`` (first of ties, first NaN), -1 for an empty cluster."""

@@ -88,10 +88,21 @@ def iou(a, b):
         for j in range(B):
             bw = b[j, 2] / 2
             bh = b[j, 3] / 2
-            lo0 = max(a[i, 0] - aw, b[j, 0] - bw)
-            lo1 = max(a[i, 1] - ah, b[j, 1] - bh)
-            hi0 = min(a[i, 0] + aw, b[j, 0] + bw)
-            hi1 = min(a[i, 1] + ah, b[j, 1] + bh)
+            # max(x, y) and min(x, y) spelt out by numba's own rule (y if y > x else x; y if
+            # y < x else x): the first run then compiles no builtin max / min overload for
+            # the helper process's kernels (K-means, association, resampling walk)
+            x = a[i, 0] - aw
+            y = b[j, 0] - bw
+            lo0 = y if y > x else x
+            x = a[i, 1] - ah
+            y = b[j, 1] - bh
+            lo1 = y if y > x else x
+            x = a[i, 0] + aw
+            y = b[j, 0] + bw
+            hi0 = y if y < x else x
+            x = a[i, 1] + ah
+            y = b[j, 1] + bh
+            hi1 = y if y < x else x
             e0 = hi0 - lo0
             e1 = hi1 - lo1
             inter = (e0 if e0 > 0.0 else 0.0) * (e1 if e1 > 0.0 else 0.0)

@@ -21,8 +21,12 @@ def _inv_var(centers, sigma_obs, sigma_min, pos_ratio):
     K = centers.shape[0]
     inv = np.empty((K, 4), np.float64)
     for c in range(K):
-        sw = max(sigma_obs * centers[c, 4], sigma_min)
-        sh = max(sigma_obs * centers[c, 5], sigma_min)
+        # (max(a, b) spelt out -- b if b > a else a, numba's own rule -- so the first run
+        # compiles no builtin-max overload for the dense K-means)
+        sw = sigma_obs * centers[c, 4]
+        sw = sigma_min if sigma_min > sw else sw
+        sh = sigma_obs * centers[c, 5]
+        sh = sigma_min if sigma_min > sh else sh
         a = pos_ratio * sw
         b = pos_ratio * sh
         inv[c, 0] = 1.0 / (a * a)
@@ -574,7 +578,9 @@ def prepare(states, log_w):
         elif log_w[i] != log_w[i]:                 # NaN: np.max's answer
             lmax = np.nan
             break
-    shift = np.zeros(6, np.float64)
+    shift = np.empty(6, np.float64)
+    for d in range(6):
+        shift[d] = 0.0
     w = np.empty(n, np.float64)
     S = np.empty((n, 6), np.float64)
     X = np.empty((n, 4), np.float64)
@@ -627,24 +633,35 @@ def lloyd(X, S, w, centers, max_iter, tol, sigma_obs, sigma_min, pos_ratio, grid
     K = centers.shape[0]
     D = S.shape[1]
     # (one spelling per dtype for every allocation of the kernels: each distinct np.zeros /
-    # np.empty / np.full signature is one more numba compile on the first run)
+    # np.empty / np.full signature is one more numba compile on the first run; np.empty
+    # filled by loops, no np.zeros: the dense K-means then compiles none of np.zeros'
+    # overloads, nor their zero fills)
     labels = np.empty(n, np.int64)
     new = np.empty(n, np.int64)
+    dmin = np.empty(n, np.float64)
+    reach = np.empty(n, np.float64)
     for i in range(n):
         labels[i] = -1
         new[i] = -1
-    dmin = np.zeros(n, np.float64)
-    reach = np.zeros(n, np.float64)
-    m = np.zeros(K, np.float64)
-    sums = np.zeros((K, D), np.float64)
-    stable = np.zeros(K, np.bool_)
-    moved = np.zeros(K, np.bool_)
-    touched = np.zeros(K, np.bool_)
+        dmin[i] = 0.0
+        reach[i] = 0.0
+    m = np.empty(K, np.float64)
+    sums = np.empty((K, D), np.float64)
+    stable = np.empty(K, np.bool_)
+    moved = np.empty(K, np.bool_)
+    touched = np.empty(K, np.bool_)
+    reach_c = np.empty(K, np.float64)
     for c in range(K):
+        m[c] = 0.0
+        for d in range(D):
+            sums[c, d] = 0.0
+        stable[c] = False
         moved[c] = True
         touched[c] = True
-    reach_c = np.zeros(K, np.float64)
-    space = np.zeros(4, np.float64)
+        reach_c[c] = 0.0
+    space = np.empty(4, np.float64)
+    for d in range(4):
+        space[d] = 0.0
     it = 0
     done = False
     for it in range(1, max_iter + 1):
@@ -712,7 +729,8 @@ def lloyd(X, S, w, centers, max_iter, tol, sigma_obs, sigma_min, pos_ratio, grid
                 for d in range(D):
                     val = sums[c, d] / m[c]
                     if d == 0 or d == 1 or d == 4 or d == 5:
-                        step = max(step, abs(val - centers[c, d]))
+                        a = abs(val - centers[c, d])
+                        step = a if a > step else step          # max(step, a)
                         if val != centers[c, d]:
                             moved[c] = True
                     centers[c, d] = val
@@ -729,7 +747,9 @@ def lloyd(X, S, w, centers, max_iter, tol, sigma_obs, sigma_min, pos_ratio, grid
             _assign(X, centers, inv, labels, new, dmin, grid_min, _min_inv(inv), stable, reach)
         for i in range(n):
             labels[i] = new[i]
-    masses = np.zeros(K, np.float64)
+    masses = np.empty(K, np.float64)
+    for c in range(K):
+        masses[c] = 0.0
     for i in range(n):
         masses[labels[i]] += w[i]
     return centers, labels, masses, dmin, it
