@@ -752,6 +752,25 @@ def test_codebook_kernel_equals_the_numpy_reference_frame_after_frame():
     assert ma[10:30, 41:44].all()                      # the mover's leading edge is foreground
 
 
+def test_codebook_storage_is_pixel_major_and_the_slot_views_share_it():
+    """The kernel walks pixels: a pixel's codewords are adjacent in the storage it gets, and
+    the (L, P) attributes the numpy code writes are views of that same memory."""
+    from pfscope.trackers.dbn.codebook import _Book
+
+    P, L = 50, 4
+    b = _Book(P, L)
+    store = dict(zip(_Book.FIELDS, b.pixel_major()))
+    for name, arr in store.items():
+        assert arr.flags.c_contiguous and arr.shape[:2] == (P, L), name
+        assert getattr(b, name).shape[:2] == (L, P), name
+    b.f[2, 7] = 9                                   # a numpy-side write reaches the kernel's
+    b.v[1, 3] = (1.0, 2.0, 3.0)
+    assert store["f"][7, 2] == 9 and store["v"][3, 1].tolist() == [1.0, 2.0, 3.0]
+    b.update(np.array([5]), np.array([3]), np.full((P, 3), 10, np.float32),
+             np.full(P, 17.0, np.float32), 4)
+    assert store["f"][5, 3] == 1 and store["q"][5, 3] == 4
+
+
 def test_person_scale_learns_the_height_line_of_the_scene_and_ignores_merged_blobs():
     """Heights on a perspective line (people further up the image look smaller), 3x the
     size anything in the defaults assumes, plus wide two-person blobs and a few too-tall ones:
