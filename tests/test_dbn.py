@@ -528,6 +528,27 @@ def test_person_blobs_are_positives_and_partial_blobs_are_left_out():
     assert tuple(blobs[1]) not in got
 
 
+def test_bin_integrals_equal_cv2_integral_of_the_bin_maps_float_for_float():
+    """The one-pass kernel (no one-hot maps) adds in cv2.integral's order: the same floats,
+    on a whole image and on a region of a crop (the crop route's margin cut off)."""
+    from pfscope.trackers.dbn.features import bin_integrals, bin_maps, integral
+
+    cfg = FeatureConfig()
+    rng = np.random.default_rng(7)
+    img = _image(5)
+    noisy = np.clip(img + rng.normal(0, 20, img.shape), 0, 255).astype(np.uint8)
+    for im, region in ((img, None), (noisy, None), (noisy[3:70, 5:60], (slice(1, 66),
+                                                                         slice(1, 54)))):
+        hm, cm = bin_maps(im, cfg)
+        if region is not None:
+            hm, cm = hm[region], cm[region]
+        ih, ic = bin_integrals(im, cfg, region)
+        assert ih.shape == (hm.shape[0] + 1, hm.shape[1] + 1, cfg.orientations)
+        assert ic[-1, -1].sum() == hm.shape[0] * hm.shape[1]      # every pixel in one bin
+        np.testing.assert_array_equal(ih, integral(np.ascontiguousarray(hm)))
+        np.testing.assert_array_equal(ic, integral(np.ascontiguousarray(cm)))
+
+
 def test_hue_rotation_augmentation_rolls_hue_bins_only():
     cfg = FeatureConfig()
     img = _image(4)

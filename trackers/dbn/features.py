@@ -82,31 +82,52 @@ class FeatureConfig:
         return asdict(self)
 
 
-def bin_maps(image: np.ndarray, cfg: FeatureConfig) -> tuple[np.ndarray, np.ndarray]:
-    """Per-pixel bin maps of a BGR uint8 image: ``hog (H, W, O)`` gradient magnitude in its
-    orientation bin, ``colour (H, W, Hb + G)`` one-hot colour bin.  float64."""
+def bin_indices(image: np.ndarray, cfg: FeatureConfig
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per-pixel bins of a BGR uint8 image: ``(ob (H, W) int64, mag (H, W) float32,
+    cb (H, W) int64)`` — the unsigned-orientation bin of the gradient, its magnitude, and the
+    colour bin (hue bin for a chromatic pixel, else ``hue_bins`` + value bin)."""
     img = image if image.ndim == 3 else cv2.cvtColor(image, cv2.COLOR_GRAY2BGR)
-    H, W = img.shape[:2]
     grey = cv2.cvtColor(img, cv2.COLOR_BGR2GRAY).astype(np.float32)
     gx = cv2.Sobel(grey, cv2.CV_32F, 1, 0, ksize=1)   # centred [-1, 0, 1] (Dalal–Triggs)
     gy = cv2.Sobel(grey, cv2.CV_32F, 0, 1, ksize=1)
     mag = np.sqrt(gx * gx + gy * gy)
     ang = np.mod(np.arctan2(gy, gx), np.pi)            # unsigned orientation
     ob = np.minimum((ang * (cfg.orientations / np.pi)).astype(np.int64), cfg.orientations - 1)
-    n = H * W
-    pix = np.arange(n)
-    hog = np.zeros((H, W, cfg.orientations))
-    hog.reshape(n, -1)[pix, ob.reshape(-1)] = mag.reshape(-1)   # one-hot by orientation bin
 
     hsv = cv2.cvtColor(img, cv2.COLOR_BGR2HSV)          # H in [0, 180), S, V in [0, 255]
     h, s, v = hsv[..., 0].astype(np.int64), hsv[..., 1], hsv[..., 2]
     chrom = (s >= cfg.sat_min * 255) & (v >= cfg.val_min * 255)
     hb = np.minimum(h * cfg.hue_bins // 180, cfg.hue_bins - 1)
     gb = cfg.hue_bins + np.minimum(v.astype(np.int64) * cfg.grey_bins // 256, cfg.grey_bins - 1)
-    cb = np.where(chrom, hb, gb)
+    return ob, mag, np.where(chrom, hb, gb)
+
+
+def bin_maps(image: np.ndarray, cfg: FeatureConfig) -> tuple[np.ndarray, np.ndarray]:
+    """Per-pixel bin maps of a BGR uint8 image: ``hog (H, W, O)`` gradient magnitude in its
+    orientation bin, ``colour (H, W, Hb + G)`` one-hot colour bin.  float64."""
+    ob, mag, cb = bin_indices(image, cfg)
+    H, W = ob.shape
+    n = H * W
+    pix = np.arange(n)
+    hog = np.zeros((H, W, cfg.orientations))
+    hog.reshape(n, -1)[pix, ob.reshape(-1)] = mag.reshape(-1)   # one-hot by orientation bin
     colour = np.zeros((H, W, cfg.colour_bins))
     colour.reshape(n, -1)[pix, cb.reshape(-1)] = 1.0
     return hog, colour
+
+
+def bin_integrals(image: np.ndarray, cfg: FeatureConfig,
+                  region: tuple[slice, slice] | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`integral` of both :func:`bin_maps` of ``image`` (restricted to ``region`` of it,
+    after the gradients), in one numba pass from :func:`bin_indices` without the maps
+    (:mod:`._feature_kernels`): the same floats."""
+    from ._feature_kernels import one_hot_integrals
+
+    ob, mag, cb = bin_indices(image, cfg)
+    if region is not None:
+        ob, mag, cb = ob[region], mag[region], cb[region]
+    return one_hot_integrals(ob, mag, cb, cfg.orientations, cfg.colour_bins)
 
 
 def integral(maps: np.ndarray) -> np.ndarray:
@@ -205,8 +226,7 @@ class FrameFeatures:
 
     def _integrals(self) -> tuple[np.ndarray, np.ndarray]:
         if self._ii is None:
-            hog, colour = bin_maps(self.image, self.cfg)
-            self._ii = (integral(hog), integral(colour))
+            self._ii = bin_integrals(self.image, self.cfg)
         return self._ii
 
     def edges(self, boxes_xywh: np.ndarray, rows: int, cols: int):
@@ -239,10 +259,10 @@ class FrameFeatures:
                                                                    c.colour_bins)), c)
         cy0, cx0 = max(y0 - 1, 0), max(x0 - 1, 0)
         crop = self.image[cy0:min(y1 + 1, self.height), cx0:min(x1 + 1, self.width)]
-        hm, cm = bin_maps(crop, c)
         region = (slice(y0 - cy0, y1 - cy0), slice(x0 - cx0, x1 - cx0))
-        hog = _cell_sums(integral(np.ascontiguousarray(hm[region])), yh - y0, xh - x0)
-        col = _cell_sums(integral(np.ascontiguousarray(cm[region])), yc - y0, xc - x0)
+        ii_hog, ii_col = bin_integrals(crop, c, region)
+        hog = _cell_sums(ii_hog, yh - y0, xh - x0)
+        col = _cell_sums(ii_col, yc - y0, xc - x0)
         return _normalise(hog.reshape(n, -1), col[:, :, 0, :], c)
 
     def describe(self, boxes_xywh: np.ndarray) -> np.ndarray:
@@ -266,14 +286,12 @@ class FrameFeatures:
             for i in np.flatnonzero(area > 0):          # a few boxes (the blobs), not particles
                 cy0, cx0 = max(y0[i] - 1, 0), max(x0[i] - 1, 0)
                 crop = self.image[cy0:min(y1[i] + 1, self.height), cx0:min(x1[i] + 1, self.width)]
-                hm, cm = bin_maps(crop, c)
                 sy, sx = y0[i] - cy0, x0[i] - cx0
                 region = (slice(sy, sy + y1[i] - y0[i]), slice(sx, sx + x1[i] - x0[i]))
+                ii_hog, ii_col = bin_integrals(crop, c, region)
                 oy, ox = y0[i], x0[i]
-                hog[i] = _cell_sums(integral(np.ascontiguousarray(hm[region])),
-                                    yh[i:i + 1] - oy, xh[i:i + 1] - ox)[0]
-                col[i] = _cell_sums(integral(np.ascontiguousarray(cm[region])),
-                                    yc[i:i + 1] - oy, xc[i:i + 1] - ox)[0]
+                hog[i] = _cell_sums(ii_hog, yh[i:i + 1] - oy, xh[i:i + 1] - ox)[0]
+                col[i] = _cell_sums(ii_col, yc[i:i + 1] - oy, xc[i:i + 1] - ox)[0]
         else:
             ii_hog, ii_colour = self._integrals()
             hog = _cell_sums(ii_hog, yh, xh)
@@ -320,5 +338,5 @@ def describe_brute_force(image: np.ndarray, boxes_xywh: np.ndarray,
     return out
 
 
-__all__ = ["FeatureConfig", "FrameFeatures", "bin_maps", "integral", "cell_edges",
-           "describe_brute_force"]
+__all__ = ["FeatureConfig", "FrameFeatures", "bin_indices", "bin_maps", "bin_integrals",
+           "integral", "cell_edges", "describe_brute_force"]
