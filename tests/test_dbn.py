@@ -588,6 +588,24 @@ def test_crop_route_equals_per_box_crops_float_for_float():
     np.testing.assert_array_equal(ff.describe_union(near), by_crop(near, True))
 
 
+def test_features_use_a_given_resize_instead_of_resizing_again():
+    """A pyramid level whose scale is in ``scaled`` (the background model's copy of the frame)
+    is described on that image: the same features as resizing again when it is the same
+    resize, and a different image would show (it is really used)."""
+    import cv2
+
+    cfg = FeatureConfig(box_height=25.0)           # BOXES heights 40-60 px -> level 1 (0.5)
+    img = _image(8)
+    half = cv2.resize(img, (80, 60), interpolation=cv2.INTER_AREA)
+    ref = FrameFeatures(img, cfg).describe(BOXES[:3])
+    np.testing.assert_array_equal(FrameFeatures(img, cfg, scaled={0.5: half}).describe(BOXES[:3]),
+                                  ref)
+    other = FrameFeatures(img, cfg, scaled={0.5: 255 - half}).describe(BOXES[:3])
+    assert not np.array_equal(other, ref)
+    wrong_size = FrameFeatures(img, cfg, scaled={0.5: half[:-1]}).describe(BOXES[:3])
+    np.testing.assert_array_equal(wrong_size, ref)   # not that resize: resized again
+
+
 def test_hue_rotation_augmentation_rolls_hue_bins_only():
     cfg = FeatureConfig()
     img = _image(4)

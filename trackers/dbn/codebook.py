@@ -380,6 +380,7 @@ class ForegroundModel:
 
     def __init__(self, params: BackgroundParams = BackgroundParams()):
         self.params = params
+        self.small: np.ndarray | None = None   # the last frame at the model's scale
         k = int(round(params.morph_kernel * params.scale))
         self._kernel = (cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (k, k)) if k > 1 else None)
         if params.method == "codebook":
@@ -411,6 +412,7 @@ class ForegroundModel:
 
     def mask(self, frame: Frame) -> np.ndarray:
         small = self._small(frame.image)
+        self.small = small
         if isinstance(self._model, Codebook):
             raw = self._model.apply(small).astype(np.uint8)
         else:

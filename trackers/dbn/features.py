@@ -186,17 +186,22 @@ class FrameFeatures:
     max_level = 5
 
     def __init__(self, image: np.ndarray, cfg: FeatureConfig = FeatureConfig(),
-                 scale: float = 1.0):
+                 scale: float = 1.0, scaled: dict[float, np.ndarray] | None = None):
         self.cfg = cfg
         self._full = image
         self._levels: dict[int, FrameFeatures] = {}
+        #: ``image`` already reduced at these scales by the same cv2.resize (INTER_AREA) call,
+        #: e.g. the background model's copy: used instead of resizing again
+        self._scaled = scaled or {}
         if cfg.box_height > 0:           # pyramid mode: levels built on demand
             scale = 1.0
         self.scale = float(scale)
         if self.scale != 1.0:
             h, w = image.shape[:2]
-            image = cv2.resize(image, (max(1, round(w * scale)), max(1, round(h * scale))),
-                               interpolation=cv2.INTER_AREA)
+            size = (max(1, round(w * scale)), max(1, round(h * scale)))
+            pre = self._scaled.get(self.scale)
+            image = (pre if pre is not None and pre.shape == (size[1], size[0]) + image.shape[2:]
+                     else cv2.resize(image, size, interpolation=cv2.INTER_AREA))
         self.image = image
         self.height, self.width = image.shape[:2]
         self._ii: tuple[np.ndarray, np.ndarray] | None = None
@@ -211,7 +216,7 @@ class FrameFeatures:
     def _level(self, k: int) -> "FrameFeatures":
         if k not in self._levels:
             self._levels[k] = FrameFeatures(self._full, replace(self.cfg, box_height=0.0),
-                                            2.0 ** -k)
+                                            2.0 ** -k, self._scaled)
         return self._levels[k]
 
     def _by_level(self, boxes_xywh: np.ndarray, method: str) -> np.ndarray:
