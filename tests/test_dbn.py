@@ -528,6 +528,84 @@ def test_person_blobs_are_positives_and_partial_blobs_are_left_out():
     assert tuple(blobs[1]) not in got
 
 
+def test_bin_integrals_equal_cv2_integral_of_the_bin_maps_float_for_float():
+    """The one-pass kernel (no one-hot maps) adds in cv2.integral's order: the same floats."""
+    from pfscope.trackers.dbn.features import bin_integrals, bin_maps, integral
+
+    cfg = FeatureConfig()
+    rng = np.random.default_rng(7)
+    img = _image(5)
+    noisy = np.clip(img + rng.normal(0, 20, img.shape), 0, 255).astype(np.uint8)
+    for im in (img, noisy, noisy[3:70, 5:60]):
+        hm, cm = bin_maps(im, cfg)
+        ih, ic = bin_integrals(im, cfg)
+        assert ih.shape == (im.shape[0] + 1, im.shape[1] + 1, cfg.orientations)
+        assert ic[-1, -1].sum() == im.shape[0] * im.shape[1]      # every pixel in one bin
+        np.testing.assert_array_equal(ih, integral(hm))
+        np.testing.assert_array_equal(ic, integral(cm))
+
+
+def test_crop_route_equals_per_box_crops_float_for_float():
+    """The blobs' route (every box's bins computed together, integrals and cell sums in one
+    numba call) gives exactly what describing each box from its own crop (one-pixel margin,
+    cv2.integral of its bin maps, 4 look-ups per cell) gives — and describe_union exactly
+    what one crop over the boxes' union gives."""
+    from pfscope.trackers.dbn.features import _cell_sums, _normalise, bin_maps, integral
+
+    cfg = FeatureConfig()
+    rng = np.random.default_rng(3)
+    img = np.clip(_image(6) + rng.normal(0, 15, (120, 160, 3)), 0, 255).astype(np.uint8)
+    ff = FrameFeatures(img, cfg)
+    H, W = img.shape[:2]
+
+    def by_crop(boxes, union):
+        yh, xh = ff.edges(boxes, cfg.hog_rows, cfg.hog_cols)
+        yc, xc = ff.edges(boxes, cfg.colour_rows, 1)
+        lo_y, hi_y = np.minimum(yh[:, 0], yc[:, 0]), np.maximum(yh[:, -1], yc[:, -1])
+        lo_x, hi_x = np.minimum(xh[:, 0], xc[:, 0]), np.maximum(xh[:, -1], xc[:, -1])
+        if union:
+            lo_y[:], hi_y[:], lo_x[:], hi_x[:] = lo_y.min(), hi_y.max(), lo_x.min(), hi_x.max()
+        out = np.zeros((len(boxes), cfg.dim))
+        for i in range(len(boxes)):
+            y0, y1, x0, x1 = lo_y[i], hi_y[i], lo_x[i], hi_x[i]
+            if y1 <= y0 or x1 <= x0:
+                out[i] = _normalise(np.zeros((1, cfg.hog_dim)),
+                                    np.zeros((1, cfg.colour_rows, cfg.colour_bins)), cfg)
+                continue
+            cy0, cx0 = max(y0 - 1, 0), max(x0 - 1, 0)
+            hm, cm = bin_maps(img[cy0:min(y1 + 1, H), cx0:min(x1 + 1, W)], cfg)
+            reg = (slice(y0 - cy0, y1 - cy0), slice(x0 - cx0, x1 - cx0))
+            hog = _cell_sums(integral(np.ascontiguousarray(hm[reg])), yh[i:i + 1] - y0,
+                             xh[i:i + 1] - x0)
+            col = _cell_sums(integral(np.ascontiguousarray(cm[reg])), yc[i:i + 1] - y0,
+                             xc[i:i + 1] - x0)
+            out[i] = _normalise(hog.reshape(1, -1), col[:, :, 0, :], cfg)[0]
+        return out
+
+    np.testing.assert_array_equal(ff.describe(BOXES), by_crop(BOXES, False))
+    assert ff._ii is None                                   # the crop route was taken
+    near = np.array([[40, 30, 20, 50], [48, 34, 22, 48], [55, 28, 18, 55.5]])
+    np.testing.assert_array_equal(ff.describe_union(near), by_crop(near, True))
+
+
+def test_features_use_a_given_resize_instead_of_resizing_again():
+    """A pyramid level whose scale is in ``scaled`` (the background model's copy of the frame)
+    is described on that image: the same features as resizing again when it is the same
+    resize, and a different image would show (it is really used)."""
+    import cv2
+
+    cfg = FeatureConfig(box_height=25.0)           # BOXES heights 40-60 px -> level 1 (0.5)
+    img = _image(8)
+    half = cv2.resize(img, (80, 60), interpolation=cv2.INTER_AREA)
+    ref = FrameFeatures(img, cfg).describe(BOXES[:3])
+    np.testing.assert_array_equal(FrameFeatures(img, cfg, scaled={0.5: half}).describe(BOXES[:3]),
+                                  ref)
+    other = FrameFeatures(img, cfg, scaled={0.5: 255 - half}).describe(BOXES[:3])
+    assert not np.array_equal(other, ref)
+    wrong_size = FrameFeatures(img, cfg, scaled={0.5: half[:-1]}).describe(BOXES[:3])
+    np.testing.assert_array_equal(wrong_size, ref)   # not that resize: resized again
+
+
 def test_hue_rotation_augmentation_rolls_hue_bins_only():
     cfg = FeatureConfig()
     img = _image(4)
@@ -750,6 +828,25 @@ def test_codebook_kernel_equals_the_numpy_reference_frame_after_frame():
         promoted |= t > 20 and not ma[30:40, 40:50].any()
     assert promoted                                    # the parked patch joined the background
     assert ma[10:30, 41:44].all()                      # the mover's leading edge is foreground
+
+
+def test_codebook_storage_is_pixel_major_and_the_slot_views_share_it():
+    """The kernel walks pixels: a pixel's codewords are adjacent in the storage it gets, and
+    the (L, P) attributes the numpy code writes are views of that same memory."""
+    from pfscope.trackers.dbn.codebook import _Book
+
+    P, L = 50, 4
+    b = _Book(P, L)
+    store = dict(zip(_Book.FIELDS, b.pixel_major()))
+    for name, arr in store.items():
+        assert arr.flags.c_contiguous and arr.shape[:2] == (P, L), name
+        assert getattr(b, name).shape[:2] == (L, P), name
+    b.f[2, 7] = 9                                   # a numpy-side write reaches the kernel's
+    b.v[1, 3] = (1.0, 2.0, 3.0)
+    assert store["f"][7, 2] == 9 and store["v"][3, 1].tolist() == [1.0, 2.0, 3.0]
+    b.update(np.array([5]), np.array([3]), np.full((P, 3), 10, np.float32),
+             np.full(P, 17.0, np.float32), 4)
+    assert store["f"][5, 3] == 1 and store["q"][5, 3] == 4
 
 
 def test_person_scale_learns_the_height_line_of_the_scene_and_ignores_merged_blobs():

@@ -29,8 +29,9 @@ frames is promoted into the background (a parked car, a moved chair), cache code
 for ``cache_forget`` frames are dropped, and background codewords unseen for ``stale_delete``
 frames are dropped.
 
-Everything is numpy over ``(L, pixels)`` arrays (slot-major; a pixel is matched slot by slot
-only until its first match) — no Python loop over pixels.  ``scale < 1``
+Training is numpy over ``(L, pixels)`` views (a pixel is matched slot by slot only until its
+first match) — no Python loop over pixels; detection is one numba pass over the pixels
+(:mod:`._codebook_kernels`), on the same codewords stored pixel-major.  ``scale < 1``
 runs the model on a down-sampled image (area averaging also removes sensor noise); blobs are
 reported in full-resolution pixels.
 
@@ -106,18 +107,30 @@ class BackgroundParams:
 
 
 class _Book:
-    """Codewords of every pixel: structure of arrays over (L slots, P pixels), slot-major, so
-    one slot of every pixel is a contiguous row (the matching and the update walk slots)."""
+    """Codewords of every pixel: a structure of arrays stored *pixel-major*, (P pixels, L
+    slots[, 3]), so one pixel's codewords are adjacent (the numba detection pass walks the
+    pixels: :mod:`._codebook_kernels`).  The attributes ``v``, ``vv``, ``imin``, ... are (L, P)
+    transposed views of that storage (``_store``: the same memory), which the numpy code
+    below (training, priming, the reference detection step) reads slot by slot."""
+
+    FIELDS = ("v", "vv", "imin", "imax", "f", "lam", "p", "q")
 
     def __init__(self, n_pix: int, L: int):
-        self.v = np.zeros((L, n_pix, 3), np.float32)
-        self.vv = np.zeros((L, n_pix), np.float32)        # ‖v‖², cached
-        self.imin = np.zeros((L, n_pix), np.float32)
-        self.imax = np.zeros((L, n_pix), np.float32)
-        self.f = np.zeros((L, n_pix), np.int32)           # 0: empty slot
-        self.lam = np.zeros((L, n_pix), np.int32)
-        self.p = np.zeros((L, n_pix), np.int32)
-        self.q = np.zeros((L, n_pix), np.int32)
+        f32, i32 = np.float32, np.int32
+        self._store = {"v": np.zeros((n_pix, L, 3), f32),
+                       "vv": np.zeros((n_pix, L), f32),      # ‖v‖², cached
+                       "imin": np.zeros((n_pix, L), f32),
+                       "imax": np.zeros((n_pix, L), f32),
+                       "f": np.zeros((n_pix, L), i32),       # 0: empty slot
+                       "lam": np.zeros((n_pix, L), i32),
+                       "p": np.zeros((n_pix, L), i32),
+                       "q": np.zeros((n_pix, L), i32)}
+        for name, arr in self._store.items():
+            setattr(self, name, np.swapaxes(arr, 0, 1))     # (L, P[, 3]) view
+
+    def pixel_major(self) -> tuple:
+        """The (P, L[, 3]) storage in :attr:`FIELDS` order (what the kernel updates)."""
+        return tuple(self._store[name] for name in self.FIELDS)
 
     def first_match(self, x, xx, inten, eps, alpha, beta, usable=None):
         """``(hit (P,) bool, slot (P,) int64)``: whether some codeword matches each pixel
@@ -160,20 +173,19 @@ class _Book:
 
     def update(self, pix, slot, x, inten, t):
         """Kim Alg. 1 step II(v): running mean and aux update of codeword ``slot`` of ``pix``."""
-        k = slot * self.f.shape[1] + pix               # flat (slot, pixel) index: 1-D takes
-        fk = self.f.reshape(-1)[k]
+        k = (slot, pix)
+        fk = self.f[k]
         f = fk.astype(np.float32)[:, None]
         xp = x[pix]
-        v = (f * self.v.reshape(-1, 3)[k] + xp) / (f + 1)
-        self.v.reshape(-1, 3)[k] = v
-        self.vv.reshape(-1)[k] = np.einsum("pc,pc->p", v, v)
+        v = (f * self.v[k] + xp) / (f + 1)
+        self.v[k] = v
+        self.vv[k] = np.einsum("pc,pc->p", v, v)
         ip = inten[pix]
-        self.imin.reshape(-1)[k] = np.minimum(self.imin.reshape(-1)[k], ip)
-        self.imax.reshape(-1)[k] = np.maximum(self.imax.reshape(-1)[k], ip)
-        self.f.reshape(-1)[k] = fk + 1
-        q = self.q.reshape(-1)
-        self.lam.reshape(-1)[k] = np.maximum(self.lam.reshape(-1)[k], t - q[k])
-        q[k] = t
+        self.imin[k] = np.minimum(self.imin[k], ip)
+        self.imax[k] = np.maximum(self.imax[k], ip)
+        self.f[k] = fk + 1
+        self.lam[k] = np.maximum(self.lam[k], t - self.q[k])
+        self.q[k] = t
 
     def update_hits(self, hit, slot, x, inten, t):
         """:meth:`update` of codeword ``slot[p]`` of every pixel ``p`` with ``hit[p]``.  A slot
@@ -318,8 +330,7 @@ class Codebook:
         f32 = np.float32
         detect(x, t, f32(p.eps_detect * p.eps_detect),
                f32(p.eps_train * p.eps_train), f32(p.alpha), f32(p.beta), p.cache_add,
-               p.cache_forget, p.stale_delete, b.v, b.vv, b.imin, b.imax, b.f, b.lam, b.p, b.q,
-               c.v, c.vv, c.imin, c.imax, c.f, c.lam, c.p, c.q, fg)
+               p.cache_forget, p.stale_delete, *b.pixel_major(), *c.pixel_major(), fg)
         return fg.reshape(self._shape)
 
     def _detect_numpy(self, x, xx, inten, t) -> np.ndarray:
@@ -347,7 +358,7 @@ class Codebook:
         if len(promote):
             cs, pp = promote[:, 0], promote[:, 1]
             bs = b.free_or_stalest(pp, t - b.q)
-            for arr in ("v", "vv", "imin", "imax", "f", "lam", "p", "q"):
+            for arr in _Book.FIELDS:
                 getattr(b, arr)[bs, pp] = getattr(c, arr)[cs, pp]
             b.lam[bs, pp] = 0
             c.clear((cs, pp))
@@ -358,7 +369,7 @@ class Codebook:
 def _take(book: _Book, pix: np.ndarray) -> _Book:
     """A view-like copy of ``book`` restricted to pixels ``pix`` (for matching only)."""
     sub = _Book.__new__(_Book)
-    for arr in ("v", "vv", "imin", "imax", "f", "lam", "p", "q"):
+    for arr in _Book.FIELDS:
         setattr(sub, arr, getattr(book, arr)[:, pix])
     return sub
 
@@ -369,6 +380,7 @@ class ForegroundModel:
 
     def __init__(self, params: BackgroundParams = BackgroundParams()):
         self.params = params
+        self.small: np.ndarray | None = None   # the last frame at the model's scale
         k = int(round(params.morph_kernel * params.scale))
         self._kernel = (cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (k, k)) if k > 1 else None)
         if params.method == "codebook":
@@ -400,6 +412,7 @@ class ForegroundModel:
 
     def mask(self, frame: Frame) -> np.ndarray:
         small = self._small(frame.image)
+        self.small = small
         if isinstance(self._model, Codebook):
             raw = self._model.apply(small).astype(np.uint8)
         else:

@@ -9,7 +9,9 @@ Then any axis-aligned cell's histogram is 4 look-ups per bin,
 a particle costs ``O(cells × bins)`` whatever its box area.  The integral histograms are
 built only when many boxes are asked for (the particles); the few blobs of a frame are
 described from their own crops (:class:`FrameFeatures`), which is cheaper than a pass over
-the whole image and gives the same numbers.
+the whole image and gives the same numbers.  The integrals come straight from the per-pixel
+bins in numba (:mod:`._feature_kernels`, in ``cv2.integral``'s order: the same floats), and a
+frame's crops share one set of numpy calls and one kernel call.
 
 Feature layout of one box (``FeatureConfig``, stored in the model file; defaults give D = 96):
 
@@ -82,31 +84,57 @@ class FeatureConfig:
         return asdict(self)
 
 
-def bin_maps(image: np.ndarray, cfg: FeatureConfig) -> tuple[np.ndarray, np.ndarray]:
-    """Per-pixel bin maps of a BGR uint8 image: ``hog (H, W, O)`` gradient magnitude in its
-    orientation bin, ``colour (H, W, Hb + G)`` one-hot colour bin.  float64."""
+def _gradients_hsv(image: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(gx, gy, hsv)`` of a BGR (or grey) uint8 image: the centred [-1, 0, 1] gradients of
+    its grey level (float32, Dalal–Triggs) and its HSV (H in [0, 180), S, V in [0, 255])."""
     img = image if image.ndim == 3 else cv2.cvtColor(image, cv2.COLOR_GRAY2BGR)
-    H, W = img.shape[:2]
     grey = cv2.cvtColor(img, cv2.COLOR_BGR2GRAY).astype(np.float32)
-    gx = cv2.Sobel(grey, cv2.CV_32F, 1, 0, ksize=1)   # centred [-1, 0, 1] (Dalal–Triggs)
-    gy = cv2.Sobel(grey, cv2.CV_32F, 0, 1, ksize=1)
+    return (cv2.Sobel(grey, cv2.CV_32F, 1, 0, ksize=1), cv2.Sobel(grey, cv2.CV_32F, 0, 1, ksize=1),
+            cv2.cvtColor(img, cv2.COLOR_BGR2HSV))
+
+
+def _bins(gx: np.ndarray, gy: np.ndarray, hsv: np.ndarray, cfg: FeatureConfig
+          ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Pixel by pixel (any shape; ``hsv`` with a last axis of 3): ``(ob, mag, cb)`` of
+    :func:`bin_indices`."""
     mag = np.sqrt(gx * gx + gy * gy)
     ang = np.mod(np.arctan2(gy, gx), np.pi)            # unsigned orientation
     ob = np.minimum((ang * (cfg.orientations / np.pi)).astype(np.int64), cfg.orientations - 1)
-    n = H * W
-    pix = np.arange(n)
-    hog = np.zeros((H, W, cfg.orientations))
-    hog.reshape(n, -1)[pix, ob.reshape(-1)] = mag.reshape(-1)   # one-hot by orientation bin
-
-    hsv = cv2.cvtColor(img, cv2.COLOR_BGR2HSV)          # H in [0, 180), S, V in [0, 255]
     h, s, v = hsv[..., 0].astype(np.int64), hsv[..., 1], hsv[..., 2]
     chrom = (s >= cfg.sat_min * 255) & (v >= cfg.val_min * 255)
     hb = np.minimum(h * cfg.hue_bins // 180, cfg.hue_bins - 1)
     gb = cfg.hue_bins + np.minimum(v.astype(np.int64) * cfg.grey_bins // 256, cfg.grey_bins - 1)
-    cb = np.where(chrom, hb, gb)
+    return ob, mag, np.where(chrom, hb, gb)
+
+
+def bin_indices(image: np.ndarray, cfg: FeatureConfig
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per-pixel bins of a BGR uint8 image: ``(ob (H, W) int64, mag (H, W) float32,
+    cb (H, W) int64)`` — the unsigned-orientation bin of the gradient, its magnitude, and the
+    colour bin (hue bin for a chromatic pixel, else ``hue_bins`` + value bin)."""
+    return _bins(*_gradients_hsv(image), cfg)
+
+
+def bin_maps(image: np.ndarray, cfg: FeatureConfig) -> tuple[np.ndarray, np.ndarray]:
+    """Per-pixel bin maps of a BGR uint8 image: ``hog (H, W, O)`` gradient magnitude in its
+    orientation bin, ``colour (H, W, Hb + G)`` one-hot colour bin.  float64."""
+    ob, mag, cb = bin_indices(image, cfg)
+    H, W = ob.shape
+    n = H * W
+    pix = np.arange(n)
+    hog = np.zeros((H, W, cfg.orientations))
+    hog.reshape(n, -1)[pix, ob.reshape(-1)] = mag.reshape(-1)   # one-hot by orientation bin
     colour = np.zeros((H, W, cfg.colour_bins))
     colour.reshape(n, -1)[pix, cb.reshape(-1)] = 1.0
     return hog, colour
+
+
+def bin_integrals(image: np.ndarray, cfg: FeatureConfig) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`integral` of both :func:`bin_maps` of ``image``, in one numba pass from
+    :func:`bin_indices` without the maps (:mod:`._feature_kernels`): the same floats."""
+    from ._feature_kernels import one_hot_integrals
+
+    return one_hot_integrals(*bin_indices(image, cfg), cfg.orientations, cfg.colour_bins)
 
 
 def integral(maps: np.ndarray) -> np.ndarray:
@@ -158,17 +186,22 @@ class FrameFeatures:
     max_level = 5
 
     def __init__(self, image: np.ndarray, cfg: FeatureConfig = FeatureConfig(),
-                 scale: float = 1.0):
+                 scale: float = 1.0, scaled: dict[float, np.ndarray] | None = None):
         self.cfg = cfg
         self._full = image
         self._levels: dict[int, FrameFeatures] = {}
+        #: ``image`` already reduced at these scales by the same cv2.resize (INTER_AREA) call,
+        #: e.g. the background model's copy: used instead of resizing again
+        self._scaled = scaled or {}
         if cfg.box_height > 0:           # pyramid mode: levels built on demand
             scale = 1.0
         self.scale = float(scale)
         if self.scale != 1.0:
             h, w = image.shape[:2]
-            image = cv2.resize(image, (max(1, round(w * scale)), max(1, round(h * scale))),
-                               interpolation=cv2.INTER_AREA)
+            size = (max(1, round(w * scale)), max(1, round(h * scale)))
+            pre = self._scaled.get(self.scale)
+            image = (pre if pre is not None and pre.shape == (size[1], size[0]) + image.shape[2:]
+                     else cv2.resize(image, size, interpolation=cv2.INTER_AREA))
         self.image = image
         self.height, self.width = image.shape[:2]
         self._ii: tuple[np.ndarray, np.ndarray] | None = None
@@ -183,7 +216,7 @@ class FrameFeatures:
     def _level(self, k: int) -> "FrameFeatures":
         if k not in self._levels:
             self._levels[k] = FrameFeatures(self._full, replace(self.cfg, box_height=0.0),
-                                            2.0 ** -k)
+                                            2.0 ** -k, self._scaled)
         return self._levels[k]
 
     def _by_level(self, boxes_xywh: np.ndarray, method: str) -> np.ndarray:
@@ -205,8 +238,7 @@ class FrameFeatures:
 
     def _integrals(self) -> tuple[np.ndarray, np.ndarray]:
         if self._ii is None:
-            hog, colour = bin_maps(self.image, self.cfg)
-            self._ii = (integral(hog), integral(colour))
+            self._ii = bin_integrals(self.image, self.cfg)
         return self._ii
 
     def edges(self, boxes_xywh: np.ndarray, rows: int, cols: int):
@@ -237,13 +269,38 @@ class FrameFeatures:
         if y1 <= y0 or x1 <= x0:
             return _normalise(np.zeros((n, c.hog_dim)), np.zeros((n, c.colour_rows,
                                                                    c.colour_bins)), c)
-        cy0, cx0 = max(y0 - 1, 0), max(x0 - 1, 0)
-        crop = self.image[cy0:min(y1 + 1, self.height), cx0:min(x1 + 1, self.width)]
-        hm, cm = bin_maps(crop, c)
-        region = (slice(y0 - cy0, y1 - cy0), slice(x0 - cx0, x1 - cx0))
-        hog = _cell_sums(integral(np.ascontiguousarray(hm[region])), yh - y0, xh - x0)
-        col = _cell_sums(integral(np.ascontiguousarray(cm[region])), yc - y0, xc - x0)
+        hog, col = self._crop_cells([(y0, y1, x0, x1)], np.zeros(n, np.int64),
+                                    yh - y0, xh - x0, yc - y0, xc - x0)
         return _normalise(hog.reshape(n, -1), col[:, :, 0, :], c)
+
+    def _crop_cells(self, regions, region_of, yh, xh, yc, xc):
+        """Cell sums ``(hog (N, R, C, O), col (N, Rc, 1, bins))`` of boxes described from
+        crops: ``regions`` ``(y0, y1, x0, x1)`` at the feature scale, box ``i`` inside region
+        ``region_of[i]`` with its cell edges relative to it.  Each region's gradients come from
+        its crop plus a one-pixel margin (so they equal the whole image's); the pixels' bins
+        are computed for all regions at once and the integral histograms and cell sums in one
+        numba call (:func:`._feature_kernels.region_cell_sums`): the same floats as
+        :func:`bin_integrals` and :func:`_cell_sums` per crop, with a few numpy calls per
+        frame instead of ~30 per box."""
+        from ._feature_kernels import region_cell_sums
+
+        c = self.cfg
+        gxs, gys, hsvs, shape = [], [], [], np.zeros((len(regions), 3), np.int64)
+        n = 0
+        for r, (y0, y1, x0, x1) in enumerate(regions):
+            cy0, cx0 = max(y0 - 1, 0), max(x0 - 1, 0)
+            gx, gy, hsv = _gradients_hsv(self.image[cy0:min(y1 + 1, self.height),
+                                                    cx0:min(x1 + 1, self.width)])
+            reg = (slice(y0 - cy0, y1 - cy0), slice(x0 - cx0, x1 - cx0))
+            gxs.append(gx[reg].reshape(-1))
+            gys.append(gy[reg].reshape(-1))
+            hsvs.append(hsv[reg].reshape(-1, 3))
+            shape[r] = n, y1 - y0, x1 - x0
+            n += (y1 - y0) * (x1 - x0)
+        ob, mag, cb = _bins(np.concatenate(gxs), np.concatenate(gys), np.concatenate(hsvs), c)
+        return region_cell_sums(ob, mag, cb, shape[:, 0], shape[:, 1], shape[:, 2],
+                                np.asarray(region_of, np.int64), yh, xh, yc, xc,
+                                c.orientations, c.colour_bins)
 
     def describe(self, boxes_xywh: np.ndarray) -> np.ndarray:
         """(N, D) float64 features of boxes ``(x, y, w, h)`` top-left, full-resolution px."""
@@ -263,17 +320,12 @@ class FrameFeatures:
         if self._ii is None and n <= self.crop_max and area.sum() < self.height * self.width / 2:
             hog = np.zeros((n, c.hog_rows, c.hog_cols, c.orientations))
             col = np.zeros((n, c.colour_rows, 1, c.colour_bins))
-            for i in np.flatnonzero(area > 0):          # a few boxes (the blobs), not particles
-                cy0, cx0 = max(y0[i] - 1, 0), max(x0[i] - 1, 0)
-                crop = self.image[cy0:min(y1[i] + 1, self.height), cx0:min(x1[i] + 1, self.width)]
-                hm, cm = bin_maps(crop, c)
-                sy, sx = y0[i] - cy0, x0[i] - cx0
-                region = (slice(sy, sy + y1[i] - y0[i]), slice(sx, sx + x1[i] - x0[i]))
-                oy, ox = y0[i], x0[i]
-                hog[i] = _cell_sums(integral(np.ascontiguousarray(hm[region])),
-                                    yh[i:i + 1] - oy, xh[i:i + 1] - ox)[0]
-                col[i] = _cell_sums(integral(np.ascontiguousarray(cm[region])),
-                                    yc[i:i + 1] - oy, xc[i:i + 1] - ox)[0]
+            i = np.flatnonzero(area > 0)                # a few boxes (the blobs), not particles
+            if len(i):
+                oy, ox = y0[i, None], x0[i, None]
+                hog[i], col[i] = self._crop_cells(
+                    [(int(y0[k]), int(y1[k]), int(x0[k]), int(x1[k])) for k in i],
+                    np.arange(len(i)), yh[i] - oy, xh[i] - ox, yc[i] - oy, xc[i] - ox)
         else:
             ii_hog, ii_colour = self._integrals()
             hog = _cell_sums(ii_hog, yh, xh)
@@ -320,5 +372,5 @@ def describe_brute_force(image: np.ndarray, boxes_xywh: np.ndarray,
     return out
 
 
-__all__ = ["FeatureConfig", "FrameFeatures", "bin_maps", "integral", "cell_edges",
-           "describe_brute_force"]
+__all__ = ["FeatureConfig", "FrameFeatures", "bin_indices", "bin_maps", "bin_integrals",
+           "integral", "cell_edges", "describe_brute_force"]

@@ -148,12 +148,14 @@ class DBNLikelihood:
                                                                        DEFAULT_BOX_HEIGHT))
         return float(fh)
 
-    def frame_features(self, frame: Frame) -> FrameFeatures:
-        """The frame's integral histograms, built once per frame."""
+    def frame_features(self, frame: Frame, scaled: Optional[dict] = None) -> FrameFeatures:
+        """The frame's integral histograms, built once per frame; ``scaled``: the frame's
+        image already reduced by ``cv2.resize`` (INTER_AREA) at these scales
+        (:class:`FrameFeatures`)."""
         key = (frame.index, id(frame.image))
         if self._key != key or self._ff is None:
             cfg = replace(self.model.features, box_height=self.box_height)
-            self._ff = FrameFeatures(frame.image, cfg, self.params.feature_scale)
+            self._ff = FrameFeatures(frame.image, cfg, self.params.feature_scale, scaled)
             self._key = key
         return self._ff
 

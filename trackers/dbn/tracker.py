@@ -301,6 +301,9 @@ class DBNPHDTracker(_AssociatingTracker):
 
         log.stage("background")
         mask = self.background.mask(frame)
+        if self.dbn is not None and frame.image.ndim == 3:
+            # the features' pyramid level at the background's scale is that same resize
+            self.dbn.frame_features(frame, {p.background.scale: self.background.small})
         log.scalar("dbn/foreground/fraction", float(mask.mean()) if mask.size else 0.0)
         if want_c:
             H, W = frame.image.shape[:2]
