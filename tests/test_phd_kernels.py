@@ -124,6 +124,12 @@ def test_grid_puts_every_point_in_its_cell_in_index_order(cell):
     np.testing.assert_array_equal(starts, np.searchsorted(key[order], np.arange(ni * nj + 1)))
 
 
+def test_grid_of_no_points_is_empty():
+    ok, _, _, _, _, ni, nj, order, starts = K.grid_build(np.zeros(0), np.zeros(0), 1.0, 1.0)
+    assert ok and ni == nj == 0 and len(order) == 0
+    np.testing.assert_array_equal(starts, [0])
+
+
 def test_grid_refuses_non_finite_points():
     x = np.array([0.0, np.nan, 3.0])
     assert not K.grid_build(x, np.zeros(3), 1.0, 1.0)[0]
@@ -137,13 +143,18 @@ def test_mass_near_kernel_equals_the_dense_gate_sum(seed):
     rng = np.random.default_rng(seed)
     x = _states(rng, 3000, far=30)
     Z = _dets_near(rng, x, 40)
-    w = rng.uniform(0, 1e-3, 3000)
+    # runs of equal log-weights (exponentiated once per run) beside distinct ones, one -inf
+    lw = np.log(rng.uniform(0, 1e-3, 3000))
+    lw[:1500] = lw[0]
+    lw[2000:2600] = np.repeat(lw[2000:2006], 100)
+    lw[2700] = -np.inf
+    w = np.exp(lw)
     std = obs_std(Z[:, 2:4])
     r2 = 13.28
     d2 = (((x[:, None, OBS] - Z[None]) / std[None]) ** 2).sum(-1)
     want = ((d2 <= r2) * w[:, None]).sum(0)
     for cell in (3.0, 50.0, 1e5):
-        ok, got = K.mass_near_kernel(x, w, Z, std, r2, cell, cell)
+        ok, got = K.mass_near_kernel(x, lw, Z, std, r2, cell, cell)
         assert ok
         np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-18)
     assert (want > 0).sum() >= 30
@@ -174,6 +185,8 @@ def test_gauss_update_equals_the_dense_eq5_on_the_gate(source, p_miss, kappa, sp
     Z = _dets_near(rng, x, 25)
     lw = rng.normal(-7, 2, 1500)
     lw[:20] = -np.inf                                  # dead particles
+    lw[300:900] = lw[300]                              # a run of equal weights (resampled)
+    lw[900:1000] = np.repeat(lw[900:905], 20)          # (newborn: one weight per detection)
     if spread:                                         # weights e^-900 apart: the log route
         lw[20:200] -= 900.0
     ps = ParticleSet(x, lw)

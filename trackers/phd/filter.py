@@ -726,7 +726,7 @@ def mass_near(predicted: ParticleSet, Z: np.ndarray, bp: BirthParams = BirthPara
     std_z = obs_std(Z[:, 2:4], lk)
     r2 = gate_threshold(bp.gate, OBS_DIM)
     cell = _grid_cell(std_z, r2)
-    ok, out = _kernels.mass_near_kernel(predicted.states, predicted.weights, Z, std_z, r2,
+    ok, out = _kernels.mass_near_kernel(predicted.states, predicted.log_weights, Z, std_z, r2,
                                         cell[0], cell[1])
     if not ok:
         raise ValueError("mass_near: non-finite particle positions")
