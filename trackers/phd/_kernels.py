@@ -77,6 +77,7 @@ def _zero_start():
     a[0] = 0
     return a
 
+
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
 def grid_build(px, py, cell_x, cell_y):
     """Bucket the points ``(px, py)`` (N,) on a uniform grid of ``cell_x × cell_y``.
@@ -183,12 +184,10 @@ def _gate_d2(states, i, Z, j, std, k, r2):
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
-def mass_near_kernel(states, lw, Z, std_z, r2, cell_x, cell_y):
-    """M(z) (N_z,): ``Σ w_i`` (``w = e^lw``, ``lw`` the log-weights) over the particles with
-    ``Σ_d ((x_id − z_d)/σ_zd)² <= r2`` on the observed columns (0, 1, 4, 5) of ``states``
-    (N, 6), ``std_z`` (N_z, 4) per detection.  Returns ``(ok, out)``; ``ok`` False on
-    non-finite positions.  A weight is exponentiated only when it differs from the last one
-    summed (after resampling they are all equal: one exp, not N)."""
+def mass_near_kernel(states, w, Z, std_z, r2, cell_x, cell_y):
+    """M(z) (N_z,): ``Σ w_i`` over the particles with ``Σ_d ((x_id − z_d)/σ_zd)² <= r2``
+    on the observed columns (0, 1, 4, 5) of ``states`` (N, 6), ``std_z`` (N_z, 4) per detection.
+    Returns ``(ok, out)``; ``ok`` False on non-finite positions."""
     nz = Z.shape[0]
     out = np.empty(nz, np.float64)
     for j in range(nz):
@@ -200,8 +199,6 @@ def mass_near_kernel(states, lw, Z, std_z, r2, cell_x, cell_y):
     if not ok:
         return False, out
     r = math.sqrt(r2)
-    prev = np.nan
-    wv = 0.0
     for j in range(nz):
         i0, i1, j0, j1 = gate_cells(Z[j, 0], Z[j, 1], std_z[j, 0], std_z[j, 1], r,
                                     x0, cx, ni, y0, cy, nj)
@@ -210,10 +207,7 @@ def mass_near_kernel(states, lw, Z, std_z, r2, cell_x, cell_y):
             for p in range(starts[ci * nj + j0], starts[ci * nj + j1 + 1]):
                 i = order[p]
                 if _gate_d2(states, i, Z, j, std_z, j, r2) <= r2:
-                    if lw[i] != prev:
-                        prev = lw[i]
-                        wv = math.exp(prev)
-                    s += wv
+                    s += w[i]
         out[j] = s
     return True, out
 

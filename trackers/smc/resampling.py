@@ -41,22 +41,12 @@ def _systematic_take(states, lw, log_mass, u0, n):
     idx = np.empty(n, np.int64)
     out = np.empty((n, D), np.float64)
     j = 0
-    # e^{lw − log_mass} once per run of equal log-weights (the same floats: a run is common,
-    # e.g. the particles no detection reached)
-    prev = lw[0]
-    ev = math.exp(prev - log_mass)
-    c = ev if N > 1 else 1.0
+    c = math.exp(lw[0] - log_mass) if N > 1 else 1.0
     for k in range(n):
         u = (u0 + k) / n
         while j < N - 1 and c <= u:
             j += 1
-            if j < N - 1:
-                if lw[j] != prev:
-                    prev = lw[j]
-                    ev = math.exp(prev - log_mass)
-                c = c + ev
-            else:
-                c = 1.0
+            c = c + math.exp(lw[j] - log_mass) if j < N - 1 else 1.0
         idx[k] = j
         for d in range(D):
             out[k, d] = states[j, d]
