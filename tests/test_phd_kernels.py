@@ -124,6 +124,12 @@ def test_grid_puts_every_point_in_its_cell_in_index_order(cell):
     np.testing.assert_array_equal(starts, np.searchsorted(key[order], np.arange(ni * nj + 1)))
 
 
+def test_grid_of_no_points_is_empty():
+    ok, _, _, _, _, ni, nj, order, starts = K.grid_build(np.zeros(0), np.zeros(0), 1.0, 1.0)
+    assert ok and ni == nj == 0 and len(order) == 0
+    np.testing.assert_array_equal(starts, [0])
+
+
 def test_grid_refuses_non_finite_points():
     x = np.array([0.0, np.nan, 3.0])
     assert not K.grid_build(x, np.zeros(3), 1.0, 1.0)[0]
@@ -174,6 +180,8 @@ def test_gauss_update_equals_the_dense_eq5_on_the_gate(source, p_miss, kappa, sp
     Z = _dets_near(rng, x, 25)
     lw = rng.normal(-7, 2, 1500)
     lw[:20] = -np.inf                                  # dead particles
+    lw[300:900] = lw[300]                              # a run of equal weights (resampled)
+    lw[900:1000] = np.repeat(lw[900:905], 20)          # (newborn: one weight per detection)
     if spread:                                         # weights e^-900 apart: the log route
         lw[20:200] -= 900.0
     ps = ParticleSet(x, lw)

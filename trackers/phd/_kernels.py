@@ -68,6 +68,16 @@ def propagate_into(x, st, sigma_v, sigma_size, accel_to_position, min_size, out)
 
 # ----------------------------------------------------------------------------- grid index
 
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
+def _zero_start():
+    """``starts`` = [0] of an empty grid (np.empty, not np.zeros: one allocation overload
+    fewer to compile on a first run)."""
+    a = np.empty(1, np.int64)
+    a[0] = 0
+    return a
+
+
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
 def grid_build(px, py, cell_x, cell_y):
     """Bucket the points ``(px, py)`` (N,) on a uniform grid of ``cell_x × cell_y``.
@@ -86,15 +96,13 @@ def grid_build(px, py, cell_x, cell_y):
         a = px[i]
         b = py[i]
         if not (math.isfinite(a) and math.isfinite(b)):
-            return (False, 0.0, 0.0, cell_x, cell_y, 0, 0, np.zeros(0, np.int64),
-                    np.zeros(1, np.int64))
+            return False, 0.0, 0.0, cell_x, cell_y, 0, 0, np.empty(0, np.int64), _zero_start()
         x0 = min(x0, a)
         x1 = max(x1, a)
         y0 = min(y0, b)
         y1 = max(y1, b)
     if n == 0:
-        return (True, 0.0, 0.0, cell_x, cell_y, 0, 0, np.zeros(0, np.int64),
-                np.zeros(1, np.int64))
+        return True, 0.0, 0.0, cell_x, cell_y, 0, 0, np.empty(0, np.int64), _zero_start()
     max_cells = 4.0 * n + 64.0
     while True:
         fi = math.floor((x1 - x0) / cell_x) + 1.0
@@ -105,7 +113,9 @@ def grid_build(px, py, cell_x, cell_y):
         cell_y *= 2.0
     ni = int(fi)
     nj = int(fj)
-    starts = np.zeros(ni * nj + 1, np.int64)
+    starts = np.empty(ni * nj + 1, np.int64)
+    for k in range(ni * nj + 1):
+        starts[k] = 0
     keys = np.empty(n, np.int64)
     for i in range(n):
         ci = min(int((px[i] - x0) / cell_x), ni - 1)
@@ -115,7 +125,9 @@ def grid_build(px, py, cell_x, cell_y):
         starts[k + 1] += 1
     for k in range(ni * nj):
         starts[k + 1] += starts[k]
-    fill = starts[:-1].copy()
+    fill = np.empty(ni * nj, np.int64)
+    for k in range(ni * nj):
+        fill[k] = starts[k]
     order = np.empty(n, np.int64)
     for i in range(n):
         k = keys[i]
@@ -177,7 +189,9 @@ def mass_near_kernel(states, w, Z, std_z, r2, cell_x, cell_y):
     on the observed columns (0, 1, 4, 5) of ``states`` (N, 6), ``std_z`` (N_z, 4) per detection.
     Returns ``(ok, out)``; ``ok`` False on non-finite positions."""
     nz = Z.shape[0]
-    out = np.zeros(nz, np.float64)
+    out = np.empty(nz, np.float64)
+    for j in range(nz):
+        out[j] = 0.0
     if states.shape[0] == 0 or nz == 0:
         return True, out
     ok, x0, y0, cx, cy, ni, nj, order, starts = grid_build(states[:, 0], states[:, 1],
@@ -298,12 +312,12 @@ def gauss_update_linear(states, lw, Z, std, log_norm, log_kappa, log_pd, log_pm,
             low = min(low, lw[i])
     if not (top > -np.inf and top - low <= _LIN_RANGE and top < np.inf):
         return True, False, lw, log_c, -np.inf, -np.inf
-    new_lw = lw.copy()
+    new_lw = np.empty(n, np.float64)     # every entry written below
     ok, x0, y0, cx, cy, ni, nj, order, starts = grid_build(states[:, 0], states[:, 1],
                                                            cell_x, cell_y)
     if not ok:
         return False, True, new_lw, log_c, -np.inf, -np.inf
-    inv = np.empty_like(std)
+    inv = np.empty((std.shape[0], 4), np.float64)
     for k in range(std.shape[0]):
         for d in range(4):
             inv[k, d] = 1.0 / std[k, d]
@@ -312,10 +326,15 @@ def gauss_update_linear(states, lw, Z, std, log_norm, log_kappa, log_pd, log_pm,
     b = np.empty(n, np.float64)
     pm = math.exp(log_pm)
     tot_pred = 0.0
-    for i in range(n):
-        e[i] = math.exp(lw[i] - top)
+    prev = np.nan                         # e^{lw - top} once per run of equal weights (the
+    ev = 0.0                              # persistent particles share one, each detection's
+    for i in range(n):                    # newborn another): the same floats, ~N_z + 1 exps
+        if lw[i] != prev:
+            prev = lw[i]
+            ev = math.exp(prev - top)
+        e[i] = ev
         b[i] = pm
-        tot_pred += e[i]
+        tot_pred += ev
     log_pred = top + math.log(tot_pred) if tot_pred > 0.0 else -np.inf
     buf_i = np.empty(n, np.int64)
     buf_v = np.empty(n, np.float64)
@@ -352,8 +371,11 @@ def gauss_update_linear(states, lw, Z, std, log_norm, log_kappa, log_pd, log_pm,
             for q in range(nb):
                 b[buf_i[q]] += math.exp(math.log(buf_v[q]) + log_f)
     tot = 0.0
+    log_pm_b = math.log(pm) if pm > 0.0 else -np.inf   # the bracket of a particle no z reached
     for i in range(n):
-        if b[i] > 0.0:
+        if b[i] == pm:
+            new_lw[i] = lw[i] + log_pm_b
+        elif b[i] > 0.0:
             new_lw[i] = lw[i] + math.log(b[i])
         else:
             new_lw[i] = -np.inf

@@ -369,6 +369,14 @@ def obs_std(sizes: np.ndarray, lk: LikelihoodParams = LikelihoodParams()) -> np.
     return out
 
 
+def detection_noise(Z: np.ndarray, lk: LikelihoodParams) -> tuple[np.ndarray, np.ndarray]:
+    """The observation-noise stds of the detections ``Z`` (N_z, 4) (:func:`obs_std` of their
+    sizes) and ``Σ_d log σ_d`` per detection: computed once a frame, read by M(z), the
+    newborn weights and the update."""
+    std = obs_std(Z[:, 2:4], lk)
+    return std, np.log(std).sum(-1)
+
+
 def _mahalanobis2(states: np.ndarray, Z: np.ndarray, std: np.ndarray) -> np.ndarray:
     """(N, N_z) squared distances of particles' observed part to each z, per-z (N_z, 4) or
     per-pair (N, N_z, 4) std."""
@@ -713,17 +721,19 @@ class BirthResult:
 
 
 def mass_near(predicted: ParticleSet, Z: np.ndarray, bp: BirthParams = BirthParams(),
-              lk: LikelihoodParams = LikelihoodParams()) -> np.ndarray:
+              lk: LikelihoodParams = LikelihoodParams(),
+              std_z: Optional[np.ndarray] = None) -> np.ndarray:
     """M(z) (N_z,): predicted mass inside the ``gate`` confidence ellipsoid of the observation
     noise around each z (maggio2007 §2, "cumulative masses M(z_{k,j}) of the propagated
     particles that are inside the 99% confidence interval").  Only the particles near each z
     are looked at (a grid on the particles' positions, :func:`._kernels.mass_near_kernel`;
     the same float64 distances as the dense test); memory is O(N + N_z), with no pair budget
-    to bound."""
+    to bound.  ``std_z``: ``obs_std(Z[:, 2:4], lk)`` when the caller has it."""
     Z = np.asarray(Z, dtype=np.float64).reshape(-1, OBS_DIM)
     if len(predicted) == 0 or len(Z) == 0:
         return np.zeros(len(Z))
-    std_z = obs_std(Z[:, 2:4], lk)
+    if std_z is None:
+        std_z = obs_std(Z[:, 2:4], lk)
     r2 = gate_threshold(bp.gate, OBS_DIM)
     cell = _grid_cell(std_z, r2)
     ok, out = _kernels.mass_near_kernel(predicted.states, predicted.weights, Z, std_z, r2,
@@ -760,15 +770,19 @@ def allocate_births(m_near: np.ndarray, bp: BirthParams = BirthParams()) -> np.n
 
 
 def log_birth_weight(Z: np.ndarray, params: PHDParams,
-                     log_kappa: Optional[np.ndarray] = None) -> np.ndarray:
+                     log_kappa: Optional[np.ndarray] = None,
+                     log_norm: Optional[np.ndarray] = None) -> np.ndarray:
     """log of each detection's total newborn weight (N_z,): ``birth_intensity`` (paper), or,
     with ``birth_odds`` > 0 and ``log_kappa`` given, ``odds · κ(z) / ((1 − p_M) ḡ(z))`` with
     ḡ(z) the mean of g(z|x) over z's newborn (``peak · (1 + birth_spread²)^-2`` for the
-    Gaussian), so that alone its newborn win ``C_b / κ = odds``."""
+    Gaussian), so that alone its newborn win ``C_b / κ = odds``.  ``log_norm``:
+    ``Σ log obs_std(Z[:, 2:4])`` per detection when the caller has it."""
     bp, lk = params.birth, params.likelihood
     if bp.birth_odds <= 0 or log_kappa is None:
         return np.full(len(Z), math.log(bp.birth_intensity))
-    log_peak = -np.log(obs_std(Z[:, 2:4], lk)).sum(-1) - 0.5 * OBS_DIM * math.log(2 * math.pi)
+    if log_norm is None:
+        log_norm = np.log(obs_std(Z[:, 2:4], lk)).sum(-1)
+    log_peak = -log_norm - 0.5 * OBS_DIM * math.log(2 * math.pi)
     log_gbar = log_peak - 0.5 * OBS_DIM * math.log1p(bp.birth_spread ** 2)
     log_pd = math.log1p(-lk.p_miss) if lk.p_miss < 1 else 0.0
     return math.log(bp.birth_odds) + np.asarray(log_kappa) - log_pd - log_gbar
@@ -782,7 +796,8 @@ def max_births(n_z: int, bp: BirthParams) -> int:
 def birth(predicted: ParticleSet, Z, params: PHDParams, rng: np.random.Generator,
           log_kappa: Optional[np.ndarray] = None,
           revive: Optional[np.ndarray] = None,
-          out: Optional[tuple[np.ndarray, np.ndarray]] = None) -> BirthResult:
+          out: Optional[tuple[np.ndarray, np.ndarray]] = None,
+          noise: Optional[tuple[np.ndarray, np.ndarray]] = None) -> BirthResult:
     """Draw J_k newborn particles around the detections (maggio2007 §2; readings in the module
     docstring): ``J_z = J_max max(0, 1 − M(z))`` (capped per frame, :func:`allocate_births`),
     each detection's newborn carrying total weight ``birth_intensity`` (or the weight set by
@@ -790,15 +805,19 @@ def birth(predicted: ParticleSet, Z, params: PHDParams, rng: np.random.Generator
     the detections that get ``revive_odds`` instead of ``birth_odds``.  Takes one word of
     ``rng``, the key of the stream the kernel draws from (:func:`._kernels.birth_fill`).
     ``out`` = (states (M, 6), log-weights (M,)) with M >= :func:`max_births`: the newborn are
-    written into their first J rows."""
-    Z = as_observations(Z)
+    written into their first J rows.  ``noise`` = (``obs_std(Z[:, 2:4])``, its ``Σ log σ``)
+    from a caller that has them and has checked ``Z`` (:func:`detection_noise`,
+    :meth:`PHDFilter.step`)."""
+    if noise is None:
+        Z = as_observations(Z)
+        noise = detection_noise(Z, params.likelihood)
     bp, lk = params.birth, params.likelihood
-    m_near = mass_near(predicted, Z, bp, lk)
+    m_near = mass_near(predicted, Z, bp, lk, noise[0])
     j = allocate_births(m_near, bp)
     n = int(j.sum())
     st = stream(key_from(rng))
     # eq. (4), newborn branch, with γ_z ∝ p_z: every newborn of z weighs birth_intensity / J_z.
-    lw_det = log_birth_weight(Z, params, log_kappa) - np.log(np.maximum(j, 1))
+    lw_det = log_birth_weight(Z, params, log_kappa, noise[1]) - np.log(np.maximum(j, 1))
     if revive is not None and bp.revive_odds > bp.birth_odds > 0 and log_kappa is not None:
         lw_det = lw_det + np.where(revive, math.log(bp.revive_odds / bp.birth_odds), 0.0)
     if out is not None and len(out[0]) >= n and len(out[1]) >= n:
@@ -837,11 +856,13 @@ class GatedGaussian:
     detection (a grid on their positions, :func:`._kernels.gauss_update`), with no pair
     arrays.  ``Z`` (N_z, 4) the detections, ``params`` the likelihood's settings, ``r2`` the
     squared Mahalanobis gate radius (``tail_radius2(gate_tail)``, bound in :mod:`.gating`; the
-    test is in float64 here, exactly the ellipsoid)."""
+    test is in float64 here, exactly the ellipsoid).  ``noise``: :func:`detection_noise` of
+    ``Z`` under ``params`` when the caller has it (read only with per-detection stds)."""
 
     Z: np.ndarray
     params: LikelihoodParams
     r2: float
+    noise: Optional[tuple[np.ndarray, np.ndarray]] = None
 
 
 #: What :func:`update` takes as the likelihood: a dense (N, N_z) matrix, one
@@ -938,8 +959,11 @@ def _update_gaussian(particles: ParticleSet, g: GatedGaussian, log_kappa: np.nda
     kappa = np.exp(log_kappa)
     lk = g.params
     by_det = lk.obs_std_source == "detection"
-    std = obs_std(Z[:, 2:4] if by_det else particles.states[:, 4:6], lk)
-    log_norm = np.log(std).sum(-1)
+    if by_det and g.noise is not None:
+        std, log_norm = g.noise
+    else:
+        std = obs_std(Z[:, 2:4] if by_det else particles.states[:, 4:6], lk)
+        log_norm = np.log(std).sum(-1)
     cell = _grid_cell(std if by_det else np.max(std[:, :2], axis=0, keepdims=True), g.r2)
     done = False
     if by_det:      # the linear route alone (weights within e^600: every PHD frame)
@@ -1174,8 +1198,9 @@ class PHDFilter:
             buf = (np.empty((cap, STATE_DIM)), np.empty(cap))
         predicted = predict(prev, p.motion, self.rng, buf)
         log_kappa_geo, log_kappa = self.scene.log_kappa(Z, scores, frame, predicted)
+        noise = detection_noise(Z, p.likelihood)
         born = birth(predicted, Z, p, self.rng, log_kappa_geo, revive,
-                     None if buf is None else (buf[0][n:], buf[1][n:]))
+                     None if buf is None else (buf[0][n:], buf[1][n:]), noise)
         m = n + len(born.particles)
         if fused and born.particles.states.base is buf[0]:
             candidates = ParticleSet(buf[0][:m], buf[1][:m])
@@ -1184,7 +1209,9 @@ class PHDFilter:
         if type(self.likelihood) is GaussianLikelihood:
             # maggio2007's Gaussian: evaluated inside the update's fused kernel
             log_g: LogG = GatedGaussian(Z, self.likelihood.params,
-                                        tail_radius2(p.gating.gate_tail, OBS_DIM))
+                                        tail_radius2(p.gating.gate_tail, OBS_DIM),
+                                        noise if self.likelihood.params == p.likelihood
+                                        else None)
         else:
             log_g = gated_log_g(self.likelihood, candidates.states, Z, frame, p)
         updated = update(candidates, log_g, log_kappa, p.likelihood.p_miss)

@@ -52,6 +52,7 @@ DEFAULT_BUDGET = 1_000_000
 
 
 @lru_cache(maxsize=32)
+@lru_cache(maxsize=32)
 def tail_radius2(tail: float, dof: int = 4) -> float:
     """Squared Mahalanobis radius ``r²`` with ``P(χ²_dof > r²) = tail`` (``isf``, accurate for
     tiny tails where ``ppf(1 − tail)`` would round)."""
