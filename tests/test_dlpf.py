@@ -214,6 +214,29 @@ def test_same_seed_same_tracks():
     assert not np.array_equal(p_a, p_c)
 
 
+def test_redrawn_parents_probe_motion_and_classify_from_the_next_frame():
+    """parents.explore_classify off (default): the parents re-drawn uniformly this frame score
+    no window (only the others do) and carry the frame's median margin into the next
+    resampling; on: every free parent scores its window."""
+    frames = list(_scene(2).frames())
+    counts = {}
+    for on in (False, True):
+        tr = make_tracker("dlpf", seed=1, **{"parents.n": "100", "parents.explore": "0.2",
+                                             "parents.explore_classify": str(on).lower()})
+        for f in frames:
+            out = tr.step(f, None, "particles")
+        win = find(out.stages, "dlpf/classify/windows", Boxes)[0]
+        counts[on] = len(win)
+        free = tr.parents.labels == 0
+        margins = tr.parents.extra[free, 1]
+        median = float(np.median(win.values["score"]))
+        if not on:
+            assert len(win) == free.sum() - round(0.2 * free.sum())
+            assert (margins == median).sum() >= round(0.2 * free.sum())
+            assert np.isin(win.values["score"], margins).all()
+    assert counts[True] == counts[False] + 20
+
+
 def test_runs_on_the_synthetic_scene_with_both_layers_reported():
     from pfscope.trackers.pipeline import BaseHook
 

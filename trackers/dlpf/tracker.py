@@ -8,14 +8,17 @@ One frame (stages in order):
               scored (eq. (7)).
 ``parents``   free parents are resampled on those weights (eq. (8)), a fraction ``explore`` is
               re-drawn uniformly (ours: without it a person who starts walking where no parent
-              is would never be found), each draws a random scale (§2.1), log-uniform over
+              is would never be found; a re-drawn parent only probes the motion in the frame
+              it is drawn and classifies from the next one on, ``explore_classify``), each
+              draws a random scale (§2.1), log-uniform over
               ``scale_min..scale_max`` of the image height (0.06-0.9: any person) until the
               online perspective prior (:mod:`.scale`: person height linear in the image row,
               or a constant height while its samples sit at one depth, fitted to the
               classifier-verified boxes of confirmed tracks, nothing scene-specific) is ready;
               then a fraction ``prior_mix`` draw from it and the rest from the learnt heights
               widened ×/÷ ``prior_margin`` (ours).
-``classify``  each free parent evaluates the HOG+SVM classifier on its one window
+``classify``  each free parent (but those just re-drawn) evaluates the HOG+SVM classifier on
+              its one window
               (:mod:`.classifier`; windows snapped to a pyramid grid so that duplicates and
               shared HOG blocks are computed once per frame; the SVM is OpenCV's people SVM or
               the paper's intersection-kernel SVM, ``classifier.model``); hits above
@@ -125,6 +128,12 @@ class ParentParams:
     velocity_from_flow: bool = param(True, "set a parent's velocity to the LK flow it measured "
                                            "(ours: the paper does not say how v is updated)")
     explore: float = param(0.2, "fraction of free parents re-drawn uniformly each frame (ours)")
+    explore_classify: bool = param(False, "a re-drawn parent also classifies its window in the "
+                                          "frame it is drawn (ours; false: it only probes the "
+                                          "motion there and classifies from the next frame on, "
+                                          "if resampling keeps it -- a lone random window costs "
+                                          "~100 HOG blocks, together two thirds of the HOG at "
+                                          "explore 0.2)")
     scheme: str = param("multinomial", "resampling scheme of eq. (8) (i.i.d. uniforms u_i = "
                                        "multinomial)", paper="jung2013 §2.1")
     score_weight: float = param(1.0, "beta: a parent's resampling log-weight also gets beta x its "
@@ -504,9 +513,12 @@ class DLPFTracker:
             np.zeros(0, dtype=np.int64)
         new = pred[anc]
         n_explore = int(round(P.parents.explore * len(free)))
+        classify = np.ones(len(free), dtype=bool)      # the free parents that classify
         if n_explore:
             pick = rng.choice(len(free), n_explore, replace=False)
             new[pick] = pa.uniform_states(n_explore, W, H, rng)
+            if not P.parents.explore_classify:
+                classify[pick] = False
         if P.parents.prior_mix > 0:  # the learnt range narrows the flat draw too (ours)
             lo, hi = prior.bounds(lo, hi, P.parents.prior_margin)
         heights = pa.draw_heights(len(free), lo, hi, rng)
@@ -540,8 +552,10 @@ class DLPFTracker:
 
         # ---------------------------------------------------------------- classify (one window each)
         log.stage("classify")
-        # the windows the classifier scores ('pyramid' mode: snapped to its level grid)
-        windows = self.classifier.snap(window_boxes(new[:, :2], heights),
+        # the windows the classifier scores ('pyramid' mode: snapped to its level grid); the
+        # parents just re-drawn only probe the motion this frame (parents.explore_classify)
+        cls = np.flatnonzero(classify)
+        windows = self.classifier.snap(window_boxes(new[cls, :2], heights[cls]),
                                        rng if P.classifier.spread else None)
         vwin, vtrack = self._verify_windows()
         # a track's few verification windows localise it: scored exactly (unsnapped), since
@@ -553,7 +567,11 @@ class DLPFTracker:
             scores = self.classifier.score(grey, windows)
             vscores = self.classifier.score(grey, vwin, exact=P.classifier.exact_verify)
         all_scores = np.concatenate([scores, vscores])
-        self.parents.extra[free, 1] = scores
+        # a parent that did not classify gets the frame's median margin: its resampling weight
+        # (parents.score_weight) neither favours nor penalises it against a typical window
+        margins = np.full(len(free), float(np.median(scores)) if len(scores) else 0.0)
+        margins[cls] = scores
+        self.parents.extra[free, 1] = margins
         self._support(vwin, vscores, vtrack)
         sup = [t.support for t in self.tracks if t.support is not None]
         if sup:
@@ -563,7 +581,7 @@ class DLPFTracker:
         hit = np.flatnonzero(scores > P.classifier.hit_threshold)
         hboxes = person_boxes(windows[hit])
         hscores = scores[hit]
-        hparents = free[hit]
+        hparents = free[cls[hit]]
         if len(hit) > 1 and P.classifier.nms_iou < 1.0:
             shifted = hscores - hscores.min() + 1.0
             keep = np.asarray(cv2.dnn.NMSBoxes(hboxes.tolist(), shifted.tolist(), 0.0,
