@@ -215,26 +215,28 @@ def test_same_seed_same_tracks():
 
 
 def test_redrawn_parents_probe_motion_and_classify_from_the_next_frame():
-    """parents.explore_classify off (default): the parents re-drawn uniformly this frame score
-    no window (only the others do) and carry the frame's median margin into the next
-    resampling; on: every free parent scores its window."""
+    """parents.explore_classify: of the parents re-drawn uniformly this frame only that
+    fraction scores a window (the other free parents all do); the rest carry the frame's
+    median margin into the next resampling.  1: every free parent scores its window."""
     frames = list(_scene(2).frames())
     counts = {}
-    for on in (False, True):
+    for frac in (0.0, 0.5, 1.0):
         tr = make_tracker("dlpf", seed=1, **{"parents.n": "100", "parents.explore": "0.2",
-                                             "parents.explore_classify": str(on).lower()})
+                                             "parents.explore_classify": str(frac)})
         for f in frames:
             out = tr.step(f, None, "particles")
         win = find(out.stages, "dlpf/classify/windows", Boxes)[0]
-        counts[on] = len(win)
+        counts[frac] = len(win)
         free = tr.parents.labels == 0
+        n_explore = round(0.2 * free.sum())
+        skipped = n_explore - round(frac * n_explore)
+        assert len(win) == free.sum() - skipped
         margins = tr.parents.extra[free, 1]
-        median = float(np.median(win.values["score"]))
-        if not on:
-            assert len(win) == free.sum() - round(0.2 * free.sum())
-            assert (margins == median).sum() >= round(0.2 * free.sum())
-            assert np.isin(win.values["score"], margins).all()
-    assert counts[True] == counts[False] + 20
+        assert (margins == float(np.median(win.values["score"]))).sum() >= skipped
+        assert np.isin(win.values["score"], margins).all()
+    assert counts[1.0] == counts[0.5] + 10 == counts[0.0] + 20
+    with pytest.raises(ValueError):
+        make_tracker("dlpf", **{"parents.explore_classify": "1.5"})
 
 
 def test_runs_on_the_synthetic_scene_with_both_layers_reported():

@@ -9,7 +9,8 @@ One frame (stages in order):
 ``parents``   free parents are resampled on those weights (eq. (8)), a fraction ``explore`` is
               re-drawn uniformly (ours: without it a person who starts walking where no parent
               is would never be found; a re-drawn parent only probes the motion in the frame
-              it is drawn and classifies from the next one on, ``explore_classify``), each
+              it is drawn and classifies from the next one on, but a fraction
+              ``explore_classify`` of them), each
               draws a random scale (§2.1), log-uniform over
               ``scale_min..scale_max`` of the image height (0.06-0.9: any person) until the
               online perspective prior (:mod:`.scale`: person height linear in the image row,
@@ -17,8 +18,8 @@ One frame (stages in order):
               classifier-verified boxes of confirmed tracks, nothing scene-specific) is ready;
               then a fraction ``prior_mix`` draw from it and the rest from the learnt heights
               widened ×/÷ ``prior_margin`` (ours).
-``classify``  each free parent (but those just re-drawn) evaluates the HOG+SVM classifier on
-              its one window
+``classify``  each free parent (but the re-drawn ones that only probe the motion) evaluates
+              the HOG+SVM classifier on its one window
               (:mod:`.classifier`; windows snapped to a pyramid grid so that duplicates and
               shared HOG blocks are computed once per frame; the SVM is OpenCV's people SVM or
               the paper's intersection-kernel SVM, ``classifier.model``); hits above
@@ -128,12 +129,13 @@ class ParentParams:
     velocity_from_flow: bool = param(True, "set a parent's velocity to the LK flow it measured "
                                            "(ours: the paper does not say how v is updated)")
     explore: float = param(0.2, "fraction of free parents re-drawn uniformly each frame (ours)")
-    explore_classify: bool = param(False, "a re-drawn parent also classifies its window in the "
-                                          "frame it is drawn (ours; false: it only probes the "
-                                          "motion there and classifies from the next frame on, "
-                                          "if resampling keeps it -- a lone random window costs "
-                                          "~100 HOG blocks, together two thirds of the HOG at "
-                                          "explore 0.2)")
+    explore_classify: float = param(0.5, "fraction of the re-drawn parents that also classify "
+                                         "their window in the frame they are drawn (ours; the "
+                                         "others only probe the motion there and classify from "
+                                         "the next frame on, if resampling keeps them: a lone "
+                                         "random window costs ~100 HOG blocks that no other "
+                                         "window shares, all of them two thirds of the HOG at "
+                                         "explore 0.2; 1 = every free parent classifies)")
     scheme: str = param("multinomial", "resampling scheme of eq. (8) (i.i.d. uniforms u_i = "
                                        "multinomial)", paper="jung2013 §2.1")
     score_weight: float = param(1.0, "beta: a parent's resampling log-weight also gets beta x its "
@@ -159,6 +161,8 @@ class ParentParams:
     def __post_init__(self):
         if self.n < 1 or not 0 <= self.explore <= 1 or not 0 < self.scale_min <= self.scale_max:
             raise ValueError("need n >= 1, 0 <= explore <= 1, 0 < scale_min <= scale_max")
+        if not 0 <= self.explore_classify <= 1:
+            raise ValueError("need 0 <= explore_classify <= 1")
         if not 0 <= self.prior_mix <= 1:
             raise ValueError("need 0 <= prior_mix <= 1")
 
@@ -517,8 +521,8 @@ class DLPFTracker:
         if n_explore:
             pick = rng.choice(len(free), n_explore, replace=False)
             new[pick] = pa.uniform_states(n_explore, W, H, rng)
-            if not P.parents.explore_classify:
-                classify[pick] = False
+            # pick is a random subset in random order: its first part classifies
+            classify[pick[int(round(P.parents.explore_classify * n_explore)):]] = False
         if P.parents.prior_mix > 0:  # the learnt range narrows the flat draw too (ours)
             lo, hi = prior.bounds(lo, hi, P.parents.prior_margin)
         heights = pa.draw_heights(len(free), lo, hi, rng)
