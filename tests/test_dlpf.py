@@ -214,6 +214,31 @@ def test_same_seed_same_tracks():
     assert not np.array_equal(p_a, p_c)
 
 
+def test_redrawn_parents_probe_motion_and_classify_from_the_next_frame():
+    """parents.explore_classify: of the parents re-drawn uniformly this frame only that
+    fraction scores a window (the other free parents all do); the rest carry the frame's
+    median margin into the next resampling.  1: every free parent scores its window."""
+    frames = list(_scene(2).frames())
+    counts = {}
+    for frac in (0.0, 0.5, 1.0):
+        tr = make_tracker("dlpf", seed=1, **{"parents.n": "100", "parents.explore": "0.2",
+                                             "parents.explore_classify": str(frac)})
+        for f in frames:
+            out = tr.step(f, None, "particles")
+        win = find(out.stages, "dlpf/classify/windows", Boxes)[0]
+        counts[frac] = len(win)
+        free = tr.parents.labels == 0
+        n_explore = round(0.2 * free.sum())
+        skipped = n_explore - round(frac * n_explore)
+        assert len(win) == free.sum() - skipped
+        margins = tr.parents.extra[free, 1]
+        assert (margins == float(np.median(win.values["score"]))).sum() >= skipped
+        assert np.isin(win.values["score"], margins).all()
+    assert counts[1.0] == counts[0.5] + 10 == counts[0.0] + 20
+    with pytest.raises(ValueError):
+        make_tracker("dlpf", **{"parents.explore_classify": "1.5"})
+
+
 def test_runs_on_the_synthetic_scene_with_both_layers_reported():
     from pfscope.trackers.pipeline import BaseHook
 
@@ -474,21 +499,27 @@ def test_classifier_threads_change_no_score():
 
 def test_step_turns_opencv_threads_off_and_restores_them(monkeypatch):
     """With classifier.threads > 1 the step runs OpenCV single-threaded (its own threads split
-    the work) and restores OpenCV's setting after it, also when the step fails; the tracks
-    equal those of the one-thread classifier under OpenCV's own threads."""
+    the work) except for Lucas-Kanade, which runs alone on that many OpenCV threads, and
+    restores OpenCV's setting after it, also when the step fails; the tracks equal those of
+    the one-thread classifier under OpenCV's own threads."""
     import cv2
 
     from pfscope.trackers.dlpf import tracker as T
     from pfscope.trackers.errors import InputError
 
-    seen = []
-    real = T.DLPFTracker._step
+    seen, lk_seen = [], []
+    real, real_lk = T.DLPFTracker._step, T.mo.lk_flow
 
     def spy(self, frame, level):
         seen.append((self.params.classifier.threads, cv2.getNumThreads()))
         return real(self, frame, level)
 
+    def lk_spy(*a, **k):   # Lucas-Kanade runs alone: OpenCV's threads back on for it
+        lk_seen.append(cv2.getNumThreads())
+        return real_lk(*a, **k)
+
     monkeypatch.setattr(T.DLPFTracker, "_step", spy)
+    monkeypatch.setattr(T.mo, "lk_flow", lk_spy)
     before = cv2.getNumThreads()
     cv2.setNumThreads(2)
     try:
@@ -499,6 +530,7 @@ def test_step_turns_opencv_threads_off_and_restores_them(monkeypatch):
             rows[threads] = run(_scene(10), [tr], level="tracks").rows["dlpf"]
             assert cv2.getNumThreads() == 2
         assert {s for s in seen} == {(1, 2), (2, 1)}
+        assert lk_seen and set(lk_seen) == {2}
         assert len(rows[1]) == len(rows[2])
         for (fa, ta), (fb, tb) in zip(rows[1], rows[2]):
             assert fa == fb and np.array_equal(ta.ids, tb.ids)

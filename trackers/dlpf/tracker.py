@@ -8,14 +8,18 @@ One frame (stages in order):
               scored (eq. (7)).
 ``parents``   free parents are resampled on those weights (eq. (8)), a fraction ``explore`` is
               re-drawn uniformly (ours: without it a person who starts walking where no parent
-              is would never be found), each draws a random scale (§2.1), log-uniform over
+              is would never be found; a re-drawn parent only probes the motion in the frame
+              it is drawn and classifies from the next one on, but a fraction
+              ``explore_classify`` of them), each
+              draws a random scale (§2.1), log-uniform over
               ``scale_min..scale_max`` of the image height (0.06-0.9: any person) until the
               online perspective prior (:mod:`.scale`: person height linear in the image row,
               or a constant height while its samples sit at one depth, fitted to the
               classifier-verified boxes of confirmed tracks, nothing scene-specific) is ready;
               then a fraction ``prior_mix`` draw from it and the rest from the learnt heights
               widened ×/÷ ``prior_margin`` (ours).
-``classify``  each free parent evaluates the HOG+SVM classifier on its one window
+``classify``  each free parent (but the re-drawn ones that only probe the motion) evaluates
+              the HOG+SVM classifier on its one window
               (:mod:`.classifier`; windows snapped to a pyramid grid so that duplicates and
               shared HOG blocks are computed once per frame; the SVM is OpenCV's people SVM or
               the paper's intersection-kernel SVM, ``classifier.model``); hits above
@@ -125,6 +129,13 @@ class ParentParams:
     velocity_from_flow: bool = param(True, "set a parent's velocity to the LK flow it measured "
                                            "(ours: the paper does not say how v is updated)")
     explore: float = param(0.2, "fraction of free parents re-drawn uniformly each frame (ours)")
+    explore_classify: float = param(0.5, "fraction of the re-drawn parents that also classify "
+                                         "their window in the frame they are drawn (ours; the "
+                                         "others only probe the motion there and classify from "
+                                         "the next frame on, if resampling keeps them: a lone "
+                                         "random window costs ~100 HOG blocks that no other "
+                                         "window shares, all of them two thirds of the HOG at "
+                                         "explore 0.2; 1 = every free parent classifies)")
     scheme: str = param("multinomial", "resampling scheme of eq. (8) (i.i.d. uniforms u_i = "
                                        "multinomial)", paper="jung2013 §2.1")
     score_weight: float = param(1.0, "beta: a parent's resampling log-weight also gets beta x its "
@@ -150,6 +161,8 @@ class ParentParams:
     def __post_init__(self):
         if self.n < 1 or not 0 <= self.explore <= 1 or not 0 < self.scale_min <= self.scale_max:
             raise ValueError("need n >= 1, 0 <= explore <= 1, 0 < scale_min <= scale_max")
+        if not 0 <= self.explore_classify <= 1:
+            raise ValueError("need 0 <= explore_classify <= 1")
         if not 0 <= self.prior_mix <= 1:
             raise ValueError("need 0 <= prior_mix <= 1")
 
@@ -462,8 +475,12 @@ class DLPFTracker:
         # one Lucas-Kanade call for the tracks' flow grids and the free parents (eq. (1))
         tpts = self._track_flow_points()
         if self._prev_grey is not None and len(free) + len(tpts):
-            flow, ok = mo.lk_flow(self._prev_grey, grey, np.concatenate([tpts, pred[:, :2]]),
-                                  win=P.motion.lk_window, levels=P.motion.lk_levels)
+            # the step's own threads are idle here: OpenCV may split the points over them
+            # (each point's flow is computed the same way whatever the thread count)
+            with opencv_threads(max(cv2.getNumThreads(), P.classifier.threads)):
+                flow, ok = mo.lk_flow(self._prev_grey, grey,
+                                      np.concatenate([tpts, pred[:, :2]]),
+                                      win=P.motion.lk_window, levels=P.motion.lk_levels)
         else:
             flow, ok = np.zeros((len(tpts) + len(free), 2)), np.zeros(len(tpts) + len(free), bool)
         self._set_track_flow(flow[:len(tpts)], ok[:len(tpts)])
@@ -500,9 +517,12 @@ class DLPFTracker:
             np.zeros(0, dtype=np.int64)
         new = pred[anc]
         n_explore = int(round(P.parents.explore * len(free)))
+        classify = np.ones(len(free), dtype=bool)      # the free parents that classify
         if n_explore:
             pick = rng.choice(len(free), n_explore, replace=False)
             new[pick] = pa.uniform_states(n_explore, W, H, rng)
+            # pick is a random subset in random order: its first part classifies
+            classify[pick[int(round(P.parents.explore_classify * n_explore)):]] = False
         if P.parents.prior_mix > 0:  # the learnt range narrows the flat draw too (ours)
             lo, hi = prior.bounds(lo, hi, P.parents.prior_margin)
         heights = pa.draw_heights(len(free), lo, hi, rng)
@@ -536,8 +556,10 @@ class DLPFTracker:
 
         # ---------------------------------------------------------------- classify (one window each)
         log.stage("classify")
-        # the windows the classifier scores ('pyramid' mode: snapped to its level grid)
-        windows = self.classifier.snap(window_boxes(new[:, :2], heights),
+        # the windows the classifier scores ('pyramid' mode: snapped to its level grid); the
+        # parents just re-drawn only probe the motion this frame (parents.explore_classify)
+        cls = np.flatnonzero(classify)
+        windows = self.classifier.snap(window_boxes(new[cls, :2], heights[cls]),
                                        rng if P.classifier.spread else None)
         vwin, vtrack = self._verify_windows()
         # a track's few verification windows localise it: scored exactly (unsnapped), since
@@ -549,7 +571,11 @@ class DLPFTracker:
             scores = self.classifier.score(grey, windows)
             vscores = self.classifier.score(grey, vwin, exact=P.classifier.exact_verify)
         all_scores = np.concatenate([scores, vscores])
-        self.parents.extra[free, 1] = scores
+        # a parent that did not classify gets the frame's median margin: its resampling weight
+        # (parents.score_weight) neither favours nor penalises it against a typical window
+        margins = np.full(len(free), float(np.median(scores)) if len(scores) else 0.0)
+        margins[cls] = scores
+        self.parents.extra[free, 1] = margins
         self._support(vwin, vscores, vtrack)
         sup = [t.support for t in self.tracks if t.support is not None]
         if sup:
@@ -559,7 +585,7 @@ class DLPFTracker:
         hit = np.flatnonzero(scores > P.classifier.hit_threshold)
         hboxes = person_boxes(windows[hit])
         hscores = scores[hit]
-        hparents = free[hit]
+        hparents = free[cls[hit]]
         if len(hit) > 1 and P.classifier.nms_iou < 1.0:
             shifted = hscores - hscores.min() + 1.0
             keep = np.asarray(cv2.dnn.NMSBoxes(hboxes.tolist(), shifted.tolist(), 0.0,
