@@ -116,3 +116,96 @@ def test_clutter_share_reads_the_shadow_model_from_the_update():
     assert np.all(less[1:3] < (1 - won)[1:3]) and less[0] == 1.0 and less[3] == 0.0
     c = won[1:3] / (1 - won[1:3]) * np.exp(log_k[1:3])          # C(z) of the update
     assert less[1:3] == pytest.approx(np.exp(log_k[1:3]) / 4 / (np.exp(log_k[1:3]) / 4 + c))
+
+
+# ----------------------------------------------------------------------------- the EM's priors
+
+def _near(**kw) -> "NearClutter":
+    from pfscope.trackers.phd.clutter import NearClutter
+
+    return NearClutter(ClutterParams(clutter_model="learn", clutter_memory=100.0, **kw), LK)
+
+
+def test_near_rate_stays_at_its_prior_while_no_target_has_formed():
+    """ν (false boxes per target per frame) divides the near shares by the predicted mass: with
+    ~0 mass (no target formed yet, each detection of a person next to the little mass the last
+    one left) its EM ran to the clip 1.  With the Gamma prior it stays near the prior unless
+    the evidence outweighs it, and it still learns ν where targets exist."""
+    from pfscope.trackers.phd.clutter import NEAR_PRIOR, PRIOR_FRAMES
+
+    nc = _near()
+    for t in range(300):                     # mass 0.001 a frame, near shares 0.01 a frame
+        nc._exposure = 0.001
+        nc.learn(np.array([0.01]), 1.0 / min(t + 5, 100))
+    # the evidence alone reads 10 (→ the clip 1); prior and evidence together
+    # (0.01 + n0 a ν0) / (0.001 + n0 a) with a = 1/100, n0 = 5: ~0.2
+    assert nc.nu < 0.3, nc.nu
+    a = 1 / 100
+    assert nc.nu == pytest.approx((0.01 + PRIOR_FRAMES * a * NEAR_PRIOR)
+                                  / (0.001 + PRIOR_FRAMES * a), rel=0.05)
+
+    learnt = _near()
+    rng = np.random.default_rng(0)
+    for t in range(300):                     # 4 targets, 0.2 false boxes next to each a frame
+        learnt._exposure = 4.0
+        learnt.learn(np.full(rng.poisson(0.8), 1.0), 1.0 / min(t + 5, 100))
+    assert 0.12 <= learnt.nu <= 0.3, learnt.nu
+
+    empty = _near()
+    for t in range(50):                      # nothing at all: the prior
+        empty._exposure = 0.0
+        empty.learn(np.zeros(0), 1.0 / min(t + 5, 100))
+    assert empty.nu == pytest.approx(NEAR_PRIOR)
+
+
+def test_place_rate_climbs_where_a_spot_keeps_firing_and_sinks_where_it_stops():
+    """A place's own clutter rate (posterior mean under the prior β): a spot firing on every
+    frame, never explained, reaches the ``gate`` model there (rate → 1); a place where clutter
+    fell a few times sinks below β's prior share once quiet; no memory, no κ_r."""
+    spot = np.array([[100.0, 200.0, 40.0, 100.0]])
+    other = np.array([[400.0, 300.0, 40.0, 100.0]])
+    rep = _place()
+    assert rep.place_rate(spot)[0] == 0.0
+    rates = []
+    for t in range(40):
+        Z = np.vstack([spot, other]) if t < 3 else spot      # `other` fires 3 times, stops
+        rep.learn(Z, np.ones(len(Z)), np.ones(len(Z)), 1.0 / min(t + 5, 100))
+        rates.append(rep.place_rate(spot)[0])
+    assert rates[0] < 0.6 and rates[-1] > 0.85, rates
+    assert np.all(np.diff(rates) > -1e-9)                    # climbs monotonically
+    assert rep.place_rate(other)[0] < 0.25
+    assert rep.log_kappa(spot)[0] == pytest.approx(
+        log_clutter_density(spot, ClutterParams(clutter_rate=1.0), LK)[0]
+        + np.log(rep.place_rate(spot)[0]))
+
+
+def _learnt(kind: str, seed: int, update: str) -> dict:
+    """PHD-MT practical with clutter_model='learn' on the synthetic scene: per-frame averages
+    (after WARMUP) of the learnt random rate λ_u, the structured counts, the true false
+    detections, and the PHD mass / true count; and the first WARMUP frames' ν."""
+    from pfscope.trackers.api import make_tracker
+    from pfscope.trackers.pipeline import BaseHook, run
+
+    tr = make_tracker("phd", seed, preset="practical", clutter_model="learn",
+                      learn_update=update)
+    rec = []
+
+    class Hook(BaseHook):
+        def on_frame(self, report):
+            sc = tr.filter.scene
+            rec.append((sc.rate, sc.place.count(), sc.people.count(), sc.people.nu,
+                        tr.filter.mass, len(report.gt.ids)))
+
+    run(_scene(kind, seed), {"phd": tr}, frames=FRAMES, level=None, hooks=[Hook()],
+        keep_rows=False, score=False)
+    r = np.array(rec)
+    late = r[WARMUP:]
+    return {"rate": late[:, 0].mean(), "place": late[:, 1].mean(), "near": late[:, 2].mean(),
+            "nu_early": r[:WARMUP, 3].max(),
+            "mass": late[:, 4].sum() / max(1.0, late[:, 5].sum())}
+
+
+@pytest.fixture(scope="module")
+def learnt():
+    return {(kind, upd): [_learnt(kind, s, upd) for s in SEEDS]
+            for kind in ("random", "place") for upd in ("gate", "model")}
