@@ -24,7 +24,7 @@ The learnt model is their mixture, ``κ(z) = κ_u(z) + κ_r(z)``:
   ``(S + n0 β) / (E + n0)`` of a Poisson rate under a Gamma prior of mean β and ``n0 =
   PRIOR_FRAMES`` frames, ``S(z)`` the faded clutter weight inside z's gate and ``E(z)`` the
   faded number of frames the place has been remembered.  A spot that fires on every frame
-  climbs to ``r = 1`` (the ``gate`` model there); a place where clutter fell once sinks to
+  climbs towards ``r = 1`` (the ``gate`` model there); a place where clutter fell once sinks to
   ``~β`` and below as it stays quiet.  A real target's detections are explained (``won ≈ 1``),
   so they leave no memory and keep the density's small κ: its mass follows the count;
 - ``κ_n`` (:class:`NearClutter`) is ν false boxes per predicted target around it (duplicate,
@@ -140,8 +140,9 @@ class PlaceClutter:
         posterior mean of a Poisson rate with the Gamma prior of mean β and ``PRIOR_FRAMES``
         frames, ``(S + n0 β) / (E + n0)``, from the clutter seen there (S, faded) over the
         frames the place has been watched (E, faded alike).  A spot that fires on every frame
-        climbs to 1 (the ``gate`` model there); a place where clutter fell once sinks towards
-        β·n0/(E + n0) as it stays quiet."""
+        climbs towards 1 (the ``gate`` model there; E/(E + n0) of it, E at most the memory's
+        1/(1 − δ) frames); a place where clutter fell once sinks towards β·n0/(E + n0) as it
+        stays quiet."""
         S, E = self._weight_in_gates(Z, watched=True)
         r = (S + PRIOR_FRAMES * self.beta) / (E + PRIOR_FRAMES)
         return np.where(S > 0, np.minimum(r, 1.0), 0.0)
