@@ -19,18 +19,34 @@ The learnt model is their mixture, ``κ(z) = κ_u(z) + κ_r(z)``:
   λ_u estimated online, plus ``near_rate`` around each detection when set);
 - ``κ_r`` is the ``gate`` model **only where clutter fell before**: a memory of the recent
   detections no target explained, each weighing its clutter share ``1 − won`` and fading with
-  factor δ per frame, and ``κ_r(z) = β (1 − δ) S(z) / V(z)`` with ``S(z)`` the faded clutter
-  weight inside the ``clutter_gate`` ellipsoid of z and ``V(z)`` that ellipsoid's volume (the
-  ``gate`` model's: a detection at a place that fired on every recent frame gets ``β`` clutter
-  points around it, as ``gate`` gives 1 to all).  A real target's detections are explained
-  (``won ≈ 1``), so they leave no memory and keep the density's small κ: its mass follows the
-  count.
+  factor δ per frame, and ``κ_r(z) = r(z) / V(z)`` with ``V(z)`` the ``clutter_gate``
+  ellipsoid's volume and ``r(z)`` the clutter rate per frame of z's place: the posterior mean
+  ``(S + n0 β) / (E + n0)`` of a Poisson rate under a Gamma prior of mean β and ``n0 =
+  PRIOR_FRAMES`` frames, ``S(z)`` the faded clutter weight inside z's gate and ``E(z)`` the
+  faded number of frames the place has been remembered.  A spot that fires on every frame
+  climbs towards ``r = 1`` (the ``gate`` model there); a place where clutter fell once sinks to
+  ``~β`` and below as it stays quiet.  A real target's detections are explained (``won ≈ 1``),
+  so they leave no memory and keep the density's small κ: its mass follows the count;
+- ``κ_n`` (:class:`NearClutter`) is ν false boxes per predicted target around it (duplicate,
+  misplaced and partial boxes next to a person), none for a detection that continues a chain
+  of mutually nearest detections (:class:`~.scene_motion.Chains`): such a detection is a
+  person's or a spot's, a box beside a person does not chain.
 
-β, the share of clutter that comes back in place, and λ_u are estimated together by EM, as the
-``scene`` rate is: after each update, detection z's clutter share ``1 − won(z)`` is split between
-the two kinds in proportion to ``κ_u(z)`` and ``κ_r(z)``; λ_u is the average of the random
-shares per frame, β the average of the repeated shares over the average exposure ``(1 − δ) Σ
-memory``.  On uniform clutter a false detection seldom falls inside an earlier one's gate (in
+β, the share of clutter that comes back in place, ν and λ_u are estimated together by EM, as
+the ``scene`` rate is: after each update, detection z's clutter share ``1 − won(z)`` is split
+between the kinds in proportion to ``κ_u(z)``, ``κ_r(z)`` and ``κ_n(z)``; λ_u is the average of
+the random shares per frame, β the average of the repeated shares over the average exposure
+(the places in memory, each counted once), ν the near shares over the predicted mass.  β and ν
+carry a Gamma prior (:func:`em_rate`, ``PRIOR_FRAMES`` frames of evidence at the prior mean,
+held, not faded): where their exposure is ~0 (no place remembered; no target formed yet, so
+that each detection of a person would read as clutter next to the little mass the previous one
+left) they stay at the prior instead of running to their clip.
+
+Which κ the update uses is ``learn_update``: ``'gate'`` the random density plus the ``gate``
+model at the learnt share of structured clutter around every detection (a stand-in for the
+structured clutter the memory has not placed yet; safe where a detector puts duplicate boxes
+next to people, PETS09's ACF, but as strict as ``gate`` where the structured share is high);
+``'model'`` the learnt mixture ``κ_u + κ_r + κ_n`` itself.  On uniform clutter a false detection seldom falls inside an earlier one's gate (in
 four dimensions: place and size), so β falls towards its floor and the model becomes the
 ``scene`` density; where the detector fires in place, β stays high and κ near those places is
 the ``gate`` model's.  Nothing to set per scene: the prior is β = 1 (the ``gate`` model where
@@ -53,24 +69,50 @@ if TYPE_CHECKING:  # pragma: no cover
 
 #: β never goes below this (EM cannot revive a component at exactly zero)
 BETA_FLOOR = 0.01
+#: strength of the prior of each EM rate (β, ν), in frames of evidence at the prior mean: the
+#: rate is ``(Σ counts + n0 · prior) / (Σ exposure + n0)`` over the memory (a Gamma prior, the
+#: conjugate of a Poisson rate, held constant instead of fading like the evidence).  With no
+#: exposure (no clutter place remembered, no predicted target) the rate stays at its prior
+#: instead of running to a clip; ``n0`` frames of one place / one target outweigh it half.
+PRIOR_FRAMES = 5.0
+#: prior mean of ν (false detections next to each target per frame): none until the
+#: detections show them
+NEAR_PRIOR = BETA_FLOOR
+
+
+def em_rate(num: float, den: float, prior: float, a: float) -> float:
+    """The EM rate with its conjugate prior (:data:`PRIOR_FRAMES`): ``num`` / ``den`` are the
+    exponential averages of the counts / the exposure per frame, ``a`` the weight of the last
+    frame in them (1 / memory once the memory is full), ``prior`` the prior mean.  Clipped to
+    [BETA_FLOOR, 1]."""
+    n0 = PRIOR_FRAMES * a
+    return float(np.clip((num + n0 * prior) / (den + n0), BETA_FLOOR, 1.0))
 #: memory entries whose faded weight is below this are dropped
 MIN_WEIGHT = 1e-3
 
 
 class PlaceClutter:
-    """The repeated-in-place part ``κ_r`` and the EM for β (module docstring).  One instance per
-    filter; ``log_kappa`` then ``learn`` once per frame."""
+    """The repeated-in-place part ``κ_r`` and the EM for β (module docstring).  β (learnt)
+    models the mean clutter rate per frame of a place where clutter fell: the prior mean of
+    each place's own rate :meth:`place_rate`.  One instance per filter; ``log_kappa`` then
+    ``learn`` once per frame."""
 
     def __init__(self, cl: "ClutterParams", lk: "LikelihoodParams"):
         self.cl, self.lk = cl, lk
         self.beta = float(cl.repeat_prior)
         self.mem_z = np.zeros((0, 4))       # past detections (y1, y2, w, h)
         self.mem_w = np.zeros(0)            # their faded clutter share
+        self.mem_e = np.zeros(0)            # the faded frames each has been remembered
         # EM sums (exponential averages): repeated share per frame, exposure per frame; the
         # prior is one clutter point of exposure at repeat_prior
-        self.num = float(cl.repeat_prior)
-        self.den = 1.0
+        self.num = 0.0
+        self.den = 0.0
+        self._a = 0.2                       # the weight of one frame in num / den (SceneModel)
         self.frames = 0
+
+    def count(self) -> float:
+        """Clutter repeated in place per frame, the prior's pseudo-counts included."""
+        return self.num + PRIOR_FRAMES * self._a * self.cl.repeat_prior
 
     @property
     def fade(self) -> float:
@@ -78,22 +120,38 @@ class PlaceClutter:
         frames = max(1.0, self.cl.repeat_memory * self.cl.clutter_memory)
         return 1.0 - 1.0 / frames if frames > 1 else 0.0
 
-    def _weight_in_gates(self, Z: np.ndarray) -> np.ndarray:
-        """``S(z)`` (N_z,): the memory's faded clutter weight inside each z's gate."""
+    def _weight_in_gates(self, Z: np.ndarray, watched: bool = False):
+        """``S(z)`` (N_z,): the memory's faded clutter weight inside each z's gate; with
+        ``watched`` also ``E(z)``, the faded frames the oldest of them has been remembered."""
         from .filter import OBS_DIM, gate_threshold, obs_std
 
         S = np.zeros(len(Z))
+        E = np.zeros(len(Z))
         if len(Z) and len(self.mem_w):
             r2 = gate_threshold(self.cl.clutter_gate, OBS_DIM)
             for ch in gate_pairs(self.mem_z, Z, r2, std_z=obs_std(Z[:, 2:4], self.lk)):
                 S += np.bincount(ch.cols, weights=self.mem_w[ch.rows], minlength=len(Z))
-        return S
+                if watched:
+                    np.maximum.at(E, ch.cols, self.mem_e[ch.rows])
+        return (S, E) if watched else S
+
+    def place_rate(self, Z: np.ndarray) -> np.ndarray:
+        """Each detection's place's clutter rate per frame (N_z,; 0 where no clutter fell): the
+        posterior mean of a Poisson rate with the Gamma prior of mean β and ``PRIOR_FRAMES``
+        frames, ``(S + n0 β) / (E + n0)``, from the clutter seen there (S, faded) over the
+        frames the place has been watched (E, faded alike).  A spot that fires on every frame
+        climbs towards 1 (the ``gate`` model there; E/(E + n0) of it, E at most the memory's
+        1/(1 − δ) frames); a place where clutter fell once sinks towards β·n0/(E + n0) as it
+        stays quiet."""
+        S, E = self._weight_in_gates(Z, watched=True)
+        r = (S + PRIOR_FRAMES * self.beta) / (E + PRIOR_FRAMES)
+        return np.where(S > 0, np.minimum(r, 1.0), 0.0)
 
     def log_kappa(self, Z: np.ndarray) -> np.ndarray:
         """``log κ_r(z)`` (N_z,) of this frame's detections (``-inf`` where no clutter fell)."""
         from .filter import log_clutter_density
 
-        rate = self.beta * np.minimum(self._weight_in_gates(Z), 1.0)
+        rate = self.place_rate(Z)
         with np.errstate(divide="ignore"):
             per_point = log_clutter_density(Z, replace(self.cl, clutter_rate=1.0), self.lk)
             return np.log(rate) + per_point
@@ -119,14 +177,15 @@ class PlaceClutter:
         exposure = self.exposure()
         self.num = (1 - a) * self.num + a * float(np.sum(repeat_share))
         self.den = (1 - a) * self.den + a * exposure
-        if self.den > 0:
-            self.beta = float(np.clip(self.num / self.den, BETA_FLOOR, 1.0))
+        self.beta = em_rate(self.num, self.den, self.cl.repeat_prior, a)
+        self._a = a
         self.frames += 1
         # fade the memory, add this frame's clutter, drop what has faded away
         w = np.concatenate([self.mem_w * self.fade, np.asarray(clutter_share, dtype=float)])
+        e = np.concatenate([self.mem_e * self.fade + 1.0, np.ones(len(w) - len(self.mem_w))])
         z = np.vstack([self.mem_z, np.asarray(Z, dtype=float).reshape(-1, 4)])
         keep = w >= MIN_WEIGHT
-        self.mem_z, self.mem_w = z[keep], w[keep]
+        self.mem_z, self.mem_w, self.mem_e = z[keep], w[keep], e[keep]
 
 
 #: the "near people" neighbourhood: this many times the observation stds of the clutter gate
@@ -139,14 +198,18 @@ class NearClutter:
     """False detections that come with the people (``κ_n``; module docstring): ``ν`` clutter
     points per target, spread as the ``gate`` model around the detection, where the predicted
     targets are: ``κ_n(z) = ν min(1, M'(z)) / V(z)`` with ``M'(z)`` the predicted mass inside
-    ``NEAR_SCALE`` × the clutter gate of z.  ν by EM: the detections' near shares over the
-    predicted mass (each target makes ν of them a frame on average)."""
+    ``NEAR_SCALE`` × the clutter gate of z.  ν (learnt) models the mean number of false boxes
+    a target brings next to it per frame; by EM, the detections' near shares over the predicted
+    mass, with the Gamma prior of :func:`em_rate` (mean ``NEAR_PRIOR``: none until the
+    detections show them), so that ν cannot run to its clip while the predicted mass is ~0.
+    A detection that continues a chain gets no κ_n (its near share is 0: module docstring)."""
 
     def __init__(self, cl: "ClutterParams", lk: "LikelihoodParams"):
         self.cl, self.lk = cl, lk
-        self.nu = float(cl.repeat_prior)
-        self.num = float(cl.repeat_prior)
-        self.den = 1.0
+        self.nu = NEAR_PRIOR
+        self.num = 0.0
+        self.den = 0.0
+        self._a = 0.2
         self._exposure = 0.0
 
     def log_kappa(self, Z: np.ndarray, predicted) -> np.ndarray:
@@ -163,10 +226,33 @@ class NearClutter:
             return np.log(self.nu * np.minimum(m, 1.0)) + per_point
 
     def learn(self, near_share: np.ndarray, a: float) -> None:
+        """After the update: ``near_share`` (N_z,) the clutter share the EM gives to κ_n (none
+        for a detection that continues a chain: :meth:`.filter.SceneModel.learn`)."""
         self.num = (1 - a) * self.num + a * float(np.sum(near_share))
         self.den = (1 - a) * self.den + a * self._exposure
-        if self.den > 0:
-            self.nu = float(np.clip(self.num / self.den, BETA_FLOOR, 1.0))
+        self.nu = em_rate(self.num, self.den, NEAR_PRIOR, a)
+        self._a = a
+
+    def count(self) -> float:
+        """Near-people clutter per frame, the prior's pseudo-counts included."""
+        return self.num + PRIOR_FRAMES * self._a * NEAR_PRIOR
+
+
+def neighbours(Z: np.ndarray, cl: "ClutterParams", lk: "LikelihoodParams",
+               scale: float = 1.0) -> np.ndarray:
+    """(N_z,) int: the other detections of the frame inside each detection's ``clutter_gate``
+    ellipsoid, its observation stds times ``scale`` (grid-indexed pairs, :func:`gate_pairs`)."""
+    from .filter import OBS_DIM, gate_threshold, obs_std
+
+    count = np.zeros(len(Z), dtype=np.int64)
+    if len(Z) > 1:
+        wide = lk if scale == 1.0 else replace(lk, sigma_obs=lk.sigma_obs * scale,
+                                                sigma_obs_min=lk.sigma_obs_min * scale)
+        for ch in gate_pairs(Z, Z, gate_threshold(cl.clutter_gate, OBS_DIM),
+                             std_z=obs_std(Z[:, 2:4], wide)):
+            other = ch.rows != ch.cols
+            count += np.bincount(ch.cols[other], minlength=len(Z))
+    return count
 
 
 def clutter_share(won: np.ndarray, log_used: np.ndarray, log_shadow: np.ndarray) -> np.ndarray:

@@ -88,7 +88,7 @@ import numpy as np
 from ..params import param, part, with_options
 from . import _kernels, motion
 from .clutter import PlaceClutter
-from .clutter import NearClutter, clutter_share
+from .clutter import NEAR_SCALE, NearClutter, clutter_share, neighbours
 from .scene_motion import Chains
 from .gating import DEFAULT_BUDGET, LogGPairs, gate_pairs, tail_radius2
 from ..smc.resampling import SCHEMES
@@ -181,6 +181,11 @@ class ClutterParams:
                                      "place (1: the 'gate' model wherever clutter fell)")
     repeat_memory: float = param(0.1, "'learn': how long the places where clutter fell are "
                                       "remembered, as a fraction of clutter_memory")
+    learn_update: str = param("gate", "'learn': the κ of the update -- 'gate': the random "
+                                      "density plus the 'gate' model at the learnt share of "
+                                      "structured clutter around every detection (the "
+                                      "structured clutter not placed yet); 'model': the "
+                                      "learnt mixture itself (.clutter)")
 
     def __post_init__(self):
         _check(self, "clutter_rate", self.clutter_rate >= 0, ">= 0")
@@ -189,6 +194,7 @@ class ClutterParams:
                "'gate', 'scene' or 'learn'")
         _check(self, "repeat_prior", 0.0 <= self.repeat_prior <= 1.0, "in [0, 1]")
         _check(self, "repeat_memory", self.repeat_memory > 0, "> 0")
+        _check(self, "learn_update", self.learn_update in ("gate", "model"), "'gate' or 'model'")
         _check(self, "clutter_memory", self.clutter_memory >= 1, ">= 1")
         _check(self, "near_rate", self.near_rate >= 0, ">= 0")
 
@@ -515,6 +521,7 @@ class SceneModel:
         # persistence label of this frame's detections for the score fit (ScoreParams)
         self.chains = Chains()
         self._persist: Optional[np.ndarray] = None
+        self._chained: Optional[np.ndarray] = None       # 'learn': continues a chain
         self.persist_sums: Optional[np.ndarray] = None   # as score_sums, labelled by persistence
         # 'learn': the repeated-in-place part of κ (.clutter), this frame's parts for learn()
         learn = self.cl.clutter_model == "learn"
@@ -532,7 +539,7 @@ class SceneModel:
     def structured(self) -> float:
         """'learn': the share of the clutter that is structured (near people or repeated in
         place) rather than random, from the EM averages (.clutter)."""
-        rep = self.people.num + self.place.num
+        rep = self.people.count() + self.place.count()
         return rep / (rep + self.rate) if rep + self.rate > 0 else 0.0
 
     @property
@@ -568,6 +575,10 @@ class SceneModel:
                   frame: Optional[Frame], predicted: Optional[ParticleSet] = None
                   ) -> tuple[np.ndarray, np.ndarray]:
         """``log κ(z)`` (N_z,) of this frame's detections: without, then with the scores."""
+        persist = self.uses_scores and self.sp.persist_frames > 0
+        if persist or self.place is not None:
+            # a no-op when the frame was linked already (PHD-MT shares its scene learner's)
+            self.chains.observe(Z, None if frame is None else frame.index)
         if self.scene_clutter:
             if len(Z):
                 self._see_sizes(Z)
@@ -588,16 +599,30 @@ class SceneModel:
             if self.place is not None:
                 self.place.cl = self.people.cl = self.cl
                 log_rep = self.place.log_kappa(Z)
-                log_near = self.people.log_kappa(Z, predicted)
+                # a detection that continues a chain of mutually nearest detections is a
+                # person's or a spot's, not a box beside a person (those do not chain): κ_n
+                # is 0 there, so it takes no share of it in the EM (the update alike with
+                # learn_update 'model')
+                self._chained = self.chains.length >= 1
+                log_near = np.where(self._chained, -np.inf,
+                                    self.people.log_kappa(Z, predicted))
                 shadow = np.logaddexp(np.logaddexp(log_kappa, log_rep), log_near)
-                log_used = np.logaddexp(log_kappa, self.place.log_gate(Z, self.structured()))
+                if self.cl.learn_update == "model":
+                    log_used = shadow
+                    # a detection with another of the frame next to it may be a second box on
+                    # one person, which a Poisson κ cannot express: the stand-in there
+                    pair = neighbours(Z, self.cl, self.lk, NEAR_SCALE) > 0
+                    if pair.any():
+                        log_used = np.where(pair, np.logaddexp(
+                            shadow, self.place.log_gate(Z, self.structured())), shadow)
+                else:
+                    log_used = np.logaddexp(log_kappa,
+                                            self.place.log_gate(Z, self.structured()))
                 self._parts = (Z, log_rep, log_near, shadow, log_used)
                 log_kappa = log_used
         else:
             log_kappa = log_clutter_density(Z, self.cl, self.lk)
-        if self.uses_scores and self.sp.persist_frames > 0:
-            # a no-op when the frame was linked already (PHD-MT shares its scene learner's)
-            self.chains.observe(Z, None if frame is None else frame.index)
+        if persist:
             self._persist = self.chains.length >= self.sp.persist_frames
         if self.uses_scores and scores is not None and len(Z):
             return log_kappa, log_kappa - self.log_score_ratio(scores)
@@ -606,11 +631,7 @@ class SceneModel:
     def _neighbours(self, Z: np.ndarray) -> float:
         """Mean number of other detections inside each detection's ``clutter_gate`` ellipsoid
         (grid-indexed pairs, :func:`~.gating.gate_pairs`)."""
-        count = 0
-        for ch in gate_pairs(Z, Z, gate_threshold(self.cl.clutter_gate, OBS_DIM),
-                             std_z=obs_std(Z[:, 2:4], self.lk)):
-            count += int(np.count_nonzero(ch.rows != ch.cols))
-        return count / len(Z)
+        return float(neighbours(Z, self.cl, self.lk).mean())
 
     def log_score_ratio(self, scores: np.ndarray) -> np.ndarray:
         """``log p(s|target) − log p(s|clutter)``, clipped to ±max_log_ratio: the fit on the
