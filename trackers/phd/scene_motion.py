@@ -33,6 +33,11 @@ matching):
   quantile, over the last :data:`WINDOW` samples (clutter links and mismatches are the tail);
   nothing is changed before :data:`MIN_SAMPLES` triplets.
 
+With ``camera`` on, the camera's image motion of each frame (:mod:`.camera_motion`, fitted
+to the same links) is taken out first: the earlier detections of a triplet are mapped into
+frame k's image coordinates, so what is measured is the people's own motion (on a moving
+camera the residual the compensated filter must still cover; a still camera is unchanged).
+
 The result is never below the preset (``max``): a smooth scene keeps its settings exactly.
 Deterministic, no randomness; memory bounded by :data:`WINDOW`.  The links compare every
 detection of a frame with every one of the previous frame (a few dozen each on real scenes);
@@ -46,6 +51,8 @@ import math
 from typing import Optional
 
 import numpy as np
+
+from . import camera_motion
 
 #: detections of two frames are linked within this many box sizes (Δx / w, Δy / h)
 LINK_DIST = 1.0
@@ -178,11 +185,23 @@ class SceneMotion:
     ``observe(Z)`` once per frame with the detections ``(cx, cy, w, h)``; :meth:`sigma_v` and
     :meth:`sigma_size` then give the measured noise (None until enough samples)."""
 
-    def __init__(self, pos_std: float):
+    def __init__(self, pos_std: float, camera: bool = False):
         #: the likelihood's position std as a fraction of the box size (σ_y / w)
         self.pos_std = float(pos_std)
         self.chains = Chains()
         self._prev_prev = np.zeros((0, 4))
+        #: estimate the camera's image motion (:mod:`.camera_motion`) from the links
+        self.camera_on = bool(camera)
+        #: the camera's similarity frame k−1 → k of the last frame observed (2×3), None when
+        #: the identity explains the links (a still camera) or ``camera`` is off
+        self.camera: Optional[np.ndarray] = None
+        self._camera_prev: Optional[np.ndarray] = None   # ... of the frame before
+        #: variance per axis of a person's own displacement in a frame, px² / (w h): what a
+        #: still camera's links may move without the camera moving (set by the tracker from
+        #: the newborn speed prior)
+        self.speed_var = 0.0
+        #: the likelihood's size std as a fraction of the box size (σ_size; the camera fit)
+        self.size_std = 2.0 * self.pos_std
         self.accel = _Ring(2)    # second differences over (w, h)
         self.size = _Ring(2)     # (1-frame, 2-frame) log size changes
         # the robust spreads of the windows, kept until a sample comes in (_spreads)
@@ -197,6 +216,12 @@ class SceneMotion:
         ch = self.chains
         prev, prev_link = ch.prev, ch.prev_link
         j = ch.observe(Z, key)
+        if self.camera_on:
+            self._camera_prev = self.camera
+            self.camera = (camera_motion.fit(prev, Z, j, self.pos_std, self.size_std,
+                                             self.speed_var,
+                                             last=self._camera_prev)
+                           if len(prev) else None)
         has = np.flatnonzero(j >= 0)
         if len(has):
             jh = j[has]
@@ -205,6 +230,13 @@ class SceneMotion:
             tri = jj >= 0
             if tri.any():
                 z, q, r = Z[has[tri]], prev[jh[tri]], self._prev_prev[jj[tri]]
+                # on a moving camera the earlier detections in frame k's image coordinates:
+                # the residuals are then the people's own motion
+                if self._camera_prev is not None:
+                    r = camera_motion.warp_boxes(r, self._camera_prev)
+                if self.camera is not None:
+                    q, r = (camera_motion.warp_boxes(q, self.camera),
+                            camera_motion.warp_boxes(r, self.camera))
                 qs = q[:, 2:4]
                 d = (z[:, :2] - 2.0 * q[:, :2] + r[:, :2]) / qs
                 self.accel.extend(d.T)
