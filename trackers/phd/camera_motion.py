@@ -27,9 +27,9 @@ when it is **significantly better than a still camera**: it must lower its inlie
 squared residual (in noise variances) by more than the 99 % quantile of a χ² with 3 degrees of
 freedom (its parameters) -- a likelihood-ratio test of "the camera moved" against "the camera is
 still", with the margin set by the noise the filter assumes, not by a sequence -- on at least
-:data:`MIN_LINKS` inlier links (one link is one person's own motion).  Where this frame's links
-are too few for a fit, the last frame's motion is kept when the links support it (no
-parameter fitted: a one-dof margin, :data:`LAST_MARGIN`).
+:data:`MIN_LINKS` inlier links (one link is one person's own motion).  A frame without such
+evidence is taken as still (carrying the last frame's motion over such frames was measured
+worse on KITTI-13: a car's image motion changes from frame to frame).
 
 Deterministic; cost quadratic in the links of a frame (one hypothesis per link; a frame's links
 are capped by :class:`.scene_motion.Chains`'s pair bound, and at most :data:`MAX_HYPOTHESES`
@@ -47,9 +47,6 @@ import numpy as np
 MIN_LINKS = 2
 #: χ²(3 dof) 99 % quantile: the fit must beat the identity by this many noise variances
 LR_MARGIN = 11.3449
-#: χ²(1 dof) 99 % quantile: the last frame's motion (nothing fitted) must beat the identity
-#: by this many noise variances to be kept
-LAST_MARGIN = 6.6349
 #: χ²(4 dof: two corners × two axes) 99 % quantile: a link whose residual under the motion is
 #: within it is an inlier
 INLIER_D2 = 13.2767
@@ -95,18 +92,15 @@ def _matrix(s: float, t: np.ndarray) -> np.ndarray:
 
 
 def fit(prev: np.ndarray, cur: np.ndarray, links: np.ndarray,
-        pos_std: float, size_std: float, speed_var: float = 0.0,
-        last: Optional[np.ndarray] = None) -> Optional[np.ndarray]:
+        pos_std: float, size_std: float, speed_var: float = 0.0) -> Optional[np.ndarray]:
     """The camera's motion (2×3, frame k−1 → frame k coordinates) from the linked detections
     ``prev`` (N_p, 4) and ``cur`` (N_c, 4) ``(cx, cy, w, h)`` (``links[i]``: the index in
     ``prev`` of ``cur[i]``'s link, −1 none), or None where a still camera explains the links as
     well (module docstring).  ``pos_std``, ``size_std``: the likelihood's position and size noise
     (σ_y, σ_size) as fractions of the box size; ``speed_var``: the variance per axis of a
-    person's own displacement in one frame, in units of ``w h`` (px² / (w h)); ``last``: the
-    camera motion of the frame before (None: still), kept where this frame's links support it
-    but are too few to fit one."""
+    person's own displacement in one frame, in units of ``w h`` (px² / (w h))."""
     has = np.flatnonzero(links >= 0)
-    if not len(has) or (len(has) < MIN_LINKS and last is None):
+    if len(has) < MIN_LINKS:
         return None
     q, z = prev[links[has]], cur[has]
     src, dst = corners(q), corners(z)
@@ -132,28 +126,24 @@ def fit(prev: np.ndarray, cur: np.ndarray, links: np.ndarray,
             return -np.inf
         return float(np.minimum(d2_id, INLIER_D2).sum() - np.minimum(r, INLIER_D2).sum())
 
-    if len(has) >= MIN_LINKS:
-        # one hypothesis per link: its size ratio and the shift of its centre
-        h = slice(0, MAX_HYPOTHESES)
-        sh = np.sqrt(wh[h] / (q[h, 2] * q[h, 3]))
-        th = z[h, :2] - sh[:, None] * q[h, :2]
-        # ... and one per pair of links: their least-squares motion (the scale then also
-        # from how far apart they are, not only from their noisy sizes)
-        ii, jj = np.triu_indices(len(has), 1)
-        k = np.stack([ii[:MAX_HYPOTHESES], jj[:MAX_HYPOTHESES]], axis=1)      # (P, 2)
-        s_ab, t_ab = _scale_shift(src[k], dst[k], wt[k])
-        sh, th = np.concatenate([sh, s_ab]), np.concatenate([th, t_ab])
-        cost = np.minimum(d2(sh, th), INLIER_D2).sum(axis=1)
-        best = int(np.argmin(cost))
-        inl = d2(sh[best], th[best]) <= INLIER_D2
-        if inl.sum() >= MIN_LINKS:
-            s, t = _scale_shift(src[inl], dst[inl], wt[inl])
-            s = float(s)
-            if gain(d2(s, t), MIN_LINKS) > LR_MARGIN:
-                return _matrix(s, t)
-    # the camera keeps moving as it did (no parameter fitted here: a one-dof margin)
-    if last is not None and gain(d2(last[0, 0], last[:, 2]), 1) > LAST_MARGIN:
-        return last
+    # one hypothesis per link: its size ratio and the shift of its centre
+    h = slice(0, MAX_HYPOTHESES)
+    sh = np.sqrt(wh[h] / (q[h, 2] * q[h, 3]))
+    th = z[h, :2] - sh[:, None] * q[h, :2]
+    # ... and one per pair of links: their least-squares motion (the scale then also
+    # from how far apart they are, not only from their noisy sizes)
+    ii, jj = np.triu_indices(len(has), 1)
+    k = np.stack([ii[:MAX_HYPOTHESES], jj[:MAX_HYPOTHESES]], axis=1)      # (P, 2)
+    s_ab, t_ab = _scale_shift(src[k], dst[k], wt[k])
+    sh, th = np.concatenate([sh, s_ab]), np.concatenate([th, t_ab])
+    cost = np.minimum(d2(sh, th), INLIER_D2).sum(axis=1)
+    best = int(np.argmin(cost))
+    inl = d2(sh[best], th[best]) <= INLIER_D2
+    if inl.sum() >= MIN_LINKS:
+        s, t = _scale_shift(src[inl], dst[inl], wt[inl])
+        s = float(s)
+        if gain(d2(s, t), MIN_LINKS) > LR_MARGIN:
+            return _matrix(s, t)
     return None
 
 
