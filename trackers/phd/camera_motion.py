@@ -14,7 +14,8 @@ rotation of their own -- it could only come from the relative positions of a few
 their own steps blur -- and a camera rolls far less than it pans, drives or zooms.
 
 Estimate (:func:`fit`): the detections of frame k−1 and k linked by :class:`.scene_motion.Chains`
-(mutually nearest within one box size, similar height) give, per link, the two boxes' corners
+(mutually nearest within one box size, similar height; :class:`.scene_motion.SceneMotion` hands
+over the links that continue a chain from frame k−2, as random clutter seldom does) give, per link, the two boxes' corners
 (top-left, bottom-right): four coordinates that fix the shift and the size change, so each link
 alone is a hypothesis of the camera's motion.  Residuals are measured in box sizes (``Δx / w``,
 ``Δy / h``, as the likelihood measures them) against the noise of a link under a still camera,

@@ -219,7 +219,10 @@ class SceneMotion:
         prev, prev_link = ch.prev, ch.prev_link
         j = ch.observe(Z, key)
         if self.camera_on:
-            self.camera = (camera_motion.fit(prev, Z, j, self.pos_std, self.size_std,
+            # links that continue a chain (a detection seen in the two frames before): random
+            # clutter seldom does, and two clutter links can look like a camera motion
+            jl = np.where(ch.length >= 2, j, -1)
+            self.camera = (camera_motion.fit(prev, Z, jl, self.pos_std, self.size_std,
                                              self.speed_var) if len(prev) else None)
         has = np.flatnonzero(j >= 0)
         if len(has):

@@ -11,6 +11,9 @@ Each step returns its stage data (:mod:`pfscope.trackers.report`), paths under `
 stage                 level       items
 ====================  ==========  =========================================================
 predict               particles   Points ``phd/particles/predicted`` (weights)
+predict               tracks      Scalars ``phd/camera/scale``, ``phd/camera/shift`` (px):
+                                  the camera motion followed (``rate.camera_motion``; 1, 0
+                                  on a still camera)
 birth                 particles   Points ``phd/particles/birth`` (ids = detection)
 birth                 clusters    Boxes ``phd/birth/detections`` values ``J`` (J_z), ``M``
                                   (mass near z)
