@@ -683,6 +683,9 @@ class GraphAssociator:
         #: beyond what their noise explains (set by the tracker from
         #: :class:`.scene_motion.SceneMotion`; ~0 on the still cameras measured): ``fill_err``
         self.scene_sigma_v = 0.0
+        #: the camera's image motion (frame → 2×3 similarity from the frame before,
+        #: :mod:`.camera_motion`) of the recent frames where the camera moved (follow_camera)
+        self._cams: dict[int, np.ndarray] = {}
 
     # ---- introspection
     @property
@@ -717,6 +720,51 @@ class GraphAssociator:
             self._lost[:, 2:4] *= ratio
             # v (px/frame) and the error growth b i + c i² of an ended track, i in frames
             self._lost_vbc *= np.array([ratio, ratio, ratio ** 2])[None, :, None]
+
+    def follow_camera(self, frame: int, A: np.ndarray) -> None:
+        """The camera moved between the last frame and ``frame`` (about to be stepped) by the
+        similarity ``A`` (2×3, :mod:`.camera_motion`): the live and ended tracks' states move
+        into ``frame``'s image coordinates (so their predictions model the targets' own
+        motion), and gap rows interpolated in them are mapped back into their own frames."""
+        from .camera_motion import warp_states
+
+        for a in (self._tail, self._prev, self._lost):
+            warp_states(a, A)
+        if len(self._lost_vbc):
+            self._lost_vbc[:, 0, :] = self._lost_vbc[:, 0, :] @ A[:, :2].T
+        self._cams[int(frame)] = A
+        keep = int(frame) - (self.params.depth + self.params.relink_depth + 2)
+        for f in [f for f in self._cams if f < keep]:
+            del self._cams[f]
+
+    def _to_frame(self, boxes: np.ndarray, f: int, frame: int) -> np.ndarray:
+        """Boxes ``(cx, cy, w, h)`` in ``frame``'s image coordinates mapped back into frame
+        ``f``'s (< frame) through the camera motions between them (themselves on a still
+        camera)."""
+        from .camera_motion import apply, compose, invert, scale
+
+        C = None
+        for g in range(int(f) + 1, int(frame) + 1):
+            A = self._cams.get(g)
+            if A is not None:
+                C = A if C is None else compose(A, C)
+        if C is None:
+            return boxes
+        Ci = invert(C)
+        out = boxes.copy()
+        out[:, :2] = apply(Ci, boxes[:, :2])
+        out[:, 2:4] = boxes[:, 2:4] * scale(Ci)
+        return out
+
+    def _back(self, boxes: np.ndarray, f: int, frames: np.ndarray) -> np.ndarray:
+        """:meth:`_to_frame` of each row of ``boxes`` from its ``frames`` into frame ``f``."""
+        if not self._cams:
+            return boxes
+        out = boxes.copy()
+        for g in np.unique(frames).tolist():
+            m = frames == g
+            out[m] = self._to_frame(boxes[m], f, g)
+        return out
 
     # ---- input checking
     def _check(self, frame, states) -> np.ndarray:
@@ -1087,7 +1135,8 @@ class GraphAssociator:
                 continue
             t = ((f - src_frame[inside]) / gap[inside])[:, None]
             st = np.full((int(inside.sum()), STATE_DIM), np.nan)
-            st[:, obs] = (1.0 - t) * src_o[inside] + t * dst_o[inside]
+            st[:, obs] = self._back((1.0 - t) * src_o[inside] + t * dst_o[inside], f,
+                                    frame[inside])
             st[:, 2:4] = vel[inside]
             fid = ids[inside]
             if self.params.fill_err > 0:
@@ -1138,6 +1187,7 @@ class GraphAssociator:
                 continue
             t = ((f - src_frame[inside]) / gap[inside])[:, None]
             box = (1.0 - t) * src[inside][:, obs] + t * dst[inside][:, obs]
+            box = self._back(box, f, frame[inside])
             ev = bst[~bfill][:, obs]
             d = dets.get(f)
             if d is not None and len(d):

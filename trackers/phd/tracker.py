@@ -11,6 +11,9 @@ Each step returns its stage data (:mod:`pfscope.trackers.report`), paths under `
 stage                 level       items
 ====================  ==========  =========================================================
 predict               particles   Points ``phd/particles/predicted`` (weights)
+predict               tracks      Scalars ``phd/camera/scale``, ``phd/camera/shift`` (px):
+                                  the camera motion followed (``rate.camera_motion``; 1, 0
+                                  on a still camera)
 birth                 particles   Points ``phd/particles/birth`` (ids = detection)
 birth                 clusters    Boxes ``phd/birth/detections`` values ``J`` (J_z), ``M``
                                   (mass near z)
@@ -57,6 +60,7 @@ from ..types import Detections, Frame, TrackSet, xywh_to_cxcywh
 from .association import (EST_CONF, GAP_CONF, AssocParams, AssocResult, FinalRows,
                           GraphAssociator)
 from .appearance import box_features
+from .camera_motion import scale as camera_scale, warp_states
 from .clustering import Clusters, kmeans_peaks
 from .filter import STATE_DIM, PHDFilter, PHDParams, PHDStepResult, _check
 from .scene_motion import SceneMotion
@@ -127,6 +131,12 @@ class RateParams:
                                       "above accel_per_s, size_per_s by what the scene's "
                                       "detections show the motion model misses (learnt "
                                       "online, phd.scene_motion; never below the preset)")
+
+    camera_motion: bool = param(False, "PHD-MT (with learn_motion): estimate the camera's "
+                                       "image motion each frame from the linked detections "
+                                       "(a similarity, used only when significantly better "
+                                       "than a still camera; phd.camera_motion) and move the "
+                                       "particles and the tracks' predictions with it")
 
     def __post_init__(self):
         for name in ("fallback_fps", "gap_s", "memory_s", "relink_tau_s", "app_memory_s"):
@@ -360,7 +370,7 @@ PHD_PRACTICAL = PHDTrackerParams(
                         persist_frames=3, p_miss=0.1, revive_odds=1.0),
     assoc=AssocParams(fill_gaps=True, fill_support=0.25, fill_free=2, app_weight=2.0, extend_heads=True,
                       head_skip=2, fill_err=1 / 6),
-    rate=RateParams(per_second=True, learn_motion=True))
+    rate=RateParams(per_second=True, learn_motion=True, camera_motion=True))
 PHD_SCENE = with_options(PHD_PRACTICAL, {"filter.clutter.clutter_model": "scene"})
 #: The practical default of MT: the same association settings per second (re-linking
 #: included).  No gap filling: MT links clutter into tracks across gaps, and filling them
@@ -392,13 +402,16 @@ class PHDTracker(_AssociatingTracker):
         self.jitter = (DetectorJitter(np_, self.params.filter.likelihood.sigma_obs)
                        if np_.learn_width > 0 and likelihood is None else None)
         lk = self.params.filter.likelihood
-        self.scene_motion = (SceneMotion(lk.sigma_obs * lk.sigma_obs_pos_ratio)
+        self.scene_motion = (SceneMotion(lk.sigma_obs * lk.sigma_obs_pos_ratio,
+                                         camera=self.params.rate.camera_motion)
                              if self.params.rate.per_second and self.params.rate.learn_motion
                              else None)
         if self.scene_motion is not None:
             # the score model's persistence labels link the same detections each frame: one
             # Chains for both (observed first in _learn_scene, keyed by the frame index)
             self.filter.scene.chains = self.scene_motion.chains
+        #: the camera's motion into the last frame (rate.camera_motion; None: still)
+        self._camera: Optional[np.ndarray] = None
         #: (preset settings, learnt values, filter settings) of the last _learn_scene
         self._scene_last: Optional[tuple] = None
 
@@ -417,6 +430,10 @@ class PHDTracker(_AssociatingTracker):
             want = replace(want, likelihood=replace(fp.likelihood, sigma_obs=width))
         if self.scene_motion is not None:
             sm = self.scene_motion
+            # a person's own displacement a frame: the newborn speed prior (per axis)
+            bp = fp.birth
+            sm.speed_var = (bp.birth_speed_std ** 2 + bp.birth_speed_mean ** 2) / 2.0
+            sm.size_std = want.likelihood.sigma_obs
             sm.observe(boxes, frame.index)
             # the residuals the likelihood explains: the learnt width's when there is one
             sm.pos_std = want.likelihood.sigma_obs * want.likelihood.sigma_obs_pos_ratio
@@ -437,6 +454,18 @@ class PHDTracker(_AssociatingTracker):
             self.filter.set_params(want)
         self._scene_last = (fp, key, self.filter.params)
 
+    def _follow_camera(self, index: int, cam: np.ndarray) -> None:
+        """The camera moved (``rate.camera_motion``; ``cam`` the similarity frame k−1 → k,
+        :mod:`.camera_motion`): the particles and the association's track states move into
+        frame k's image coordinates before the prediction, which then models the people's own
+        motion only."""
+        ps = self.filter.particles
+        if len(ps):
+            states = ps.states.copy()
+            warp_states(states, cam)
+            self.filter.particles = type(ps)(states, ps.log_weights, ps.labels, ps.extra)
+        self.associator.follow_camera(index, cam)
+
     def _retime_filter(self, ratio: float) -> None:
         self.filter.set_params(self.active.filter)
         if ratio != 1.0 and len(self.filter.particles):
@@ -453,9 +482,14 @@ class PHDTracker(_AssociatingTracker):
         dets = detections if detections is not None else Detections.empty()
         self._retime(frame)
         z = xywh_to_cxcywh(dets.boxes)      # read-only below: one conversion a frame
+        cam = None
         if self.jitter is not None or self.scene_motion is not None:
             self._learn_scene(frame, z)
+            cam = self.scene_motion.camera if self.scene_motion is not None else None
+            if cam is not None:
+                self._follow_camera(frame.index, cam)
         log = StageLog(self.stages, level)
+        self._camera = cam
         revive = None
         if self.active.filter.birth.revive_odds > 0 and len(dets):
             revive = self.associator.returning(frame.index, z)
@@ -471,6 +505,10 @@ class PHDTracker(_AssociatingTracker):
         """The filter's and K-means' stage data (arrays the step computed anyway)."""
         want_p, want_c = log.wants("particles"), log.wants("clusters")
         log.stage("predict")
+        if self.params.rate.camera_motion and self.scene_motion is not None:
+            cam = self._camera
+            log.scalar("phd/camera/scale", 1.0 if cam is None else camera_scale(cam))
+            log.scalar("phd/camera/shift", 0.0 if cam is None else float(np.hypot(*cam[:, 2])))
         if want_p:
             log.add(Points("phd/particles/predicted", r.predicted.states[:, :2],
                            weights=r.predicted.weights))

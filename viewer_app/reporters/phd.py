@@ -28,5 +28,7 @@ LAYOUT = TrackerLayout(
                            "log f, candidate edges grey, trails")),
     plots=(("PHD mass", ("phd/mass", "phd/clusters/kept", "tracks/count", "detections/count")),
            ("Particles", ("phd/particles/count", "phd/birth/count")),
+           # the camera motion followed (rate.camera_motion): shift in px, scale (1: still)
+           ("Camera", ("phd/camera/shift", "phd/camera/scale")),
            ("Step ms", ("timing/**",))),
 )

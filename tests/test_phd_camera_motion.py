@@ -1,0 +1,229 @@
+"""The camera's image motion estimated from the detections (``rate.camera_motion``,
+:mod:`pfscope.trackers.phd.camera_motion`): on a panning and zooming camera PHD-MT keeps the
+people as tracks only when the particles and the tracks follow the estimated motion; on a still
+camera the estimate is the identity and the tracks are unchanged.
+
+Scenes are built from boxes (no pixels), 10 fps, 1242x375, seeds 0-4: three people walking
+(0.4 heights a second), each detected with probability 0.9 and 4 % box noise, plus Poisson
+clutter.  The moving camera pans (the whole image shifts by up to 0.3 person heights a frame,
+direction changing over 4 s) and zooms about the image centre (±25 % over 2.5 s).  Scored: the
+share of frames (after the first second) where each person is covered by a track of the
+tracks file (IoU >= 0.5)."""
+
+from __future__ import annotations
+
+from functools import cache
+
+import numpy as np
+import pytest
+
+from pfscope.trackers.api import make_tracker
+from pfscope.trackers.phd import camera_motion as cm
+from pfscope.trackers.phd.scene_motion import Chains
+from pfscope.trackers.types import Detections, Frame, TrackSet, blank_image
+
+SEEDS = range(5)
+FPS, W, H = 10.0, 1242, 375
+SECONDS = 8.0
+PAN = 0.3             # pan speed amplitude, person heights per frame
+ZOOM = 0.25           # zoom amplitude about the image centre
+#: both arms with 0.1 clutter points around each detection, not the preset's 1 (the clutter
+#: model is another setting's job; this test isolates the camera motion)
+OPTIONS = {"clutter_rate": "0.1"}
+#: a person's own speed prior of the practical preset at 10 fps: 1.5 sqrt(w h) a second
+SPEED_VAR = (1.5 / FPS) ** 2 / 2
+
+
+def _truth(seed: int, moving: bool) -> np.ndarray:
+    """(frames, people, 4) true boxes (x, y, w, h)."""
+    rng = np.random.default_rng(700 + seed)
+    n = int(SECONDS * FPS)
+    h0 = 0.22 * H
+    x0 = np.array([0.3, 0.5, 0.7]) * W + rng.uniform(-20, 20, 3)
+    walk = np.array([1.0, -1.0, 0.5]) * 0.4 * h0 / FPS          # px per frame, in the world
+    phase = rng.uniform(0, 2 * np.pi)
+    pan, out = 0.0, []
+    for k in range(n):
+        s = 1.0
+        if moving:
+            pan += PAN * h0 * np.sin(2 * np.pi * k / 40.0 + phase)
+            s = 1.0 + ZOOM * np.sin(2 * np.pi * k / 25.0)
+        cx = W / 2 + s * (x0 + walk * k - W / 2) + pan
+        cy = np.full(3, H / 2 + s * (0.55 * H - H / 2))
+        h = h0 * s
+        w = 0.4 * h
+        out.append(np.stack([cx - w / 2, cy - h / 2, np.full(3, w), np.full(3, h)], axis=1))
+    return np.array(out)
+
+
+def _detections(truth: np.ndarray, seed: int):
+    rng = np.random.default_rng(900 + seed)
+    for gt in truth:
+        boxes, scores = [], []
+        for g in gt:
+            if rng.random() < 0.9:
+                e = 0.04 * rng.standard_normal(4)
+                w, h = g[2] * (1 + e[2]), g[3] * (1 + e[3])
+                cx, cy = g[0] + g[2] / 2 + e[0] * g[2], g[1] + g[3] / 2 + e[1] * g[3]
+                boxes.append([cx - w / 2, cy - h / 2, w, h])
+                scores.append(rng.beta(8, 2))
+        for _ in range(rng.poisson(1.0)):
+            h = rng.uniform(0.15, 0.3) * H
+            boxes.append([rng.uniform(0, W - 0.4 * h), rng.uniform(0, H - h), 0.4 * h, h])
+            scores.append(rng.beta(2, 6))
+        yield Detections(np.array(boxes).reshape(-1, 4), np.array(scores))
+
+
+def _iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    lo = np.maximum(a[:, None, :2], b[None, :, :2])
+    hi = np.minimum(a[:, None, :2] + a[:, None, 2:], b[None, :, :2] + b[None, :, 2:])
+    inter = np.prod(np.clip(hi - lo, 0, None), axis=-1)
+    return inter / (np.prod(a[:, 2:], -1)[:, None] + np.prod(b[:, 2:], -1)[None, :] - inter)
+
+
+@cache
+def _run(moving: bool, camera: bool) -> tuple[np.ndarray, tuple, tuple]:
+    """Per seed: the share of (frame, person) covered by a track; the tracks file rows; the
+    number of frames the camera was estimated to move."""
+    out, rows_all, moved = [], [], []
+    image = blank_image(H, W)
+    empty = TrackSet(np.zeros(0, dtype=np.int64), np.zeros((0, 4)))
+    for seed in SEEDS:
+        truth = _truth(seed, moving)
+        tracker = make_tracker("phd", seed, preset="practical",
+                               **{"rate.camera_motion": str(camera).lower(), **OPTIONS})
+        rows, n_moved = [], 0
+        for k, det in enumerate(_detections(truth, seed)):
+            rows.extend(tracker.step(Frame(k + 1, k / FPS, image), det).rows)
+            n_moved += tracker.scene_motion.camera is not None
+        rows.extend(tracker.finish())
+        by_frame = dict(rows)
+        hit = []
+        for k in range(int(FPS), len(truth)):
+            ts = by_frame.get(k + 1, empty)
+            m = _iou(truth[k], ts.boxes) if len(ts.boxes) else np.zeros((3, 0))
+            hit.extend((m >= 0.5).any(axis=1) if m.shape[1] else [False] * 3)
+        out.append(np.mean(hit))
+        rows_all.append(tuple((f, ts.ids.tobytes(), ts.boxes.tobytes()) for f, ts in rows))
+        moved.append(n_moved)
+    return np.array(out), tuple(rows_all), tuple(moved)
+
+
+def test_moving_camera_is_tracked_only_with_the_motion_compensated():
+    """Pan and zoom: compensated, the people are covered in >= 50 % of the (frame, person)
+    pairs on average over seeds 0-4 (>= 40 % in every seed) and >= 0.15 more than without
+    (measured: 0.56, seeds 0.49-0.64, against 0.28, seeds 0.12-0.37)."""
+    comp, _, moved = _run(True, True)
+    raw, _, _ = _run(True, False)
+    assert comp.mean() >= 0.5, (comp, raw)
+    assert comp.min() >= 0.4, (comp, raw)
+    assert comp.mean() - raw.mean() >= 0.15, (comp, raw)
+    assert min(moved) >= 0.3 * SECONDS * FPS, moved     # the motion was seen (the pan
+    # passes through a standstill twice in its 4 s period, and only links continuing a chain
+    # count; measured 27-45 of 80 frames)
+
+
+def test_still_camera_estimate_is_identity_and_tracks_unchanged():
+    """Still camera (people walking, clutter): the camera is called still in >= 99 % of the
+    frames of seeds 0-4 (the test's 99 % level; measured: none), and the tracks file
+    is byte-identical with and without the compensation on every seed where it never moved
+    (at least 3 of 5); where it did, the coverage moves by at most 0.05."""
+    cov_on, rows_on, moved = _run(False, True)
+    cov_off, rows_off, _ = _run(False, False)
+    assert sum(moved) <= 0.01 * len(SEEDS) * SECONDS * FPS, moved
+    still = [i for i, m in enumerate(moved) if m == 0]
+    assert len(still) >= 3, moved
+    for i in still:
+        assert rows_on[i] == rows_off[i], i
+    assert np.abs(cov_on - cov_off).max() <= 0.05, (cov_on, cov_off)
+
+
+def _boxes(rng: np.random.Generator, n: int) -> np.ndarray:
+    h = rng.uniform(60, 120, n)
+    return np.stack([rng.uniform(100, W - 100, n), rng.uniform(120, H - 120, n), 0.4 * h, h],
+                    axis=1)
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_fit_recovers_a_similarity(seed):
+    """Six people under a known zoom 1.08 + shift (40, −10) px, 4 % box noise and their own
+    steps at the speed prior (rms 0.08-0.16 box sizes), one link a mismatch: the fit puts the
+    five true links' boxes within 0.12 box sizes rms of where the true motion puts them
+    (measured 0.047-0.093; the identity: > 0.8), scale within 0.025 (measured 1.07-1.10)."""
+    rng = np.random.default_rng(seed)
+    q = _boxes(rng, 6)
+    A = np.array([[1.08, 0.0, 40.0 - 0.08 * W / 2], [0.0, 1.08, -10.0 - 0.08 * H / 2]])
+    z = cm.warp_boxes(q, A)
+    step = np.sqrt(SPEED_VAR * q[:, 2] * q[:, 3])[:, None] * rng.standard_normal((6, 2))
+    z[:, :2] += step + 0.04 * z[:, 2:4] * rng.standard_normal((6, 2))
+    z[:, 2:4] *= 1 + 0.04 * rng.standard_normal((6, 2))
+    z[5, :2] += z[5, 2:4] * 0.8                                    # a mismatched link
+    got = cm.fit(q, z, np.arange(6), 0.075, 0.15, SPEED_VAR)
+    assert got is not None
+    want = cm.warp_boxes(q, A)
+    err = (cm.warp_boxes(q, got) - want)[:5, :2] / want[:5, 2:4]
+    assert np.sqrt(np.mean(err ** 2)) <= 0.12, err
+    assert abs(cm.scale(got) - 1.08) <= 0.025
+
+
+def test_fit_on_a_still_camera_is_none():
+    """Still camera, 2-8 people each stepping at the speed prior with 4 % box noise, 500
+    frames: the fit calls the camera still in >= 99 % of them (a group that happens to step
+    the same way may pass the 99 % test now and then)."""
+    rng = np.random.default_rng(0)
+    moved = 0
+    for _ in range(500):
+        n = int(rng.integers(2, 9))
+        q = _boxes(rng, n)
+        z = q.copy()
+        z[:, :2] += (np.sqrt(SPEED_VAR * q[:, 2] * q[:, 3])[:, None]
+                     * rng.standard_normal((n, 2)))
+        z[:, :2] += 0.04 * q[:, 2:4] * rng.standard_normal((n, 2))
+        z[:, 2:4] *= 1 + 0.04 * rng.standard_normal((n, 2))
+        moved += cm.fit(q, z, np.arange(n), 0.075, 0.15, SPEED_VAR) is not None
+    assert moved <= 5, moved
+
+
+def test_transform_helpers():
+    """compose / invert / warp_states agree with applying the transforms one by one."""
+    A = np.array([[1.1, -0.05, 12.0], [0.05, 1.1, -3.0]])
+    B = np.array([[0.95, 0.0, -7.0], [0.0, 0.95, 4.0]])
+    p = np.array([[10.0, 20.0], [300.0, -40.0]])
+    assert np.allclose(cm.apply(cm.compose(B, A), p), cm.apply(B, cm.apply(A, p)))
+    assert np.allclose(cm.apply(cm.invert(A), cm.apply(A, p)), p)
+    s = np.array([[10.0, 20.0, 1.0, 2.0, 30.0, 60.0], [5.0, 5.0, np.nan, np.nan, 8.0, 16.0]])
+    cm.warp_states(s, A)
+    assert np.allclose(s[:, :2], cm.apply(A, np.array([[10.0, 20.0], [5.0, 5.0]])))
+    assert np.allclose(s[0, 2:4], A[:, :2] @ [1.0, 2.0])
+    assert np.isnan(s[1, 2:4]).all()
+    assert np.allclose(s[:, 4:6], np.array([[30.0, 60.0], [8.0, 16.0]]) * cm.scale(A))
+    # Chains links the people of the test's own panning scene (the estimator's input): at
+    # least half of the 3 people's frame pairs
+    ch, n = Chains(), 0
+    for k, det in enumerate(_detections(_truth(0, True), 0)):
+        b = det.boxes
+        n += int((ch.observe(np.c_[b[:, :2] + b[:, 2:] / 2, b[:, 2:]], k) >= 0).sum())
+    assert n >= 0.5 * 3 * (SECONDS * FPS - 1), n
+
+
+def test_gap_rows_follow_the_camera():
+    """A person standing still in the world while the camera pans 20 px a frame, missed in
+    frame 3: the association (tails moved by ``follow_camera``) keeps one track, and the gap
+    row of frame 3 sits where the person is in frame 3's image (x = 100 + 20·3), not where the
+    interpolation in frame 4's coordinates puts it (20 px further)."""
+    from pfscope.trackers.phd.association import AssocParams, GraphAssociator
+
+    assoc = GraphAssociator(AssocParams(fill_gaps=True, min_length=2, depth=5))
+    A = np.array([[1.0, 0.0, 20.0], [0.0, 1.0, 0.0]])
+    rows = []
+    for k in range(1, 9):
+        if k > 1:
+            assoc.follow_camera(k, A)
+        st = np.zeros((0, 6)) if k == 3 else np.array([[100.0 + 20 * k, 200.0, np.nan,
+                                                        np.nan, 40.0, 100.0]])
+        rows.extend(assoc.step(k, st).finalised)
+    rows.extend(assoc.flush())
+    by = {r.frame: r for r in rows}
+    assert len(np.unique(np.concatenate([r.ids for r in rows]))) == 1
+    assert by[3].filled.all() and len(by[3].ids) == 1
+    assert by[3].states[0, 0] == pytest.approx(160.0)
