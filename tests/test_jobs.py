@@ -322,3 +322,31 @@ def test_tune_interrupted_ends_its_workers_without_traces(tmp_path):
     assert stopped_in < 8, stopped_in
     assert _wait_group_gone(p.pid, 10)
     assert (tmp_path / "s.incomplete.rrd").exists() and not (tmp_path / "best.toml").exists()
+
+
+def test_a_run_stopped_before_its_outputs_exist_is_not_run_and_one_with_files_is_interrupted(
+        tmp_path, monkeypatch):
+    """A stop that lands while a run is still opening its source (no output file yet) reports
+    it "not run", as a queued run, and "interrupted" only when its partial files are there
+    (a batch's summary then names as interrupted exactly the runs with *.incomplete.* files)."""
+    from types import SimpleNamespace
+
+    from pfscope.trackers.outputs import incomplete_path
+    from pfscope.viewer_app import api
+    from pfscope.viewer_app.batch import Job, run_job
+
+    made = {"files": False}
+
+    def fake_record(source, *, out, tracks_out, **kw):
+        if made["files"]:
+            incomplete_path(Path(out)).write_bytes(b"partial")
+        return SimpleNamespace(interrupted=True, scores={}, frames=0, seconds=0.0, fps=0.0,
+                               bytes=0, out=Path(out), tracks_out=Path(tracks_out))
+
+    monkeypatch.setattr(api, "record", fake_record)
+    never = SimpleNamespace(is_set=lambda: False)
+    row = run_job(Job("synthetic", "passthrough", 0, str(tmp_path)), stop=never)
+    assert row["status"] == "not run" and row["rrd"] == "" and row["tracks"] == "", row
+    made["files"] = True
+    row = run_job(Job("synthetic", "passthrough", 1, str(tmp_path)), stop=never)
+    assert row["status"] == "interrupted", row

@@ -208,10 +208,16 @@ def run_job(job: Job, stop=None) -> dict:
                      force=job.force, progress=False, max_points=job.max_points,
                      stop=ev, **synthetic, **job.options)
         scores = next(iter(res.scores.values()), {}) if res.scores else {}
-        row.update(status="interrupted" if res.interrupted else "ok", frames=res.frames,
+        # stopped before its outputs were opened: nothing of it exists, as for a queued run
+        # (the rule of _stopped_row: "interrupted" only with its partial files there)
+        status = ("ok" if not res.interrupted
+                  else "interrupted" if _leftovers(job) else "not run")
+        row.update(status=status, frames=res.frames,
                    seconds=round(res.seconds, 3), fps=round(res.fps, 2), bytes=res.bytes,
                    rrd=str(res.out), tracks=str(res.tracks_out) if res.tracks_out else "",
                    **{k: scores[k] for k in SUMMARY_KEYS if k in scores})
+        if status == "not run":
+            row.update(rrd="", tracks="")
         if row["status"] == "ok":
             tmp = job.path(".json.part")
             ident = job.identity or run_identity(job)
