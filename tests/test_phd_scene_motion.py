@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 
 from pfscope.trackers.api import make_tracker
+from pfscope.trackers.eval.overlap import box_iou
 from pfscope.trackers.phd.scene_motion import SceneMotion, link
 from pfscope.trackers.types import Detections, Frame, TrackSet, blank_image
 
@@ -76,13 +77,6 @@ def _detections(truth: np.ndarray, seed: int):
         yield Detections(np.array(boxes).reshape(-1, 4), np.array(scores))
 
 
-def _iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    lo = np.maximum(a[:, None, :2], b[None, :, :2])
-    hi = np.minimum(a[:, None, :2] + a[:, None, 2:], b[None, :, :2] + b[None, :, 2:])
-    inter = np.prod(np.clip(hi - lo, 0, None), axis=-1)
-    return inter / (np.prod(a[:, 2:], -1)[:, None] + np.prod(b[:, 2:], -1)[None, :] - inter)
-
-
 @cache
 def _covered(shake: bool, learn: bool) -> tuple[np.ndarray, tuple]:
     """Per seed the share of (frame, person) covered by a track; and the filter's final motion
@@ -102,7 +96,7 @@ def _covered(shake: bool, learn: bool) -> tuple[np.ndarray, tuple]:
         hit = []
         for k in range(int(FPS), len(truth)):
             ts = by_frame.get(k + 1, empty)
-            m = _iou(truth[k], ts.boxes) if len(ts.boxes) else np.zeros((3, 0))
+            m = box_iou(truth[k], ts.boxes) if len(ts.boxes) else np.zeros((3, 0))
             hit.extend((m >= 0.5).any(axis=1) if m.shape[1] else [False] * 3)
         out.append(np.mean(hit))
         motion.append((tracker.filter.params.motion, tracker.active.filter.motion))
