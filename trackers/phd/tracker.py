@@ -61,7 +61,7 @@ from .association import (EST_CONF, GAP_CONF, AssocParams, AssocResult, FinalRow
                           GraphAssociator)
 from .appearance import box_features
 from .camera_motion import scale as camera_scale, warp_states
-from .clustering import Clusters, kmeans_peaks
+from .clustering import Clusters, kmeans_peaks, measurement_estimates
 from .filter import STATE_DIM, PHDFilter, PHDParams, PHDStepResult, _check
 from .scene_motion import SceneMotion
 from .scene_noise import DetectorJitter, NoiseParams, learnt_width
@@ -75,6 +75,10 @@ class ClusterParams:
                      paper="maggio2007 §4")
     split_rule: str = param("guarded", "'guarded' (a split must leave both halves >= T) or "
                                        "'literal' (§3 as written); see phd.clustering")
+    estimate: str = param("centre", "what a kept cluster reports: 'centre' (the K-means mean, "
+                                    "§3) or 'measurement' (on a detection that won >= 0.5: "
+                                    "the posterior given that detection alone; "
+                                    "phd.clustering)")
 
     def __post_init__(self):
         if not self.T >= 0:
@@ -82,6 +86,9 @@ class ClusterParams:
         if self.split_rule not in ("guarded", "literal"):
             raise ValueError(f"ClusterParams.split_rule must be 'guarded' or 'literal', "
                              f"got {self.split_rule!r}")
+        if self.estimate not in ("centre", "measurement"):
+            raise ValueError(f"ClusterParams.estimate must be 'centre' or 'measurement', "
+                             f"got {self.estimate!r}")
 
 
 @dataclass(frozen=True)
@@ -371,7 +378,8 @@ PHD_PRACTICAL = PHDTrackerParams(
                         persist_frames=3, p_miss=0.1, revive_odds=1.0),
     assoc=AssocParams(fill_gaps=True, fill_support=0.25, fill_free=2, app_weight=2.0, extend_heads=True,
                       head_skip=2, fill_err=1 / 6),
-    rate=RateParams(per_second=True, learn_motion=True, camera_motion=True))
+    rate=RateParams(per_second=True, learn_motion=True, camera_motion=True),
+    clusters=ClusterParams(estimate="measurement"))
 PHD_SCENE = with_options(PHD_PRACTICAL, {"filter.clutter.clutter_model": "scene"})
 #: The practical default of MT: the same association settings per second (re-linking
 #: included).  No gap filling: MT links clutter into tracks across gaps, and filling them
@@ -498,6 +506,12 @@ class PHDTracker(_AssociatingTracker):
         cp = self.params.clusters
         clusters = kmeans_peaks(r.resampled, r.observations, cp.T, params=self.filter.params,
                                 split_rule=cp.split_rule)
+        if cp.estimate == "measurement":
+            born = r.born
+            clusters = measurement_estimates(
+                clusters, r.updated.particles.states,
+                np.concatenate([r.predicted.log_weights, born.log_weights]), r.observations,
+                r.updated.per_det_mass, self.filter.likelihood, self.filter.params, frame)
         self._report_filter(dets, r, clusters, log)
         return self._associate(frame, clusters.kept_centers, log, r.observations)
 
