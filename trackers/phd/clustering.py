@@ -51,26 +51,33 @@ and searches the grid's rings around itself only when that list ends too soon.  
 iteration where most centres stay put costs about one distance per particle, and nothing is
 O(K²) in time or memory (a 2,000-detection storm's K-means: 4.2 s → 0.33 s a frame).
 
-**Per-measurement estimates** (:func:`measurement_estimates`, not in maggio2007; the
-``practical`` preset's ``clusters.estimate``): a K-means centre is the mean of every particle
+**Per-measurement estimates** (:func:`measurement_estimates`, not in maggio2007; opt-in,
+``clusters.estimate = measurement``): a K-means centre is the mean of every particle
 assigned to the cluster, so it mixes the parts of the updated PHD that eq. (5) keeps apart --
 the missed-detection part ``p_M ω`` (the whole predicted cloud, wide when the motion is fast)
-and each detection's part ``ψ_z(x) ω / (κ(z) + C(z))``.  The state of the target that produced
-detection z is the posterior given z alone, ``E[x | z] = Σ_i g(z|x_i) ω_i x_i / Σ_i g(z|x_i) ω_i``
-over the predicted and newborn particles (pre-update weights ω) -- the per-measurement
-estimate of the SMC-PHD literature (Ristic, Clark & Vo 2010, "Improved SMC implementation of
-the PHD filter"; Stone Soup's SMC-PHD reads its estimates that way).  A kept cluster initialised
-on a detection that won at least half a target (``won = C(z)/(κ(z)+C(z)) >= 0.5``: more likely
-a target's than clutter) reports that posterior's position and size; its velocity stays the
-cluster's (z carries none: the posterior velocity given z alone is pulled to the newborn prior)
+and each detection's part ``t_z(x) ω`` with ``t_z = (1 − p_M) g(z|x) / (κ(z) + C(z))``.  The
+state of the target that produced detection z is the mean of z's part alone -- the
+per-measurement estimate of the SMC-PHD literature (Ristic, Clark & Vo 2010, "Improved SMC
+implementation of the PHD filter"; Stone Soup's SMC-PHD reads its estimates that way) --
+here restricted to the cluster's own particles, so that a neighbour's particles that z also
+reaches (two people side by side) stay with the neighbour's cluster.  A kept cluster
+initialised on a detection that won at least half a target (``won = C(z)/(κ(z)+C(z)) >= 0.5``:
+more likely a target's than clutter) reports that mean's position and size, each particle
+weighted by the share ``t_z / (p_M + Σ_z' t_z')`` of its updated weight that z explains; its
+velocity stays the cluster's (z carries none: z's part is pulled to the newborn's prior speed)
 and its mass is unchanged.  Other kept clusters (a split's, or on a detection that is more
-likely clutter, the target then reported where its missed-detection mass lies) keep the K-means
-centre.  Cost: one gated pass over the particles near the kept clusters' detections
-(:func:`.filter.gated_log_g`), O(pairs).
+likely clutter) keep the K-means centre.  Cost: one gated pass of the detections over those
+clusters' particles (:func:`.filter.gated_log_g`), O(pairs).
+Measured (development set, seeds 0-2): with ``clutter_model=learn learn_update=model``
+PETS09-S2L1 IDF1 0.680 -> 0.72, KITTI-13 MOTA 0.121 -> 0.15, the others within 0.005; with the
+``gate`` clutter model TUD-Stadtmitte loses 0.03 IDF1 (two people crossing swap identities on
+two seeds: the centre's share of the predicted cloud carried their momentum through the
+crossing), hence opt-in.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -257,54 +264,67 @@ def kmeans_peaks(ps: ParticleSet, Z, T: float = 0.6, *, params: PHDParams | None
 MIN_WON = 0.5
 
 
-def measurement_estimates(clusters: Clusters, states: np.ndarray, log_weights: np.ndarray, Z,
-                          won: np.ndarray, likelihood, params: PHDParams, frame=None,
-                          min_won: float = MIN_WON) -> Clusters:
-    """``clusters`` with each kept cluster initialised on a detection z that won at least
-    ``min_won`` reporting ``E[x | z]`` for its position and size (module docstring,
-    "Per-measurement estimates"); velocity, masses, labels unchanged.
+def measurement_estimates(clusters: Clusters, ps: ParticleSet, Z, won: np.ndarray,
+                          kappa: np.ndarray, c_z: np.ndarray, p_miss: float, likelihood,
+                          params: PHDParams, frame=None, min_won: float = MIN_WON) -> Clusters:
+    """``clusters`` (K-means of the particles ``ps``) with each kept cluster initialised on a
+    detection z that won at least ``min_won`` reporting, for its position and size, the mean of
+    the part of its particles' weight that z explains (module docstring, "Per-measurement
+    estimates"); velocity, masses, labels unchanged.
 
-    states (N, 6), log_weights (N,): the particles the update weighed (predicted then newborn)
-    with their weights *before* the update; Z (N_z, 4) the frame's detections; won (N_z,) the
-    update's ``per_det_mass``; ``likelihood``, ``params``: the filter's (the same gated g as the
-    update, :func:`.filter.gated_log_g`).  A detection with no particle in its gate keeps the
-    K-means centre."""
+    A particle's updated weight is ``ω⁻ (p_M + Σ_z' t_z'(x))`` with ``t_z = (1 − p_M) g(z|x) /
+    (κ(z) + C(z))`` (eq. (5)), so the share z explains is ``t_z(x) / (p_M + Σ_z' t_z'(x))``;
+    ``ps`` holds the updated PHD (after resampling), ``labels`` say which particles are the
+    cluster's.  Z (N_z, 4) the frame's detections; won, kappa, c_z (N_z,) the update's
+    ``per_det_mass``, κ(z), C(z); p_miss its p_M; ``likelihood``, ``params``: the filter's
+    (the same gated g as the update, :func:`.filter.gated_log_g`).  A detection none of whose
+    cluster's particles lies in its gate keeps the K-means centre."""
     Z = as_observations(Z)
-    won = np.asarray(won, dtype=np.float64).reshape(-1)
-    if len(won) != len(Z):
-        raise ValueError(f"measurement_estimates: {len(Z)} detections but {len(won)} won values")
-    states = np.asarray(states, dtype=np.float64)
-    log_weights = np.asarray(log_weights, dtype=np.float64).reshape(-1)
-    if len(log_weights) != len(states):
-        raise ValueError(f"measurement_estimates: {len(states)} particles but "
-                         f"{len(log_weights)} weights")
+    won, kappa, c_z = (np.asarray(a, dtype=np.float64).reshape(-1) for a in (won, kappa, c_z))
+    if not len(won) == len(kappa) == len(c_z) == len(Z):
+        raise ValueError(f"measurement_estimates: {len(Z)} detections but {len(won)} won, "
+                         f"{len(kappa)} κ and {len(c_z)} C values")
+    labels = clusters.labels
+    if len(labels) != len(ps):
+        raise ValueError(f"measurement_estimates: {len(ps)} particles but {len(labels)} labels")
     k = np.flatnonzero(clusters.kept & (clusters.origin >= 0))
-    if len(k) == 0 or len(states) == 0:
+    if len(k) == 0 or len(ps) == 0:
         return clusters
     k = k[won[clusters.origin[k]] >= min_won]
     if len(k) == 0:
         return clusters
-    Zs = Z[clusters.origin[k]]
+    cluster_of = np.full(len(Z), -1, dtype=np.int64)       # detection -> the cluster it reports
+    cluster_of[clusters.origin[k]] = k
+    # only the chosen clusters' particles matter: gate every detection against them (their
+    # bracket p_M + Σ t needs each detection that reaches them)
+    member = np.flatnonzero(np.isin(labels, k))
+    if len(member) == 0:
+        return clusters
+    states = np.asarray(ps.states, dtype=np.float64)[member]
     rows, cols, vals = [], [], []
-    for ch in gated_log_g(likelihood, states, Zs, frame, params):
+    for ch in gated_log_g(likelihood, states, Z, frame, params):
         rows.append(ch.rows)
         cols.append(ch.cols)
         vals.append(ch.values)
     if not rows:
         return clusters
     rows, cols = np.concatenate(rows), np.concatenate(cols)
-    a = np.concatenate(vals) + log_weights[rows]
-    ok = np.isfinite(a)
-    rows, cols, a = rows[ok], cols[ok], a[ok]
-    if len(a) == 0:
+    log_pd = math.log1p(-p_miss) if p_miss < 1 else -np.inf
+    t = np.exp(np.concatenate(vals) + log_pd - np.log(kappa + c_z)[cols])
+    bracket = p_miss + np.bincount(rows, weights=t, minlength=len(member))
+    own = cluster_of[cols] >= 0
+    own[own] = labels[member[rows[own]]] == cluster_of[cols[own]]
+    rows, cols, t = rows[own], cols[own], t[own]
+    lw = np.asarray(ps.log_weights, dtype=np.float64)[member[rows]]
+    ok = (bracket[rows] > 0) & np.isfinite(lw) & (t > 0)
+    if not ok.any():
         return clusters
-    top = np.full(len(Zs), -np.inf)
-    np.maximum.at(top, cols, a)
-    w = np.exp(a - top[cols])
-    total = np.bincount(cols, weights=w, minlength=len(Zs))
-    has = total > 0
+    rows, cols, t, lw = rows[ok], cols[ok], t[ok], lw[ok]
+    w = np.exp(lw - lw.max()) * t / bracket[rows]
+    total = np.bincount(cols, weights=w, minlength=len(Z))
+    det = np.flatnonzero((total > 0) & (cluster_of >= 0))
     centers = clusters.centers.copy()
     for d in OBS_COLS:
-        m = np.bincount(cols, weights=w * states[rows, d], minlength=len(Zs))
-        centers[k[has], d] = m[has] / total[has]
+        m = np.bincount(cols, weights=w * states[rows, d], minlength=len(Z))
+        centers[cluster_of[det], d] = m[det] / total[det]
     return replace(clusters, centers=centers)

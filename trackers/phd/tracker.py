@@ -77,8 +77,8 @@ class ClusterParams:
                                        "'literal' (§3 as written); see phd.clustering")
     estimate: str = param("centre", "what a kept cluster reports: 'centre' (the K-means mean, "
                                     "§3) or 'measurement' (on a detection that won >= 0.5: "
-                                    "the posterior given that detection alone; "
-                                    "phd.clustering)")
+                                    "the mean of the part of the cluster that detection "
+                                    "explains; phd.clustering)")
 
     def __post_init__(self):
         if not self.T >= 0:
@@ -378,8 +378,7 @@ PHD_PRACTICAL = PHDTrackerParams(
                         persist_frames=3, p_miss=0.1, revive_odds=1.0),
     assoc=AssocParams(fill_gaps=True, fill_support=0.25, fill_free=2, app_weight=2.0, extend_heads=True,
                       head_skip=2, fill_err=1 / 6),
-    rate=RateParams(per_second=True, learn_motion=True, camera_motion=True),
-    clusters=ClusterParams(estimate="measurement"))
+    rate=RateParams(per_second=True, learn_motion=True, camera_motion=True))
 PHD_SCENE = with_options(PHD_PRACTICAL, {"filter.clutter.clutter_model": "scene"})
 #: The practical default of MT: the same association settings per second (re-linking
 #: included).  No gap filling: MT links clutter into tracks across gaps, and filling them
@@ -507,11 +506,11 @@ class PHDTracker(_AssociatingTracker):
         clusters = kmeans_peaks(r.resampled, r.observations, cp.T, params=self.filter.params,
                                 split_rule=cp.split_rule)
         if cp.estimate == "measurement":
-            born = r.born
+            up = r.updated
             clusters = measurement_estimates(
-                clusters, r.updated.particles.states,
-                np.concatenate([r.predicted.log_weights, born.log_weights]), r.observations,
-                r.updated.per_det_mass, self.filter.likelihood, self.filter.params, frame)
+                clusters, r.resampled, r.observations, up.per_det_mass, up.kappa, up.c_z,
+                self.filter.params.likelihood.p_miss, self.filter.likelihood,
+                self.filter.params, frame)
         self._report_filter(dets, r, clusters, log)
         return self._associate(frame, clusters.kept_centers, log, r.observations)
 
