@@ -69,7 +69,7 @@ and its mass is unchanged.  Other kept clusters (a split's, or on a detection th
 likely clutter) keep the K-means centre.  Cost: one gated pass of the detections over those
 clusters' particles (:func:`.filter.gated_log_g`), O(pairs).
 Measured (development set, seeds 0-2): with ``clutter_model=learn learn_update=model``
-PETS09-S2L1 IDF1 0.680 -> 0.72, KITTI-13 MOTA 0.121 -> 0.15, the others within 0.005; with the
+PETS09-S2L1 IDF1 0.680 -> 0.708, KITTI-13 MOTA 0.121 -> 0.148, the others within 0.005; with the
 ``gate`` clutter model TUD-Stadtmitte loses 0.03 IDF1 (two people crossing swap identities on
 two seeds: the centre's share of the predicted cloud carried their momentum through the
 crossing), hence opt-in.
