@@ -1099,8 +1099,9 @@ class GraphAssociator:
     def _fill_gaps(self, src: np.ndarray, src_frame: np.ndarray, dst: np.ndarray, frame,
                    ids: np.ndarray) -> None:
         """Add interpolated rows to the buffered frames strictly between each chosen edge's ends
-        (``src`` at ``src_frame`` → ``dst`` at ``frame``, one frame or one per edge).  A loop
-        over the buffered frames (at most ``depth``), vectorised over the edges."""
+        (``src`` at ``src_frame`` → ``dst`` at ``frame``, one frame or one per edge).  The rows of
+        every (buffered frame, edge) pair in one set of numpy calls; the overlap tests and the
+        buffer's rows one call per frame that gets rows (at most ``depth`` frames)."""
         gap = frame - src_frame
         long = gap > 1
         if not long.any() or not self._buffer:
@@ -1125,75 +1126,92 @@ class GraphAssociator:
             frame, vel = frame[keep], vel[keep]
         src_o, dst_o = src[:, obs], dst[:, obs]
         lo, hi = int(src_frame.min()), int(frame.max())
-        for n, (f, bid, bst, bfill) in enumerate(self._buffer):
-            if f <= lo:                 # (the buffer is in frame order: only the frames
-                continue                # strictly inside some gap need a look)
-            if f >= hi:
-                break
-            inside = (src_frame < f) & (f < frame)
-            if not inside.any():
-                continue
-            t = ((f - src_frame[inside]) / gap[inside])[:, None]
-            st = np.full((int(inside.sum()), STATE_DIM), np.nan)
-            st[:, obs] = self._back((1.0 - t) * src_o[inside] + t * dst_o[inside], f,
-                                    frame[inside])
-            st[:, 2:4] = vel[inside]
-            fid = ids[inside]
-            if self.params.fill_err > 0:
-                likely = self._likely_rows(f, st, f - src_frame[inside], gap[inside])
-                st, fid = st[likely], fid[likely]
-            # a box another track's estimate already covers is not filled (the gap is then
-            # the other track's frame: filling it would report one target twice)
+        # the buffered frames strictly inside some gap (the buffer is in frame order)
+        at = [n for n, b in enumerate(self._buffer) if lo < b[0] < hi]
+        if not at:
+            return
+        fs = np.array([self._buffer[n][0] for n in at], dtype=np.int64)
+        # every (frame, edge) pair with the frame inside the edge's gap, frame-major (each
+        # frame's rows in edge order): all frames' rows in one set of numpy calls
+        fi, ei = np.nonzero((src_frame[None, :] < fs[:, None]) & (fs[:, None] < frame[None, :]))
+        if not len(ei):
+            return
+        f_row = fs[fi]
+        t = ((f_row - src_frame[ei]) / gap[ei])[:, None]
+        box = (1.0 - t) * src_o[ei] + t * dst_o[ei]
+        if self._cams:
+            for k in np.unique(fi).tolist():
+                m = fi == k
+                box[m] = self._back(box[m], int(fs[k]), frame[ei[m]])
+        st = np.full((len(ei), STATE_DIM), np.nan)
+        st[:, obs] = box
+        st[:, 2:4] = vel[ei]
+        keep = np.ones(len(ei), dtype=bool)
+        if self.params.fill_err > 0:
+            keep = self._likely_rows(fs, fi, st, f_row - src_frame[ei], gap[ei])
+        # a box another track's estimate already covers is not filled (the gap is then
+        # the other track's frame: filling it would report one target twice)
+        for k in np.unique(fi[keep]).tolist():
+            bst, bfill = self._buffer[at[k]][2], self._buffer[at[k]][3]
             est = bst[~bfill]
-            if len(est) and len(st):
-                free = _iou(st[:, obs], est[:, obs]).max(axis=1) < self.params.fill_overlap
-                st, fid = st[free], fid[free]
-            if not len(st):
-                continue
-            self._buffer[n] = (f, np.concatenate([bid, fid]),
-                               np.concatenate([bst, st]),
-                               np.concatenate([bfill, np.ones(len(st), dtype=bool)]))
+            if len(est):
+                m = np.flatnonzero(keep & (fi == k))
+                keep[m] = _iou(st[m][:, obs], est[:, obs]).max(axis=1) < self.params.fill_overlap
+        for k in np.unique(fi[keep]).tolist():
+            m = keep & (fi == k)
+            n = at[k]
+            f, bid, bst, bfill = self._buffer[n]
+            self._buffer[n] = (f, np.concatenate([bid, ids[ei[m]]]),
+                               np.concatenate([bst, st[m]]),
+                               np.concatenate([bfill, np.ones(int(m.sum()), dtype=bool)]))
 
-    def _likely_rows(self, f: int, st: np.ndarray, t: np.ndarray, gap: np.ndarray) -> np.ndarray:
-        """``fill_err``: mask of the gap rows ``st`` of frame ``f`` (``t`` frames into gaps of
-        ``gap``) whose straight line is likely right -- its error std
+    def _likely_rows(self, fs: np.ndarray, fi: np.ndarray, st: np.ndarray, t: np.ndarray,
+                     gap: np.ndarray) -> np.ndarray:
+        """``fill_err``: mask of the gap rows ``st`` (row ``r`` in frame ``fs[fi[r]]``, ``t``
+        frames into gaps of ``gap``) whose straight line is likely right -- its error std
         (:func:`interpolation_std` under ``scene_sigma_v``) at most ``fill_err`` -- or that a
-        detection of the frame (kept with extend_heads) overlaps by ``fill_overlap``."""
+        detection of its frame (kept with extend_heads) overlaps by ``fill_overlap``."""
         keep = interpolation_std(self.scene_sigma_v, t, gap) <= self.params.fill_err
         if keep.all():
             return keep
-        d = next((d for g, d in self._dets if g == f), None)
-        if d is not None and len(d):
-            keep |= _iou(st[:, OBS_INDEX], d).max(axis=1) >= self.params.fill_overlap
+        for k in np.unique(fi[~keep]).tolist():
+            f = int(fs[k])
+            d = next((d for g, d in self._dets if g == f), None)
+            if d is not None and len(d):
+                m = np.flatnonzero(fi == k)
+                keep[m] |= _iou(st[m][:, OBS_INDEX], d).max(axis=1) >= self.params.fill_overlap
         return keep
 
     def _gap_support(self, src: np.ndarray, src_frame: np.ndarray, dst: np.ndarray,
                      frame: np.ndarray, gap: np.ndarray) -> np.ndarray:
         """``fill_support``: per edge, the share of the gap's inner frames (buffered ones) whose
         interpolated box overlaps a detection of the frame or another track's estimate by
-        ``fill_overlap`` or more.  A loop
-        over the buffered frames, vectorised over the edges."""
+        ``fill_overlap`` or more.  The boxes of every (frame, edge) pair at once, the overlaps
+        one call per buffered frame."""
         obs = OBS_INDEX
         dets = {f: d for f, d in self._dets}
-        hits = np.zeros(len(src))
         lo, hi = int(src_frame.min()), int(frame.max())
-        for f, bid, bst, bfill in self._buffer:
-            if f <= lo:
-                continue
-            if f >= hi:
-                break
-            inside = (src_frame < f) & (f < frame)
-            if not inside.any():
-                continue
-            t = ((f - src_frame[inside]) / gap[inside])[:, None]
-            box = (1.0 - t) * src[inside][:, obs] + t * dst[inside][:, obs]
-            box = self._back(box, f, frame[inside])
-            ev = bst[~bfill][:, obs]
-            d = dets.get(f)
-            if d is not None and len(d):
-                ev = np.concatenate([ev, d])
-            if len(ev):
-                hits[inside] += _iou(box, ev).max(axis=1) >= self.params.fill_overlap
+        # the buffered frames strictly inside some gap (the buffer is in frame order)
+        at = [b for b in self._buffer if lo < b[0] < hi]
+        fs = np.array([b[0] for b in at], dtype=np.int64)
+        # every (frame, edge) pair with the frame inside the edge's gap: the interpolated boxes
+        # of all frames in one set of numpy calls, then one overlap test per frame
+        fi, ei = np.nonzero((src_frame[None, :] < fs[:, None]) & (fs[:, None] < frame[None, :]))
+        hit = np.zeros(len(ei), dtype=bool)
+        if len(ei):
+            t = ((fs[fi] - src_frame[ei]) / gap[ei])[:, None]
+            box = (1.0 - t) * src[ei][:, obs] + t * dst[ei][:, obs]
+            for k in np.unique(fi).tolist():
+                f, bid, bst, bfill = at[k]
+                m = np.flatnonzero(fi == k)
+                ev = bst[~bfill][:, obs]
+                d = dets.get(f)
+                if d is not None and len(d):
+                    ev = np.concatenate([ev, d])
+                if len(ev):
+                    hit[m] = _iou(self._back(box[m], f, frame[ei[m]]),
+                                  ev).max(axis=1) >= self.params.fill_overlap
+        hits = np.bincount(ei, weights=hit, minlength=len(src))
         return hits / np.maximum(gap - 1, 1)
 
     def _confirmed_ids(self, ids: np.ndarray, extra_ids=None, extra_len=None) -> np.ndarray:
