@@ -1132,54 +1132,63 @@ class GraphAssociator:
             return
         fs = np.array([self._buffer[n][0] for n in at], dtype=np.int64)
         # every (frame, edge) pair with the frame inside the edge's gap, frame-major (each
-        # frame's rows in edge order): all frames' rows in one set of numpy calls
+        # frame's rows in edge order): all frames' rows in one set of numpy calls; frame k's
+        # rows are run[k]:run[k + 1]
         fi, ei = np.nonzero((src_frame[None, :] < fs[:, None]) & (fs[:, None] < frame[None, :]))
         if not len(ei):
             return
+        run = np.searchsorted(fi, np.arange(len(fs) + 1)).tolist()
         f_row = fs[fi]
         t = ((f_row - src_frame[ei]) / gap[ei])[:, None]
         box = (1.0 - t) * src_o[ei] + t * dst_o[ei]
         if self._cams:
-            for k in np.unique(fi).tolist():
-                m = fi == k
-                box[m] = self._back(box[m], int(fs[k]), frame[ei[m]])
+            for k in range(len(fs)):
+                r = slice(run[k], run[k + 1])
+                if run[k] < run[k + 1]:
+                    box[r] = self._back(box[r], int(fs[k]), frame[ei[r]])
         st = np.full((len(ei), STATE_DIM), np.nan)
         st[:, obs] = box
         st[:, 2:4] = vel[ei]
-        keep = np.ones(len(ei), dtype=bool)
-        if self.params.fill_err > 0:
-            keep = self._likely_rows(fs, fi, st, f_row - src_frame[ei], gap[ei])
-        # a box another track's estimate already covers is not filled (the gap is then
-        # the other track's frame: filling it would report one target twice)
-        for k in np.unique(fi[keep]).tolist():
-            bst, bfill = self._buffer[at[k]][2], self._buffer[at[k]][3]
+        fid = ids[ei]
+        keep = (self._likely_rows(fs, run, st, f_row - src_frame[ei], gap[ei])
+                if self.params.fill_err > 0 else None)
+        for k, n in enumerate(at):
+            r = slice(run[k], run[k + 1])
+            rows, rid = st[r], fid[r]
+            if keep is not None:
+                rows, rid = rows[keep[r]], rid[keep[r]]
+            if not len(rows):
+                continue
+            f, bid, bst, bfill = self._buffer[n]
+            # a box another track's estimate already covers is not filled (the gap is then
+            # the other track's frame: filling it would report one target twice)
             est = bst[~bfill]
             if len(est):
-                m = np.flatnonzero(keep & (fi == k))
-                keep[m] = _iou(st[m][:, obs], est[:, obs]).max(axis=1) < self.params.fill_overlap
-        for k in np.unique(fi[keep]).tolist():
-            m = keep & (fi == k)
-            n = at[k]
-            f, bid, bst, bfill = self._buffer[n]
-            self._buffer[n] = (f, np.concatenate([bid, ids[ei[m]]]),
-                               np.concatenate([bst, st[m]]),
-                               np.concatenate([bfill, np.ones(int(m.sum()), dtype=bool)]))
+                free = _iou(rows[:, obs], est[:, obs]).max(axis=1) < self.params.fill_overlap
+                rows, rid = rows[free], rid[free]
+                if not len(rows):
+                    continue
+            self._buffer[n] = (f, np.concatenate([bid, rid]), np.concatenate([bst, rows]),
+                               np.concatenate([bfill, np.ones(len(rows), dtype=bool)]))
 
-    def _likely_rows(self, fs: np.ndarray, fi: np.ndarray, st: np.ndarray, t: np.ndarray,
+    def _likely_rows(self, fs: np.ndarray, run: list, st: np.ndarray, t: np.ndarray,
                      gap: np.ndarray) -> np.ndarray:
-        """``fill_err``: mask of the gap rows ``st`` (row ``r`` in frame ``fs[fi[r]]``, ``t``
-        frames into gaps of ``gap``) whose straight line is likely right -- its error std
-        (:func:`interpolation_std` under ``scene_sigma_v``) at most ``fill_err`` -- or that a
-        detection of its frame (kept with extend_heads) overlaps by ``fill_overlap``."""
+        """``fill_err``: mask of the gap rows ``st`` (rows ``run[k]:run[k + 1]`` in frame
+        ``fs[k]``, ``t`` frames into gaps of ``gap``) whose straight line is likely right --
+        its error std (:func:`interpolation_std` under ``scene_sigma_v``) at most ``fill_err``
+        -- or that a detection of its frame (kept with extend_heads) overlaps by
+        ``fill_overlap``."""
         keep = interpolation_std(self.scene_sigma_v, t, gap) <= self.params.fill_err
         if keep.all():
             return keep
-        for k in np.unique(fi[~keep]).tolist():
+        for k in range(len(fs)):
+            r = slice(run[k], run[k + 1])
+            if keep[r].all():
+                continue
             f = int(fs[k])
             d = next((d for g, d in self._dets if g == f), None)
             if d is not None and len(d):
-                m = np.flatnonzero(fi == k)
-                keep[m] |= _iou(st[m][:, OBS_INDEX], d).max(axis=1) >= self.params.fill_overlap
+                keep[r] |= _iou(st[r][:, OBS_INDEX], d).max(axis=1) >= self.params.fill_overlap
         return keep
 
     def _gap_support(self, src: np.ndarray, src_frame: np.ndarray, dst: np.ndarray,
@@ -1199,17 +1208,19 @@ class GraphAssociator:
         fi, ei = np.nonzero((src_frame[None, :] < fs[:, None]) & (fs[:, None] < frame[None, :]))
         hit = np.zeros(len(ei), dtype=bool)
         if len(ei):
+            run = np.searchsorted(fi, np.arange(len(fs) + 1)).tolist()
             t = ((fs[fi] - src_frame[ei]) / gap[ei])[:, None]
             box = (1.0 - t) * src[ei][:, obs] + t * dst[ei][:, obs]
-            for k in np.unique(fi).tolist():
-                f, bid, bst, bfill = at[k]
-                m = np.flatnonzero(fi == k)
+            for k, (f, bid, bst, bfill) in enumerate(at):
+                if run[k] == run[k + 1]:
+                    continue
+                r = slice(run[k], run[k + 1])
                 ev = bst[~bfill][:, obs]
                 d = dets.get(f)
                 if d is not None and len(d):
                     ev = np.concatenate([ev, d])
                 if len(ev):
-                    hit[m] = _iou(self._back(box[m], f, frame[ei[m]]),
+                    hit[r] = _iou(self._back(box[r], f, frame[ei[r]]),
                                   ev).max(axis=1) >= self.params.fill_overlap
         hits = np.bincount(ei, weights=hit, minlength=len(src))
         return hits / np.maximum(gap - 1, 1)
