@@ -1099,9 +1099,10 @@ class GraphAssociator:
     def _fill_gaps(self, src: np.ndarray, src_frame: np.ndarray, dst: np.ndarray, frame,
                    ids: np.ndarray) -> None:
         """Add interpolated rows to the buffered frames strictly between each chosen edge's ends
-        (``src`` at ``src_frame`` → ``dst`` at ``frame``, one frame or one per edge).  The rows of
-        every (buffered frame, edge) pair in one set of numpy calls; the overlap tests and the
-        buffer's rows one call per frame that gets rows (at most ``depth`` frames)."""
+        (``src`` at ``src_frame`` → ``dst`` at ``frame``, one frame or one per edge).  The boxes
+        of every (buffered frame, edge) pair in one set of numpy calls, shared by the gap
+        support and the rows; the overlap tests and the buffer's rows one call per frame that
+        gets rows (at most ``depth`` frames)."""
         gap = frame - src_frame
         long = gap > 1
         if not long.any() or not self._buffer:
@@ -1111,20 +1112,6 @@ class GraphAssociator:
         frame = frame[long]
         obs = OBS_INDEX
         vel = (dst[:, [0, 1]] - src[:, [0, 1]]) / gap[:, None]
-        if self.params.fill_support > 0:
-            # a gap of at most fill_free missing frames is filled anyway: the evidence is
-            # looked up for the longer ones only (one edge's support is its own)
-            keep = gap - 1 <= self.params.fill_free
-            look = ~keep
-            if look.any():
-                keep[look] = (self._gap_support(src[look], src_frame[look], dst[look],
-                                                frame[look], gap[look])
-                              >= self.params.fill_support)
-            if not keep.any():
-                return
-            src, src_frame, dst, ids, gap = src[keep], src_frame[keep], dst[keep], ids[keep], gap[keep]
-            frame, vel = frame[keep], vel[keep]
-        src_o, dst_o = src[:, obs], dst[:, obs]
         lo, hi = int(src_frame.min()), int(frame.max())
         # the buffered frames strictly inside some gap (the buffer is in frame order)
         at = [n for n, b in enumerate(self._buffer) if lo < b[0] < hi]
@@ -1132,20 +1119,33 @@ class GraphAssociator:
             return
         fs = np.array([self._buffer[n][0] for n in at], dtype=np.int64)
         # every (frame, edge) pair with the frame inside the edge's gap, frame-major (each
-        # frame's rows in edge order): all frames' rows in one set of numpy calls; frame k's
-        # rows are run[k]:run[k + 1]
+        # frame's rows in edge order); frame k's rows are run[k]:run[k + 1]
         fi, ei = np.nonzero((src_frame[None, :] < fs[:, None]) & (fs[:, None] < frame[None, :]))
         if not len(ei):
             return
         run = np.searchsorted(fi, np.arange(len(fs) + 1)).tolist()
-        f_row = fs[fi]
-        t = ((f_row - src_frame[ei]) / gap[ei])[:, None]
-        box = (1.0 - t) * src_o[ei] + t * dst_o[ei]
+        t = ((fs[fi] - src_frame[ei]) / gap[ei])[:, None]
+        box = (1.0 - t) * src[ei][:, obs] + t * dst[ei][:, obs]
         if self._cams:
             for k in range(len(fs)):
                 r = slice(run[k], run[k + 1])
                 if run[k] < run[k + 1]:
                     box[r] = self._back(box[r], int(fs[k]), frame[ei[r]])
+        if self.params.fill_support > 0:
+            # a gap of at most fill_free missing frames is filled anyway: the evidence is
+            # looked up for the longer ones only (one edge's support is its own)
+            ok = gap - 1 <= self.params.fill_free
+            look = ~ok
+            if look.any():
+                hits = np.bincount(ei, weights=self._gap_hits(at, run, box, look[ei]),
+                                   minlength=len(gap))
+                ok[look] = (hits / np.maximum(gap - 1, 1))[look] >= self.params.fill_support
+            if not ok.any():
+                return
+            sel = np.flatnonzero(ok[ei])
+            fi, ei, box = fi[sel], ei[sel], box[sel]
+            run = np.searchsorted(fi, np.arange(len(fs) + 1)).tolist()
+        f_row = fs[fi]
         st = np.full((len(ei), STATE_DIM), np.nan)
         st[:, obs] = box
         st[:, 2:4] = vel[ei]
@@ -1191,39 +1191,27 @@ class GraphAssociator:
                 keep[r] |= _iou(st[r][:, OBS_INDEX], d).max(axis=1) >= self.params.fill_overlap
         return keep
 
-    def _gap_support(self, src: np.ndarray, src_frame: np.ndarray, dst: np.ndarray,
-                     frame: np.ndarray, gap: np.ndarray) -> np.ndarray:
-        """``fill_support``: per edge, the share of the gap's inner frames (buffered ones) whose
-        interpolated box overlaps a detection of the frame or another track's estimate by
-        ``fill_overlap`` or more.  The boxes of every (frame, edge) pair at once, the overlaps
-        one call per buffered frame."""
+    def _gap_hits(self, at: list, run: list, box: np.ndarray, rows: np.ndarray) -> np.ndarray:
+        """``fill_support``'s evidence: per gap row (``box`` (R, 4), rows ``run[k]:run[k + 1]``
+        in the buffered frame ``self._buffer[at[k]]``), whether its interpolated box overlaps a
+        detection of the frame or another track's estimate by ``fill_overlap`` or more; only
+        the ``rows`` (mask) are looked at, the others are False.  One overlap call per frame."""
         obs = OBS_INDEX
         dets = {f: d for f, d in self._dets}
-        lo, hi = int(src_frame.min()), int(frame.max())
-        # the buffered frames strictly inside some gap (the buffer is in frame order)
-        at = [b for b in self._buffer if lo < b[0] < hi]
-        fs = np.array([b[0] for b in at], dtype=np.int64)
-        # every (frame, edge) pair with the frame inside the edge's gap: the interpolated boxes
-        # of all frames in one set of numpy calls, then one overlap test per frame
-        fi, ei = np.nonzero((src_frame[None, :] < fs[:, None]) & (fs[:, None] < frame[None, :]))
-        hit = np.zeros(len(ei), dtype=bool)
-        if len(ei):
-            run = np.searchsorted(fi, np.arange(len(fs) + 1)).tolist()
-            t = ((fs[fi] - src_frame[ei]) / gap[ei])[:, None]
-            box = (1.0 - t) * src[ei][:, obs] + t * dst[ei][:, obs]
-            for k, (f, bid, bst, bfill) in enumerate(at):
-                if run[k] == run[k + 1]:
-                    continue
-                r = slice(run[k], run[k + 1])
-                ev = bst[~bfill][:, obs]
-                d = dets.get(f)
-                if d is not None and len(d):
-                    ev = np.concatenate([ev, d])
-                if len(ev):
-                    hit[r] = _iou(self._back(box[r], f, frame[ei[r]]),
-                                  ev).max(axis=1) >= self.params.fill_overlap
-        hits = np.bincount(ei, weights=hit, minlength=len(src))
-        return hits / np.maximum(gap - 1, 1)
+        hit = np.zeros(len(box), dtype=bool)
+        for k, n in enumerate(at):
+            m = rows[run[k]:run[k + 1]]
+            if not m.any():
+                continue
+            f, bid, bst, bfill = self._buffer[n]
+            ev = bst[~bfill][:, obs]
+            d = dets.get(f)
+            if d is not None and len(d):
+                ev = np.concatenate([ev, d])
+            if len(ev):
+                h = hit[run[k]:run[k + 1]]
+                h[m] = _iou(box[run[k]:run[k + 1]][m], ev).max(axis=1) >= self.params.fill_overlap
+        return hit
 
     def _confirmed_ids(self, ids: np.ndarray, extra_ids=None, extra_len=None) -> np.ndarray:
         """Mask of ``ids`` whose track has at least ``min_length`` vertices (live or just ended)."""
