@@ -1099,8 +1099,10 @@ class GraphAssociator:
     def _fill_gaps(self, src: np.ndarray, src_frame: np.ndarray, dst: np.ndarray, frame,
                    ids: np.ndarray) -> None:
         """Add interpolated rows to the buffered frames strictly between each chosen edge's ends
-        (``src`` at ``src_frame`` → ``dst`` at ``frame``, one frame or one per edge).  A loop
-        over the buffered frames (at most ``depth``), vectorised over the edges."""
+        (``src`` at ``src_frame`` → ``dst`` at ``frame``, one frame or one per edge).  The boxes
+        of every (buffered frame, edge) pair in one set of numpy calls, shared by the gap
+        support and the rows; the overlap tests and the buffer's rows one call per frame that
+        gets rows (at most ``depth`` frames)."""
         gap = frame - src_frame
         long = gap > 1
         if not long.any() or not self._buffer:
@@ -1110,91 +1112,106 @@ class GraphAssociator:
         frame = frame[long]
         obs = OBS_INDEX
         vel = (dst[:, [0, 1]] - src[:, [0, 1]]) / gap[:, None]
+        lo, hi = int(src_frame.min()), int(frame.max())
+        # the buffered frames strictly inside some gap (the buffer is in frame order)
+        at = [n for n, b in enumerate(self._buffer) if lo < b[0] < hi]
+        if not at:
+            return
+        fs = np.array([self._buffer[n][0] for n in at], dtype=np.int64)
+        # every (frame, edge) pair with the frame inside the edge's gap, frame-major (each
+        # frame's rows in edge order); frame k's rows are run[k]:run[k + 1]
+        fi, ei = np.nonzero((src_frame[None, :] < fs[:, None]) & (fs[:, None] < frame[None, :]))
+        if not len(ei):
+            return
+        run = np.searchsorted(fi, np.arange(len(fs) + 1)).tolist()
+        t = ((fs[fi] - src_frame[ei]) / gap[ei])[:, None]
+        box = (1.0 - t) * src[ei][:, obs] + t * dst[ei][:, obs]
+        if self._cams:
+            for k in range(len(fs)):
+                r = slice(run[k], run[k + 1])
+                if run[k] < run[k + 1]:
+                    box[r] = self._back(box[r], int(fs[k]), frame[ei[r]])
         if self.params.fill_support > 0:
             # a gap of at most fill_free missing frames is filled anyway: the evidence is
             # looked up for the longer ones only (one edge's support is its own)
-            keep = gap - 1 <= self.params.fill_free
-            look = ~keep
+            ok = gap - 1 <= self.params.fill_free
+            look = ~ok
             if look.any():
-                keep[look] = (self._gap_support(src[look], src_frame[look], dst[look],
-                                                frame[look], gap[look])
-                              >= self.params.fill_support)
-            if not keep.any():
+                hits = np.bincount(ei, weights=self._gap_hits(at, run, box, look[ei]),
+                                   minlength=len(gap))
+                ok[look] = (hits / np.maximum(gap - 1, 1))[look] >= self.params.fill_support
+            if not ok.any():
                 return
-            src, src_frame, dst, ids, gap = src[keep], src_frame[keep], dst[keep], ids[keep], gap[keep]
-            frame, vel = frame[keep], vel[keep]
-        src_o, dst_o = src[:, obs], dst[:, obs]
-        lo, hi = int(src_frame.min()), int(frame.max())
-        for n, (f, bid, bst, bfill) in enumerate(self._buffer):
-            if f <= lo:                 # (the buffer is in frame order: only the frames
-                continue                # strictly inside some gap need a look)
-            if f >= hi:
-                break
-            inside = (src_frame < f) & (f < frame)
-            if not inside.any():
+            sel = np.flatnonzero(ok[ei])
+            fi, ei, box = fi[sel], ei[sel], box[sel]
+            run = np.searchsorted(fi, np.arange(len(fs) + 1)).tolist()
+        f_row = fs[fi]
+        st = np.full((len(ei), STATE_DIM), np.nan)
+        st[:, obs] = box
+        st[:, 2:4] = vel[ei]
+        fid = ids[ei]
+        keep = (self._likely_rows(fs, run, st, f_row - src_frame[ei], gap[ei])
+                if self.params.fill_err > 0 else None)
+        for k, n in enumerate(at):
+            r = slice(run[k], run[k + 1])
+            rows, rid = st[r], fid[r]
+            if keep is not None:
+                rows, rid = rows[keep[r]], rid[keep[r]]
+            if not len(rows):
                 continue
-            t = ((f - src_frame[inside]) / gap[inside])[:, None]
-            st = np.full((int(inside.sum()), STATE_DIM), np.nan)
-            st[:, obs] = self._back((1.0 - t) * src_o[inside] + t * dst_o[inside], f,
-                                    frame[inside])
-            st[:, 2:4] = vel[inside]
-            fid = ids[inside]
-            if self.params.fill_err > 0:
-                likely = self._likely_rows(f, st, f - src_frame[inside], gap[inside])
-                st, fid = st[likely], fid[likely]
+            f, bid, bst, bfill = self._buffer[n]
             # a box another track's estimate already covers is not filled (the gap is then
             # the other track's frame: filling it would report one target twice)
             est = bst[~bfill]
-            if len(est) and len(st):
-                free = _iou(st[:, obs], est[:, obs]).max(axis=1) < self.params.fill_overlap
-                st, fid = st[free], fid[free]
-            if not len(st):
-                continue
-            self._buffer[n] = (f, np.concatenate([bid, fid]),
-                               np.concatenate([bst, st]),
-                               np.concatenate([bfill, np.ones(len(st), dtype=bool)]))
+            if len(est):
+                free = _iou(rows[:, obs], est[:, obs]).max(axis=1) < self.params.fill_overlap
+                rows, rid = rows[free], rid[free]
+                if not len(rows):
+                    continue
+            self._buffer[n] = (f, np.concatenate([bid, rid]), np.concatenate([bst, rows]),
+                               np.concatenate([bfill, np.ones(len(rows), dtype=bool)]))
 
-    def _likely_rows(self, f: int, st: np.ndarray, t: np.ndarray, gap: np.ndarray) -> np.ndarray:
-        """``fill_err``: mask of the gap rows ``st`` of frame ``f`` (``t`` frames into gaps of
-        ``gap``) whose straight line is likely right -- its error std
-        (:func:`interpolation_std` under ``scene_sigma_v``) at most ``fill_err`` -- or that a
-        detection of the frame (kept with extend_heads) overlaps by ``fill_overlap``."""
+    def _likely_rows(self, fs: np.ndarray, run: list, st: np.ndarray, t: np.ndarray,
+                     gap: np.ndarray) -> np.ndarray:
+        """``fill_err``: mask of the gap rows ``st`` (rows ``run[k]:run[k + 1]`` in frame
+        ``fs[k]``, ``t`` frames into gaps of ``gap``) whose straight line is likely right --
+        its error std (:func:`interpolation_std` under ``scene_sigma_v``) at most ``fill_err``
+        -- or that a detection of its frame (kept with extend_heads) overlaps by
+        ``fill_overlap``."""
         keep = interpolation_std(self.scene_sigma_v, t, gap) <= self.params.fill_err
         if keep.all():
             return keep
-        d = next((d for g, d in self._dets if g == f), None)
-        if d is not None and len(d):
-            keep |= _iou(st[:, OBS_INDEX], d).max(axis=1) >= self.params.fill_overlap
+        for k in range(len(fs)):
+            r = slice(run[k], run[k + 1])
+            if keep[r].all():
+                continue
+            f = int(fs[k])
+            d = next((d for g, d in self._dets if g == f), None)
+            if d is not None and len(d):
+                keep[r] |= _iou(st[r][:, OBS_INDEX], d).max(axis=1) >= self.params.fill_overlap
         return keep
 
-    def _gap_support(self, src: np.ndarray, src_frame: np.ndarray, dst: np.ndarray,
-                     frame: np.ndarray, gap: np.ndarray) -> np.ndarray:
-        """``fill_support``: per edge, the share of the gap's inner frames (buffered ones) whose
-        interpolated box overlaps a detection of the frame or another track's estimate by
-        ``fill_overlap`` or more.  A loop
-        over the buffered frames, vectorised over the edges."""
+    def _gap_hits(self, at: list, run: list, box: np.ndarray, rows: np.ndarray) -> np.ndarray:
+        """``fill_support``'s evidence: per gap row (``box`` (R, 4), rows ``run[k]:run[k + 1]``
+        in the buffered frame ``self._buffer[at[k]]``), whether its interpolated box overlaps a
+        detection of the frame or another track's estimate by ``fill_overlap`` or more; only
+        the ``rows`` (mask) are looked at, the others are False.  One overlap call per frame."""
         obs = OBS_INDEX
         dets = {f: d for f, d in self._dets}
-        hits = np.zeros(len(src))
-        lo, hi = int(src_frame.min()), int(frame.max())
-        for f, bid, bst, bfill in self._buffer:
-            if f <= lo:
+        hit = np.zeros(len(box), dtype=bool)
+        for k, n in enumerate(at):
+            m = rows[run[k]:run[k + 1]]
+            if not m.any():
                 continue
-            if f >= hi:
-                break
-            inside = (src_frame < f) & (f < frame)
-            if not inside.any():
-                continue
-            t = ((f - src_frame[inside]) / gap[inside])[:, None]
-            box = (1.0 - t) * src[inside][:, obs] + t * dst[inside][:, obs]
-            box = self._back(box, f, frame[inside])
+            f, bid, bst, bfill = self._buffer[n]
             ev = bst[~bfill][:, obs]
             d = dets.get(f)
             if d is not None and len(d):
                 ev = np.concatenate([ev, d])
             if len(ev):
-                hits[inside] += _iou(box, ev).max(axis=1) >= self.params.fill_overlap
-        return hits / np.maximum(gap - 1, 1)
+                h = hit[run[k]:run[k + 1]]
+                h[m] = _iou(box[run[k]:run[k + 1]][m], ev).max(axis=1) >= self.params.fill_overlap
+        return hit
 
     def _confirmed_ids(self, ids: np.ndarray, extra_ids=None, extra_len=None) -> np.ndarray:
         """Mask of ``ids`` whose track has at least ``min_length`` vertices (live or just ended)."""
