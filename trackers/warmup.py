@@ -12,10 +12,12 @@ that many detections) is left out: it is most of the compile, and most scenes ne
 It compiles on the first frame that does (the app says so then: ``viewer_app.run``'s
 ``compile_notices``) and is cached like the rest.
 
-On the first run (numba's cache holds no K-means kernel yet) and a machine with a second core,
-a child process compiles the K-means and association kernels into the cache while this one
-compiles the filter's, then this one loads them (:func:`_start_helper`): the compile's wall
-time drops by about the helper's share (its CPU time does not).
+On the first run (numba's cache holds no filter kernel yet) and a machine with a second core,
+a child process compiles the PHD filter's kernels into the cache while this one compiles the
+K-means and association kernels, then this one loads the filter's (:func:`_start_helper`):
+the compile's wall time drops by about the helper's share (its CPU time does not).  The child
+starts before the app has imported its trackers (``start_helper_early``), so it takes the
+larger share: the two finish about together.
 
 ``uses_kernels(tracker)`` tells which trackers call the kernels (by their registered name).
 """
@@ -71,19 +73,34 @@ def _compile_association() -> None:
     _iou(s[:, [0, 1, 4, 5]], s[:, [0, 1, 4, 5]])
 
 
-def _compile_helper_share() -> None:
-    """The helper process's share (:func:`_start_helper`), on a made-up particle cloud around
-    the walkers as the filter leaves it (C-ordered float64 states and log-weights, mass ≈ 1
-    per walker): first the filter's kernel this process reaches last (the resampling walk:
-    compiled before this one gets there), then the K-means kernels and the association's.
-    (M(z) is this process's: its grid is compiled with the update's.)"""
-    from .api import make_params
+def _compile_filter_share() -> None:
+    """The PHD filter's kernels (predict, M(z), birth, the update, the resampling walk): two
+    filter steps of a practical PHD-MT on the walkers (the second has particles to predict and
+    M(z) to measure).  The first-run helper's share (:func:`_start_helper`): it imports the
+    filter and its preset only, not the tracker registry (every tracker and their libraries:
+    ~0.4 s of the helper's CPU before its first compile)."""
+    from .phd.tracker import PHD_PRACTICAL, PHDTracker
+    from .types import Frame, blank_image
+
+    image = blank_image(480, 640)
+    tr = PHDTracker(PHD_PRACTICAL, rng=np.random.default_rng(0))
+    own = np.random.default_rng(2)
+    for k in range(2):
+        tr.filter.step(_walkers(k, own), Frame(k + 1, k / 25.0, image))
+
+
+def _compile_cluster_share() -> None:
+    """The K-means kernels (dense specialisation) and the association's, on a made-up particle
+    cloud around the walkers as the filter leaves it (C-ordered float64 states and
+    log-weights, mass ≈ 1 per walker): the warm-up's own share while the helper compiles the
+    filter's (:func:`compile_kernels`).  (The filter's kernels take the larger share of the
+    compile; this process starts compiling ~2 s after the helper, once the app has set up.)"""
     from .phd.clustering import kmeans_peaks
-    from .phd.filter import resample
+    from .phd.tracker import PHD_PRACTICAL
     from .smc import ParticleSet
 
     rng = np.random.default_rng(1)
-    params = make_params("phd", "practical", {})
+    params = PHD_PRACTICAL
     Z = _walkers(0, rng).observations()
     n = 1500 * len(Z)
     states = np.empty((n, 6))
@@ -91,8 +108,6 @@ def _compile_helper_share() -> None:
     states[:, [0, 1, 4, 5]] = Z[src] + rng.normal(0.0, 3.0, (n, 4))
     states[:, 2:4] = rng.normal(0.0, 1.0, (n, 2))
     ps = ParticleSet(states, np.full(n, np.log(len(Z) / n)))
-    fp = params.filter
-    resample(ps, fp.resampling, rng)
     cp = params.clusters
     kmeans_peaks(ps, Z, cp.T, params=params.filter, split_rule=cp.split_rule)
     _compile_association()
@@ -108,20 +123,20 @@ def _cache_cold(dispatcher) -> bool:
 
 
 def _start_helper() -> "subprocess.Popen | None":
-    """A child process compiling :func:`_compile_helper_share` into numba's cache
+    """A child process compiling :func:`_compile_filter_share` into numba's cache
     (the same ``NUMBA_CACHE_DIR`` and interpreter), started only on a first run on a machine
     with a second core; None otherwise (or when it cannot start: this process then compiles
     everything itself, as it would anyway)."""
     if (os.cpu_count() or 1) < 2:
         return None
-    from .phd import _kmeans_kernels
+    from .phd import _kernels
 
-    if not _cache_cold(_kmeans_kernels.lloyd):
+    if not _cache_cold(_kernels.gauss_update_linear):
         return None
     try:
         return subprocess.Popen(
             [sys.executable, "-c", "from pfscope.trackers.warmup import "
-             "_compile_helper_share as f; f()"],
+             "_compile_filter_share as f; f()"],
             stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     except OSError:
         return None
@@ -198,12 +213,8 @@ def compile_kernels(presets=("practical", "paper"), phd: bool = True,
     image = blank_image(480, 640)
     helper, _early = (_early, None) if _early is not None else (_start_helper(), None)
     if helper is not None:
-        # the filter's kernels here (two frames: the second has particles to predict and
-        # M(z) to measure) while the helper compiles the K-means and association ones
-        tr = PHDTracker(make_params("phd", presets[0], {}), rng=np.random.default_rng(0))
-        own = np.random.default_rng(2)
-        for k in range(2):
-            tr.filter.step(_walkers(k, own), Frame(k + 1, k / 25.0, image))
+        # the K-means and association kernels here while the helper compiles the filter's
+        _compile_cluster_share()
         _join(helper)
     for preset in presets:
         tr = PHDTracker(make_params("phd", preset, {}), rng=np.random.default_rng(0))
