@@ -61,24 +61,28 @@ def _walkers(k: int, rng: np.random.Generator):
     return Detections(np.vstack([boxes, clutter]), np.linspace(0.2, 1.0, 11))
 
 
-def _compile_association() -> None:
-    """The association's kernels (edge scores, the IoU of gap filling): the warm-up's tracks
-    need more than its four frames of estimates to reach them."""
+def _compile_association(edges: bool = True, iou: bool = True) -> None:
+    """The association's kernels (``edges``: the edge scores; ``iou``: the IoU of gap
+    filling): the warm-up's tracks need more than its four frames of estimates to reach
+    them."""
     from .phd.association import AssocParams, _iou, score_edges, tail_velocity
 
     s = np.array([[100.0, 100.0, 1.0, 0.0, 30.0, 70.0]])
-    ap = AssocParams()
-    v, b, c = tail_velocity(s, s, np.zeros(1, dtype=np.int64), ap)
-    score_edges(s, v, b, c, np.ones(1, dtype=np.int64), s, ap)
-    _iou(s[:, [0, 1, 4, 5]], s[:, [0, 1, 4, 5]])
+    if edges:
+        ap = AssocParams()
+        v, b, c = tail_velocity(s, s, np.zeros(1, dtype=np.int64), ap)
+        score_edges(s, v, b, c, np.ones(1, dtype=np.int64), s, ap)
+    if iou:
+        _iou(s[:, [0, 1, 4, 5]], s[:, [0, 1, 4, 5]])
 
 
 def _compile_filter_share() -> None:
     """The PHD filter's kernels (predict, M(z), birth, the update, the resampling walk): two
     filter steps of a practical PHD-MT on the walkers (the second has particles to predict and
-    M(z) to measure).  The first-run helper's share (:func:`_start_helper`): it imports the
-    filter and its preset only, not the tracker registry (every tracker and their libraries:
-    ~0.4 s of the helper's CPU before its first compile)."""
+    M(z) to measure), then the IoU of gap filling.  The first-run helper's share
+    (:func:`_start_helper`): it imports the filter and its preset only, not the tracker
+    registry (every tracker and their libraries: ~0.4 s of the helper's CPU before its first
+    compile)."""
     from .phd.tracker import PHD_PRACTICAL, PHDTracker
     from .types import Frame, blank_image
 
@@ -87,14 +91,15 @@ def _compile_filter_share() -> None:
     own = np.random.default_rng(2)
     for k in range(2):
         tr.filter.step(_walkers(k, own), Frame(k + 1, k / 25.0, image))
+    _compile_association(edges=False)
 
 
 def _compile_cluster_share() -> None:
-    """The K-means kernels (dense specialisation) and the association's, on a made-up particle
-    cloud around the walkers as the filter leaves it (C-ordered float64 states and
-    log-weights, mass ≈ 1 per walker): the warm-up's own share while the helper compiles the
-    filter's (:func:`compile_kernels`).  (The filter's kernels take the larger share of the
-    compile; this process starts compiling ~2 s after the helper, once the app has set up.)"""
+    """The K-means kernels (dense specialisation) and the association's edge scores, on a
+    made-up particle cloud around the walkers as the filter leaves it (C-ordered float64
+    states and log-weights, mass ≈ 1 per walker): the warm-up's own share while the helper
+    compiles the filter's (:func:`compile_kernels`).  (The helper takes the larger share of
+    the compile: it starts ~2 s before this process, which first sets the app up.)"""
     from .phd.clustering import kmeans_peaks
     from .phd.tracker import PHD_PRACTICAL
     from .smc import ParticleSet
@@ -110,7 +115,7 @@ def _compile_cluster_share() -> None:
     ps = ParticleSet(states, np.full(n, np.log(len(Z) / n)))
     cp = params.clusters
     kmeans_peaks(ps, Z, cp.T, params=params.filter, split_rule=cp.split_rule)
-    _compile_association()
+    _compile_association(iou=False)
 
 
 def _cache_cold(dispatcher) -> bool:
