@@ -247,10 +247,11 @@ def test_first_run_helper_fills_the_cache(tmp_path):
 
 def test_first_run_compiles_each_kernel_once_in_one_process(tmp_path):
     """A first run's warm-up (empty numba cache, a second core: the helper compiles the filter's
-    kernels and the IoU of gap filling) compiles in this process the K-means kernels and the
-    association's edge scores only, one specialisation each: none of the helper's kernels again (the helper's calls have the
-    run's very signatures, so they load from its cache), none for the 'paper' preset that
-    'practical' did not need, and nothing the run does not call.  numba's compile events,
+    kernels but M(z), and the IoU of gap filling) compiles in this process the K-means kernels,
+    the association's edge scores and M(z) only, one specialisation each: none of the
+    helper's kernels again (the helper's calls have the run's very signatures, so they load
+    from its cache), none for the 'paper' preset that 'practical' did not need, and nothing
+    the run does not call.  numba's compile events,
     a fresh process."""
     import subprocess
     import sys
@@ -276,7 +277,7 @@ def test_first_run_compiles_each_kernel_once_in_one_process(tmp_path):
                          timeout=900)
     assert out.returncode == 0, out.stderr[-2000:]
     top = out.stdout.split()
-    assert sorted(top) == ["edge_scores", "farthest", "lloyd", "prepare"], top
+    assert sorted(top) == ["edge_scores", "farthest", "lloyd", "mass_near_kernel", "prepare"], top
 
 
 def test_early_helper_only_for_the_phd_kernels(monkeypatch):

@@ -14,7 +14,8 @@ It compiles on the first frame that does (the app says so then: ``viewer_app.run
 
 On the first run (numba's cache holds no filter kernel yet) and a machine with a second core,
 a child process compiles the PHD filter's kernels into the cache while this one compiles the
-K-means and association kernels, then this one loads the filter's (:func:`_start_helper`):
+K-means kernels, the association's edge scores and M(z), then this one loads the helper's
+(:func:`_start_helper`):
 the compile's wall time drops by about the helper's share (its CPU time does not).  The child
 starts before the app has imported its trackers (``start_helper_early``), so it takes the
 larger share: the two finish about together.
@@ -77,45 +78,53 @@ def _compile_association(edges: bool = True, iou: bool = True) -> None:
 
 
 def _compile_filter_share() -> None:
-    """The PHD filter's kernels (predict, M(z), birth, the update, the resampling walk): two
-    filter steps of a practical PHD-MT on the walkers (the second has particles to predict and
-    M(z) to measure), then the IoU of gap filling.  The first-run helper's share
-    (:func:`_start_helper`): it imports the filter and its preset only, not the tracker
-    registry (every tracker and their libraries: ~0.4 s of the helper's CPU before its first
-    compile)."""
+    """The first-run helper's share (:func:`_start_helper`): the PHD filter's kernels but M(z)
+    -- one filter step of a practical PHD-MT on the walkers (birth, the update, the resampling
+    walk), the prediction of its particles as the next step makes it -- then the IoU of gap
+    filling.  It imports the filter and its preset only, not the tracker registry (every
+    tracker and their libraries: ~0.4 s of the helper's CPU before its first compile)."""
+    from .phd.filter import max_births, predict
     from .phd.tracker import PHD_PRACTICAL, PHDTracker
     from .types import Frame, blank_image
 
-    image = blank_image(480, 640)
     tr = PHDTracker(PHD_PRACTICAL, rng=np.random.default_rng(0))
     own = np.random.default_rng(2)
-    for k in range(2):
-        tr.filter.step(_walkers(k, own), Frame(k + 1, k / 25.0, image))
+    f = tr.filter
+    Z = _walkers(0, own)
+    f.step(Z, Frame(1, 0.0, blank_image(480, 640)))
+    # the next step's prediction, into its buffers (PHDFilter.step)
+    n, p = len(f.particles), f.params
+    cap = n + max_births(len(Z.observations()), p.birth)
+    predict(f.particles, p.motion, f.rng, (np.empty((cap, 6)), np.empty(cap)))
     _compile_association(edges=False)
 
 
-def _compile_cluster_share() -> None:
-    """The K-means kernels (dense specialisation) and the association's edge scores, on a
-    made-up particle cloud around the walkers as the filter leaves it (C-ordered float64
-    states and log-weights, mass ≈ 1 per walker): the warm-up's own share while the helper
-    compiles the filter's (:func:`compile_kernels`).  (The helper takes the larger share of
-    the compile: it starts ~2 s before this process, which first sets the app up.)"""
+def _compile_main_share() -> None:
+    """The warm-up's own share on a first run while the helper compiles the filter's
+    (:func:`compile_kernels`): the K-means kernels (dense specialisation), the association's
+    edge scores and M(z) of the birth, on a made-up particle cloud around the walkers as the
+    filter leaves it (C-ordered float64 states and log-weights, mass ≈ 1 per walker).  The
+    helper starts ~2 s before this process, which first sets the app up, so it takes the
+    larger share; M(z) comes last here, when the helper has cached the grid it shares with
+    the update (numba then loads it instead of compiling it again)."""
     from .phd.clustering import kmeans_peaks
+    from .phd.filter import as_observations, detection_noise, mass_near
     from .phd.tracker import PHD_PRACTICAL
     from .smc import ParticleSet
 
     rng = np.random.default_rng(1)
     params = PHD_PRACTICAL
-    Z = _walkers(0, rng).observations()
+    Z = as_observations(_walkers(0, rng))
     n = 1500 * len(Z)
     states = np.empty((n, 6))
     src = np.repeat(np.arange(len(Z)), n // len(Z))
     states[:, [0, 1, 4, 5]] = Z[src] + rng.normal(0.0, 3.0, (n, 4))
     states[:, 2:4] = rng.normal(0.0, 1.0, (n, 2))
     ps = ParticleSet(states, np.full(n, np.log(len(Z) / n)))
-    cp = params.clusters
-    kmeans_peaks(ps, Z, cp.T, params=params.filter, split_rule=cp.split_rule)
+    cp, fp = params.clusters, params.filter
+    kmeans_peaks(ps, Z, cp.T, params=fp, split_rule=cp.split_rule)
     _compile_association(iou=False)
+    mass_near(ps, Z, fp.birth, fp.likelihood, detection_noise(Z, fp.likelihood)[0])
 
 
 def _cache_cold(dispatcher) -> bool:
@@ -218,8 +227,8 @@ def compile_kernels(presets=("practical", "paper"), phd: bool = True,
     image = blank_image(480, 640)
     helper, _early = (_early, None) if _early is not None else (_start_helper(), None)
     if helper is not None:
-        # the K-means and association kernels here while the helper compiles the filter's
-        _compile_cluster_share()
+        # the K-means, edge-score and M(z) kernels here while the helper compiles the rest
+        _compile_main_share()
         _join(helper)
     for preset in presets:
         tr = PHDTracker(make_params("phd", preset, {}), rng=np.random.default_rng(0))
