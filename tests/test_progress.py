@@ -225,9 +225,6 @@ def test_first_run_helper_fills_the_cache(tmp_path):
     """On a first run (empty numba cache) the warm-up starts a helper process that compiles the
     PHD filter's kernels into the cache (this process then loads them); on a later run (filled
     cache) it starts none."""
-    import subprocess
-    import sys
-
     code = ("import os\n"
             "from pfscope.trackers import warmup as W\n"
             "from pfscope.trackers.phd import _kernels as K\n"
@@ -238,11 +235,19 @@ def test_first_run_helper_fills_the_cache(tmp_path):
             "W._join(h)\n"
             "print(h.returncode, W._cache_cold(K.gauss_update_linear), "
             "W._start_helper() is None)\n")
+    assert _fresh_process(code, tmp_path) == ["True", "True", "0", "False", "True"]
+
+
+def _fresh_process(code: str, tmp_path) -> list:
+    """The words ``code`` prints, run in a fresh interpreter with an empty numba cache."""
+    import subprocess
+    import sys
+
     env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
-                         timeout=600)
+                         timeout=900)
     assert out.returncode == 0, out.stderr[-2000:]
-    assert out.stdout.split() == ["True", "True", "0", "False", "True"]
+    return out.stdout.split()
 
 
 def test_first_run_compiles_each_kernel_once_in_one_process(tmp_path):
@@ -251,11 +256,7 @@ def test_first_run_compiles_each_kernel_once_in_one_process(tmp_path):
     the association's edge scores and M(z) only, one specialisation each: none of the
     helper's kernels again (the helper's calls have the run's very signatures, so they load
     from its cache), none for the 'paper' preset that 'practical' did not need, and nothing
-    the run does not call.  numba's compile events,
-    a fresh process."""
-    import subprocess
-    import sys
-
+    the run does not call.  numba's compile events, a fresh process."""
     code = ("import os\n"
             "from numba.core import event as ev\n"
             "os.cpu_count = lambda: 2\n"
@@ -272,11 +273,7 @@ def test_first_run_compiles_each_kernel_once_in_one_process(tmp_path):
             "    else:\n"
             "        depth -= 1\n"
             "print(' '.join(top))\n")
-    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
-    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
-                         timeout=900)
-    assert out.returncode == 0, out.stderr[-2000:]
-    top = out.stdout.split()
+    top = _fresh_process(code, tmp_path)
     assert sorted(top) == ["edge_scores", "farthest", "lloyd", "mass_near_kernel", "prepare"], top
 
 
