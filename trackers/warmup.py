@@ -15,10 +15,9 @@ It compiles on the first frame that does (the app says so then: ``viewer_app.run
 On the first run (numba's cache holds no filter kernel yet) and a machine with a second core,
 a child process compiles the PHD filter's kernels into the cache while this one compiles the
 K-means kernels, the association's edge scores and M(z), then this one loads the helper's
-(:func:`_start_helper`):
-the compile's wall time drops by about the helper's share (its CPU time does not).  The child
-starts before the app has imported its trackers (``start_helper_early``), so it takes the
-larger share: the two finish about together.
+(:func:`_start_helper`): the compile's wall time drops by about the helper's share (its CPU
+time does not).  The child starts before the app has imported its trackers
+(``start_helper_early``), so it takes the larger share: the two finish about together.
 
 ``uses_kernels(tracker)`` tells which trackers call the kernels (by their registered name).
 """
