@@ -404,20 +404,21 @@ def test_dense_lloyd_compiles_none_of_the_grid_search(tmp_path):
 
 
 
-def test_first_run_helper_compiles_no_zeros_or_builtin_minmax_overloads(tmp_path):
-    """The first-run helper's share (resampling walk, dense K-means, association kernels:
-    ``warmup._compile_helper_share``) allocates with ``np.empty`` and spells ``max``/``min``
-    out, so numba compiles none of ``np.zeros``' overloads (nor their zero fills) and no
-    builtin max/min overload for it (~1 s of CPU of the first run).  A fresh process with an
-    empty numba cache, numba's compile events recorded."""
+def test_kmeans_and_association_compile_no_zeros_or_builtin_minmax_overloads(tmp_path):
+    """The dense K-means and the association's kernels (``warmup._compile_main_share``, the
+    warm-up's own share on a first run, and the IoU of gap filling) allocate with ``np.empty``
+    and spell ``max``/``min`` out, so numba compiles none of ``np.zeros``' overloads (nor their
+    zero fills) and no builtin max/min overload for them (~1 s of CPU of the first run).
+    A fresh process with an empty numba cache, numba's compile events recorded."""
     import os
     import subprocess
     import sys
 
     code = ("from numba.core import event as ev\n"
             "with ev.install_recorder('numba:compile') as r:\n"
-            "    from pfscope.trackers.warmup import _compile_helper_share\n"
-            "    _compile_helper_share()\n"
+            "    from pfscope.trackers import warmup as W\n"
+            "    W._compile_main_share()\n"
+            "    W._compile_association(edges=False)\n"
             "names = {getattr(getattr(e.data['dispatcher'], 'py_func', None), '__qualname__',\n"
             "                 '?') for _, e in r.buffer if e.is_start}\n"
             "print('\\n'.join(sorted(names)))\n")

@@ -223,25 +223,58 @@ def test_a_dlpf_run_warms_only_the_resampling_kernel(monkeypatch):
 
 def test_first_run_helper_fills_the_cache(tmp_path):
     """On a first run (empty numba cache) the warm-up starts a helper process that compiles the
-    K-means kernels into the cache (this process then loads them); on a later run (filled
+    PHD filter's kernels into the cache (this process then loads them); on a later run (filled
     cache) it starts none."""
-    import subprocess
-    import sys
-
     code = ("import os\n"
             "from pfscope.trackers import warmup as W\n"
-            "from pfscope.trackers.phd import _kmeans_kernels as K\n"
+            "from pfscope.trackers.phd import _kernels as K\n"
             "os.cpu_count = lambda: 2\n"
-            "print(W._cache_cold(K.lloyd))\n"
+            "print(W._cache_cold(K.gauss_update_linear))\n"
             "h = W._start_helper()\n"
             "print(h is not None)\n"
             "W._join(h)\n"
-            "print(h.returncode, W._cache_cold(K.lloyd), W._start_helper() is None)\n")
+            "print(h.returncode, W._cache_cold(K.gauss_update_linear), "
+            "W._start_helper() is None)\n")
+    assert _fresh_process(code, tmp_path) == ["True", "True", "0", "False", "True"]
+
+
+def _fresh_process(code: str, tmp_path) -> list:
+    """The words ``code`` prints, run in a fresh interpreter with an empty numba cache."""
+    import subprocess
+    import sys
+
     env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
-                         timeout=600)
+                         timeout=900)
     assert out.returncode == 0, out.stderr[-2000:]
-    assert out.stdout.split() == ["True", "True", "0", "False", "True"]
+    return out.stdout.split()
+
+
+def test_first_run_compiles_each_kernel_once_in_one_process(tmp_path):
+    """A first run's warm-up (empty numba cache, a second core: the helper compiles the filter's
+    kernels but M(z), and the IoU of gap filling) compiles in this process the K-means kernels,
+    the association's edge scores and M(z) only, one specialisation each: none of the
+    helper's kernels again (the helper's calls have the run's very signatures, so they load
+    from its cache), none for the 'paper' preset that 'practical' did not need, and nothing
+    the run does not call.  numba's compile events, a fresh process."""
+    code = ("import os\n"
+            "from numba.core import event as ev\n"
+            "os.cpu_count = lambda: 2\n"
+            "from pfscope.trackers import warmup as W\n"
+            "depth, top = 0, []\n"
+            "with ev.install_recorder('numba:compile') as r:\n"
+            "    W.compile_kernels()\n"
+            "for _, e in r.buffer:\n"
+            "    if e.is_start:\n"
+            "        if depth == 0:\n"
+            "            d = e.data['dispatcher']\n"
+            "            top.append(d.py_func.__qualname__)\n"
+            "        depth += 1\n"
+            "    else:\n"
+            "        depth -= 1\n"
+            "print(' '.join(top))\n")
+    top = _fresh_process(code, tmp_path)
+    assert sorted(top) == ["edge_scores", "farthest", "lloyd", "mass_near_kernel", "prepare"], top
 
 
 def test_early_helper_only_for_the_phd_kernels(monkeypatch):

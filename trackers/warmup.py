@@ -12,10 +12,12 @@ that many detections) is left out: it is most of the compile, and most scenes ne
 It compiles on the first frame that does (the app says so then: ``viewer_app.run``'s
 ``compile_notices``) and is cached like the rest.
 
-On the first run (numba's cache holds no K-means kernel yet) and a machine with a second core,
-a child process compiles the K-means and association kernels into the cache while this one
-compiles the filter's, then this one loads them (:func:`_start_helper`): the compile's wall
-time drops by about the helper's share (its CPU time does not).
+On the first run (numba's cache holds no filter kernel yet) and a machine with a second core,
+a child process compiles the PHD filter's kernels into the cache while this one compiles the
+K-means kernels, the association's edge scores and M(z), then this one loads the helper's
+(:func:`_start_helper`): the compile's wall time drops by about the helper's share (its CPU
+time does not).  The child starts before the app has imported its trackers
+(``start_helper_early``), so it takes the larger share: the two finish about together.
 
 ``uses_kernels(tracker)`` tells which trackers call the kernels (by their registered name).
 """
@@ -59,43 +61,69 @@ def _walkers(k: int, rng: np.random.Generator):
     return Detections(np.vstack([boxes, clutter]), np.linspace(0.2, 1.0, 11))
 
 
-def _compile_association() -> None:
-    """The association's kernels (edge scores, the IoU of gap filling): the warm-up's tracks
-    need more than its four frames of estimates to reach them."""
+def _compile_association(edges: bool = True, iou: bool = True) -> None:
+    """The association's kernels (``edges``: the edge scores; ``iou``: the IoU of gap
+    filling): the warm-up's tracks need more than its four frames of estimates to reach
+    them."""
     from .phd.association import AssocParams, _iou, score_edges, tail_velocity
 
     s = np.array([[100.0, 100.0, 1.0, 0.0, 30.0, 70.0]])
-    ap = AssocParams()
-    v, b, c = tail_velocity(s, s, np.zeros(1, dtype=np.int64), ap)
-    score_edges(s, v, b, c, np.ones(1, dtype=np.int64), s, ap)
-    _iou(s[:, [0, 1, 4, 5]], s[:, [0, 1, 4, 5]])
+    if edges:
+        ap = AssocParams()
+        v, b, c = tail_velocity(s, s, np.zeros(1, dtype=np.int64), ap)
+        score_edges(s, v, b, c, np.ones(1, dtype=np.int64), s, ap)
+    if iou:
+        _iou(s[:, [0, 1, 4, 5]], s[:, [0, 1, 4, 5]])
 
 
-def _compile_helper_share() -> None:
-    """The helper process's share (:func:`_start_helper`), on a made-up particle cloud around
-    the walkers as the filter leaves it (C-ordered float64 states and log-weights, mass ≈ 1
-    per walker): first the filter's kernel this process reaches last (the resampling walk:
-    compiled before this one gets there), then the K-means kernels and the association's.
-    (M(z) is this process's: its grid is compiled with the update's.)"""
-    from .api import make_params
+def _compile_filter_share() -> None:
+    """The first-run helper's share (:func:`_start_helper`): the PHD filter's kernels but M(z)
+    -- one filter step of a practical PHD-MT on the walkers (birth, the update, the resampling
+    walk), the prediction of its particles as the next step makes it -- then the IoU of gap
+    filling.  It imports the filter and its preset only, not the tracker registry (every
+    tracker and their libraries: ~0.4 s of the helper's CPU before its first compile)."""
+    from .phd.filter import max_births, predict
+    from .phd.tracker import PHD_PRACTICAL, PHDTracker
+    from .types import Frame, blank_image
+
+    tr = PHDTracker(PHD_PRACTICAL, rng=np.random.default_rng(0))
+    own = np.random.default_rng(2)
+    f = tr.filter
+    Z = _walkers(0, own)
+    f.step(Z, Frame(1, 0.0, blank_image(480, 640)))
+    # the next step's prediction, into its buffers (PHDFilter.step)
+    n, p = len(f.particles), f.params
+    cap = n + max_births(len(Z.observations()), p.birth)
+    predict(f.particles, p.motion, f.rng, (np.empty((cap, 6)), np.empty(cap)))
+    _compile_association(edges=False)
+
+
+def _compile_main_share() -> None:
+    """The warm-up's own share on a first run while the helper compiles the filter's
+    (:func:`compile_kernels`): the K-means kernels (dense specialisation), the association's
+    edge scores and M(z) of the birth, on a made-up particle cloud around the walkers as the
+    filter leaves it (C-ordered float64 states and log-weights, mass ≈ 1 per walker).  The
+    helper starts ~2 s before this process, which first sets the app up, so it takes the
+    larger share; M(z) comes last here, when the helper has cached the grid it shares with
+    the update (numba then loads it instead of compiling it again)."""
     from .phd.clustering import kmeans_peaks
-    from .phd.filter import resample
+    from .phd.filter import as_observations, detection_noise, mass_near
+    from .phd.tracker import PHD_PRACTICAL
     from .smc import ParticleSet
 
     rng = np.random.default_rng(1)
-    params = make_params("phd", "practical", {})
-    Z = _walkers(0, rng).observations()
+    params = PHD_PRACTICAL
+    Z = as_observations(_walkers(0, rng))
     n = 1500 * len(Z)
     states = np.empty((n, 6))
     src = np.repeat(np.arange(len(Z)), n // len(Z))
     states[:, [0, 1, 4, 5]] = Z[src] + rng.normal(0.0, 3.0, (n, 4))
     states[:, 2:4] = rng.normal(0.0, 1.0, (n, 2))
     ps = ParticleSet(states, np.full(n, np.log(len(Z) / n)))
-    fp = params.filter
-    resample(ps, fp.resampling, rng)
-    cp = params.clusters
-    kmeans_peaks(ps, Z, cp.T, params=params.filter, split_rule=cp.split_rule)
-    _compile_association()
+    cp, fp = params.clusters, params.filter
+    kmeans_peaks(ps, Z, cp.T, params=fp, split_rule=cp.split_rule)
+    _compile_association(iou=False)
+    mass_near(ps, Z, fp.birth, fp.likelihood, detection_noise(Z, fp.likelihood)[0])
 
 
 def _cache_cold(dispatcher) -> bool:
@@ -108,20 +136,20 @@ def _cache_cold(dispatcher) -> bool:
 
 
 def _start_helper() -> "subprocess.Popen | None":
-    """A child process compiling :func:`_compile_helper_share` into numba's cache
+    """A child process compiling :func:`_compile_filter_share` into numba's cache
     (the same ``NUMBA_CACHE_DIR`` and interpreter), started only on a first run on a machine
     with a second core; None otherwise (or when it cannot start: this process then compiles
     everything itself, as it would anyway)."""
     if (os.cpu_count() or 1) < 2:
         return None
-    from .phd import _kmeans_kernels
+    from .phd import _kernels
 
-    if not _cache_cold(_kmeans_kernels.lloyd):
+    if not _cache_cold(_kernels.gauss_update_linear):
         return None
     try:
         return subprocess.Popen(
             [sys.executable, "-c", "from pfscope.trackers.warmup import "
-             "_compile_helper_share as f; f()"],
+             "_compile_filter_share as f; f()"],
             stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     except OSError:
         return None
@@ -198,12 +226,8 @@ def compile_kernels(presets=("practical", "paper"), phd: bool = True,
     image = blank_image(480, 640)
     helper, _early = (_early, None) if _early is not None else (_start_helper(), None)
     if helper is not None:
-        # the filter's kernels here (two frames: the second has particles to predict and
-        # M(z) to measure) while the helper compiles the K-means and association ones
-        tr = PHDTracker(make_params("phd", presets[0], {}), rng=np.random.default_rng(0))
-        own = np.random.default_rng(2)
-        for k in range(2):
-            tr.filter.step(_walkers(k, own), Frame(k + 1, k / 25.0, image))
+        # the K-means, edge-score and M(z) kernels here while the helper compiles the rest
+        _compile_main_share()
         _join(helper)
     for preset in presets:
         tr = PHDTracker(make_params("phd", preset, {}), rng=np.random.default_rng(0))

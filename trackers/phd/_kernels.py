@@ -97,10 +97,10 @@ def grid_build(px, py, cell_x, cell_y):
         b = py[i]
         if not (math.isfinite(a) and math.isfinite(b)):
             return False, 0.0, 0.0, cell_x, cell_y, 0, 0, np.empty(0, np.int64), _zero_start()
-        x0 = min(x0, a)
-        x1 = max(x1, a)
-        y0 = min(y0, b)
-        y1 = max(y1, b)
+        x0 = a if a < x0 else x0           # min(x0, a), max(x1, a), ... spelt out as numba's
+        x1 = a if a > x1 else x1           # own rule (v if v < acc else acc): the same floats,
+        y0 = b if b < y0 else y0           # and no builtin min/max overload to compile on a
+        y1 = b if b > y1 else y1           # first run
     if n == 0:
         return True, 0.0, 0.0, cell_x, cell_y, 0, 0, np.empty(0, np.int64), _zero_start()
     max_cells = 4.0 * n + 64.0
@@ -118,8 +118,10 @@ def grid_build(px, py, cell_x, cell_y):
         starts[k] = 0
     keys = np.empty(n, np.int64)
     for i in range(n):
-        ci = min(int((px[i] - x0) / cell_x), ni - 1)
-        cj = min(int((py[i] - y0) / cell_y), nj - 1)
+        ci = int((px[i] - x0) / cell_x)
+        ci = ni - 1 if ni - 1 < ci else ci
+        cj = int((py[i] - y0) / cell_y)
+        cj = nj - 1 if nj - 1 < cj else cj
         k = ci * nj + cj
         keys[i] = k
         starts[k + 1] += 1
@@ -145,8 +147,8 @@ def grid_span(lo, hi, origin, cell, n_cells):
     b = math.floor((hi - origin) / cell)
     if not b >= 0.0 or not a <= n_cells - 1.0:      # also catches NaN
         return 0, -1
-    c0 = 0 if a < 0.0 else int(a)
-    c1 = n_cells - 1 if b > n_cells - 1.0 else int(b)
+    c0 = 0 if a < 0.0 else a                        # (math.floor is an int already)
+    c1 = n_cells - 1 if b > n_cells - 1.0 else b
     return c0, c1
 
 
@@ -223,8 +225,10 @@ def birth_fill(Z, j, lw_det, st, sigma_obs, sigma_min, pos_ratio, spread, speed_
     s = st[0]
     k = 0
     for z in range(Z.shape[0]):
-        sw = max(sigma_obs * Z[z, 2], sigma_min)
-        sh = max(sigma_obs * Z[z, 3], sigma_min)
+        sw = sigma_obs * Z[z, 2]
+        sw = sigma_min if sigma_min > sw else sw      # max(sw, sigma_min), spelt out
+        sh = sigma_obs * Z[z, 3]
+        sh = sigma_min if sigma_min > sh else sh
         s0 = spread * (pos_ratio * sw)
         s1 = spread * (pos_ratio * sh)
         s2 = spread * sw
@@ -308,8 +312,9 @@ def gauss_update_linear(states, lw, Z, std, log_norm, log_kappa, log_pd, log_pm,
     low = np.inf
     for i in range(n):
         if lw[i] > -np.inf:
-            top = max(top, lw[i])
-            low = min(low, lw[i])
+            v = lw[i]                     # max(top, v), min(low, v), spelt out
+            top = v if v > top else top
+            low = v if v < low else low
     if not (top > -np.inf and top - low <= _LIN_RANGE and top < np.inf):
         return True, False, lw, log_c, -np.inf, -np.inf
     new_lw = np.empty(n, np.float64)     # every entry written below
@@ -360,8 +365,9 @@ def gauss_update_linear(states, lw, Z, std, log_norm, log_kappa, log_pd, log_pm,
         log_c[j] = math.log(s) + top + log_scale
         lk = log_kappa[j]
         lc = log_c[j]
-        hi = max(lk, lc)
-        log_den = hi + math.log1p(math.exp(min(lk, lc) - hi))
+        hi = lc if lc > lk else lk        # max(lk, lc), min(lk, lc), spelt out
+        lo = lc if lc < lk else lk
+        log_den = hi + math.log1p(math.exp(lo - hi))
         log_f = log_scale - log_den       # ψ/(κ + C) = f e^{−d²/2}
         if log_f <= _LIN_RANGE:
             f = math.exp(log_f)

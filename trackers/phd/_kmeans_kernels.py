@@ -66,8 +66,7 @@ def _nearest_dense(X, i, centers, inv):
     return lab, best
 
 
-@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
-      no_cpython_wrapper=True)
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
 def _assign_dense(X, centers, inv, labels, dmin):
     """:func:`_nearest_dense` of every particle: the same d² floats and labels, the centres'
     coordinates laid out by column so the K distances of a particle are one vector loop."""
