@@ -692,11 +692,7 @@ class SceneModel:
                 dup = np.nan_to_num(np.exp(log_dup - total))
             self.rate = (1 - a) * self.rate + a * float(np.sum(share * (1.0 - rep - near - dup)))
             # a duplicate box is the person's, not a place's: it leaves no place memory
-            import os
-            mw = share * (1.0 - near - dup)
-            if os.environ.get("H19_PLACEALL"):
-                mw = np.maximum(mw, float(os.environ["H19_PLACEALL"]))
-            self.place.learn(Z, mw, share * rep, a)
+            self.place.learn(Z, share * (1.0 - near - dup), share * rep, a)
             self.people.learn(share * near, a)
             if self.cl.learn_update == "model":
                 self.dups.learn(won, a)
