@@ -202,6 +202,10 @@ class SceneMotion:
         #: still camera's links may move without the camera moving (set by the tracker from
         #: the newborn speed prior)
         self.speed_var = 0.0
+        #: the camera motion's memory in frames (:class:`.camera_motion.CameraMotion`; set by
+        #: the tracker from the frame rate)
+        self.camera_memory = 1.0
+        self._camera = camera_motion.CameraMotion()
         #: the likelihood's size std as a fraction of the box size (σ_size; the camera fit)
         self.size_std = 2.0 * self.pos_std
         self.accel = _Ring(2)    # second differences over (w, h)
@@ -222,8 +226,8 @@ class SceneMotion:
             # links that continue a chain (a detection seen in the two frames before): random
             # clutter seldom does, and two clutter links can look like a camera motion
             jl = np.where(ch.length >= 2, j, -1)
-            self.camera = (camera_motion.fit(prev, Z, jl, self.pos_std, self.size_std,
-                                             self.speed_var) if len(prev) else None)
+            self.camera = self._camera.step(prev, Z, jl, self.pos_std, self.size_std,
+                                            self.speed_var, self.camera_memory)
         has = np.flatnonzero(j >= 0)
         if len(has):
             jh = j[has]
