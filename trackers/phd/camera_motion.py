@@ -29,8 +29,16 @@ squared residual (in noise variances) by more than the 99 % quantile of a χ² w
 freedom (its parameters) -- a likelihood-ratio test of "the camera moved" against "the camera is
 still", with the margin set by the noise the filter assumes, not by a sequence -- on at least
 :data:`MIN_LINKS` inlier links (one link is one person's own motion).  A frame without such
-evidence is taken as still (carrying the last frame's motion over such frames was measured
-worse on KITTI-13: a car's image motion changes from frame to frame).
+evidence is taken as still by :func:`fit` (carrying the last frame's motion over such frames
+was measured worse on KITTI-13: a single frame's motion from two or three links is noisy).
+
+Continuity (:class:`CameraMotion`, what the tracker uses): the camera moves smoothly, so its
+motion is also kept as a level over about a second of frames (an information filter with
+forgetting), to which every frame's links add their evidence -- a frame with a single linked
+person too.  Frames that :func:`fit` alone calls still then get the level, but only within a
+second of a frame that passed the test above (on KITTI-13, 2.8 detections a frame: 186 of 340
+frames get a motion instead of 82; the ground truth's motion left over per frame, median,
+0.104 -> 0.060 box heights).
 
 Deterministic; cost quadratic in the links of a frame (one hypothesis per link; a frame's links
 are capped by :class:`.scene_motion.Chains`'s pair bound, and at most :data:`MAX_HYPOTHESES`

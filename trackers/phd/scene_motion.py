@@ -36,8 +36,8 @@ matching):
 With ``camera`` on, the camera's image motion of each frame is also estimated from the same
 links (:mod:`.camera_motion`; :attr:`SceneMotion.camera`).  The noise is still measured on the
 raw triplets, camera motion included: the estimate exists only where enough people are linked
-(on KITTI-13 in ~95 of 340 frames), so in most frames of a moving camera the filter predicts
-uncompensated, and the triplets of the compensated frames are the well-linked ones (a noise
+(on KITTI-13 in ~82 of 340 frames by the per-frame test, 186 with the motion's continuity), so
+in many frames of a moving camera the filter predicts uncompensated (a noise
 learnt on the residuals, 0.12 instead of 0.23 box sizes on KITTI-13, left the other frames
 uncovered and cost IDF1: docs/trackers/phd.md).
 
