@@ -199,15 +199,24 @@ class CameraMotion:
     uncertainty: measurements older than ``memory`` frames (one second of video, set by the
     tracker from the frame rate) fade out.
 
+    Adaptive forgetting: when two frames in a row pass :func:`fit`'s likelihood-ratio test and
+    the second contradicts the level (its innovation beyond the χ²₃ 99 % gate), the camera
+    changed its motion faster than the drift allows, and the level's information is shrunk
+    until that frame is consistent with it.  A single such frame is not enough: on a still
+    camera it is the test's 1 % false alarm, and the level (full of still frames) then stays
+    still.
+
     Called moving only while both hold: (1) a frame's own links passed :func:`fit`'s
-    likelihood-ratio test against a still camera within the last ``memory`` frames (so a still
-    camera is never called moving by the level alone: people who walk the same way for a while
-    look like a slow pan once their evidence piles up, and the per-frame test, which counts a
-    person's own step as noise, is what tells a camera from a group); (2) the level itself
-    differs from the identity by more than the χ²₃ 99 % quantile in its own covariance
-    (``(θ − θ_id)ᵀ H (θ − θ_id) > LR_MARGIN``).  Frames with one link or none between two
-    frames that moved then get the level (the camera's recent motion, refined by whatever
-    links they have) instead of a still camera."""
+    likelihood-ratio test against a still camera within the last ``memory`` frames (the level
+    alone would call people who walk the same way for a while a slow pan once their evidence
+    piles up -- a person keeps their velocity, so their steps are not independent from frame
+    to frame as the level assumes; the per-frame test, which counts a person's own step as
+    noise, is what opens it); (2) the level itself differs from the identity by more than the
+    χ²₃ 99 % quantile in its own covariance (``(θ − θ_id)ᵀ H (θ − θ_id) > LR_MARGIN``).
+    Frames with one link or none between frames that moved then get the level (the camera's
+    recent motion, refined by whatever links they have) instead of a still camera.  Limit: on
+    a still camera, a false alarm while a group walks the same way (people walking away from
+    the camera shrink together) opens the level for up to ``memory`` frames."""
 
     def __init__(self):
         self.H = np.zeros((3, 3))
@@ -252,9 +261,11 @@ class CameraMotion:
         self.b *= lam
         if r is not None:
             th_r = np.array([r.s, r.t[0], r.t[1]])
-            if r.significant:
-                # the camera changed its motion beyond what the level allows: the level's
-                # information shrinks until this frame is consistent with it
+            if r.significant and self.since == 0:
+                # two frames in a row whose own links beat a still camera (one such frame on a
+                # still camera is the test's 1 % false alarm) and this one contradicts the
+                # level: the camera changed its motion beyond what the level's drift allows,
+                # so the level's information shrinks until this frame is consistent with it
                 a = self._consistent(th_r, r.H)
                 self.H *= a
                 self.b *= a
