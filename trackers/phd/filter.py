@@ -192,6 +192,13 @@ class ClutterParams:
                                         "already boxed, per detected person and frame "
                                         "(learnt online; 0: no duplicate term; .clutter)")
 
+    spot_places: bool = param(False, "'learn' with learn_update 'model': a place's clutter "
+                                     "memory counts only detections that continue no chain "
+                                     "(a spot fires on and off, a person frame after frame), "
+                                     "and newborns weigh against κ without the place memory "
+                                     "(people do not appear more often where clutter "
+                                     "repeats; .clutter)")
+
     def __post_init__(self):
         _check(self, "clutter_rate", self.clutter_rate >= 0, ">= 0")
         _check(self, "clutter_gate", 0.0 < self.clutter_gate < 1.0, "in (0, 1)")
@@ -535,6 +542,8 @@ class SceneModel:
         self.people = NearClutter(self.cl, self.lk) if learn else None
         self.dups = DuplicateBoxes(self.cl, self.lk) if learn else None
         self._parts: Optional[tuple] = None
+        #: 'learn' with spot_places: log κ without the place memory, for the newborn's weight
+        self.birth_log_kappa: Optional[np.ndarray] = None
 
     def set_likelihood(self, lk: LikelihoodParams) -> None:
         """New observation-noise widths for the clutter volumes (PHDFilter.set_params)."""
@@ -626,6 +635,11 @@ class SceneModel:
                     log_used = np.logaddexp(log_kappa,
                                             self.place.log_gate(Z, self.structured()))
                 self._parts = (Z, log_rep, log_near, log_dup, shadow, log_used)
+                if self.cl.spot_places and self.cl.learn_update == "model":
+                    # a person appears no more often where clutter repeats: the newborn
+                    # weigh against κ without the place memory (birth_odds, log_birth_weight)
+                    self.birth_log_kappa = np.logaddexp(np.logaddexp(log_kappa, log_near),
+                                                        log_dup)
                 log_kappa = log_used
         else:
             log_kappa = log_clutter_density(Z, self.cl, self.lk)
@@ -692,7 +706,14 @@ class SceneModel:
                 dup = np.nan_to_num(np.exp(log_dup - total))
             self.rate = (1 - a) * self.rate + a * float(np.sum(share * (1.0 - rep - near - dup)))
             # a duplicate box is the person's, not a place's: it leaves no place memory
-            self.place.learn(Z, share * (1.0 - near - dup), share * rep, a)
+            unch = 1.0
+            if self.cl.spot_places and self.cl.learn_update == "model" \
+                    and self._chained is not None:
+                # a place's memory counts the detections that continue no chain: a spot
+                # fires on and off and starts anew each time, a newcomer's own first
+                # detections chain after the first and leave it (spot_places)
+                unch = (~self._chained).astype(float)
+            self.place.learn(Z, share * (1.0 - near - dup) * unch, share * rep * unch, a)
             self.people.learn(share * near, a)
             if self.cl.learn_update == "model":
                 self.dups.learn(won, a)
@@ -1229,7 +1250,10 @@ class PHDFilter:
             cap = n + max_births(len(Z), p.birth)
             buf = (np.empty((cap, STATE_DIM)), np.empty(cap))
         predicted = predict(prev, p.motion, self.rng, buf)
+        self.scene.birth_log_kappa = None
         log_kappa_geo, log_kappa = self.scene.log_kappa(Z, scores, frame, predicted)
+        if self.scene.birth_log_kappa is not None:
+            log_kappa_geo = self.scene.birth_log_kappa
         noise = detection_noise(Z, p.likelihood)
         born = birth(predicted, Z, p, self.rng, log_kappa_geo, revive,
                      None if buf is None else (buf[0][n:], buf[1][n:]), noise)
