@@ -106,15 +106,18 @@ def _run(moving: bool, camera: bool) -> tuple[np.ndarray, tuple, tuple]:
 def test_moving_camera_is_tracked_only_with_the_motion_compensated():
     """Pan and zoom: compensated, the people are covered in >= 50 % of the (frame, person)
     pairs on average over seeds 0-4 (>= 40 % in every seed) and >= 0.15 more than without
-    (measured: 0.56, seeds 0.49-0.64, against 0.28, seeds 0.12-0.37)."""
+    (measured: 0.66, seeds 0.57-0.72, against 0.28, seeds 0.12-0.37).  The camera's motion is
+    given in >= 70 % of the 80 frames of every seed (measured 62-78: the continuity of
+    :class:`.camera_motion.CameraMotion` carries it through frames with fewer than two linked
+    people; the per-frame fit alone gave 27-45)."""
     comp, _, moved = _run(True, True)
     raw, _, _ = _run(True, False)
     assert comp.mean() >= 0.5, (comp, raw)
     assert comp.min() >= 0.4, (comp, raw)
     assert comp.mean() - raw.mean() >= 0.15, (comp, raw)
-    assert min(moved) >= 0.3 * SECONDS * FPS, moved     # the motion was seen (the pan
+    assert min(moved) >= 0.7 * SECONDS * FPS, moved     # the motion was seen (the pan
     # passes through a standstill twice in its 4 s period, and only links continuing a chain
-    # count; measured 27-45 of 80 frames)
+    # count)
 
 
 def test_still_camera_estimate_is_identity_and_tracks_unchanged():
@@ -221,3 +224,86 @@ def test_gap_rows_follow_the_camera():
     assert len(np.unique(np.concatenate([r.ids for r in rows]))) == 1
     assert by[3].filled.all() and len(by[3].ids) == 1
     assert by[3].states[0, 0] == pytest.approx(160.0)
+
+
+
+def _frame_pair(rng: np.random.Generator, A: np.ndarray, n: int) -> tuple:
+    """Boxes of ``n`` people in frame k−1 and k under the camera motion ``A``, each person
+    stepping at the speed prior, 4 % box noise in both frames."""
+    q = _boxes(rng, n)
+    z = cm.warp_boxes(q, A)
+    z[:, :2] += np.sqrt(SPEED_VAR * q[:, 2] * q[:, 3])[:, None] * rng.standard_normal((n, 2))
+    for b in (q, z):
+        b[:, :2] += 0.04 * b[:, 2:4] * rng.standard_normal((n, 2))
+        b[:, 2:4] *= 1 + 0.04 * rng.standard_normal((n, 2))
+    return q, z
+
+
+#: a car driving forward: everything grows 5 % a frame about the image centre
+DRIVE = np.array([[1.05, 0.0, -0.05 * W / 2], [0.0, 1.05, -0.05 * H / 2]])
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_camera_continuity_fills_frames_with_few_links(seed):
+    """A camera driving forward (5 % growth a frame), 40 frames at 10 fps; frames alternate
+    between 3 linked people and a single one (the others missed).  The per-frame fit needs two
+    inlier links, so it calls the single-link frames still; :class:`CameraMotion` (the level of
+    the recent frames' motion) gives every frame after the first moving one a motion (measured:
+    all of them, from the first frame), and on the single-link frames its scale is within 0.025
+    of 1.05 (measured 0.005-0.014, seeds 0-4) -- without the continuity (the per-frame fit
+    alone) none has one."""
+    rng = np.random.default_rng(seed)
+    est, per_frame = cm.CameraMotion(), 0
+    single, errs = 0, []
+    first = None
+    for k in range(40):
+        n = 3 if k % 2 == 0 else 1
+        q, z = _frame_pair(rng, DRIVE, n)
+        A = est.step(q, z, np.arange(n), 0.075, 0.15, SPEED_VAR, FPS * cm.MEMORY_S)
+        per_frame += (n == 1) and cm.fit(q, z, np.arange(n), 0.075, 0.15, SPEED_VAR) is not None
+        if A is not None and first is None:
+            first = k
+        if first is not None and n == 1:
+            single += 1
+            assert A is not None, k
+            errs.append(abs(cm.scale(A) - 1.05))
+    assert first is not None and first <= 10, first
+    assert per_frame == 0
+    assert single >= 14 and max(errs) <= 0.025, errs
+
+
+def test_camera_continuity_on_a_still_camera_stays_still():
+    """Still camera, 2-8 people stepping at the speed prior, 500 frames (every second frame a
+    single link): :class:`CameraMotion` calls the camera moving in <= 3 % of the frames (the
+    per-frame test's rare false alarms open the level for one second at most, and the level
+    must itself differ from a still camera; measured: none, with 2-3 per-frame false alarms)."""
+    rng = np.random.default_rng(0)
+    est, moved = cm.CameraMotion(), 0
+    for k in range(500):
+        n = int(rng.integers(2, 9)) if k % 2 == 0 else 1
+        q, z = _frame_pair(rng, cm.IDENTITY, n)
+        moved += est.step(q, z, np.arange(n), 0.075, 0.15, SPEED_VAR,
+                          FPS * cm.MEMORY_S) is not None
+    assert moved <= 15, moved
+
+
+
+def test_camera_continuity_does_not_call_a_walking_group_a_pan():
+    """Still camera, 3-6 people all walking the same way at a third of the speed prior's std a
+    frame (a group crossing the scene), 300 frames at 10 fps, seeds 0-2: the level, which takes
+    the frames as independent, piles up their common velocity into a 'pan'; :class:`CameraMotion`
+    opens it only within a second of a frame that passed the per-frame test, so the camera is
+    called moving in <= 75 of the 900 frames (measured 50: 7, 33, 10; the per-frame test alone:
+    24; without the opening condition: 110)."""
+    moved = 0
+    for seed in range(3):
+        rng = np.random.default_rng(50 + seed)
+        est = cm.CameraMotion()
+        v = np.sqrt(SPEED_VAR) / 3.0
+        for _ in range(300):
+            n = int(rng.integers(3, 7))
+            q, z = _frame_pair(rng, cm.IDENTITY, n)
+            z[:, 0] += v * np.sqrt(z[:, 2] * z[:, 3])
+            moved += est.step(q, z, np.arange(n), 0.075, 0.15, SPEED_VAR,
+                              FPS * cm.MEMORY_S) is not None
+    assert moved <= 75, moved

@@ -46,7 +46,9 @@ Which κ the update uses is ``learn_update``: ``'gate'`` the random density plus
 model at the learnt share of structured clutter around every detection (a stand-in for the
 structured clutter the memory has not placed yet; safe where a detector puts duplicate boxes
 next to people, PETS09's ACF, but as strict as ``gate`` where the structured share is high);
-``'model'`` the learnt mixture ``κ_u + κ_r + κ_n`` itself.  On uniform clutter a false detection seldom falls inside an earlier one's gate (in
+``'model'`` the learnt mixture ``κ_u + κ_r + κ_n + κ_d`` itself, ``κ_d``
+(:class:`DuplicateBoxes`) the second boxes a detector puts on a person it already boxed, which
+a Poisson clutter term cannot express.  On uniform clutter a false detection seldom falls inside an earlier one's gate (in
 four dimensions: place and size), so β falls towards its floor and the model becomes the
 ``scene`` density; where the detector fires in place, β stays high and κ near those places is
 the ``gate`` model's.  Nothing to set per scene: the prior is β = 1 (the ``gate`` model where
@@ -58,7 +60,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import replace
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Optional
 
 import numpy as np
 
@@ -238,21 +240,93 @@ class NearClutter:
         return self.num + PRIOR_FRAMES * self._a * NEAR_PRIOR
 
 
-def neighbours(Z: np.ndarray, cl: "ClutterParams", lk: "LikelihoodParams",
-               scale: float = 1.0) -> np.ndarray:
-    """(N_z,) int: the other detections of the frame inside each detection's ``clutter_gate``
-    ellipsoid, its observation stds times ``scale`` (grid-indexed pairs, :func:`gate_pairs`)."""
+class DuplicateBoxes:
+    """Second boxes on a person the detector already boxed (``κ_d``, ``learn_update='model'``).
+
+    What it models: a detector (PETS09's ACF) often puts a second box on a person it boxed,
+    shifted or resized, inside ``NEAR_SCALE`` × the clutter gate of the first.  A Poisson
+    clutter term cannot express that: the PHD reads the second box as a second person.  The
+    persons' boxes are not known at update time, so each detection stands in for one (as the
+    births do): a box z with ``n(z)`` other detections of the frame in its widened gate
+    (:func:`neighbour_pairs`) is the second box of one of them with probability ``q``, spread
+    as the ``gate`` model: ``κ_d(z) = q · n(z) / V(z)`` (``V(z)`` the clutter gate's volume).
+    Both boxes of a pair get it (either may be the second one); a box alone gets none.  A
+    person already tracked keeps its box (its predicted ``C(z) ≫ q / V(z)``); a box next to it
+    that the prediction does not explain stays clutter instead of starting a second track.
+    Linear in detections (grid-indexed pairs; no particles × detections).
+
+    ``q`` (learnt) is the probability that the other box next to a tracked person's box is a
+    second box on that person rather than another person: over the detections z with a
+    neighbour, ``Σ_z won(z) · [some z' near z has won(z') < ½]`` over ``Σ_z won(z)`` (``won``
+    the update's target share; a neighbour counts as unexplained where the update found
+    clutter the likelier; a tracked box next to another tracked box is two people), exponential
+    averages as the other rates, with the Gamma prior of :func:`em_rate` (mean
+    ``duplicate_prior``: nothing known, halfway; 0 turns the term off).  Where the detector
+    boxes each person once, the pairs are people side by side and q sinks; where it often boxes
+    a person twice q stays high (PETS09-S2L1's ACF: ~0.75; the soft count ``1 − won(z')``
+    instead of the label gave ~0.6 and let second boxes through on PETS09-S3MF1)."""
+
+    def __init__(self, cl: "ClutterParams", lk: "LikelihoodParams"):
+        self.cl, self.lk = cl, lk
+        self.q = float(cl.duplicate_prior)
+        self.num = 0.0
+        self.den = 0.0
+        self._pairs: Optional[tuple] = None
+
+    def log_kappa(self, Z: np.ndarray) -> np.ndarray:
+        """``log κ_d(z)`` (N_z,; ``-inf`` where z has no neighbour)."""
+        from .filter import log_clutter_density
+
+        self._pairs = None
+        if self.cl.duplicate_prior <= 0 or len(Z) < 2:
+            return np.full(len(Z), -np.inf)
+        rows, cols = neighbour_pairs(Z, self.cl, self.lk, NEAR_SCALE)
+        self._pairs = (rows, cols)
+        n = np.bincount(cols, minlength=len(Z))
+        with np.errstate(divide="ignore"):
+            per_point = log_clutter_density(Z, replace(self.cl, clutter_rate=1.0), self.lk)
+            return np.log(self.q * n) + per_point
+
+    def learn(self, won: np.ndarray, a: float) -> None:
+        """After the update: ``won`` (N_z,) the detections' target shares."""
+        if self.cl.duplicate_prior <= 0:
+            return
+        won = np.clip(np.asarray(won, dtype=np.float64), 0.0, 1.0)
+        extra = paired = np.zeros(len(won))
+        if self._pairs is not None and len(won):
+            rows, cols = self._pairs
+            # a neighbour is unexplained where the update found clutter the likelier (won < ½)
+            extra = np.bincount(cols, weights=(won[rows] < 0.5).astype(float), minlength=len(won)) > 0
+            paired = np.bincount(cols, minlength=len(won)) > 0
+        self.num = (1 - a) * self.num + a * float(np.sum(won * extra))
+        self.den = (1 - a) * self.den + a * float(np.sum(won * paired))
+        self.q = em_rate(self.num, self.den, self.cl.duplicate_prior, a)
+
+
+def neighbour_pairs(Z: np.ndarray, cl: "ClutterParams", lk: "LikelihoodParams",
+                    scale: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """(rows, cols) int arrays: the pairs of distinct detections of the frame with ``rows``
+    inside the ``clutter_gate`` ellipsoid of ``cols``, its observation stds times ``scale``
+    (grid-indexed pairs, :func:`gate_pairs`)."""
     from .filter import OBS_DIM, gate_threshold, obs_std
 
-    count = np.zeros(len(Z), dtype=np.int64)
+    rows, cols = [np.zeros(0, dtype=np.int64)], [np.zeros(0, dtype=np.int64)]
     if len(Z) > 1:
         wide = lk if scale == 1.0 else replace(lk, sigma_obs=lk.sigma_obs * scale,
                                                 sigma_obs_min=lk.sigma_obs_min * scale)
         for ch in gate_pairs(Z, Z, gate_threshold(cl.clutter_gate, OBS_DIM),
                              std_z=obs_std(Z[:, 2:4], wide)):
             other = ch.rows != ch.cols
-            count += np.bincount(ch.cols[other], minlength=len(Z))
-    return count
+            rows.append(ch.rows[other])
+            cols.append(ch.cols[other])
+    return np.concatenate(rows).astype(np.int64), np.concatenate(cols).astype(np.int64)
+
+
+def neighbours(Z: np.ndarray, cl: "ClutterParams", lk: "LikelihoodParams",
+               scale: float = 1.0) -> np.ndarray:
+    """(N_z,) int: the other detections of the frame inside each detection's ``clutter_gate``
+    ellipsoid, its observation stds times ``scale`` (:func:`neighbour_pairs`)."""
+    return np.bincount(neighbour_pairs(Z, cl, lk, scale)[1], minlength=len(Z)).astype(np.int64)
 
 
 def clutter_share(won: np.ndarray, log_used: np.ndarray, log_shadow: np.ndarray) -> np.ndarray:

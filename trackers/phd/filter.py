@@ -88,7 +88,7 @@ import numpy as np
 from ..params import param, part, with_options
 from . import _kernels, motion
 from .clutter import PlaceClutter
-from .clutter import NEAR_SCALE, NearClutter, clutter_share, neighbours
+from .clutter import DuplicateBoxes, NearClutter, clutter_share, neighbours
 from .scene_motion import Chains
 from .gating import DEFAULT_BUDGET, LogGPairs, gate_pairs, tail_radius2
 from ..smc.resampling import SCHEMES
@@ -185,7 +185,19 @@ class ClutterParams:
                                       "density plus the 'gate' model at the learnt share of "
                                       "structured clutter around every detection (the "
                                       "structured clutter not placed yet); 'model': the "
-                                      "learnt mixture itself (.clutter)")
+                                      "learnt mixture itself, second boxes on one person "
+                                      "included (.clutter)")
+    duplicate_prior: float = param(0.5, "'learn' with learn_update 'model': prior mean of q, "
+                                        "the extra boxes a detector puts on a person it "
+                                        "already boxed, per detected person and frame "
+                                        "(learnt online; 0: no duplicate term; .clutter)")
+
+    spot_places: bool = param(False, "'learn' with learn_update 'model': a place's clutter "
+                                     "memory counts only detections that continue no chain "
+                                     "(a spot fires on and off, a person frame after frame), "
+                                     "and newborns weigh against κ without the place memory "
+                                     "(people do not appear more often where clutter "
+                                     "repeats; .clutter)")
 
     def __post_init__(self):
         _check(self, "clutter_rate", self.clutter_rate >= 0, ">= 0")
@@ -196,6 +208,7 @@ class ClutterParams:
         _check(self, "repeat_memory", self.repeat_memory > 0, "> 0")
         _check(self, "learn_update", self.learn_update in ("gate", "model"), "'gate' or 'model'")
         _check(self, "clutter_memory", self.clutter_memory >= 1, ">= 1")
+        _check(self, "duplicate_prior", 0.0 <= self.duplicate_prior <= 1.0, "in [0, 1]")
         _check(self, "near_rate", self.near_rate >= 0, ">= 0")
 
 
@@ -527,12 +540,15 @@ class SceneModel:
         learn = self.cl.clutter_model == "learn"
         self.place = PlaceClutter(self.cl, self.lk) if learn else None
         self.people = NearClutter(self.cl, self.lk) if learn else None
+        self.dups = DuplicateBoxes(self.cl, self.lk) if learn else None
         self._parts: Optional[tuple] = None
+        #: 'learn' with spot_places: log κ without the place memory, for the newborn's weight
+        self.birth_log_kappa: Optional[np.ndarray] = None
 
     def set_likelihood(self, lk: LikelihoodParams) -> None:
         """New observation-noise widths for the clutter volumes (PHDFilter.set_params)."""
         self.lk = lk
-        for part in (self.place, self.people):
+        for part in (self.place, self.people, self.dups):
             if part is not None:
                 part.lk = lk
 
@@ -607,18 +623,23 @@ class SceneModel:
                 log_near = np.where(self._chained, -np.inf,
                                     self.people.log_kappa(Z, predicted))
                 shadow = np.logaddexp(np.logaddexp(log_kappa, log_rep), log_near)
+                log_dup = np.full(len(Z), -np.inf)
                 if self.cl.learn_update == "model":
+                    # a second box on a person already boxed, which a Poisson κ cannot
+                    # express: the duplicate term (.clutter.DuplicateBoxes) joins the mixture
+                    self.dups.cl = self.cl
+                    log_dup = self.dups.log_kappa(Z)
+                    shadow = np.logaddexp(shadow, log_dup)
                     log_used = shadow
-                    # a detection with another of the frame next to it may be a second box on
-                    # one person, which a Poisson κ cannot express: the stand-in there
-                    pair = neighbours(Z, self.cl, self.lk, NEAR_SCALE) > 0
-                    if pair.any():
-                        log_used = np.where(pair, np.logaddexp(
-                            shadow, self.place.log_gate(Z, self.structured())), shadow)
                 else:
                     log_used = np.logaddexp(log_kappa,
                                             self.place.log_gate(Z, self.structured()))
-                self._parts = (Z, log_rep, log_near, shadow, log_used)
+                self._parts = (Z, log_rep, log_near, log_dup, shadow, log_used)
+                if self.cl.spot_places and self.cl.learn_update == "model":
+                    # a person appears no more often where clutter repeats: the newborn
+                    # weigh against κ without the place memory (birth_odds, log_birth_weight)
+                    self.birth_log_kappa = np.logaddexp(np.logaddexp(log_kappa, log_near),
+                                                        log_dup)
                 log_kappa = log_used
         else:
             log_kappa = log_clutter_density(Z, self.cl, self.lk)
@@ -677,14 +698,25 @@ class SceneModel:
         """After the update: ``won`` (N_z,) = C/(κ + C), each detection's target share."""
         a = 1.0 / min(self.frames + 5, self.cl.clutter_memory)
         if self.place is not None and self._parts is not None:
-            Z, log_rep, log_near, total, log_used = self._parts
+            Z, log_rep, log_near, log_dup, total, log_used = self._parts
             share = clutter_share(won, log_used, total)
             with np.errstate(invalid="ignore"):
                 rep = np.nan_to_num(np.exp(log_rep - total))
                 near = np.nan_to_num(np.exp(log_near - total))
-            self.rate = (1 - a) * self.rate + a * float(np.sum(share * (1.0 - rep - near)))
-            self.place.learn(Z, share * (1.0 - near), share * rep, a)
+                dup = np.nan_to_num(np.exp(log_dup - total))
+            self.rate = (1 - a) * self.rate + a * float(np.sum(share * (1.0 - rep - near - dup)))
+            # a duplicate box is the person's, not a place's: it leaves no place memory
+            unch = 1.0
+            if self.cl.spot_places and self.cl.learn_update == "model" \
+                    and self._chained is not None:
+                # a place's memory counts the detections that continue no chain: a spot
+                # fires on and off and starts anew each time, a newcomer's own first
+                # detections chain after the first and leave it (spot_places)
+                unch = (~self._chained).astype(float)
+            self.place.learn(Z, share * (1.0 - near - dup) * unch, share * rep * unch, a)
             self.people.learn(share * near, a)
+            if self.cl.learn_update == "model":
+                self.dups.learn(won, a)
             self._parts = None
         elif self.scene_clutter:
             self.rate = (1 - a) * self.rate + a * float(np.sum(1.0 - won))
@@ -1218,7 +1250,10 @@ class PHDFilter:
             cap = n + max_births(len(Z), p.birth)
             buf = (np.empty((cap, STATE_DIM)), np.empty(cap))
         predicted = predict(prev, p.motion, self.rng, buf)
+        self.scene.birth_log_kappa = None
         log_kappa_geo, log_kappa = self.scene.log_kappa(Z, scores, frame, predicted)
+        if self.scene.birth_log_kappa is not None:
+            log_kappa_geo = self.scene.birth_log_kappa
         noise = detection_noise(Z, p.likelihood)
         born = birth(predicted, Z, p, self.rng, log_kappa_geo, revive,
                      None if buf is None else (buf[0][n:], buf[1][n:]), noise)

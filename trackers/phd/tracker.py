@@ -60,7 +60,7 @@ from ..types import Detections, Frame, TrackSet, xywh_to_cxcywh
 from .association import (EST_CONF, GAP_CONF, AssocParams, AssocResult, FinalRows,
                           GraphAssociator)
 from .appearance import box_features
-from .camera_motion import scale as camera_scale, warp_states
+from .camera_motion import MEMORY_S as CAMERA_MEMORY_S, scale as camera_scale, warp_states
 from .clustering import Clusters, kmeans_peaks, measurement_estimates
 from .filter import STATE_DIM, PHDFilter, PHDParams, PHDStepResult, _check
 from .scene_motion import SceneMotion
@@ -442,6 +442,7 @@ class PHDTracker(_AssociatingTracker):
             bp = fp.birth
             sm.speed_var = (bp.birth_speed_std ** 2 + bp.birth_speed_mean ** 2) / 2.0
             sm.size_std = want.likelihood.sigma_obs
+            sm.camera_memory = CAMERA_MEMORY_S * (self.fps or self.params.rate.fallback_fps)
             sm.observe(boxes, frame.index)
             # the residuals the likelihood explains: the learnt width's when there is one
             sm.pos_std = want.likelihood.sigma_obs * want.likelihood.sigma_obs_pos_ratio
