@@ -193,11 +193,13 @@ class ClutterParams:
                                         "(learnt online; 0: no duplicate term; .clutter)")
 
     spot_places: bool = param(False, "'learn' with learn_update 'model': a place's clutter "
-                                     "memory counts only detections that continue no chain "
-                                     "(a spot fires on and off, a person frame after frame), "
-                                     "and newborns weigh against κ without the place memory "
-                                     "(people do not appear more often where clutter "
-                                     "repeats; .clutter)")
+                                     "memory counts a detection that continues a chain by the "
+                                     "probability that its chain so far is clutter (the "
+                                     "product of its detections' clutter shares 1 - won: a "
+                                     "spot's chain stays clutter, a person's stops being "
+                                     "clutter once it wins mass), and newborns weigh against "
+                                     "κ without the place memory (people do not appear more "
+                                     "often where clutter repeats; .clutter)")
 
     def __post_init__(self):
         _check(self, "clutter_rate", self.clutter_rate >= 0, ">= 0")
@@ -535,6 +537,10 @@ class SceneModel:
         self.chains = Chains()
         self._persist: Optional[np.ndarray] = None
         self._chained: Optional[np.ndarray] = None       # 'learn': continues a chain
+        #: 'learn' with spot_places: the chain links of this frame's detections (Chains) and,
+        #: per detection of the last learnt frame, P(its chain up to it is clutter)
+        self._link: Optional[np.ndarray] = None
+        self._chain_clutter: Optional[np.ndarray] = None
         self.persist_sums: Optional[np.ndarray] = None   # as score_sums, labelled by persistence
         # 'learn': the repeated-in-place part of κ (.clutter), this frame's parts for learn()
         learn = self.cl.clutter_model == "learn"
@@ -620,6 +626,7 @@ class SceneModel:
                 # is 0 there, so it takes no share of it in the EM (the update alike with
                 # learn_update 'model')
                 self._chained = self.chains.length >= 1
+                self._link = self.chains.prev_link
                 log_near = np.where(self._chained, -np.inf,
                                     self.people.log_kappa(Z, predicted))
                 shadow = np.logaddexp(np.logaddexp(log_kappa, log_rep), log_near)
@@ -694,6 +701,18 @@ class SceneModel:
         gap = mean[0] - mean[1]
         return gap * gap / var, gap / var, 0.5 * (mean[0] + mean[1])
 
+    def _chain_prior(self, n: int) -> np.ndarray:
+        """(n,) P(the chain a detection of this frame continues is clutter): the last learnt
+        frame's value at its link (Chains), 1 where it continues no chain (or the links do
+        not refer to that frame)."""
+        out = np.ones(n)
+        j, c = self._link, self._chain_clutter
+        if j is None or c is None or len(j) != n or len(c) == 0:
+            return out
+        ok = (j >= 0) & (j < len(c))
+        out[ok] = c[j[ok]]
+        return out
+
     def learn(self, scores: Optional[np.ndarray], won: np.ndarray) -> None:
         """After the update: ``won`` (N_z,) = C/(κ + C), each detection's target share."""
         a = 1.0 / min(self.frames + 5, self.cl.clutter_memory)
@@ -707,12 +726,14 @@ class SceneModel:
             self.rate = (1 - a) * self.rate + a * float(np.sum(share * (1.0 - rep - near - dup)))
             # a duplicate box is the person's, not a place's: it leaves no place memory
             unch = 1.0
-            if self.cl.spot_places and self.cl.learn_update == "model" \
-                    and self._chained is not None:
-                # a place's memory counts the detections that continue no chain: a spot
-                # fires on and off and starts anew each time, a newcomer's own first
-                # detections chain after the first and leave it (spot_places)
-                unch = (~self._chained).astype(float)
+            if self.cl.spot_places and self.cl.learn_update == "model":
+                # a place's memory counts a detection that continues a chain by the
+                # probability that the chain so far is clutter: a spot's firings win no mass
+                # and its chain stays clutter, a newcomer's chain stops being clutter as soon
+                # as its detections win mass (spot_places)
+                prior = self._chain_prior(len(won))
+                unch = prior
+                self._chain_clutter = prior * (1.0 - np.asarray(won, dtype=np.float64))
             self.place.learn(Z, share * (1.0 - near - dup) * unch, share * rep * unch, a)
             self.people.learn(share * near, a)
             if self.cl.learn_update == "model":
