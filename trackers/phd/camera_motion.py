@@ -231,11 +231,14 @@ class CameraMotion:
         already, else found by bisection (an adaptive forgetting: the camera changed its
         motion more than the drift allows)."""
 
+        try:
+            d = th - np.linalg.solve(self.H, self.b)          # innovation against the level
+            level_cov, frame_cov = np.linalg.inv(self.H), np.linalg.inv(H)
+        except np.linalg.LinAlgError:
+            return 0.0
+
         def d2(a: float) -> float:
-            Hl = a * self.H
-            d = th - np.linalg.solve(self.H, self.b)
-            C = np.linalg.inv(Hl) + np.linalg.inv(H)
-            return float(d @ np.linalg.solve(C, d))
+            return float(d @ np.linalg.solve(level_cov / a + frame_cov, d))
 
         try:
             if d2(1.0) <= LR_MARGIN:

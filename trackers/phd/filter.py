@@ -537,9 +537,8 @@ class SceneModel:
         self.chains = Chains()
         self._persist: Optional[np.ndarray] = None
         self._chained: Optional[np.ndarray] = None       # 'learn': continues a chain
-        #: 'learn' with spot_places: the chain links of this frame's detections (Chains) and,
-        #: per detection of the last learnt frame, P(its chain up to it is clutter)
-        self._link: Optional[np.ndarray] = None
+        #: 'learn' with spot_places: per detection of the last learnt frame, P(its chain up to
+        #: it is clutter)
         self._chain_clutter: Optional[np.ndarray] = None
         self.persist_sums: Optional[np.ndarray] = None   # as score_sums, labelled by persistence
         # 'learn': the repeated-in-place part of κ (.clutter), this frame's parts for learn()
@@ -548,8 +547,6 @@ class SceneModel:
         self.people = NearClutter(self.cl, self.lk) if learn else None
         self.dups = DuplicateBoxes(self.cl, self.lk) if learn else None
         self._parts: Optional[tuple] = None
-        #: 'learn' with spot_places: log κ without the place memory, for the newborn's weight
-        self.birth_log_kappa: Optional[np.ndarray] = None
 
     def set_likelihood(self, lk: LikelihoodParams) -> None:
         """New observation-noise widths for the clutter volumes (PHDFilter.set_params)."""
@@ -596,7 +593,10 @@ class SceneModel:
     def log_kappa(self, Z: np.ndarray, scores: Optional[np.ndarray],
                   frame: Optional[Frame], predicted: Optional[ParticleSet] = None
                   ) -> tuple[np.ndarray, np.ndarray]:
-        """``log κ(z)`` (N_z,) of this frame's detections: without, then with the scores."""
+        """``log κ(z)`` (N_z,) of this frame's detections: the one the newborn weigh against
+        (without the scores; with ``spot_places``, also without the place memory), then the
+        update's (with the scores)."""
+        log_birth = None
         persist = self.uses_scores and self.sp.persist_frames > 0
         if persist or self.place is not None:
             # a no-op when the frame was linked already (PHD-MT shares its scene learner's)
@@ -626,7 +626,6 @@ class SceneModel:
                 # is 0 there, so it takes no share of it in the EM (the update alike with
                 # learn_update 'model')
                 self._chained = self.chains.length >= 1
-                self._link = self.chains.prev_link
                 log_near = np.where(self._chained, -np.inf,
                                     self.people.log_kappa(Z, predicted))
                 shadow = np.logaddexp(np.logaddexp(log_kappa, log_rep), log_near)
@@ -645,16 +644,16 @@ class SceneModel:
                 if self.cl.spot_places and self.cl.learn_update == "model":
                     # a person appears no more often where clutter repeats: the newborn
                     # weigh against κ without the place memory (birth_odds, log_birth_weight)
-                    self.birth_log_kappa = np.logaddexp(np.logaddexp(log_kappa, log_near),
-                                                        log_dup)
+                    log_birth = np.logaddexp(np.logaddexp(log_kappa, log_near), log_dup)
                 log_kappa = log_used
         else:
             log_kappa = log_clutter_density(Z, self.cl, self.lk)
         if persist:
             self._persist = self.chains.length >= self.sp.persist_frames
+        birth = log_kappa if log_birth is None else log_birth
         if self.uses_scores and scores is not None and len(Z):
-            return log_kappa, log_kappa - self.log_score_ratio(scores)
-        return log_kappa, log_kappa
+            return birth, log_kappa - self.log_score_ratio(scores)
+        return birth, log_kappa
 
     def _neighbours(self, Z: np.ndarray) -> float:
         """Mean number of other detections inside each detection's ``clutter_gate`` ellipsoid
@@ -703,10 +702,10 @@ class SceneModel:
 
     def _chain_prior(self, n: int) -> np.ndarray:
         """(n,) P(the chain a detection of this frame continues is clutter): the last learnt
-        frame's value at its link (Chains), 1 where it continues no chain (or the links do
-        not refer to that frame)."""
+        frame's value at its link (:attr:`Chains.prev_link`), 1 where it continues no chain
+        (or the links do not refer to that frame)."""
         out = np.ones(n)
-        j, c = self._link, self._chain_clutter
+        j, c = self.chains.prev_link, self._chain_clutter
         if j is None or c is None or len(j) != n or len(c) == 0:
             return out
         ok = (j >= 0) & (j < len(c))
@@ -725,16 +724,15 @@ class SceneModel:
                 dup = np.nan_to_num(np.exp(log_dup - total))
             self.rate = (1 - a) * self.rate + a * float(np.sum(share * (1.0 - rep - near - dup)))
             # a duplicate box is the person's, not a place's: it leaves no place memory
-            unch = 1.0
+            chain = 1.0
             if self.cl.spot_places and self.cl.learn_update == "model":
                 # a place's memory counts a detection that continues a chain by the
                 # probability that the chain so far is clutter: a spot's firings win no mass
                 # and its chain stays clutter, a newcomer's chain stops being clutter as soon
                 # as its detections win mass (spot_places)
-                prior = self._chain_prior(len(won))
-                unch = prior
-                self._chain_clutter = prior * (1.0 - np.asarray(won, dtype=np.float64))
-            self.place.learn(Z, share * (1.0 - near - dup) * unch, share * rep * unch, a)
+                chain = self._chain_prior(len(won))
+                self._chain_clutter = chain * (1.0 - np.asarray(won, dtype=np.float64))
+            self.place.learn(Z, share * (1.0 - near - dup) * chain, share * rep * chain, a)
             self.people.learn(share * near, a)
             if self.cl.learn_update == "model":
                 self.dups.learn(won, a)
@@ -1271,10 +1269,7 @@ class PHDFilter:
             cap = n + max_births(len(Z), p.birth)
             buf = (np.empty((cap, STATE_DIM)), np.empty(cap))
         predicted = predict(prev, p.motion, self.rng, buf)
-        self.scene.birth_log_kappa = None
         log_kappa_geo, log_kappa = self.scene.log_kappa(Z, scores, frame, predicted)
-        if self.scene.birth_log_kappa is not None:
-            log_kappa_geo = self.scene.birth_log_kappa
         noise = detection_noise(Z, p.likelihood)
         born = birth(predicted, Z, p, self.rng, log_kappa_geo, revive,
                      None if buf is None else (buf[0][n:], buf[1][n:]), noise)
