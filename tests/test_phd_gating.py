@@ -18,7 +18,8 @@ from pfscope.trackers.phd.filter import (GaussianLikelihood, PHDFilter, PHDParam
                                          log_clutter_density, log_likelihood,
                                          log_likelihood_pairs, mass_near, obs_std, predict,
                                          update)
-from pfscope.trackers.phd.gating import GridIndex, LogGPairs, gate_pairs, tail_radius2
+from pfscope.trackers.phd.gating import (GridIndex, LogGPairs, gate_pairs, gate_sums,
+                                         tail_radius2)
 from pfscope.trackers.smc import ParticleSet
 
 # Five targets (centre, velocity, size), two of them close enough for their gates to overlap.
@@ -145,6 +146,40 @@ def test_gate_pairs_finds_exactly_the_pairs_inside_the_gate(budget):
         got32 |= set(zip(ch.rows.tolist(), ch.cols.tolist()))
     q = (obs[:, None, :] - Z[None]) / obs_std(Z[:, 2:4])[None]
     assert set(zip(*np.nonzero(np.einsum("ijk,ijk->ij", q, q) <= r2))) <= got32
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_gate_sums_are_the_sums_over_the_gated_pairs_bit_for_bit(seed):
+    """gate_sums (one numba pass) gives what np.bincount / np.maximum.at over gate_pairs' pairs
+    give: the same pairs, each detection's weights summed in the same order (equal floats),
+    on scattered points, points on top of the detections, and the detections themselves."""
+    rng = np.random.default_rng(seed)
+
+    def boxes(k):
+        b = np.empty((k, 4))
+        b[:, :2] = rng.uniform(0, [640, 480], (k, 2))
+        b[:, 2] = rng.uniform(10, 60, k)
+        b[:, 3] = b[:, 2] * rng.uniform(1.5, 3, k)
+        return b
+
+    Z = boxes(int(rng.integers(1, 40)))
+    near = Z[rng.integers(0, len(Z), 300)] + rng.normal(0, 4, (300, 4))
+    near[:, 2:] = np.abs(near[:, 2:]) + 1
+    pts = np.vstack([boxes(int(rng.integers(0, 300))), near, Z])
+    w, e = rng.uniform(0, 1, len(pts)), rng.uniform(1, 30, len(pts))
+    for scale, gate in ((1.0, 0.99), (2.0, 0.9)):
+        r2, std = gate_threshold(gate, 4), scale * obs_std(Z[:, 2:4])
+        S0, E0, C0 = np.zeros(len(Z)), np.zeros(len(Z)), np.zeros(len(Z), np.int64)
+        for ch in gate_pairs(pts, Z, r2, std_z=std):
+            S0 += np.bincount(ch.cols, weights=w[ch.rows], minlength=len(Z))
+            np.maximum.at(E0, ch.cols, e[ch.rows])
+            C0 += np.bincount(ch.cols, minlength=len(Z))
+        S, E, C = gate_sums(pts, Z, r2, std, w, e)
+        assert C0.sum() > len(Z)                      # the test has pairs to find
+        assert np.array_equal(S, S0) and np.array_equal(E, E0) and np.array_equal(C, C0)
+    assert all(len(a) == 0 for a in gate_sums(pts, Z[:0], r2, std[:0], w))
+    S, E, C = gate_sums(pts[:0], Z, r2, std, w[:0])
+    assert not S.any() and not E.any() and not C.any()
 
 
 def test_grid_index_runs_cover_every_point_of_a_box():

@@ -64,7 +64,7 @@ from typing import TYPE_CHECKING, Optional
 
 import numpy as np
 
-from .gating import gate_pairs
+from .gating import gate_sums
 
 if TYPE_CHECKING:  # pragma: no cover
     from .filter import ClutterParams, LikelihoodParams
@@ -131,10 +131,8 @@ class PlaceClutter:
         E = np.zeros(len(Z))
         if len(Z) and len(self.mem_w):
             r2 = gate_threshold(self.cl.clutter_gate, OBS_DIM)
-            for ch in gate_pairs(self.mem_z, Z, r2, std_z=obs_std(Z[:, 2:4], self.lk)):
-                S += np.bincount(ch.cols, weights=self.mem_w[ch.rows], minlength=len(Z))
-                if watched:
-                    np.maximum.at(E, ch.cols, self.mem_e[ch.rows])
+            S, E, _ = gate_sums(self.mem_z, Z, r2, obs_std(Z[:, 2:4], self.lk), self.mem_w,
+                                self.mem_e)
         return (S, E) if watched else S
 
     def place_rate(self, Z: np.ndarray) -> np.ndarray:
@@ -280,9 +278,9 @@ class DuplicateBoxes:
         self._pairs = None
         if self.cl.duplicate_prior <= 0 or len(Z) < 2:
             return np.full(len(Z), -np.inf)
-        rows, cols = neighbour_pairs(Z, self.cl, self.lk, NEAR_SCALE)
-        self._pairs = (rows, cols)
-        n = np.bincount(cols, minlength=len(Z))
+        std, r2 = _wide_gate(Z, self.cl, self.lk, NEAR_SCALE)
+        n = gate_sums(Z, Z, r2, std, np.ones(len(Z)))[2] - 1        # the others: not z itself
+        self._pairs = (Z, std, r2, n)
         with np.errstate(divide="ignore"):
             per_point = log_clutter_density(Z, replace(self.cl, clutter_rate=1.0), self.lk)
             return np.log(self.q * n) + per_point
@@ -294,28 +292,38 @@ class DuplicateBoxes:
         won = np.clip(np.asarray(won, dtype=np.float64), 0.0, 1.0)
         extra = paired = np.zeros(len(won))
         if self._pairs is not None and len(won):
-            rows, cols = self._pairs
-            # a neighbour is unexplained where the update found clutter the likelier (won < ½)
-            extra = np.bincount(cols, weights=(won[rows] < 0.5).astype(float), minlength=len(won)) > 0
-            paired = np.bincount(cols, minlength=len(won)) > 0
+            Z, std, r2, n = self._pairs
+            # a neighbour is unexplained where the update found clutter the likelier (won < ½);
+            # the sums count 0s and 1s (exact), z's own term taken off again
+            lost = (won < 0.5).astype(float)
+            extra = gate_sums(Z, Z, r2, std, lost)[0] - lost > 0
+            paired = n > 0
         self.num = (1 - a) * self.num + a * float(np.sum(won * extra))
         self.den = (1 - a) * self.den + a * float(np.sum(won * paired))
         self.q = em_rate(self.num, self.den, self.cl.duplicate_prior, a)
+
+
+def _wide_gate(Z: np.ndarray, cl: "ClutterParams", lk: "LikelihoodParams",
+               scale: float) -> tuple[np.ndarray, float]:
+    """The detections' observation stds times ``scale`` and the ``clutter_gate`` radius r²."""
+    from .filter import OBS_DIM, gate_threshold, obs_std
+
+    wide = lk if scale == 1.0 else replace(lk, sigma_obs=lk.sigma_obs * scale,
+                                            sigma_obs_min=lk.sigma_obs_min * scale)
+    return obs_std(Z[:, 2:4], wide), gate_threshold(cl.clutter_gate, OBS_DIM)
 
 
 def neighbour_pairs(Z: np.ndarray, cl: "ClutterParams", lk: "LikelihoodParams",
                     scale: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
     """(rows, cols) int arrays: the pairs of distinct detections of the frame with ``rows``
     inside the ``clutter_gate`` ellipsoid of ``cols``, its observation stds times ``scale``
-    (grid-indexed pairs, :func:`gate_pairs`)."""
-    from .filter import OBS_DIM, gate_threshold, obs_std
+    (grid-indexed pairs, :func:`.gating.gate_pairs`)."""
+    from .gating import gate_pairs
 
     rows, cols = [np.zeros(0, dtype=np.int64)], [np.zeros(0, dtype=np.int64)]
     if len(Z) > 1:
-        wide = lk if scale == 1.0 else replace(lk, sigma_obs=lk.sigma_obs * scale,
-                                                sigma_obs_min=lk.sigma_obs_min * scale)
-        for ch in gate_pairs(Z, Z, gate_threshold(cl.clutter_gate, OBS_DIM),
-                             std_z=obs_std(Z[:, 2:4], wide)):
+        std, r2 = _wide_gate(Z, cl, lk, scale)
+        for ch in gate_pairs(Z, Z, r2, std_z=std):
             other = ch.rows != ch.cols
             rows.append(ch.rows[other])
             cols.append(ch.cols[other])
@@ -325,8 +333,12 @@ def neighbour_pairs(Z: np.ndarray, cl: "ClutterParams", lk: "LikelihoodParams",
 def neighbours(Z: np.ndarray, cl: "ClutterParams", lk: "LikelihoodParams",
                scale: float = 1.0) -> np.ndarray:
     """(N_z,) int: the other detections of the frame inside each detection's ``clutter_gate``
-    ellipsoid, its observation stds times ``scale`` (:func:`neighbour_pairs`)."""
-    return np.bincount(neighbour_pairs(Z, cl, lk, scale)[1], minlength=len(Z)).astype(np.int64)
+    ellipsoid, its observation stds times ``scale`` (the pairs of :func:`neighbour_pairs`,
+    counted by :func:`.gating.gate_sums` without forming them)."""
+    if len(Z) < 2:
+        return np.zeros(len(Z), dtype=np.int64)
+    std, r2 = _wide_gate(Z, cl, lk, scale)
+    return gate_sums(Z, Z, r2, std, np.ones(len(Z)))[2] - 1
 
 
 def clutter_share(won: np.ndarray, log_used: np.ndarray, log_shadow: np.ndarray) -> np.ndarray:
