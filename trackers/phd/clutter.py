@@ -147,21 +147,23 @@ class PlaceClutter:
         r = (S + PRIOR_FRAMES * self.beta) / (E + PRIOR_FRAMES)
         return np.where(S > 0, np.minimum(r, 1.0), 0.0)
 
-    def log_kappa(self, Z: np.ndarray) -> np.ndarray:
-        """``log κ_r(z)`` (N_z,) of this frame's detections (``-inf`` where no clutter fell)."""
-        from .filter import log_clutter_density
-
+    def log_kappa(self, Z: np.ndarray, log_v: Optional[np.ndarray] = None) -> np.ndarray:
+        """``log κ_r(z)`` (N_z,) of this frame's detections (``-inf`` where no clutter fell).
+        ``log_v``: the clutter gates' ``log V(z)`` when the caller has them."""
         rate = self.place_rate(Z)
         with np.errstate(divide="ignore"):
-            per_point = log_clutter_density(Z, replace(self.cl, clutter_rate=1.0), self.lk)
-            return np.log(rate) + per_point
+            return np.log(rate) + _unit_density(Z, self.cl, self.lk, log_v)
 
-    def log_gate(self, Z: np.ndarray, share: float) -> np.ndarray:
+    def log_gate(self, Z: np.ndarray, share: float,
+                 log_v: Optional[np.ndarray] = None) -> np.ndarray:
         """``log`` of the ``gate`` model at rate ``share`` around every detection: the part of
         κ that stands for structured clutter the memory has not placed yet."""
         from .filter import log_clutter_density
 
-        return log_clutter_density(Z, replace(self.cl, clutter_rate=max(share, 0.0)), self.lk)
+        if log_v is None or not share > 0:
+            return log_clutter_density(Z, replace(self.cl, clutter_rate=max(share, 0.0)),
+                                       self.lk)
+        return math.log(share) - log_v
 
     def exposure(self) -> float:
         """Places where clutter fell, each counted once: Σ_j w_j / max(1, S(z_j))."""
@@ -212,8 +214,9 @@ class NearClutter:
         self._a = 0.2
         self._exposure = 0.0
 
-    def log_kappa(self, Z: np.ndarray, predicted) -> np.ndarray:
-        from .filter import BirthParams, log_clutter_density, mass_near
+    def log_kappa(self, Z: np.ndarray, predicted, log_v: Optional[np.ndarray] = None
+                  ) -> np.ndarray:
+        from .filter import BirthParams, mass_near
 
         self._exposure = float(predicted.mass) if predicted is not None else 0.0
         if predicted is None or not len(Z):
@@ -222,8 +225,8 @@ class NearClutter:
                        sigma_obs_min=self.lk.sigma_obs_min * NEAR_SCALE)
         m = mass_near(predicted, Z, BirthParams(gate=self.cl.clutter_gate), wide)
         with np.errstate(divide="ignore"):
-            per_point = log_clutter_density(Z, replace(self.cl, clutter_rate=1.0), self.lk)
-            return np.log(self.nu * np.minimum(m, 1.0)) + per_point
+            return np.log(self.nu * np.minimum(m, 1.0)) + _unit_density(Z, self.cl, self.lk,
+                                                                         log_v)
 
     def learn(self, near_share: np.ndarray, a: float) -> None:
         """After the update: ``near_share`` (N_z,) the clutter share the EM gives to κ_n (none
@@ -271,10 +274,9 @@ class DuplicateBoxes:
         self.den = 0.0
         self._pairs: Optional[tuple] = None
 
-    def log_kappa(self, Z: np.ndarray) -> np.ndarray:
-        """``log κ_d(z)`` (N_z,; ``-inf`` where z has no neighbour)."""
-        from .filter import log_clutter_density
-
+    def log_kappa(self, Z: np.ndarray, log_v: Optional[np.ndarray] = None) -> np.ndarray:
+        """``log κ_d(z)`` (N_z,; ``-inf`` where z has no neighbour); ``log_v`` as
+        :meth:`PlaceClutter.log_kappa`'s."""
         self._pairs = None
         if self.cl.duplicate_prior <= 0 or len(Z) < 2:
             return np.full(len(Z), -np.inf)
@@ -282,8 +284,7 @@ class DuplicateBoxes:
         n = gate_sums(Z, Z, r2, std, np.ones(len(Z)))[2] - 1        # the others: not z itself
         self._pairs = (Z, std, r2, n)
         with np.errstate(divide="ignore"):
-            per_point = log_clutter_density(Z, replace(self.cl, clutter_rate=1.0), self.lk)
-            return np.log(self.q * n) + per_point
+            return np.log(self.q * n) + _unit_density(Z, self.cl, self.lk, log_v)
 
     def learn(self, won: np.ndarray, a: float) -> None:
         """After the update: ``won`` (N_z,) the detections' target shares."""
@@ -301,6 +302,15 @@ class DuplicateBoxes:
         self.num = (1 - a) * self.num + a * float(np.sum(won * extra))
         self.den = (1 - a) * self.den + a * float(np.sum(won * paired))
         self.q = em_rate(self.num, self.den, self.cl.duplicate_prior, a)
+
+
+def _unit_density(Z: np.ndarray, cl: "ClutterParams", lk: "LikelihoodParams",
+                  log_v: Optional[np.ndarray]) -> np.ndarray:
+    """``log`` of one clutter point spread as the ``gate`` model around each detection,
+    ``−log V(z)`` (:func:`.filter.log_clutter_density` at rate 1: the same floats)."""
+    from .filter import log_gate_volume
+
+    return -(log_gate_volume(Z, cl, lk) if log_v is None else log_v)
 
 
 def _wide_gate(Z: np.ndarray, cl: "ClutterParams", lk: "LikelihoodParams",

@@ -488,14 +488,20 @@ def log_clutter_density(Z: np.ndarray, cl: ClutterParams = ClutterParams(),
                         lk: LikelihoodParams = LikelihoodParams()) -> np.ndarray:
     """``log κ(z)`` (N_z,): ``clutter_rate`` points spread over the ``clutter_gate`` confidence
     ellipsoid of the observation noise around z (reading of maggio2007 §4, module docstring)."""
+    if cl.clutter_rate > 0:
+        return math.log(cl.clutter_rate) - log_gate_volume(Z, cl, lk)
+    return np.full(len(Z), -np.inf)
+
+
+def log_gate_volume(Z: np.ndarray, cl: ClutterParams, lk: LikelihoodParams) -> np.ndarray:
+    """``log V(z)`` (N_z,): the volume of the ``clutter_gate`` confidence ellipsoid of the
+    observation noise around each z (:func:`log_clutter_density` is ``log clutter_rate − log
+    V``; the learnt clutter's parts share one per frame, :meth:`SceneModel.log_kappa`)."""
     std = obs_std(Z[:, 2:4], lk)
     r2 = gate_threshold(cl.clutter_gate, OBS_DIM)
     d = OBS_DIM
     log_unit_ball = 0.5 * d * math.log(math.pi) - math.lgamma(0.5 * d + 1)
-    log_volume = log_unit_ball + 0.5 * d * math.log(r2) + np.log(std).sum(-1)
-    if cl.clutter_rate > 0:
-        return math.log(cl.clutter_rate) - log_volume
-    return np.full(len(Z), -np.inf)
+    return log_unit_ball + 0.5 * d * math.log(r2) + np.log(std).sum(-1)
 
 
 # ----------------------------------------------------------------------------- scene clutter
@@ -615,31 +621,33 @@ class SceneModel:
             if self.cl.near_learn and len(Z):
                 a = 1.0 / min(self.frames + 5, self.cl.clutter_memory)
                 self.near = (1 - a) * self.near + a * self._neighbours(Z)
+            # log V(z) of the clutter gate, once for every part spread as the 'gate' model
+            # (log_clutter_density at rate λ is log λ − log V: the same floats)
+            log_v = log_gate_volume(Z, self.cl, self.lk)
             if self.near > 0:
-                near = log_clutter_density(Z, replace(self.cl, clutter_rate=self.near), self.lk)
-                log_kappa = np.logaddexp(log_kappa, near)
+                log_kappa = np.logaddexp(log_kappa, math.log(self.near) - log_v)
             if self.place is not None:
                 self.place.cl = self.people.cl = self.cl
-                log_rep = self.place.log_kappa(Z)
+                log_rep = self.place.log_kappa(Z, log_v)
                 # a detection that continues a chain of mutually nearest detections is a
                 # person's or a spot's, not a box beside a person (those do not chain): κ_n
                 # is 0 there, so it takes no share of it in the EM (the update alike with
                 # learn_update 'model')
                 self._chained = self.chains.length >= 1
                 log_near = np.where(self._chained, -np.inf,
-                                    self.people.log_kappa(Z, predicted))
+                                    self.people.log_kappa(Z, predicted, log_v))
                 shadow = np.logaddexp(np.logaddexp(log_kappa, log_rep), log_near)
                 log_dup = np.full(len(Z), -np.inf)
                 if self.cl.learn_update == "model":
                     # a second box on a person already boxed, which a Poisson κ cannot
                     # express: the duplicate term (.clutter.DuplicateBoxes) joins the mixture
                     self.dups.cl = self.cl
-                    log_dup = self.dups.log_kappa(Z)
+                    log_dup = self.dups.log_kappa(Z, log_v)
                     shadow = np.logaddexp(shadow, log_dup)
                     log_used = shadow
                 else:
                     log_used = np.logaddexp(log_kappa,
-                                            self.place.log_gate(Z, self.structured()))
+                                            self.place.log_gate(Z, self.structured(), log_v))
                 self._parts = (Z, log_rep, log_near, log_dup, shadow, log_used)
                 if self.cl.spot_places and self.cl.learn_update == "model":
                     # a person appears no more often where clutter repeats: the newborn
