@@ -177,6 +177,16 @@ def test_gate_sums_are_the_sums_over_the_gated_pairs_bit_for_bit(seed):
         S, E, C = gate_sums(pts, Z, r2, std, w, e)
         assert C0.sum() > len(Z)                      # the test has pairs to find
         assert np.array_equal(S, S0) and np.array_equal(E, E0) and np.array_equal(C, C0)
+        # in any order (counts, sums of 0s and 1s): the few pairs of the detections among
+        # themselves are all tested without a grid, the many of the points with the grid
+        ones = (w < 0.5).astype(float)
+        for a, b in ((Z, Z), (pts, Z)):
+            S0, C0 = np.zeros(len(b)), np.zeros(len(b), np.int64)
+            for ch in gate_pairs(a, b, r2, std_z=std):
+                S0 += np.bincount(ch.cols, weights=ones[:len(a)][ch.rows], minlength=len(b))
+                C0 += np.bincount(ch.cols, minlength=len(b))
+            S, _, C = gate_sums(a, b, r2, std, ones[:len(a)], ordered=False)
+            assert np.array_equal(S, S0) and np.array_equal(C, C0)
     assert all(len(a) == 0 for a in gate_sums(pts, Z[:0], r2, std[:0], w))
     S, E, C = gate_sums(pts[:0], Z, r2, std, w[:0])
     assert not S.any() and not E.any() and not C.any()

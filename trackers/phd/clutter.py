@@ -281,7 +281,7 @@ class DuplicateBoxes:
         if self.cl.duplicate_prior <= 0 or len(Z) < 2:
             return np.full(len(Z), -np.inf)
         std, r2 = _wide_gate(Z, self.cl, self.lk, NEAR_SCALE)
-        n = gate_sums(Z, Z, r2, std, np.ones(len(Z)))[2] - 1        # the others: not z itself
+        n = gate_sums(Z, Z, r2, std, np.ones(len(Z)), ordered=False)[2] - 1   # not z itself
         self._pairs = (Z, std, r2, n)
         with np.errstate(divide="ignore"):
             return np.log(self.q * n) + _unit_density(Z, self.cl, self.lk, log_v)
@@ -297,7 +297,7 @@ class DuplicateBoxes:
             # a neighbour is unexplained where the update found clutter the likelier (won < ½);
             # the sums count 0s and 1s (exact), z's own term taken off again
             lost = (won < 0.5).astype(float)
-            extra = gate_sums(Z, Z, r2, std, lost)[0] - lost > 0
+            extra = gate_sums(Z, Z, r2, std, lost, ordered=False)[0] - lost > 0
             paired = n > 0
         self.num = (1 - a) * self.num + a * float(np.sum(won * extra))
         self.den = (1 - a) * self.den + a * float(np.sum(won * paired))
@@ -348,7 +348,7 @@ def neighbours(Z: np.ndarray, cl: "ClutterParams", lk: "LikelihoodParams",
     if len(Z) < 2:
         return np.zeros(len(Z), dtype=np.int64)
     std, r2 = _wide_gate(Z, cl, lk, scale)
-    return gate_sums(Z, Z, r2, std, np.ones(len(Z)))[2] - 1
+    return gate_sums(Z, Z, r2, std, np.ones(len(Z)), ordered=False)[2] - 1
 
 
 def clutter_share(won: np.ndarray, log_used: np.ndarray, log_shadow: np.ndarray) -> np.ndarray:

@@ -270,8 +270,14 @@ def _median0(a: np.ndarray) -> np.ndarray:
     return s[h] if len(s) % 2 else (s[h - 1] + s[h]) / 2.0
 
 
+#: gate_sums in any order: below this many (point, detection) pairs every pair is tested (no
+#: grid to build); above, the grid keeps the cost linear in the detections
+BRUTE_PAIRS = 4096
+
+
 def gate_sums(obs: np.ndarray, Z: np.ndarray, r2: float, std_z: np.ndarray, w: np.ndarray,
-              e: Optional[np.ndarray] = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+              e: Optional[np.ndarray] = None, ordered: bool = True
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Per detection j, over the points i inside its gate (``d²_ij <= r2`` as in
     :func:`gate_pairs` with ``std_z``): ``S_j = Σ w_i``, ``E_j = max(0, max e_i)`` and the
     count ``C_j`` (N_z,) int64 -- what ``np.bincount`` / ``np.maximum.at`` over
@@ -279,7 +285,9 @@ def gate_sums(obs: np.ndarray, Z: np.ndarray, r2: float, std_z: np.ndarray, w: n
     (:class:`GridIndex`, the same cells), each detection's points visited in the same order
     (so ``S`` sums the same floats in the same order).  For the clutter model's memory and the
     detections' neighbours (:mod:`.clutter`), which ask this four times a frame of a few
-    hundred points at most: the pairs' ~40 numpy calls were most of their cost."""
+    hundred points at most: the pairs' ~40 numpy calls were most of their cost.
+    ``ordered=False``: the caller needs no particular summation order (counts, sums of 0s and
+    1s), so small inputs (< :data:`BRUTE_PAIRS` pairs) test every pair without a grid."""
     n_z = len(Z)
     S, E, C = np.zeros(n_z), np.zeros(n_z), np.zeros(n_z, dtype=np.int64)
     if len(obs) == 0 or n_z == 0:
@@ -289,6 +297,10 @@ def gate_sums(obs: np.ndarray, Z: np.ndarray, r2: float, std_z: np.ndarray, w: n
     std = np.ascontiguousarray(std_z, dtype=np.float64)
     w = np.ascontiguousarray(w, dtype=np.float64)
     e = w if e is None else np.ascontiguousarray(e, dtype=np.float64)
+    if not ordered and len(obs) * n_z < BRUTE_PAIRS:
+        _gate_sums(obs, w, e, Z, std, float(r2), _NO_GRID, _NO_GRID, 0.0, 0.0, 1.0, 1.0, 0, 0,
+                   S, E, C)
+        return S, E, C
     half = math.sqrt(r2) * std[:, :2] * (1 + 1e-6) + 1e-9      # gate_pairs' query boxes
     index = GridIndex(obs[:, :2], 2.0 * _median0(half))
     _gate_sums(obs, w, e, Z, std, float(r2), index.order.astype(np.int64, copy=False),
@@ -298,10 +310,33 @@ def gate_sums(obs: np.ndarray, Z: np.ndarray, r2: float, std_z: np.ndarray, w: n
     return S, E, C
 
 
+_NO_GRID = np.zeros(0, dtype=np.int64)
+
+
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
 def _gate_sums(obs, w, e, Z, std, r2, order, keys, ox, oy, cx, cy, ni, nj, S, E, C):
     """:func:`gate_sums`' pass, into ``S``, ``E``, ``C`` (zeros): :meth:`GridIndex.runs` and
-    :func:`gate_pairs`' test per detection, its runs' points in order."""
+    :func:`gate_pairs`' test per detection, its runs' points in order (``ni`` = 0: no grid,
+    every point in index order)."""
+    if ni == 0:
+        # no grid (ordered=False, few pairs): every point, in index order
+        for j in range(Z.shape[0]):
+            s = 0.0
+            m = 0.0
+            k = 0
+            for q in range(obs.shape[0]):
+                d0 = (obs[q, 0] - Z[j, 0]) / std[j, 0]
+                d1 = (obs[q, 1] - Z[j, 1]) / std[j, 1]
+                d2 = (obs[q, 2] - Z[j, 2]) / std[j, 2]
+                d3 = (obs[q, 3] - Z[j, 3]) / std[j, 3]
+                if d0 * d0 + d1 * d1 + d2 * d2 + d3 * d3 <= r2:
+                    s += w[q]
+                    k += 1
+                    m = e[q] if e[q] > m else m
+            S[j] = s
+            E[j] = m
+            C[j] = k
+        return
     r = math.sqrt(r2)
     n = keys.shape[0]
     for j in range(Z.shape[0]):
