@@ -48,6 +48,7 @@ hypotheses are scored).
 from __future__ import annotations
 
 import math
+from functools import lru_cache
 from typing import Optional
 
 import numpy as np
@@ -114,6 +115,16 @@ def fit(prev: np.ndarray, cur: np.ndarray, links: np.ndarray,
     return None if r is None or not r.significant else _matrix(r.s, r.t)
 
 
+@lru_cache(maxsize=64)
+def _link_pairs(n: int) -> np.ndarray:
+    """(P, 2) the first :data:`MAX_HYPOTHESES` pairs ``i < j`` of ``n`` links, in
+    ``np.triu_indices`` order (read-only; the same few ``n`` come back every frame)."""
+    ii, jj = np.triu_indices(n, 1)
+    k = np.stack([ii[:MAX_HYPOTHESES], jj[:MAX_HYPOTHESES]], axis=1)
+    k.flags.writeable = False
+    return k
+
+
 class _Fit:
     """One frame's robust fit: scale ``s``, shift ``t`` (2,), its information matrix ``H``
     (3×3 over ``(s, t_x, t_y)``, the inverse covariance of the weighted least squares on the
@@ -166,8 +177,7 @@ def _robust_fit(prev: np.ndarray, cur: np.ndarray, links: np.ndarray, pos_std: f
     # ... and one per pair of links: their least-squares motion (the scale then also
     # from how far apart they are, not only from their noisy sizes)
     if len(has) > 1:
-        ii, jj = np.triu_indices(len(has), 1)
-        k = np.stack([ii[:MAX_HYPOTHESES], jj[:MAX_HYPOTHESES]], axis=1)      # (P, 2)
+        k = _link_pairs(len(has))                                              # (P, 2)
         s_ab, t_ab = _scale_shift(src[k], dst[k], wt[k])
         sh, th = np.concatenate([sh, s_ab]), np.concatenate([th, t_ab])
     cost = np.minimum(d2(sh, th), INLIER_D2).sum(axis=1)

@@ -213,6 +213,7 @@ class NearClutter:
         self.den = 0.0
         self._a = 0.2
         self._exposure = 0.0
+        self._gate: Optional[tuple] = None      # (lk, cl, widened lk, gate) of log_kappa
 
     def log_kappa(self, Z: np.ndarray, predicted, log_v: Optional[np.ndarray] = None
                   ) -> np.ndarray:
@@ -221,9 +222,13 @@ class NearClutter:
         self._exposure = float(predicted.mass) if predicted is not None else 0.0
         if predicted is None or not len(Z):
             return np.full(len(Z), -np.inf)
-        wide = replace(self.lk, sigma_obs=self.lk.sigma_obs * NEAR_SCALE,
-                       sigma_obs_min=self.lk.sigma_obs_min * NEAR_SCALE)
-        m = mass_near(predicted, Z, BirthParams(gate=self.cl.clutter_gate), wide)
+        if self._gate is None or self._gate[0] is not self.lk or self._gate[1] is not self.cl:
+            # the widened noise and the gate, built again only when the settings change
+            wide = replace(self.lk, sigma_obs=self.lk.sigma_obs * NEAR_SCALE,
+                           sigma_obs_min=self.lk.sigma_obs_min * NEAR_SCALE)
+            self._gate = (self.lk, self.cl, wide, BirthParams(gate=self.cl.clutter_gate))
+        wide, bp = self._gate[2:]
+        m = mass_near(predicted, Z, bp, wide)
         with np.errstate(divide="ignore"):
             return np.log(self.nu * np.minimum(m, 1.0)) + _unit_density(Z, self.cl, self.lk,
                                                                          log_v)

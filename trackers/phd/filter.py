@@ -727,9 +727,10 @@ class SceneModel:
             Z, log_rep, log_near, log_dup, total, log_used = self._parts
             share = clutter_share(won, log_used, total)
             with np.errstate(invalid="ignore"):
-                rep = np.nan_to_num(np.exp(log_rep - total))
-                near = np.nan_to_num(np.exp(log_near - total))
-                dup = np.nan_to_num(np.exp(log_dup - total))
+                # shares in [0, 1] (each part <= the total), NaN (-inf - -inf) -> 0: what
+                # np.nan_to_num does to them, without its generic machinery
+                rep, near, dup = (_nan_to_0(np.exp(x - total))
+                                  for x in (log_rep, log_near, log_dup))
             self.rate = (1 - a) * self.rate + a * float(np.sum(share * (1.0 - rep - near - dup)))
             # a duplicate box is the person's, not a place's: it leaves no place memory
             chain = 1.0
@@ -759,6 +760,12 @@ class SceneModel:
                     and len(self._persist) == len(s):
                 q = np.stack([self._persist, ~self._persist]).astype(np.float64)
                 self.persist_sums = d * self.persist_sums + _class_sums(q, s)
+
+
+def _nan_to_0(x: np.ndarray) -> np.ndarray:
+    """``x`` with its NaNs set to 0, in place (``x`` finite or NaN)."""
+    x[np.isnan(x)] = 0.0
+    return x
 
 
 def _class_sums(r: np.ndarray, s: np.ndarray) -> np.ndarray:
