@@ -227,6 +227,11 @@ def test_gated_mass_near_equals_the_dense_sum():
     got = mass_near(pred, Z, p.birth, p.likelihood)
     np.testing.assert_allclose(got, dense, rtol=1e-12, atol=1e-15)
     assert np.all(got[:5] > 0.5)                      # the targets' detections
+    # detections skipped (the learnt clutter's chained ones): 0 there, the very same floats
+    # at the others (the same grid, whatever the subset)
+    for skip in (np.arange(len(Z)) % 2 == 0, np.arange(len(Z)) < 5, np.ones(len(Z), bool)):
+        part = mass_near(pred, Z, p.birth, p.likelihood, skip=skip)
+        assert np.array_equal(part[~skip], got[~skip]) and not part[skip].any()
 
 
 def test_births_per_frame_are_capped_proportionally():

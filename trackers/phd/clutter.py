@@ -215,8 +215,10 @@ class NearClutter:
         self._exposure = 0.0
         self._gate: Optional[tuple] = None      # (lk, cl, widened lk, gate) of log_kappa
 
-    def log_kappa(self, Z: np.ndarray, predicted, log_v: Optional[np.ndarray] = None
-                  ) -> np.ndarray:
+    def log_kappa(self, Z: np.ndarray, predicted, log_v: Optional[np.ndarray] = None,
+                  chained: Optional[np.ndarray] = None) -> np.ndarray:
+        """``log κ_n(z)`` (N_z,); ``-inf`` where ``chained`` (those continue a chain: no κ_n,
+        module docstring), whose predicted mass is then not summed."""
         from .filter import BirthParams, mass_near
 
         self._exposure = float(predicted.mass) if predicted is not None else 0.0
@@ -228,7 +230,7 @@ class NearClutter:
                            sigma_obs_min=self.lk.sigma_obs_min * NEAR_SCALE)
             self._gate = (self.lk, self.cl, wide, BirthParams(gate=self.cl.clutter_gate))
         wide, bp = self._gate[2:]
-        m = mass_near(predicted, Z, bp, wide)
+        m = mass_near(predicted, Z, bp, wide, skip=chained)
         with np.errstate(divide="ignore"):
             return np.log(self.nu * np.minimum(m, 1.0)) + _unit_density(Z, self.cl, self.lk,
                                                                          log_v)

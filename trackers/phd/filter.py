@@ -635,7 +635,7 @@ class SceneModel:
                 # learn_update 'model')
                 self._chained = self.chains.length >= 1
                 log_near = np.where(self._chained, -np.inf,
-                                    self.people.log_kappa(Z, predicted, log_v))
+                                    self.people.log_kappa(Z, predicted, log_v, self._chained))
                 shadow = np.logaddexp(np.logaddexp(log_kappa, log_rep), log_near)
                 log_dup = np.full(len(Z), -np.inf)
                 if self.cl.learn_update == "model":
@@ -809,13 +809,16 @@ class BirthResult:
 
 def mass_near(predicted: ParticleSet, Z: np.ndarray, bp: BirthParams = BirthParams(),
               lk: LikelihoodParams = LikelihoodParams(),
-              std_z: Optional[np.ndarray] = None) -> np.ndarray:
+              std_z: Optional[np.ndarray] = None,
+              skip: Optional[np.ndarray] = None) -> np.ndarray:
     """M(z) (N_z,): predicted mass inside the ``gate`` confidence ellipsoid of the observation
     noise around each z (maggio2007 §2, "cumulative masses M(z_{k,j}) of the propagated
     particles that are inside the 99% confidence interval").  Only the particles near each z
     are looked at (a grid on the particles' positions, :func:`._kernels.mass_near_kernel`;
     the same float64 distances as the dense test); memory is O(N + N_z), with no pair budget
-    to bound.  ``std_z``: ``obs_std(Z[:, 2:4], lk)`` when the caller has it."""
+    to bound.  ``std_z``: ``obs_std(Z[:, 2:4], lk)`` when the caller has it.  ``skip`` (N_z,)
+    bool: detections whose M(z) the caller does not need (0 there); the others get the very
+    floats of the whole call (the same grid: its cells come from every detection's noise)."""
     Z = np.asarray(Z, dtype=np.float64).reshape(-1, OBS_DIM)
     if len(predicted) == 0 or len(Z) == 0:
         return np.zeros(len(Z))
@@ -823,6 +826,18 @@ def mass_near(predicted: ParticleSet, Z: np.ndarray, bp: BirthParams = BirthPara
         std_z = obs_std(Z[:, 2:4], lk)
     r2 = gate_threshold(bp.gate, OBS_DIM)
     cell = _grid_cell(std_z, r2)
+    if skip is not None:
+        full = np.zeros(len(Z))
+        need = np.flatnonzero(~skip)
+        if len(need):
+            full[need] = mass_near_at(predicted, Z[need], std_z[need], r2, cell)
+        return full
+    return mass_near_at(predicted, Z, std_z, r2, cell)
+
+
+def mass_near_at(predicted: ParticleSet, Z: np.ndarray, std_z: np.ndarray, r2: float,
+                 cell: np.ndarray) -> np.ndarray:
+    """:func:`mass_near`'s kernel call on a grid of ``cell`` (2,)."""
     ok, out = _kernels.mass_near_kernel(predicted.states, predicted.weights, Z, std_z, r2,
                                         cell[0], cell[1])
     if not ok:
