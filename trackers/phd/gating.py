@@ -318,69 +318,55 @@ def _gate_sums(obs, w, e, Z, std, r2, order, keys, ox, oy, cx, cy, ni, nj, S, E,
     """:func:`gate_sums`' pass, into ``S``, ``E``, ``C`` (zeros): :meth:`GridIndex.runs` and
     :func:`gate_pairs`' test per detection, its runs' points in order (``ni`` = 0: no grid,
     every point in index order)."""
-    if ni == 0:
-        # no grid (ordered=False, few pairs): every point, in index order
-        for j in range(Z.shape[0]):
-            s = 0.0
-            m = 0.0
-            k = 0
-            for q in range(obs.shape[0]):
-                d0 = (obs[q, 0] - Z[j, 0]) / std[j, 0]
-                d1 = (obs[q, 1] - Z[j, 1]) / std[j, 1]
-                d2 = (obs[q, 2] - Z[j, 2]) / std[j, 2]
-                d3 = (obs[q, 3] - Z[j, 3]) / std[j, 3]
-                if d0 * d0 + d1 * d1 + d2 * d2 + d3 * d3 <= r2:
-                    s += w[q]
-                    k += 1
-                    m = e[q] if e[q] > m else m
-            S[j] = s
-            E[j] = m
-            C[j] = k
-        return
     r = math.sqrt(r2)
-    n = keys.shape[0]
+    n = obs.shape[0]
     for j in range(Z.shape[0]):
-        hx = r * std[j, 0] * (1 + 1e-6) + 1e-9
-        hy = r * std[j, 1] * (1 + 1e-6) + 1e-9
-        # GridIndex._cells (floor, clipped to [-1, shape]), then runs' clip to the grid
-        a = (Z[j, 0] - hx - ox) / cx
-        b = (Z[j, 0] + hx - ox) / cx
-        c = (Z[j, 1] - hy - oy) / cy
-        d = (Z[j, 1] + hy - oy) / cy
-        i0 = math.floor(-1.0 if a < -1.0 else (ni if a > ni else a))
-        i1 = math.floor(-1.0 if b < -1.0 else (ni if b > ni else b))
-        j0 = math.floor(-1.0 if c < -1.0 else (nj if c > nj else c))
-        j1 = math.floor(-1.0 if d < -1.0 else (nj if d > nj else d))
-        i0 = 0 if i0 < 0 else i0
-        j0 = 0 if j0 < 0 else j0
-        i1 = ni - 1 if i1 > ni - 1 else i1
-        j1 = nj - 1 if j1 > nj - 1 else j1
-        if i1 < i0 or j1 < j0:
-            continue
+        # ni = 0: no grid (ordered=False, few pairs): one run of every point, in index order
+        i0 = i1 = j0 = j1 = 0
+        if ni > 0:
+            hx = r * std[j, 0] * (1 + 1e-6) + 1e-9
+            hy = r * std[j, 1] * (1 + 1e-6) + 1e-9
+            # GridIndex._cells (floor, clipped to [-1, shape]), then runs' clip to the grid
+            a = (Z[j, 0] - hx - ox) / cx
+            b = (Z[j, 0] + hx - ox) / cx
+            c = (Z[j, 1] - hy - oy) / cy
+            d = (Z[j, 1] + hy - oy) / cy
+            i0 = math.floor(-1.0 if a < -1.0 else (ni if a > ni else a))
+            i1 = math.floor(-1.0 if b < -1.0 else (ni if b > ni else b))
+            j0 = math.floor(-1.0 if c < -1.0 else (nj if c > nj else c))
+            j1 = math.floor(-1.0 if d < -1.0 else (nj if d > nj else d))
+            i0 = 0 if i0 < 0 else i0
+            j0 = 0 if j0 < 0 else j0
+            i1 = ni - 1 if i1 > ni - 1 else i1
+            j1 = nj - 1 if j1 > nj - 1 else j1
+            if i1 < i0 or j1 < j0:
+                continue
         s = 0.0
         m = 0.0
         k = 0
         for i in range(i0, i1 + 1):
-            # searchsorted(keys, i nj + j0, "left") .. searchsorted(keys, i nj + j1, "right")
-            key = i * nj + j0
-            lo, hi = 0, n
-            while lo < hi:
-                mid = (lo + hi) >> 1
-                if keys[mid] < key:
-                    lo = mid + 1
-                else:
-                    hi = mid
-            start = lo
-            key = i * nj + j1
-            hi = n
-            while lo < hi:
-                mid = (lo + hi) >> 1
-                if keys[mid] <= key:
-                    lo = mid + 1
-                else:
-                    hi = mid
+            start, lo = 0, n
+            if ni > 0:
+                # searchsorted(keys, i nj + j0, "left") .. searchsorted(keys, i nj + j1, "right")
+                key = i * nj + j0
+                lo, hi = 0, n
+                while lo < hi:
+                    mid = (lo + hi) >> 1
+                    if keys[mid] < key:
+                        lo = mid + 1
+                    else:
+                        hi = mid
+                start = lo
+                key = i * nj + j1
+                hi = n
+                while lo < hi:
+                    mid = (lo + hi) >> 1
+                    if keys[mid] <= key:
+                        lo = mid + 1
+                    else:
+                        hi = mid
             for p in range(start, lo):
-                q = order[p]
+                q = order[p] if ni > 0 else p
                 d0 = (obs[q, 0] - Z[j, 0]) / std[j, 0]
                 d1 = (obs[q, 1] - Z[j, 1]) / std[j, 1]
                 d2 = (obs[q, 2] - Z[j, 2]) / std[j, 2]
