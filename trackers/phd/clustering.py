@@ -233,8 +233,11 @@ def kmeans_peaks(ps: ParticleSet, Z, T: float = 0.6, *, params: PHDParams | None
             near = _split_neighbours(centers, j, dmin[far], params.likelihood)
             is_local = np.zeros(len(centers), dtype=bool)
             is_local[near] = True
-            sel = np.flatnonzero(is_local[labels])
-            t_c, t_lab, t_m, t_d, it = _lloyd(X[sel], S[sel], w_rel[sel],
+            # (np.take, not fancy indexing: the same copies, ~4x faster for (n, 4) / (n, 6)
+            # rows on numpy 2.4)
+            sel = np.flatnonzero(np.take(is_local, labels))
+            t_c, t_lab, t_m, t_d, it = _lloyd(np.take(X, sel, axis=0), np.take(S, sel, axis=0),
+                                              np.take(w_rel, sel),
                                               np.concatenate([centers[near], S[far][None]]),
                                               params, max_iter, tol)
             n_iter += it
