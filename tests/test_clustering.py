@@ -154,7 +154,7 @@ def test_split_prechecks_of_all_candidates_match_one_at_a_time(seed):
     # the batched pre-check must give every candidate the answer (and the floats) of the
     # one-at-a-time loop: nearest neighbours by distance then index (ties from duplicated
     # centres), masses summed in index order, members on the centre, empty clusters, NaN
-    from pfscope.trackers.phd.clustering import _split_prechecks
+    from pfscope.trackers.phd.clustering import _split_neighbours, _split_prechecks
     from pfscope.trackers.phd.filter import LikelihoodParams
 
     rng = np.random.default_rng(seed)
@@ -176,7 +176,13 @@ def test_split_prechecks_of_all_candidates_match_one_at_a_time(seed):
                                  * inv_j) / 4.0
     order = rng.permutation(K)[: int(rng.integers(1, K + 1))]
     for need in (1.2, 1.3, 2.0, -np.inf):
-        got = _split_prechecks(centers, masses, dmin, far_of, order, lk, need)
+        got, nears = _split_prechecks(centers, masses, dmin, far_of, order, lk, need)
         want = [_precheck_one(centers, masses, dmin, far_of, j, lk, need) if need > -np.inf
                 else bool(far_of[j] >= 0 and not dmin[far_of[j]] <= 0.0) for j in order]
         assert got.tolist() == want
+        for j, near in zip(order, nears):      # the trials' neighbours, when given
+            if near is not None:
+                assert near.tolist() == _split_neighbours(centers, j, dmin[far_of[j]],
+                                                          lk).tolist()
+        if need > -np.inf:
+            assert all(n is not None for n, g in zip(nears, got) if g)

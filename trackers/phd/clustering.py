@@ -221,16 +221,17 @@ def kmeans_peaks(ps: ParticleSet, Z, T: float = 0.6, *, params: PHDParams | None
         if not len(cand):
             break
         order = cand[np.argsort(-masses[cand], kind="stable")][:budget]
-        ok = _split_prechecks(centers, masses, dmin, far_of, order, params.likelihood,
-                              2.0 * min_split_mass if guarded else -np.inf)
+        ok, nears = _split_prechecks(centers, masses, dmin, far_of, order, params.likelihood,
+                                     2.0 * min_split_mass if guarded else -np.inf)
         accepted = False
-        for j, ok_j in zip(order.tolist(), ok.tolist()):
+        for j, ok_j, near in zip(order.tolist(), ok.tolist(), nears):
             budget -= 1
             if not ok_j:                   # no member / all on the centre, or (guarded) the
                 final[j] = True            # trial could not give two halves >= min_split_mass
                 continue
             far = int(far_of[j])           # j's member farthest from its centre
-            near = _split_neighbours(centers, j, dmin[far], params.likelihood)
+            if near is None:
+                near = _split_neighbours(centers, j, dmin[far], params.likelihood)
             is_local = np.zeros(len(centers), dtype=bool)
             is_local[near] = True
             # (np.take, not fancy indexing: the same copies, ~4x faster for (n, 4) / (n, 6)
@@ -276,26 +277,29 @@ def _split_neighbours(centers, j, reach2, lk) -> np.ndarray:
     return np.sort(near[np.argsort(dc[near], kind="stable")][:SPLIT_NEIGHBOURS])
 
 
-def _split_prechecks(centers, masses, dmin, far_of, order, lk, need) -> np.ndarray:
-    """(len(order),) bool: whether a split of each candidate cluster in ``order`` is worth a
-    trial -- it has a member off its centre, and its :func:`_split_neighbours` hold at least
-    ``need`` mass (``-inf``: no mass test) -- for all candidates in a few array operations.
-    The same floats and answers as :func:`_split_neighbours` one candidate at a time (the
-    neighbours' masses summed in index order); a candidate whose reach is not finite gets the
-    one-at-a-time answer."""
+def _split_prechecks(centers, masses, dmin, far_of, order, lk, need) -> tuple[np.ndarray, list]:
+    """``(ok, nears)``: ``ok`` (len(order),) bool, whether a split of each candidate cluster in
+    ``order`` is worth a trial -- it has a member off its centre, and its
+    :func:`_split_neighbours` hold at least ``need`` mass (``-inf``: no mass test) -- for all
+    candidates in a few array operations; ``nears`` each candidate's
+    :func:`_split_neighbours` when they were found here, else None.  The same floats and
+    answers as :func:`_split_neighbours` one candidate at a time (the neighbours' masses summed
+    in index order); a candidate whose reach is not finite gets the one-at-a-time answer."""
     far = far_of[order]
     ok = far >= 0
+    nears: list = [None] * len(order)
     reach2 = np.where(ok, dmin[np.where(ok, far, 0)], np.nan)
     ok &= ~(reach2 <= 0.0)
     if need == -np.inf or not ok.any():
-        return ok
+        return ok, nears
     rows = np.flatnonzero(ok)
     fin = np.isfinite(reach2[rows])
     for r in rows[~fin]:                    # (absurd reaches: one at a time)
-        ok[r] = not masses[_split_neighbours(centers, order[r], reach2[r], lk)].sum() < need
+        nears[r] = _split_neighbours(centers, order[r], reach2[r], lk)
+        ok[r] = not masses[nears[r]].sum() < need
     rows = rows[fin]
     if not len(rows):
-        return ok
+        return ok, nears
     c = centers[:, OBS_COLS]
     js = order[rows]
     inv = 1.0 / obs_std(centers[js, 4:6], lk) ** 2                         # (m, 4)
@@ -308,7 +312,11 @@ def _split_prechecks(centers, masses, dmin, far_of, order, lk, need) -> np.ndarr
     first = np.sort(np.where(take, first, len(centers)), axis=1)
     m = np.append(masses, 0.0)[first]
     ok[rows] = ~(np.sum(m, axis=1) < need)
-    return ok
+    K = len(centers)
+    for r, f in zip(rows.tolist(), first):
+        if ok[r]:                          # (the trials' neighbours: no second look)
+            nears[r] = f[f < K]
+    return ok, nears
 
 
 #: :func:`measurement_estimates`: a detection must have won at least this share of a target
