@@ -186,3 +186,31 @@ def test_split_prechecks_of_all_candidates_match_one_at_a_time(seed):
                                                           lk).tolist()
         if need > -np.inf:
             assert all(n is not None for n, g in zip(nears, got) if g)
+
+
+@pytest.mark.parametrize("rule", ["literal", "guarded"])
+def test_every_split_candidate_of_a_crowd_is_looked_at(rule):
+    # more split candidates than one pre-check batch, the heaviest ones impossible to split
+    # (every member on the centre): every candidate is still looked at -- literal: every
+    # other mass ends at most 1; guarded: every pair of merged targets is split
+    rng = np.random.default_rng(7)
+    n_pairs, n_points = 24, 24
+    states, Z = [], []
+    for k in range(n_pairs + n_points):
+        a = [60.0 + 200.0 * (k % 8), 100.0 + 300.0 * (k // 8), 0.0, 0.0, 30.0, 60.0]
+        if k < n_pairs:         # two targets one box width apart, one detection between them
+            b = [a[0] + 30.0, a[1], 0.0, 0.0, 30.0, 60.0]
+            states += [cloud(rng, a, 1.0, n=200), cloud(rng, b, 1.0, n=200)]
+            Z.append([a[0] + 15.0, a[1], 30.0, 60.0])
+        else:                   # mass 3+ on one point: a heavier candidate with nothing to split
+            m = 3.0 + 0.01 * k
+            states.append(ParticleSet(np.tile(a, (50, 1)), np.full(50, math.log(m / 50))))
+            Z.append([a[0], a[1], a[4], a[5]])
+    ps = states[0]
+    for s in states[1:]:
+        ps = ps.concat(s)
+    c = kmeans_peaks(ps, np.array(Z), split_rule=rule, max_splits=1000)
+    if rule == "literal":
+        assert np.all((c.masses <= 1.0 + 1e-9) | (c.masses >= 3.0))
+    else:
+        assert c.n_splits == n_pairs and c.kept.sum() == 2 * n_pairs + n_points

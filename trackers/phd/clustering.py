@@ -97,6 +97,10 @@ INDEX_MIN_CENTERS = 16
 #: A split's trial Lloyd iterations run on the split cluster and at most this many of its
 #: nearest neighbouring clusters (itself included).
 SPLIT_NEIGHBOURS = 4
+#: Split candidates pre-checked together (:func:`_split_prechecks`), at most: the work an
+#: accepted split wastes (the rest of the batch is looked at again) stays bounded.
+SPLIT_BATCH = 16
+SPLIT_AFTER_SPLIT = 4
 
 
 @dataclass(frozen=True)
@@ -212,6 +216,7 @@ def kmeans_peaks(ps: ParticleSet, Z, T: float = 0.6, *, params: PHDParams | None
     n_splits = 0
     budget = max_splits              # split candidates looked at, at most
     guarded = split_rule == "guarded"
+    batch = SPLIT_BATCH
     while budget > 0:
         # The candidates heaviest first (np.argmax's order: the lowest index among equal
         # masses).  Until a split is accepted nothing changes, so the next candidates are the
@@ -220,7 +225,15 @@ def kmeans_peaks(ps: ParticleSet, Z, T: float = 0.6, *, params: PHDParams | None
         cand = np.flatnonzero((masses > split_above) & ~final)
         if not len(cand):
             break
-        order = cand[np.argsort(-masses[cand], kind="stable")][:budget]
+        # (a batch at a time: an accepted split makes the rest of the batch moot, so after one
+        # -- more may follow, a storm's -- the next batch is short)
+        b = min(budget, batch)
+        n_cand = len(cand)
+        key = -masses[cand]
+        if len(cand) > 2 * b:               # (a storm: sort the b heaviest, not all)
+            sub = np.flatnonzero(key <= np.partition(key, b - 1)[b - 1])
+            cand, key = cand[sub], key[sub]
+        order = cand[np.argsort(key, kind="stable")][:b]
         ok, nears = _split_prechecks(centers, masses, dmin, far_of, order, params.likelihood,
                                      2.0 * min_split_mass if guarded else -np.inf)
         accepted = False
@@ -260,8 +273,9 @@ def kmeans_peaks(ps: ParticleSet, Z, T: float = 0.6, *, params: PHDParams | None
             far_of = _kmeans_kernels.farthest(labels, dmin, len(centers))
             accepted = True
             break                          # the state changed: candidates afresh
-        if not accepted:
-            break                          # every candidate of this order is final
+        if not accepted and len(order) == n_cand:
+            break                          # every candidate is final
+        batch = SPLIT_AFTER_SPLIT if accepted else SPLIT_BATCH
     kept = masses >= T
     return Clusters(centers + shift, masses, labels.astype(np.int64, copy=False), kept, origin, n_splits,
                     n_iter)
@@ -305,14 +319,22 @@ def _split_prechecks(centers, masses, dmin, far_of, order, lk, need) -> tuple[np
     inv = 1.0 / obs_std(centers[js, 4:6], lk) ** 2                         # (m, 4)
     dc = np.sum((c[None, :, :] - c[js][:, None, :]) ** 2 * inv[:, None, :], axis=2)
     within = dc <= 4.0 * reach2[rows][:, None]                             # (m, K)
-    # the nearest SPLIT_NEIGHBOURS within reach, by distance then index (a stable sort)
-    first = np.argsort(np.where(within, dc, np.inf), axis=1, kind="stable")[:, :SPLIT_NEIGHBOURS]
-    take = np.take_along_axis(within, first, axis=1)
-    # summed in index order (the ones out of reach last, as zeros): masses[near].sum()
-    first = np.sort(np.where(take, first, len(centers)), axis=1)
+    # each candidate's neighbours in index order, then K (none) -- all those within reach
+    # when they are at most SPLIT_NEIGHBOURS, else the nearest ones by distance then index
+    K = len(centers)
+    cnt = within.sum(axis=1)
+    first = np.full((len(rows), SPLIT_NEIGHBOURS), K, dtype=np.int64)
+    small = cnt <= SPLIT_NEIGHBOURS
+    if small.any():
+        rr, cc = np.nonzero(within[small])          # row by row, columns ascending
+        n_s = cnt[small]
+        slot = np.arange(len(rr)) - np.repeat(np.cumsum(n_s) - n_s, n_s)
+        first[np.flatnonzero(small)[rr], slot] = cc
+    for q in np.flatnonzero(~small).tolist():       # (a crowd: one at a time)
+        e = np.flatnonzero(within[q])
+        first[q] = np.sort(e[np.argsort(dc[q, e], kind="stable")][:SPLIT_NEIGHBOURS])
     m = np.append(masses, 0.0)[first]
     ok[rows] = ~(np.sum(m, axis=1) < need)
-    K = len(centers)
     for r, f in zip(rows.tolist(), first):
         if ok[r]:                          # (the trials' neighbours: no second look)
             nears[r] = f[f < K]
