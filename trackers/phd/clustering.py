@@ -100,6 +100,7 @@ SPLIT_NEIGHBOURS = 4
 #: Split candidates pre-checked together (:func:`_split_prechecks`), at most: the work an
 #: accepted split wastes (the rest of the batch is looked at again) stays bounded.
 SPLIT_BATCH = 16
+#: ... and after an accepted split (more may follow, in a storm), at most this many.
 SPLIT_AFTER_SPLIT = 4
 
 
