@@ -137,3 +137,80 @@ def test_clustering_is_deterministic_and_survives_tiny_weights():
     assert not t.kept.any()
     with pytest.raises(ValueError):
         kmeans_peaks(ps, obs(A), split_rule="bogus")
+
+
+def _precheck_one(centers, masses, dmin, far_of, j, lk, need):
+    """The guarded pre-check of one split candidate, as kmeans_peaks took it one at a time."""
+    from pfscope.trackers.phd.clustering import _split_neighbours
+
+    far = int(far_of[j])
+    if far < 0 or dmin[far] <= 0.0:
+        return False
+    return not masses[_split_neighbours(centers, j, dmin[far], lk)].sum() < need
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_split_prechecks_of_all_candidates_match_one_at_a_time(seed):
+    # the batched pre-check must give every candidate the answer (and the floats) of the
+    # one-at-a-time loop: nearest neighbours by distance then index (ties from duplicated
+    # centres), masses summed in index order, members on the centre, empty clusters, NaN
+    from pfscope.trackers.phd.clustering import _split_neighbours, _split_prechecks
+    from pfscope.trackers.phd.filter import LikelihoodParams
+
+    rng = np.random.default_rng(seed)
+    lk = LikelihoodParams()
+    K = int(rng.integers(8, 40))
+    centers = np.zeros((K, 6))
+    centers[:, :2] = rng.uniform(0, 40, (K, 2))          # crowded: several neighbours in reach
+    centers[:, 4:6] = rng.uniform(10, 40, (K, 2))
+    dup = rng.integers(0, K, K // 3)
+    centers[dup[1:]] = centers[dup[0]]                  # equal distances: ties
+    masses = rng.choice([0.3, 0.35, 0.4, 0.6, 1.05, 2.0], K)
+    dmin = rng.choice([0.0, 0.5, 2.0, 9.0, 40.0, 400.0, np.nan, np.inf], 3 * K)
+    far_of = rng.integers(-1, 3 * K, K)
+    for j in rng.integers(0, K, K // 2):                # reaches exactly on a neighbour
+        far_of[j] = int(rng.integers(0, 3 * K))
+        e = int(rng.integers(0, K))
+        inv_j = 1.0 / obs_std(centers[j, 4:6]) ** 2
+        dmin[far_of[j]] = np.sum((centers[e, [0, 1, 4, 5]] - centers[j, [0, 1, 4, 5]]) ** 2
+                                 * inv_j) / 4.0
+    order = rng.permutation(K)[: int(rng.integers(1, K + 1))]
+    for need in (1.2, 1.3, 2.0, -np.inf):
+        got, nears = _split_prechecks(centers, masses, dmin, far_of, order, lk, need)
+        want = [_precheck_one(centers, masses, dmin, far_of, j, lk, need) if need > -np.inf
+                else bool(far_of[j] >= 0 and not dmin[far_of[j]] <= 0.0) for j in order]
+        assert got.tolist() == want
+        for j, near in zip(order, nears):      # the trials' neighbours, when given
+            if near is not None:
+                assert near.tolist() == _split_neighbours(centers, j, dmin[far_of[j]],
+                                                          lk).tolist()
+        if need > -np.inf:
+            assert all(n is not None for n, g in zip(nears, got) if g)
+
+
+@pytest.mark.parametrize("rule", ["literal", "guarded"])
+def test_every_split_candidate_of_a_crowd_is_looked_at(rule):
+    # more split candidates than one pre-check batch, the heaviest ones impossible to split
+    # (every member on the centre): every candidate is still looked at -- literal: every
+    # other mass ends at most 1; guarded: every pair of merged targets is split
+    rng = np.random.default_rng(7)
+    n_pairs, n_points = 24, 24
+    states, Z = [], []
+    for k in range(n_pairs + n_points):
+        a = [60.0 + 200.0 * (k % 8), 100.0 + 300.0 * (k // 8), 0.0, 0.0, 30.0, 60.0]
+        if k < n_pairs:         # two targets one box width apart, one detection between them
+            b = [a[0] + 30.0, a[1], 0.0, 0.0, 30.0, 60.0]
+            states += [cloud(rng, a, 1.0, n=200), cloud(rng, b, 1.0, n=200)]
+            Z.append([a[0] + 15.0, a[1], 30.0, 60.0])
+        else:                   # mass 3+ on one point: a heavier candidate with nothing to split
+            m = 3.0 + 0.01 * k
+            states.append(ParticleSet(np.tile(a, (50, 1)), np.full(50, math.log(m / 50))))
+            Z.append([a[0], a[1], a[4], a[5]])
+    ps = states[0]
+    for s in states[1:]:
+        ps = ps.concat(s)
+    c = kmeans_peaks(ps, np.array(Z), split_rule=rule, max_splits=1000)
+    if rule == "literal":
+        assert np.all((c.masses <= 1.0 + 1e-9) | (c.masses >= 3.0))
+    else:
+        assert c.n_splits == n_pairs and c.kept.sum() == 2 * n_pairs + n_points
