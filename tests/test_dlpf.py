@@ -499,9 +499,9 @@ def test_classifier_threads_change_no_score():
 
 def test_step_turns_opencv_threads_off_and_restores_them(monkeypatch):
     """With classifier.threads > 1 the step runs OpenCV single-threaded (its own threads split
-    the work) except for Lucas-Kanade, which runs alone on that many OpenCV threads, and
-    restores OpenCV's setting after it, also when the step fails; the tracks equal those of
-    the one-thread classifier under OpenCV's own threads."""
+    the work), Lucas-Kanade included (switching OpenCV's pool on and off around it cost more
+    than it gained), and restores OpenCV's setting after it, also when the step fails; the
+    tracks equal those of the one-thread classifier under OpenCV's own threads."""
     import cv2
 
     from pfscope.trackers.dlpf import tracker as T
@@ -514,8 +514,8 @@ def test_step_turns_opencv_threads_off_and_restores_them(monkeypatch):
         seen.append((self.params.classifier.threads, cv2.getNumThreads()))
         return real(self, frame, level)
 
-    def lk_spy(*a, **k):   # Lucas-Kanade runs alone: OpenCV's threads back on for it
-        lk_seen.append(cv2.getNumThreads())
+    def lk_spy(*a, **k):   # Lucas-Kanade runs on the step's setting
+        lk_seen.append((seen[-1][0], cv2.getNumThreads()))
         return real_lk(*a, **k)
 
     monkeypatch.setattr(T.DLPFTracker, "_step", spy)
@@ -530,7 +530,7 @@ def test_step_turns_opencv_threads_off_and_restores_them(monkeypatch):
             rows[threads] = run(_scene(10), [tr], level="tracks").rows["dlpf"]
             assert cv2.getNumThreads() == 2
         assert {s for s in seen} == {(1, 2), (2, 1)}
-        assert lk_seen and set(lk_seen) == {2}
+        assert set(lk_seen) == {(1, 2), (2, 1)}
         assert len(rows[1]) == len(rows[2])
         for (fa, ta), (fb, tb) in zip(rows[1], rows[2]):
             assert fa == fb and np.array_equal(ta.ids, tb.ids)

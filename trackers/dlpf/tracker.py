@@ -475,12 +475,12 @@ class DLPFTracker:
         # one Lucas-Kanade call for the tracks' flow grids and the free parents (eq. (1))
         tpts = self._track_flow_points()
         if self._prev_grey is not None and len(free) + len(tpts):
-            # the step's own threads are idle here: OpenCV may split the points over them
-            # (each point's flow is computed the same way whatever the thread count)
-            with opencv_threads(max(cv2.getNumThreads(), P.classifier.threads)):
-                flow, ok = mo.lk_flow(self._prev_grey, grey,
-                                      np.concatenate([tpts, pred[:, :2]]),
-                                      win=P.motion.lk_window, levels=P.motion.lk_levels)
+            # on the step's OpenCV setting (single-threaded when classifier.threads > 1): the
+            # process's other threads (frame decoding, the recording's JPEG) keep the second
+            # core busy meanwhile, and turning OpenCV's pool on and off around the call cost
+            # more than it gained (each point's flow is the same for any thread count)
+            flow, ok = mo.lk_flow(self._prev_grey, grey, np.concatenate([tpts, pred[:, :2]]),
+                                  win=P.motion.lk_window, levels=P.motion.lk_levels)
         else:
             flow, ok = np.zeros((len(tpts) + len(free), 2)), np.zeros(len(tpts) + len(free), bool)
         self._set_track_flow(flow[:len(tpts)], ok[:len(tpts)])
