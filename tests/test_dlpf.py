@@ -120,6 +120,38 @@ def test_lk_measures_a_translation():
     assert ok.all() and np.allclose(flow, [[3, 2], [3, 2]], atol=0.3)
 
 
+def test_lk_split_over_threads_gives_each_point_the_same_flow():
+    """lk_flow with a pool splits the points into consecutive shares, one per thread, and
+    returns each point's flow and status in order, exactly as one call would; too few points
+    for a share each run in one call."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    import cv2
+    rng = np.random.default_rng(2)
+    a = cv2.GaussianBlur((rng.random((120, 160)) * 255).astype(np.uint8), (7, 7), 2)
+    b = np.roll(a, (1, -2), axis=(0, 1))
+    pts = np.c_[rng.uniform(-5, 165, 300), rng.uniform(-5, 125, 300)]   # some outside
+    flow, ok = mo.lk_flow(a, b, pts)
+    calls = []
+    real = cv2.calcOpticalFlowPyrLK
+
+    def counted(*a, **k):
+        calls.append(len(a[2]))
+        return real(*a, **k)
+
+    with ThreadPoolExecutor(2) as pool:
+        cv2.calcOpticalFlowPyrLK = counted
+        try:
+            f3, ok3 = mo.lk_flow(a, b, pts, pool=pool, parts=3)
+            f_small, _ = mo.lk_flow(a, b, pts[:70], pool=pool, parts=3)
+        finally:
+            cv2.calcOpticalFlowPyrLK = real
+    assert calls == [100, 100, 100, 70]
+    assert not ok.all() and ok.any()
+    assert np.array_equal(f3, flow) and np.array_equal(ok3, ok)
+    assert np.array_equal(f_small, flow[:70])
+
+
 def test_tracker_masks_motion_inside_tracked_regions():
     tr = make_tracker("dlpf", seed=0)
     frames = list(_scene(4).frames())
