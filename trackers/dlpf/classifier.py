@@ -276,11 +276,6 @@ class HOGWindowClassifier:
         for f in futures:
             f.result()
 
-    def executor(self):
-        """The worker threads' executor (``threads`` − 1 workers, created on first use), for
-        other work of the step while the classifier is idle; None with one thread."""
-        return self._workers()[0] if self.threads > 1 else None
-
     def _workers(self):
         """The worker threads (created on first use), one block HOG and one window HOG per
         thread (the calling thread's first)."""

@@ -42,40 +42,21 @@ import numpy as np
 from ..smc import logsumexp
 
 READINGS = ("exp", "shift", "literal")
-#: fewest points per share when Lucas–Kanade is split over threads (:func:`lk_flow`)
-_MIN_SHARE = 64
 
 
 def lk_flow(prev_grey: np.ndarray, grey: np.ndarray, points: np.ndarray, *, win: int = 15,
-            levels: int = 3, pool=None, parts: int = 1) -> tuple[np.ndarray, np.ndarray]:
+            levels: int = 3) -> tuple[np.ndarray, np.ndarray]:
     """Pyramidal Lucas–Kanade (eq. (1)) of ``points`` (N, 2) from ``prev_grey`` to ``grey``.
 
     Returns ``flow`` (N, 2) in px/frame and ``ok`` (N,) bool; points LK could not track
-    (untextured window, left the image) get flow 0 and ``ok`` False.  With an executor
-    ``pool`` and ``parts`` > 1 the points are split into that many consecutive shares, all but
-    the first on ``pool`` (OpenCV releases the GIL): each point's flow is computed the same
-    way whatever share it is in, so the result does not depend on the split (each share
-    builds the two images' pyramids again: ~1 ms)."""
+    (untextured window, left the image) get flow 0 and ``ok`` False."""
     n = len(points)
     if n == 0:
         return np.zeros((0, 2)), np.zeros(0, dtype=bool)
     p0 = np.ascontiguousarray(points, dtype=np.float32).reshape(-1, 1, 2)
-    args = dict(winSize=(int(win), int(win)), maxLevel=int(levels),
-                criteria=(cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 10, 0.03))
-    parts = max(1, min(int(parts), n // _MIN_SHARE)) if pool is not None else 1
-    if parts == 1:
-        p1, status, _err = cv2.calcOpticalFlowPyrLK(prev_grey, grey, p0, None, **args)
-    else:
-        cuts = np.linspace(0, n, parts + 1).astype(int)
-
-        def share(i: int):
-            return cv2.calcOpticalFlowPyrLK(prev_grey, grey, p0[cuts[i]:cuts[i + 1]], None,
-                                            **args)[:2]
-
-        futures = [pool.submit(share, i) for i in range(1, parts)]
-        done = [share(0)] + [f.result() for f in futures]
-        p1 = np.concatenate([d[0] for d in done])
-        status = np.concatenate([d[1] for d in done])
+    p1, status, _err = cv2.calcOpticalFlowPyrLK(
+        prev_grey, grey, p0, None, winSize=(int(win), int(win)), maxLevel=int(levels),
+        criteria=(cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 10, 0.03))
     flow = (p1 - p0).reshape(n, 2).astype(np.float64)
     ok = status.reshape(n).astype(bool) & np.all(np.isfinite(flow), axis=1)
     flow[~ok] = 0.0

@@ -194,10 +194,9 @@ class ClassifierParams:
                                      "resampled on its own (a few per track), in 'pyramid' "
                                      "mode too")
     threads: int = param(2, "threads that compute the pyramid's HOG blocks ('pyramid' mode; "
-                            "each region's blocks by one thread) and share the Lucas-Kanade "
-                            "points (each point's flow is the same in any share), so the scores "
-                            "and the tracks are the same for any value; 1 = none; more than 1: "
-                            "OpenCV's own threads are off during the step")
+                            "each region's blocks by one thread, so the scores and the tracks "
+                            "are the same for any value; 1 = none; more than 1: OpenCV's own "
+                            "threads are off during the step)")
     model: str = param("", "classifier file from 'pfscope train-classifier' (an intersection-"
                            "kernel SVM, jung2013 §2.1); empty: OpenCV's pre-trained people SVM.  "
                            "Its margins are on another scale: use it with hit_threshold=0 "
@@ -476,13 +475,12 @@ class DLPFTracker:
         # one Lucas-Kanade call for the tracks' flow grids and the free parents (eq. (1))
         tpts = self._track_flow_points()
         if self._prev_grey is not None and len(free) + len(tpts):
-            # split over the classifier's idle threads (classifier.threads), not OpenCV's
-            # pool: turning that on and off around the call cost more than it gained (each
-            # point's flow is the same whatever share it is in)
-            flow, ok = mo.lk_flow(self._prev_grey, grey, np.concatenate([tpts, pred[:, :2]]),
-                                  win=P.motion.lk_window, levels=P.motion.lk_levels,
-                                  pool=getattr(self.classifier, "executor", lambda: None)(),
-                                  parts=P.classifier.threads)
+            # the step's own threads are idle here: OpenCV may split the points over them
+            # (each point's flow is computed the same way whatever the thread count)
+            with opencv_threads(max(cv2.getNumThreads(), P.classifier.threads)):
+                flow, ok = mo.lk_flow(self._prev_grey, grey,
+                                      np.concatenate([tpts, pred[:, :2]]),
+                                      win=P.motion.lk_window, levels=P.motion.lk_levels)
         else:
             flow, ok = np.zeros((len(tpts) + len(free), 2)), np.zeros(len(tpts) + len(free), bool)
         self._set_track_flow(flow[:len(tpts)], ok[:len(tpts)])
