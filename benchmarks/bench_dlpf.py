@@ -41,7 +41,8 @@ per-window HOG), as two lanes of one run, without the exhaustive lane::
 
 **Whole-process speed and the per-stage profile** (``--profile``): ``pfscope record SOURCE
 --tracker dlpf --level tracks`` as a user runs it, twice: once as a subprocess (wall time from
-start to exit, and the frame loop's fps the command prints), once in this process through the
+start to exit, the frame loop's fps the command prints, and what is left outside the loop:
+imports, setup, scoring, closing the recording), once in this process through the
 same ``record()`` with clocks around the stages (wall and main-thread CPU ms per frame: frame
 decode, Lucas-Kanade, the classifier (the parents' windows and the tracks' verification
 windows, which overlap on two threads), confirmation,
@@ -347,6 +348,9 @@ def main_profile(a, dlpf_options: dict) -> int:
     print(f"subprocess: {whole['wall_s']:.1f} s start to exit ({whole['fps_whole']:.1f} frames/s"
           f" whole process), frame loop {whole['loop_s']:.1f} s ({whole['fps_loop']:.1f} fps), "
           f"{whole['cpu_s']:.1f} CPU s")
+    outside = whole["wall_s"] - whole["loop_s"]
+    print(f"outside the frame loop (imports, setup, scoring, closing the recording): "
+          f"{outside:.1f} s wall, {100 * outside / whole['wall_s']:.0f} % of the process")
     loop_ms = 1000 * prof["loop_wall_s"] / max(n, 1)
     cpu_ms = 1000 * prof["loop_cpu_s"] / max(n, 1)
     rows = [[s, f"{v['wall_ms']:.2f}", f"{100 * v['wall_ms'] / loop_ms:.1f}",

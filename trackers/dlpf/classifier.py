@@ -207,14 +207,6 @@ class HOGWindowClassifier:
         # each connected group of touching windows of one level is one region of the level
         # image, resampled once; each block of it that some window uses is computed once
         nreg, reg = _regions(k, cu, cv, wx, wy)
-        # every block of every window, in OpenCV's order (x outer, y inner); the distinct ones
-        bu = (cu[:, None] + np.repeat(np.arange(wx - 1), wy - 1)[None]).ravel()
-        bv = (cv[:, None] + np.tile(np.arange(wy - 1), wx - 1)[None]).ravel()
-        _, bfirst, binv = np.unique(_pack(np.repeat(k, nb), bu, bv), return_index=True,
-                                    return_inverse=True)
-        bu, bv, breg = bu[bfirst], bv[bfirst], reg[bfirst // nb]
-        order = np.argsort(breg, kind="stable")
-        cuts = np.searchsorted(breg[order], np.arange(nreg + 1))
         big = np.iinfo(np.int64).max
         x0, y0 = np.full(nreg, big), np.full(nreg, big)
         x1, y1 = np.full(nreg, -big), np.full(nreg, -big)
@@ -224,19 +216,36 @@ class HOGWindowClassifier:
         np.maximum.at(y1, reg, cv + wy)
         rlev = np.empty(nreg, dtype=np.int64)
         rlev[reg] = k
-        blocks = np.empty((len(bu), BLOCK_LEN), dtype=np.float32)
+        # every block of every window, in OpenCV's order (x outer, y inner), as its place on
+        # its region's block grid (regions one after the other): a block two windows share
+        # has one place (they are in one region), so marking the places used gives the
+        # distinct blocks, grouped by region, without sorting
+        gw, gh = x1 - x0 - 1, y1 - y0 - 1
+        off = np.concatenate([[0], np.cumsum(gw * gh)])
+        bu = cu[:, None] - x0[reg][:, None] + np.repeat(np.arange(wx - 1), wy - 1)[None]
+        bv = cv[:, None] - y0[reg][:, None] + np.tile(np.arange(wy - 1), wx - 1)[None]
+        place = (off[reg][:, None] + bv * gw[reg][:, None] + bu).ravel()
+        used = np.zeros(int(off[-1]), dtype=bool)
+        used[place] = True
+        ids = np.flatnonzero(used)
+        index = np.empty(len(used), dtype=np.int64)
+        index[ids] = np.arange(len(ids))
+        binv = index[place]
+        breg = np.searchsorted(off, ids, side="right") - 1
+        cuts = np.searchsorted(breg, np.arange(nreg + 1))
+        local = ids - off[breg]
+        blocks = np.empty((len(ids), BLOCK_LEN), dtype=np.float32)
         # each block's top-left px in its region (1 px more on each side of a region so that
         # its border gradients see their real neighbours)
-        locs = np.empty((len(bu), 2), dtype=np.int32)
-        locs[:, 0] = 1 + CELL * (bu - x0[breg])
-        locs[:, 1] = 1 + CELL * (bv - y0[breg])
-        locs = locs[order]
+        locs = np.empty((len(ids), 2), dtype=np.int32)
+        locs[:, 0] = 1 + CELL * (local % gw[breg])
+        locs[:, 1] = 1 + CELL * (local // gw[breg])
         # level px (a, b) samples frame px ((a + 0.5)/s - 0.5, ...)
         inv_s = self.scale_step ** -rlev.astype(np.float64)
         tx = ((x0 * CELL - 1) + 0.5) * inv_s - 0.5
         ty = ((y0 * CELL - 1) + 0.5) * inv_s - 0.5
         sizes = np.stack([(x1 - x0) * CELL + 2, (y1 - y0) * CELL + 2], axis=1).tolist()
-        jobs = [(order[cuts[r]:cuts[r + 1]],
+        jobs = [(slice(cuts[r], cuts[r + 1]),
                  np.array([[inv_s[r], 0.0, tx[r]], [0.0, inv_s[r], ty[r]]]),
                  tuple(sizes[r]), locs[cuts[r]:cuts[r + 1]])
                 for r in range(nreg)]
