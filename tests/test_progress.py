@@ -59,6 +59,25 @@ def test_lines_show_the_recent_rate():
     assert last == "lane: 100/100 frames, 25.0 fps"
 
 
+def test_first_frame_shows_its_time_and_the_rate_counts_from_its_end():
+    """The first frame's one-off costs (first calls, the recording's first frame) are not a
+    rate: its line says how long it took, and the rate (and so the ETA) from frame 2 on counts
+    frames after it."""
+    clock = FakeClock()
+    out = io.StringIO()                           # not a terminal: a line every 10 %
+    bar = Progress(10, "lane", stream=out, clock=clock, window=2.0)
+    bar.start()
+    for done, secs in enumerate([0.8, 0.1, 0.1], start=1):
+        clock.t += secs
+        bar.update(done)
+        if done == 1:
+            assert out.getvalue().splitlines() == ["lane: 1/10 frames, first frame 0.8 s"]
+        if done == 2:
+            assert abs(bar.rate() - 10.0) < 1e-9  # 1 frame in 0.1 s, not 2 in 0.9 s
+            assert out.getvalue().splitlines()[-1] == "lane: 2/10 frames, 10.0 fps"
+    assert abs(bar.eta(3) - 0.7) < 1e-9           # 7 frames left at 10 fps
+
+
 def test_rate_zero_before_frames():
     bar = Progress(10, "t", stream=io.StringIO(), clock=FakeClock())
     bar.start()
