@@ -19,14 +19,26 @@ BENCH = ROOT / "benchmarks"
 
 
 @pytest.fixture(scope="module")
-def common():
+def bench_path():
     sys.path.insert(0, str(BENCH))
     try:
-        import _common
-
-        yield _common
+        yield
     finally:
         sys.path.remove(str(BENCH))
+
+
+@pytest.fixture(scope="module")
+def common(bench_path):
+    import _common
+
+    return _common
+
+
+@pytest.fixture(scope="module")
+def bench(bench_path):
+    import bench
+
+    return bench
 
 
 def test_targets_scene_is_seeded_and_keeps_every_target_in_view(common):
@@ -215,22 +227,10 @@ def test_per_measurement_estimates_take_the_detections_above_half_a_target(commo
         assert len(S._per_measurement(Pred, np.log(w), 0.3)) == 2
 
 
-def _bench_module():
-    sys.path.insert(0, str(BENCH))
-    try:
-        import bench
-
-        return bench
-    finally:
-        sys.path.remove(str(BENCH))
-
-
-def test_detector_free_fps_missing_data_is_said_or_an_error(monkeypatch, capsys):
+def test_detector_free_fps_missing_data_is_said_or_an_error(bench, monkeypatch, capsys):
     """endtoend's detector-free part never skips silently: without PETS09-S2L1 a NOT RUN line
     (and ``skipped`` in the JSON) by default, and the error when the trackers were named."""
     import argparse
-
-    bench = _bench_module()
 
     def missing():
         raise bench.C.NoData("PETS09-S2L1 not found (looked in /nowhere)")
@@ -246,12 +246,10 @@ def test_detector_free_fps_missing_data_is_said_or_an_error(monkeypatch, capsys)
         bench.detector_free_section(args)
 
 
-def test_detector_free_fps_and_stage_profile_of_a_fresh_process(capsys):
+def test_detector_free_fps_and_stage_profile_of_a_fresh_process(bench, capsys):
     """The whole-process fps of `pfscope record PETS09-S2L1 --tracker dbn-phd --level tracks`
     (a fresh process) and its per-stage profile: every declared stage timed on every frame."""
     import argparse
-
-    bench = _bench_module()
     try:
         bench.C.pets_path()
     except bench.C.NoData as e:
