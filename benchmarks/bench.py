@@ -777,7 +777,9 @@ def bench_detector_free(args, exe_py: str, cache: str, tmp: str) -> dict:
         with open(js) as fh:
             got = json.load(fh)
         n = len(got["t"])
-        loop = got["t"][-1] - got["begin"] if n else float("nan")
+        if not n:
+            raise RuntimeError(f"{name}: `pfscope {' '.join(base)}` ran no frame")
+        loop = got["t"][-1] - got["begin"]
         names = got["stage_names"]
         mean = {s: 1e3 * float(np.mean([f.get(s, 0.0) for f in got["stages"]])) for s in names}
         step = 1e3 * float(np.mean(got["step"]))
