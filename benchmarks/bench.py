@@ -35,7 +35,10 @@ Sections (all by default; ``--only`` picks some):
                (``--e2e-preset``, default practical) vs Stone Soup's SMC-PHD + extraction at
                ``--ss-targets``, one seed, with PHD-MT's per-stage split; fresh-process
                ``pfscope record`` with an empty numba cache (cold) vs filled (warm); a
-               5-frame DBN-PHD run's wall time.
+               5-frame DBN-PHD run's wall time; the detector-free trackers' whole-process
+               fps on PETS09-S2L1 (``--e2e-detector-free``: ``pfscope record PETS09-S2L1
+               --tracker T --level tracks`` in a fresh process, numba's cache warm, frames /
+               wall seconds) with the per-stage ms per frame of each tracker's step.
 
 Every run goes through the engine's one frame loop (``pfscope.trackers.pipeline.run``) at
 ``level=None`` without a recorder (``recording`` adds the app's recorder on purpose). Stage
@@ -60,6 +63,8 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+
+T_START = time.perf_counter()      # (a --record-child process's whole time counts from here)
 
 import _common as C
 import numpy as np
@@ -707,13 +712,128 @@ def _first_run(cmd: list, cache: str, cwd: str) -> float:
     return secs
 
 
+#: the detector-free trackers whose whole-process fps on PETS09-S2L1 ``endtoend`` reports
+DETECTOR_FREE = ("dlpf", "dbn-phd")
+
+
+def record_child(out: str, argv: list) -> int:
+    """``pfscope record ARGV`` in this process, through the CLI's own code path (``cli.main``),
+    with the stage clocks of the ``stages`` section and a hook taking each frame's time; the
+    per-frame numbers go to ``out`` as JSON (the parent times the whole process)."""
+    import json
+
+    from pfscope.trackers import pipeline
+
+    clock = C.Clock()
+    got: dict = {"t": [], "step": [], "stages": [], "stage_names": []}
+    run0 = pipeline.run
+
+    class Collect(pipeline.BaseHook):
+        def begin(self, info):
+            got["begin"] = time.perf_counter()
+            got["stage_names"] = [list(t.stages) for t in info.trackers.values()][0]
+
+        def on_frame(self, report):
+            got["t"].append(time.perf_counter())
+            got["step"].append(sum(report.step_seconds.values()))
+            got["stages"].append(clock.take())
+
+    def run(*a, hooks=(), **k):          # record() imports pipeline.run when it runs
+        return run0(*a, hooks=[*hooks, Collect()], **k)
+
+    pipeline.run = run
+    from pfscope.viewer_app.cli import main as cli_main
+
+    with stagelog_clocks(clock):
+        rc = cli_main(argv)
+    got["process_seconds"] = time.perf_counter() - T_START
+    with open(out, "w") as fh:
+        json.dump(got, fh)
+    return rc
+
+
+def bench_detector_free(args, exe_py: str, cache: str, tmp: str) -> dict:
+    """Whole-process fps of ``pfscope record PETS09-S2L1 --tracker T --level tracks`` for the
+    detector-free trackers (a fresh process each, numba's cache filled by a short run first),
+    with the per-stage ms per frame of the tracker's step (means over the frames: the parts add
+    up) and the time per frame outside the step (reading, decoding, the recording)."""
+    import json
+
+    src = str(C.pets_path())
+    res = {}
+    rows, prof = [], []
+    for name in args.e2e_detector_free:
+        base = ["record", src, "--tracker", name, "--level", "tracks", "--quiet", "--force",
+                "--seed", str(args.seed)]
+        if args.e2e_pets_frames:
+            base += ["--frames", str(args.e2e_pets_frames)]
+        # a short run first: the kernels compiled into the cache (what "warm" means)
+        _first_run([exe_py, "-m", "pfscope.viewer_app.cli", "record", src, "--tracker", name,
+                    "--level", "tracks", "--quiet", "--force", "--frames", "3",
+                    "--out", "w.rrd"], cache, tmp)
+        js = str(Path(tmp) / f"{name}.json")
+        wall = _first_run([exe_py, str(Path(__file__).resolve()), "--record-child", js, "--",
+                           *base, "--out", f"{name}.rrd"], cache, tmp)
+        with open(js) as fh:
+            got = json.load(fh)
+        n = len(got["t"])
+        if not n:
+            raise RuntimeError(f"{name}: `pfscope {' '.join(base)}` ran no frame")
+        loop = got["t"][-1] - got["begin"]
+        names = got["stage_names"]
+        mean = {s: 1e3 * float(np.mean([f.get(s, 0.0) for f in got["stages"]])) for s in names}
+        step = 1e3 * float(np.mean(got["step"]))
+        d = {"frames": n, "process_seconds": wall, "fps_process": n / wall,
+             "loop_seconds": loop, "fps_loop": n / loop, "setup_seconds": wall - loop,
+             "stages_mean_ms": mean, "step_mean_ms": step,
+             "other_ms": step - sum(mean.values()),
+             "outside_step_ms": 1e3 * loop / n - step}
+        res[name] = d
+        rows.append([name, n, f"{wall:.1f}", f"{d['fps_process']:.1f}",
+                     f"{d['setup_seconds']:.1f}", f"{d['fps_loop']:.1f}", ms(step),
+                     ms(d["outside_step_ms"])])
+        prof.append((name, d))
+        print(f"  {name}: {wall:.1f} s", file=sys.stderr)
+    print(f"\n=== detector-free trackers, whole process: `pfscope record {C.PETS} --tracker T "
+          f"--level tracks` (a fresh process, numba's cache warm), frames / wall seconds ===")
+    print(C.table(["tracker", "frames", "process s", "fps (whole process)", "set-up s",
+                   "fps (frame loop)", "step ms", "outside the step ms"], rows))
+    for name, d in prof:
+        print(f"\n{name}: ms per frame of each step stage (means over the {d['frames']} frames; "
+              f"other = the step outside its stages)")
+        print(C.table(["stage", "ms", "share of the step"],
+                      [[s, ms(v), f"{100 * v / d['step_mean_ms']:.0f}%"]
+                       for s, v in d["stages_mean_ms"].items()]
+                      + [["other", ms(d["other_ms"]),
+                          f"{100 * d['other_ms'] / d['step_mean_ms']:.0f}%"],
+                         ["step", ms(d["step_mean_ms"]), "100%"]]))
+    return {"source": src, "trackers": res}
+
+
+def detector_free_section(args) -> dict:
+    """:func:`bench_detector_free` in a temporary folder with its own numba cache, when
+    PETS09-S2L1 is found; when not, a NOT RUN line (and ``skipped`` in the JSON), or the
+    error (:class:`_common.NoData`) when the trackers were named on the command line."""
+    try:
+        C.pets_path()
+    except C.NoData as e:
+        if getattr(args, "e2e_detector_free_asked", False):
+            raise
+        print(f"\n=== detector-free trackers on {C.PETS}: NOT RUN: {e} ===")
+        return {"skipped": str(e)}
+    with tempfile.TemporaryDirectory(prefix="pfscope-e2e-") as tmp:
+        return bench_detector_free(args, sys.executable, str(Path(tmp) / "numba-cache"), tmp)
+
+
 def bench_endtoend(args) -> dict:
     """What a user meets: (1) pfscope's whole ``PHDTracker.step`` (filter, K-means,
     association; ``--e2e-preset``) next to Stone Soup's SMC-PHD step plus its extraction
     (k-means of round(mass) centres, ``_extract``) on the same detections, one seed, in one
     pipeline run; (2) ``pfscope record`` (the built-in scene, 150 frames) in a fresh process
     with an empty numba cache (cold: the first run after an install) and again with it
-    filled (warm); (3) the start of a 5-frame DBN-PHD run (warm)."""
+    filled (warm); (3) the start of a 5-frame DBN-PHD run, first (its own kernels compile:
+    the PHD-MT runs before leave only the PHD filter's in the cache) and warm; (4) the
+    detector-free trackers' whole-process fps on PETS09-S2L1 (:func:`detector_free_section`)."""
     import _stonesoup as S
 
     out: dict = {}
@@ -765,6 +885,9 @@ def bench_endtoend(args) -> dict:
         out["stonesoup"] = {"preset": preset, "frames": frames, "warmup": warm,
                             "stonesoup_version": S.version(), "rows": res}
 
+    if args.e2e_detector_free:
+        out["detector_free"] = detector_free_section(args)
+
     # first run after an install vs a warm run, each a fresh process
     if args.e2e_no_first_run:
         return out
@@ -775,17 +898,24 @@ def bench_endtoend(args) -> dict:
         cold = _first_run(cmd, cache, tmp)
         warm_s = [_first_run(cmd, cache, tmp) for _ in range(args.e2e_warm_repeat)]
         warm_run = C.median(warm_s)
-        dbn = _first_run([exe, "record", "--tracker", "dbn-phd", "--frames", "5", "--force",
-                          "--out", "dbn.rrd"], cache, tmp)
+        # DBN-PHD's own kernels (codebook, features) are not in the cache yet: its first run
+        # compiles them; the second is the warm one
+        dbn_cmd = [exe, "record", "--tracker", "dbn-phd", "--frames", "5", "--force",
+                   "--out", "dbn.rrd"]
+        dbn_first = _first_run(dbn_cmd, cache, tmp)
+        dbn = _first_run(dbn_cmd, cache, tmp)
     print(f"\n=== first run: `pfscope record` (built-in scene, 150 frames), a fresh process "
           f"each ===")
     print(C.table(["run", "seconds"], [["cold (empty numba cache)", f"{cold:.1f}"],
                                        ["warm (median of "
                                         f"{len(warm_s)})", f"{warm_run:.1f}"],
                                        ["cold / warm", f"{cold / warm_run:.2f}x"],
+                                       ["dbn-phd, 5 frames (its own kernels compile)",
+                                        f"{dbn_first:.1f}"],
                                        ["dbn-phd, 5 frames (warm)", f"{dbn:.1f}"]]))
     out["first_run"] = {"cold_s": cold, "warm_s": warm_s, "ratio": cold / warm_run,
-                        "dbn_phd_5_frames_s": dbn, "loadavg": list(os.getloadavg())}
+                        "dbn_phd_5_frames_first_s": dbn_first, "dbn_phd_5_frames_s": dbn,
+                        "loadavg": list(os.getloadavg())}
     return out
 
 
@@ -847,22 +977,34 @@ def parse_args(argv=None):
     e2e.add_argument("--e2e-no-first-run", action="store_true",
                      help="skip the cold/warm first-run processes (quick iterations on the "
                           "per-step table)")
+    e2e.add_argument("--e2e-detector-free", nargs="*", choices=DETECTOR_FREE, metavar="NAME",
+                     help="detector-free trackers timed whole-process on PETS09-S2L1 "
+                          f"(default: {' '.join(DETECTOR_FREE)} when the sequence is found, "
+                          "a NOT RUN line when not; named here: an error when not found; "
+                          "given with no name: none)")
+    e2e.add_argument("--e2e-pets-frames", type=int, metavar="N",
+                     help="PETS09-S2L1 frames of the detector-free runs (full: all 795; "
+                          "quick: 200)")
     ap.add_argument("--tiny", action="store_true", help=argparse.SUPPRESS)  # the smoke test
     ap.add_argument("--memory-child", nargs=2, type=int, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
+    args.e2e_detector_free_asked = args.e2e_detector_free is not None
+    if args.e2e_detector_free is None:
+        args.e2e_detector_free = list(DETECTOR_FREE)
     full = dict(stage_frames=60, scale_frames=30, targets=[4, 16, 64, 256], rec_frames=100,
                 rec_repeat=3, mem_frames=10_000, mem_every=1_000, ss_frames=60, ss_warmup=10,
                 ss_targets=[4, 16, 64], ss_seeds=[0, 1, 2],
                 ss_lanes=["standard", "nonoise", "oracle", "oracle-birth"], e2e_frames=60,
-                e2e_warm_repeat=3)
+                e2e_warm_repeat=3, e2e_pets_frames=0)
     quick = dict(stage_frames=15, scale_frames=12, targets=[4, 16, 64], rec_frames=25,
                  rec_repeat=1, mem_frames=1_000, mem_every=100, ss_frames=60, ss_warmup=10,
                  ss_targets=[4, 16], ss_seeds=[0],
                  ss_lanes=["standard", "nonoise", "oracle", "oracle-birth"], e2e_frames=40,
-                 e2e_warm_repeat=1)
+                 e2e_warm_repeat=1, e2e_pets_frames=200)
     tiny = dict(stage_frames=7, scale_frames=7, targets=[4, 8], rec_frames=4, rec_repeat=1,
                 mem_frames=30, mem_every=10, ss_frames=8, ss_warmup=2, ss_targets=[4],
-                ss_seeds=[0], ss_lanes=list(SS_LANES), e2e_frames=8, e2e_warm_repeat=1)
+                ss_seeds=[0], ss_lanes=list(SS_LANES), e2e_frames=8, e2e_warm_repeat=1,
+                e2e_pets_frames=10)
     for k, v in (tiny if args.tiny else quick if args.quick else full).items():
         if getattr(args, k, None) is None:
             setattr(args, k, v)
@@ -875,6 +1017,8 @@ def parse_args(argv=None):
     bad = [o for o in args.ss_set if "=" not in o]
     if bad:
         ap.error(f"--ss-set takes NAME=VALUE, got {bad[0]!r}")
+    if args.e2e_pets_frames < 0:
+        ap.error(f"--e2e-pets-frames must be >= 0 (0: all), got {args.e2e_pets_frames}")
     if any(t < 1 for t in args.ss_targets):
         ap.error(f"--ss-targets must be >= 1, got {' '.join(map(str, args.ss_targets))}")
     return args
@@ -912,6 +1056,8 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
+    if sys.argv[1:2] == ["--record-child"]:     # bench_detector_free's fresh process
+        sys.exit(record_child(sys.argv[2], sys.argv[4:]))
     try:
         sys.exit(main())
     except KeyboardInterrupt:

@@ -19,14 +19,26 @@ BENCH = ROOT / "benchmarks"
 
 
 @pytest.fixture(scope="module")
-def common():
+def bench_path():
     sys.path.insert(0, str(BENCH))
     try:
-        import _common
-
-        yield _common
+        yield
     finally:
         sys.path.remove(str(BENCH))
+
+
+@pytest.fixture(scope="module")
+def common(bench_path):
+    import _common
+
+    return _common
+
+
+@pytest.fixture(scope="module")
+def bench(bench_path):
+    import bench
+
+    return bench
 
 
 def test_targets_scene_is_seeded_and_keeps_every_target_in_view(common):
@@ -213,3 +225,45 @@ def test_per_measurement_estimates_take_the_detections_above_half_a_target(commo
     np.testing.assert_allclose(est, [[20.0, 30.0]])
     with np.errstate(divide="ignore"):
         assert len(S._per_measurement(Pred, np.log(w), 0.3)) == 2
+
+
+def test_detector_free_fps_missing_data_is_said_or_an_error(bench, monkeypatch, capsys):
+    """endtoend's detector-free part never skips silently: without PETS09-S2L1 a NOT RUN line
+    (and ``skipped`` in the JSON) by default, and the error when the trackers were named."""
+    import argparse
+
+    def missing():
+        raise bench.C.NoData("PETS09-S2L1 not found (looked in /nowhere)")
+
+    monkeypatch.setattr(bench.C, "pets_path", missing)
+    args = argparse.Namespace(e2e_detector_free=["dlpf"], e2e_detector_free_asked=False,
+                              e2e_pets_frames=3, seed=0)
+    d = bench.detector_free_section(args)
+    assert d == {"skipped": "PETS09-S2L1 not found (looked in /nowhere)"}
+    assert "NOT RUN: PETS09-S2L1 not found" in capsys.readouterr().out
+    args.e2e_detector_free_asked = True
+    with pytest.raises(bench.C.NoData):
+        bench.detector_free_section(args)
+
+
+def test_detector_free_fps_and_stage_profile_of_a_fresh_process(bench, capsys):
+    """The whole-process fps of `pfscope record PETS09-S2L1 --tracker dbn-phd --level tracks`
+    (a fresh process) and its per-stage profile: every declared stage timed on every frame."""
+    import argparse
+    try:
+        bench.C.pets_path()
+    except bench.C.NoData as e:
+        pytest.skip(str(e))
+    from pfscope.trackers.api import make_tracker
+
+    args = argparse.Namespace(e2e_detector_free=["dbn-phd"], e2e_detector_free_asked=True,
+                              e2e_pets_frames=4, seed=0)
+    d = bench.detector_free_section(args)["trackers"]["dbn-phd"]
+    assert d["frames"] == 4
+    assert list(d["stages_mean_ms"]) == list(make_tracker("dbn-phd", 0).stages)
+    assert all(v > 0 for v in d["stages_mean_ms"].values())
+    assert sum(d["stages_mean_ms"].values()) <= 1.5 * d["step_mean_ms"]
+    assert 0 < d["loop_seconds"] < d["process_seconds"]
+    assert d["fps_process"] == pytest.approx(4 / d["process_seconds"])
+    out = capsys.readouterr().out
+    assert "fps (whole process)" in out and "dbn-phd: ms per frame of each step stage" in out

@@ -171,8 +171,10 @@ class Progress:
     """A one-line progress bar on stderr (a line every ~10 % when stderr is not a terminal).
 
     The fps shown is the *recent* rate: frames over the last ``window`` seconds (at least the
-    last two frame times; before that, since :meth:`start`), so a slow first frame or a busy
-    minute does not colour the rest of the run; the ETA is the frames left at that rate.  The
+    last two frame times), so a busy minute does not colour the rest of the run; the ETA is
+    the frames left at that rate.  The first frame carries one-off costs (first calls, the
+    recording's first frame: 0.2-0.8 s where later frames take 0.04-0.2): its line shows its
+    time instead of a rate, and from the second frame on the rate counts from its end.  The
     clock starts at :meth:`start` (the pipeline's ``begin``, after the kernels are ready), or
     at the first :meth:`update` if nobody called it.  ``clock`` is injectable for tests."""
 
@@ -210,28 +212,39 @@ class Progress:
             self._marks.append((now, done))
             return
         self._marks.append((now, done))
+        if done >= 2 and self._marks[0][1] == 0:     # the first frame's one-off costs out
+            self._marks.popleft()
         # keep the marks of the last `window` seconds, and at least two frame intervals
         while len(self._marks) > 3 and now - self._marks[1][0] >= self.window:
             self._marks.popleft()
+
+    def _first(self, done: int) -> Optional[float]:
+        """The first frame's seconds while it is the only frame done (else None)."""
+        if done == 1 and len(self._marks) == 2 and self._marks[0][1] == 0:
+            return self._marks[1][0] - self._marks[0][0]
+        return None
 
     def update(self, done: int) -> None:
         if not self.enabled:
             return
         now = self.clock()
         self._mark(now, done)
-        rate = self.rate()
+        rate, first = self.rate(), self._first(done)
         if self.tty:
             if now - self._last_draw < 0.1 and done != self.total:
                 return
             self._last_draw = now
+            speed = (f"first frame {first:.1f} s" if first is not None else
+                     f"{rate:5.1f} fps")
             if self.total:
                 frac = min(done / self.total, 1.0)
                 bar = "#" * int(frac * 30)
                 eta = self.eta(done)
-                msg = (f"\r{self.label} [{bar:<30}] {done}/{self.total} {rate:5.1f} fps "
-                       f"ETA {eta if eta is not None else 0:4.0f}s")
+                msg = (f"\r{self.label} [{bar:<30}] {done}/{self.total} {speed}" +
+                       (f" ETA {eta if eta is not None else 0:4.0f}s" if first is None
+                        else "        "))
             else:
-                msg = f"\r{self.label} {done} frames {rate:5.1f} fps"
+                msg = f"\r{self.label} {done} frames {speed}"
             self.stream.write(msg)
             self.stream.flush()
         else:
@@ -239,7 +252,9 @@ class Progress:
             if decile != self._last_decile:
                 self._last_decile = decile
                 tot = f"/{self.total}" if self.total else ""
-                self.stream.write(f"{self.label}: {done}{tot} frames, {rate:.1f} fps\n")
+                speed = (f"first frame {first:.1f} s" if first is not None else
+                         f"{rate:.1f} fps")
+                self.stream.write(f"{self.label}: {done}{tot} frames, {speed}\n")
                 self.stream.flush()
 
     def close(self) -> None:
