@@ -342,7 +342,7 @@ def test_record_starts_the_helper_before_the_parser(monkeypatch):
 
 def test_faster_numba_flags_gives_numba_own_hash_eq_and_values():
     """warmup.faster_numba_flags replaces numba's TargetConfig.__hash__/__eq__/values (~14 % of
-    the warm-up's compile under cProfile, ~5 % of its CPU) by per-class equivalents: the same
+    the first run's compile CPU in a profile) by per-class precomputed equivalents: the same
     hash, equality and values (order included) as numba's own code, on flags set, unset and
     copied."""
     from numba.core.compiler import Flags

@@ -60,8 +60,7 @@ def faster_numba_flags() -> bool:
     """Make numba's compile-flag bookkeeping cheaper, with the same results: numba looks every
     overload up by a key holding the compile flags (``TargetConfig``), whose ``__hash__`` and
     ``__eq__`` each rebuild the dict of all ~40 options through their properties
-    (``values()``): ~14 % of the warm-up's compile under cProfile, ~5 % of its CPU (0.6 s of
-    ~13 s) by the calls' count and their measured cost.  The hash is of the
+    (``values()``) -- ~14 % of the first run's compile CPU in a profile.  The hash is of the
     sorted option *names* only (a constant per class), and ``values()`` is the class's
     defaults overlaid with the options set: both computed that way here, per class once.
     Applied only when numba's three methods read as :data:`_TARGETCONFIG_SRC` says (else left
