@@ -338,32 +338,3 @@ def test_record_starts_the_helper_before_the_parser(monkeypatch):
     cli._early_compile(["eval", "--tracker", "phd"])
     cli._early_compile([])
     assert asked == [["phd"], ["dlpf"]]
-
-
-def test_faster_numba_flags_gives_numba_own_hash_eq_and_values():
-    """warmup.faster_numba_flags replaces numba's TargetConfig.__hash__/__eq__/values (~14 % of
-    the first run's compile CPU in a profile) by per-class precomputed equivalents: the same
-    hash, equality and values (order included) as numba's own code, on flags set, unset and
-    copied."""
-    from numba.core.compiler import Flags
-
-    from pfscope.trackers.warmup import faster_numba_flags
-
-    def ref_values(self):                          # numba's own, as warmup checks it reads
-        return {k: getattr(self, k) for k in self.options}
-
-    a, b = Flags(), Flags()
-    b.nrt = True
-    b.no_cpython_wrapper = True
-    c = Flags(copy_from=b)
-    d = Flags(copy_from=b)
-    d.boundscheck = True
-    flags = (a, b, c, d)
-    assert faster_numba_flags()
-    for x in flags:
-        assert list(x.values().items()) == list(ref_values(x).items())
-        assert hash(x) == hash(tuple(sorted(ref_values(x))))
-        for y in flags:
-            assert (x == y) == (ref_values(x) == ref_values(y))
-    assert b == c and a != b and c != d
-    assert {b: 1}[c] == 1                          # a dict key found through the new hash/eq

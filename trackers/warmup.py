@@ -48,65 +48,6 @@ def phd_kernels_needed(trackers) -> bool:
                for t in trackers)
 
 
-#: numba's TargetConfig methods :func:`faster_numba_flags` replaces, as numba spells them (it
-#: replaces none unless all three read so)
-_TARGETCONFIG_SRC = {"__hash__": "return hash(tuple(sorted(self.values())))",
-                     "__eq__": "return self.values() == other.values()",
-                     "values": "return {k: getattr(self, k) for k in self.options}"}
-_flags_fast = False
-
-
-def faster_numba_flags() -> bool:
-    """Make numba's compile-flag bookkeeping cheaper, with the same results: numba looks every
-    overload up by a key holding the compile flags (``TargetConfig``), whose ``__hash__`` and
-    ``__eq__`` each rebuild the dict of all ~40 options through their properties
-    (``values()``) -- ~14 % of the first run's compile CPU in a profile.  The hash is of the
-    sorted option *names* only (a constant per class), and ``values()`` is the class's
-    defaults overlaid with the options set: both computed that way here, per class once.
-    Applied only when numba's three methods read as :data:`_TARGETCONFIG_SRC` says (else left
-    alone); returns whether it is applied."""
-    global _flags_fast
-    if _flags_fast:
-        return True
-    try:
-        import inspect
-
-        from numba.core.targetconfig import TargetConfig as T
-
-        if not all(line in inspect.getsource(getattr(T, name))
-                   for name, line in _TARGETCONFIG_SRC.items()):
-            return False
-    except Exception:
-        return False
-    per_class: dict = {}
-
-    def _defaults(cls):
-        got = per_class.get(cls)
-        if got is None:
-            d = {k: opt.default for k, opt in cls.options.items()}
-            got = per_class[cls] = (d, hash(tuple(sorted(d))))
-        return got
-
-    def values(self):
-        d = dict(_defaults(type(self))[0])
-        for k, v in self._values.items():
-            if k in d:
-                d[k] = v
-        return d
-
-    def __hash__(self):
-        return _defaults(type(self))[1]
-
-    def __eq__(self, other):
-        if isinstance(other, T):
-            return values(self) == values(other)
-        return NotImplemented
-
-    T.values, T.__hash__, T.__eq__ = values, __hash__, __eq__
-    _flags_fast = True
-    return True
-
-
 def _walkers(k: int, rng: np.random.Generator):
     """Frame ``k``'s made-up detections: eight walkers and three clutter boxes, fewer than
     INDEX_MIN_CENTERS detections (the dense K-means), enough mass for several clusters
@@ -141,7 +82,6 @@ def _compile_filter_share() -> None:
     walk), the prediction of its particles as the next step makes it -- then the IoU of gap
     filling.  It imports the filter and its preset only, not the tracker registry (every
     tracker and their libraries: ~0.4 s of the helper's CPU before its first compile)."""
-    faster_numba_flags()
     from .phd.filter import max_births, predict
     from .phd.tracker import PHD_PRACTICAL, PHDTracker
     from .types import Frame, blank_image
@@ -271,7 +211,6 @@ def compile_kernels(presets=("practical", "paper"), phd: bool = True,
     key = (presets if phd else ()) + (("resample",) if index else ())
     if key in _ready or (not phd and any("resample" in k for k in _ready)):
         return 0.0
-    faster_numba_flags()
     from .api import make_params
     from .phd.tracker import PHDTracker
     from .smc.resampling import resample_indices
