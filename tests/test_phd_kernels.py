@@ -203,6 +203,10 @@ def test_gauss_update_equals_the_dense_eq5_on_the_gate(source, p_miss, kappa, sp
     assert got.miss_mass == pytest.approx(want.miss_mass)
     # the mass the kernel summed is the log-sum-exp of its weights
     assert got.particles.log_mass == pytest.approx(want.particles.log_mass, rel=1e-12)
+    if source == "detection" and not spread:           # the linear route: its weights recorded
+        w, scale = got.particles.__dict__["_normalised"]
+        np.testing.assert_allclose(w * scale, np.exp(b - want.particles.log_mass),
+                                   rtol=1e-10, atol=1e-300)
     if p_miss < 1:
         assert np.count_nonzero(got.c_z > 0) >= 20     # the detections did win mass
 

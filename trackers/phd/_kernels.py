@@ -304,7 +304,9 @@ _LIN_RANGE = 600.0
 def gauss_update_linear(states, lw, Z, std, log_norm, log_kappa, log_pd, log_pm, r2,
                         cell_x, cell_y, n_grid, grid, j_born):
     """:func:`gauss_update`'s linear route alone (per-detection stds), the same floats:
-    ``(ok, done, new_lw, log_c, log_mass, log_pred)``; ``done`` False when the weights span
+    ``(ok, done, new_lw, log_c, log_mass, log_pred, lin, scale)``, ``lin · scale`` (N,) the
+    normalised weights ``e^{new_lw − log_mass}`` as the update's sums made them (for the
+    resampling walk: no exp a particle there); ``done`` False when the weights span
     more than e^600 (nothing computed: call :func:`gauss_update`).  A run whose weights never
     spread that wide compiles this kernel only, not the log-space route (first-run compile).
 
@@ -329,7 +331,7 @@ def gauss_update_linear(states, lw, Z, std, log_norm, log_kappa, log_pd, log_pm,
             top = v if v > top else top
             low = v if v < low else low
     if not (top > -np.inf and top - low <= _LIN_RANGE and top < np.inf):
-        return True, False, lw, log_c, -np.inf, -np.inf
+        return True, False, lw, log_c, -np.inf, -np.inf, lw, 0.0
     new_lw = np.empty(n, np.float64)     # every entry written below
     x0, y0, cx, cy, ni, nj, order, starts = grid
     if order.shape[0] != n_grid:
@@ -337,7 +339,7 @@ def gauss_update_linear(states, lw, Z, std, log_norm, log_kappa, log_pd, log_pm,
                                                                states[:n_grid, 1],
                                                                cell_x, cell_y)
         if not ok:
-            return False, True, new_lw, log_c, -np.inf, -np.inf
+            return False, True, new_lw, log_c, -np.inf, -np.inf, lw, 0.0
     # the blocks' bounding boxes (y1 lo, hi, y2 lo, hi): an empty block's never meets a gate
     n_blk = j_born.shape[0]
     b_end = np.empty(n_blk + 1, np.int64)
@@ -353,7 +355,7 @@ def gauss_update_linear(states, lw, Z, std, log_norm, log_kappa, log_pd, log_pm,
             a = states[i, 0]
             c = states[i, 1]
             if not (math.isfinite(a) and math.isfinite(c)):
-                return False, True, new_lw, log_c, -np.inf, -np.inf
+                return False, True, new_lw, log_c, -np.inf, -np.inf, lw, 0.0
             lo0 = a if a < lo0 else lo0
             hi0 = a if a > hi0 else hi0
             lo1 = c if c < lo1 else lo1
@@ -363,7 +365,7 @@ def gauss_update_linear(states, lw, Z, std, log_norm, log_kappa, log_pd, log_pm,
         box[z, 2] = lo1
         box[z, 3] = hi1
     if b_end[n_blk] != n:
-        return False, True, new_lw, log_c, -np.inf, -np.inf
+        return False, True, new_lw, log_c, -np.inf, -np.inf, lw, 0.0
     inv = np.empty((std.shape[0], 4), np.float64)
     for k in range(std.shape[0]):
         for d in range(4):
@@ -441,8 +443,11 @@ def gauss_update_linear(states, lw, Z, std, log_norm, log_kappa, log_pd, log_pm,
             new_lw[i] = lw[i] + math.log(b[i])
         else:
             new_lw[i] = -np.inf
-        tot += e[i] * b[i]
-    return True, True, new_lw, log_c, (top + math.log(tot)) if tot > 0.0 else -np.inf, log_pred
+        v = e[i] * b[i]
+        tot += v
+        e[i] = v                          # the linear weight, e^{new_lw − top}
+    return (True, True, new_lw, log_c, (top + math.log(tot)) if tot > 0.0 else -np.inf,
+            log_pred, e, 1.0 / tot if tot > 0.0 else 0.0)
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
@@ -466,7 +471,7 @@ def gauss_update(states, lw, Z, std, log_norm, by_det, log_kappa, log_pd, log_pm
     :func:`gauss_update_linear` (called first here; :func:`..filter.update` calls it alone
     when it can, so a first run compiles the log route only if a frame needs it)."""
     if by_det:
-        ok, done, new_lw, log_c, log_mass, log_pred = gauss_update_linear(
+        ok, done, new_lw, log_c, log_mass, log_pred, _, _ = gauss_update_linear(
             states, lw, Z, std, log_norm, log_kappa, log_pd, log_pm, r2, cell_x, cell_y,
             states.shape[0], (0.0, 0.0, cell_x, cell_y, 0, 0, np.empty(0, np.int64),
                               _zero_start()), np.empty(0, np.int64))

@@ -1091,7 +1091,7 @@ def _update_gaussian(particles: ParticleSet, g: GatedGaussian, log_kappa: np.nda
     if by_det:      # the linear route alone (weights within e^600: every PHD frame)
         n_grid, grid, j_born = g.persistent if g.persistent is not None else (n, _NO_GRID,
                                                                               _NO_BLOCKS)
-        ok, done, new_lw, log_c, log_mass, log_pred = _kernels.gauss_update_linear(
+        ok, done, new_lw, log_c, log_mass, log_pred, lin, scale = _kernels.gauss_update_linear(
             particles.states, lw, Z, std, log_norm, log_kappa, log_pd, log_pm,
             float(g.r2), cell[0], cell[1], n_grid, grid, j_born)
     if not done:
@@ -1104,6 +1104,8 @@ def _update_gaussian(particles: ParticleSet, g: GatedGaussian, log_kappa: np.nda
     log_den = np.where(np.isfinite(log_den), log_den, 0.0)              # κ = C = 0: term is 0
     out = ParticleSet(particles.states, new_lw, particles.labels, particles.extra)
     out.known_log_mass(log_mass)                                        # the kernel summed it
+    if done and scale > 0.0:
+        out.known_normalised(lin, scale)                                # (the resampling walk)
     particles.known_log_mass(log_pred)
     return UpdateResult(out, np.exp(log_c), kappa, np.exp(log_c - log_den),
                         p_miss * math.exp(log_pred))
