@@ -1086,15 +1086,17 @@ def _update_gaussian(particles: ParticleSet, g: GatedGaussian, log_kappa: np.nda
     else:
         std = obs_std(Z[:, 2:4] if by_det else particles.states[:, 4:6], lk)
         log_norm = np.log(std).sum(-1)
-    cell = _grid_cell(std if by_det else np.max(std[:, :2], axis=0, keepdims=True), g.r2)
     done = False
     if by_det:      # the linear route alone (weights within e^600: every PHD frame)
-        n_grid, grid, j_born = g.persistent if g.persistent is not None else (n, _NO_GRID,
-                                                                              _NO_BLOCKS)
+        if g.persistent is not None:            # its grid is built: no cell to size
+            (n_grid, grid, j_born), cell = g.persistent, (1.0, 1.0)
+        else:
+            n_grid, grid, j_born, cell = n, _NO_GRID, _NO_BLOCKS, _grid_cell(std, g.r2)
         ok, done, new_lw, log_c, log_mass, log_pred, lin, scale = _kernels.gauss_update_linear(
             particles.states, lw, Z, std, log_norm, log_kappa, log_pd, log_pm,
             float(g.r2), cell[0], cell[1], n_grid, grid, j_born)
     if not done:
+        cell = _grid_cell(std if by_det else np.max(std[:, :2], axis=0, keepdims=True), g.r2)
         ok, new_lw, log_c, log_mass, log_pred = _kernels.gauss_update(
             particles.states, lw, Z, std, log_norm, by_det, log_kappa, log_pd, log_pm,
             float(g.r2), cell[0], cell[1])

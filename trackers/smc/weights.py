@@ -138,10 +138,13 @@ class ParticleSet:
         """Total weight ``exp(logsumexp(log_weights))`` (0 for an empty set)."""
         return float(np.exp(self.log_mass))
 
-    @property
+    @cached_property
     def weights(self) -> np.ndarray:
-        """Linear (unnormalised) weights, (N,)."""
-        return np.exp(self.log_weights)
+        """Linear (unnormalised) weights, (N,), computed once (read-only: callers share it;
+        the PHD filter's M(z) and its clutter model both read the predicted set's)."""
+        w = np.exp(self.log_weights)
+        w.setflags(write=False)
+        return w
 
     def ess(self) -> float:
         return ess(self.log_weights)
