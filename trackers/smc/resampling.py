@@ -46,21 +46,14 @@ def _systematic_take(states, lw, log_mass, u0, n, w, scale):
     D = states.shape[1]
     idx = np.empty(n, np.int64)
     out = np.empty((n, D), np.float64)
+    lin = w.shape[0] == N
     j = 0
-    if w.shape[0] == N:
-        c = w[0] * scale if N > 1 else 1.0
-    else:
-        c = math.exp(lw[0] - log_mass) if N > 1 else 1.0
+    c = (w[0] * scale if lin else math.exp(lw[0] - log_mass)) if N > 1 else 1.0
     for k in range(n):
         u = (u0 + k) / n
-        if w.shape[0] == N:
-            while j < N - 1 and c <= u:
-                j += 1
-                c = c + w[j] * scale if j < N - 1 else 1.0
-        else:
-            while j < N - 1 and c <= u:
-                j += 1
-                c = c + math.exp(lw[j] - log_mass) if j < N - 1 else 1.0
+        while j < N - 1 and c <= u:
+            j += 1
+            c = c + (w[j] * scale if lin else math.exp(lw[j] - log_mass)) if j < N - 1 else 1.0
         idx[k] = j
         for d in range(D):
             out[k, d] = states[j, d]
