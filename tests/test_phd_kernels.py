@@ -149,7 +149,7 @@ def test_mass_near_kernel_equals_the_dense_gate_sum(seed):
     d2 = (((x[:, None, OBS] - Z[None]) / std[None]) ** 2).sum(-1)
     want = ((d2 <= r2) * w[:, None]).sum(0)
     for cell in (3.0, 50.0, 1e5):
-        ok, got = K.mass_near_kernel(x, w, Z, std, r2, cell, cell)
+        ok, got, _ = K.mass_near_kernel(x, w, Z, std, r2, cell, cell)
         assert ok
         np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-18)
     assert (want > 0).sum() >= 30
@@ -203,8 +203,55 @@ def test_gauss_update_equals_the_dense_eq5_on_the_gate(source, p_miss, kappa, sp
     assert got.miss_mass == pytest.approx(want.miss_mass)
     # the mass the kernel summed is the log-sum-exp of its weights
     assert got.particles.log_mass == pytest.approx(want.particles.log_mass, rel=1e-12)
+    if source == "detection" and not spread:           # the linear route: its weights recorded
+        w, scale = got.particles.__dict__["_normalised"]
+        np.testing.assert_allclose(w * scale, np.exp(b - want.particles.log_mass),
+                                   rtol=1e-10, atol=1e-300)
     if p_miss < 1:
         assert np.count_nonzero(got.c_z > 0) >= 20     # the detections did win mass
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_update_on_the_birth_grid_and_newborn_blocks_is_the_one_grid_update(seed):
+    """The filter's route: the predicted particles through the grid M(z)'s kernel built (its
+    own, finer cells) and the newborn as one block per detection, looked at by their bounding
+    box -- the same gated pairs, hence the same weights (up to the order of C(z)'s sum), as
+    one grid on every particle.  Blocks: on their detection, far from it, empty, one with a
+    straggler that only a gate elsewhere reaches."""
+    rng = np.random.default_rng(seed)
+    n = 1500
+    x = _states(rng, n, far=10)
+    Z = _dets_near(rng, x, 12)
+    std = obs_std(Z[:, 2:4])
+    j = rng.integers(0, 60, len(Z))
+    j[2] = 0                                           # an empty block
+    born = np.concatenate([np.repeat(Z[z:z + 1], j[z], 0) for z in range(len(Z))])
+    born = np.c_[born[:, :2], np.zeros((len(born), 2)), born[:, 2:]]
+    born[:, [0, 1, 4, 5]] += rng.normal(0, 1, (len(born), 4)) * np.repeat(std, j, 0)
+    s0 = int(j[:4].sum())                              # block 4 sits on detection 0 ...
+    born[s0:s0 + j[4], [0, 1]] = Z[0, :2] + rng.normal(0, 1, (j[4], 2)) * std[0, :2]
+    born[s0 + j[4] - 1, [0, 1]] = Z[5, :2]             # ... but one of them on detection 5
+    born[s0 + j[4] - 1, [4, 5]] = Z[5, 2:]
+    states = np.vstack([x, born])
+    lw = np.r_[np.full(n, -7.0), np.repeat(rng.normal(-9, 1, len(Z)), j)]
+    r2 = tail_radius2(1e-12)
+    log_kappa = rng.normal(-14, 1, len(Z))
+    lk = LikelihoodParams()
+    cell = 2 * np.sqrt(13.28) * np.median(std[:, :2], axis=0)
+    ok, _, grid = K.mass_near_kernel(x, np.exp(lw[:n]), Z, std, 13.28, cell[0], cell[1])
+    assert ok
+    ps = ParticleSet(states, lw)
+    want = update(ps, GatedGaussian(Z, lk, r2), log_kappa, 0.05)
+    got = update(ps, GatedGaussian(Z, lk, r2, persistent=(n, grid, j)), log_kappa, 0.05)
+    a, b = got.particles.log_weights, want.particles.log_weights
+    np.testing.assert_allclose(a, b, rtol=1e-13, atol=1e-12)
+    np.testing.assert_allclose(got.c_z, want.c_z, rtol=1e-12, atol=1e-300)
+    assert got.particles.log_mass == pytest.approx(want.particles.log_mass, rel=1e-13)
+    assert (b[n:] != b[n:].min()).sum() > 100         # newborn did meet gates
+    k = n + s0 + j[4] - 1                              # the straggler won at detection 5
+    assert b[k] > lw[k] + np.log(0.05) + 1
+    with pytest.raises(ValueError, match="non-finite"):   # the blocks must cover the rows
+        update(ps, GatedGaussian(Z, lk, r2, persistent=(n, grid, j[:-1])), log_kappa, 0.05)
 
 
 def test_gauss_update_refuses_non_finite_positions():

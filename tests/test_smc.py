@@ -174,3 +174,25 @@ def test_particle_set_rejects_mismatched_columns():
     with pytest.raises(ValueError, match="one side only"):
         ParticleSet(np.zeros((1, 2)), np.zeros(1), labels=[1]).concat(
             ParticleSet(np.zeros((1, 2)), np.zeros(1)))
+
+
+def test_systematic_resampling_walks_the_known_normalised_weights():
+    """A set whose maker recorded its normalised weights (the PHD update's kernel) is walked on
+    them, not on exps of its log-weights: the same ancestors when they agree (up to round-off),
+    the recorded ones when they differ."""
+    rng = np.random.default_rng(4)
+    lw = rng.normal(0, 2, 3000)
+    ps = ParticleSet(rng.normal(size=(3000, 6)), lw)
+    plain = resample(ps, 2500, np.random.default_rng(9))
+    hinted = ParticleSet(ps.states, lw)
+    w = np.exp(lw - lw.max())
+    hinted.known_normalised(w, 1.0 / w.sum())
+    got = resample(hinted, 2500, np.random.default_rng(9))
+    np.testing.assert_array_equal(got.states, plain.states)
+    assert got.log_mass == pytest.approx(plain.log_mass)
+    skewed = ParticleSet(ps.states, lw)
+    one = np.zeros(3000)
+    one[17] = 5.0
+    skewed.known_normalised(one, 0.2)                  # every ancestor is particle 17
+    out = resample(skewed, 40, np.random.default_rng(9))
+    np.testing.assert_array_equal(out.states, np.repeat(ps.states[17:18], 40, 0))

@@ -189,17 +189,21 @@ def _gate_d2(states, i, Z, j, std, k, r2):
 def mass_near_kernel(states, w, Z, std_z, r2, cell_x, cell_y):
     """M(z) (N_z,): ``Σ w_i`` over the particles with ``Σ_d ((x_id − z_d)/σ_zd)² <= r2``
     on the observed columns (0, 1, 4, 5) of ``states`` (N, 6), ``std_z`` (N_z, 4) per detection.
-    Returns ``(ok, out)``; ``ok`` False on non-finite positions."""
+    Returns ``(ok, out, grid)``; ``ok`` False on non-finite positions; ``grid`` =
+    ``(x0, y0, cx, cy, ni, nj, order, starts)`` of :func:`grid_build` on the particles'
+    positions (no cell when there is no particle or no detection), which the update reuses
+    for the same particles (:func:`gauss_update_linear`)."""
     nz = Z.shape[0]
     out = np.empty(nz, np.float64)
     for j in range(nz):
         out[j] = 0.0
     if states.shape[0] == 0 or nz == 0:
-        return True, out
+        return True, out, (0.0, 0.0, cell_x, cell_y, 0, 0, np.empty(0, np.int64), _zero_start())
     ok, x0, y0, cx, cy, ni, nj, order, starts = grid_build(states[:, 0], states[:, 1],
                                                            cell_x, cell_y)
+    grid = (x0, y0, cx, cy, ni, nj, order, starts)
     if not ok:
-        return False, out
+        return False, out, grid
     r = math.sqrt(r2)
     for j in range(nz):
         i0, i1, j0, j1 = gate_cells(Z[j, 0], Z[j, 1], std_z[j, 0], std_z[j, 1], r,
@@ -211,7 +215,7 @@ def mass_near_kernel(states, w, Z, std_z, r2, cell_x, cell_y):
                 if _gate_d2(states, i, Z, j, std_z, j, r2) <= r2:
                     s += w[i]
         out[j] = s
-    return True, out
+    return True, out, grid
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
@@ -298,11 +302,22 @@ _LIN_RANGE = 600.0
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
 def gauss_update_linear(states, lw, Z, std, log_norm, log_kappa, log_pd, log_pm, r2,
-                        cell_x, cell_y):
+                        cell_x, cell_y, n_grid, grid, j_born):
     """:func:`gauss_update`'s linear route alone (per-detection stds), the same floats:
-    ``(ok, done, new_lw, log_c, log_mass, log_pred)``; ``done`` False when the weights span
+    ``(ok, done, new_lw, log_c, log_mass, log_pred, lin, scale)``, ``lin · scale`` (N,) the
+    normalised weights ``e^{new_lw − log_mass}`` as the update's sums made them (for the
+    resampling walk: no exp a particle there); ``done`` False when the weights span
     more than e^600 (nothing computed: call :func:`gauss_update`).  A run whose weights never
-    spread that wide compiles this kernel only, not the log-space route (first-run compile)."""
+    spread that wide compiles this kernel only, not the log-space route (first-run compile).
+
+    A detection's gated pairs come from two kinds of rows: the first ``n_grid`` through
+    ``grid`` (:func:`grid_build` of their positions, as :func:`mass_near_kernel` returns it for
+    the predicted particles; built here with cells ``cell_x × cell_y`` when its ``order`` does
+    not hold ``n_grid`` points), then ``len(j_born)`` blocks of ``j_born[z]`` rows each (the
+    newborn of each detection, rows ``n_grid ...``, which must end at ``N``), a block looked at
+    only when the bounding box of its positions meets the detection's gate box.  So the
+    filter buckets its particles once a frame; with ``n_grid = N`` and no block this is the
+    one grid on every particle."""
     n = states.shape[0]
     nz = Z.shape[0]
     log_c = np.empty(nz, np.float64)
@@ -316,12 +331,41 @@ def gauss_update_linear(states, lw, Z, std, log_norm, log_kappa, log_pd, log_pm,
             top = v if v > top else top
             low = v if v < low else low
     if not (top > -np.inf and top - low <= _LIN_RANGE and top < np.inf):
-        return True, False, lw, log_c, -np.inf, -np.inf
+        return True, False, lw, log_c, -np.inf, -np.inf, lw, 0.0
     new_lw = np.empty(n, np.float64)     # every entry written below
-    ok, x0, y0, cx, cy, ni, nj, order, starts = grid_build(states[:, 0], states[:, 1],
-                                                           cell_x, cell_y)
-    if not ok:
-        return False, True, new_lw, log_c, -np.inf, -np.inf
+    x0, y0, cx, cy, ni, nj, order, starts = grid
+    if order.shape[0] != n_grid:
+        ok, x0, y0, cx, cy, ni, nj, order, starts = grid_build(states[:n_grid, 0],
+                                                               states[:n_grid, 1],
+                                                               cell_x, cell_y)
+        if not ok:
+            return False, True, new_lw, log_c, -np.inf, -np.inf, lw, 0.0
+    # the blocks' bounding boxes (y1 lo, hi, y2 lo, hi): an empty block's never meets a gate
+    n_blk = j_born.shape[0]
+    b_end = np.empty(n_blk + 1, np.int64)
+    box = np.empty((n_blk, 4), np.float64)
+    b_end[0] = n_grid
+    for z in range(n_blk):
+        b_end[z + 1] = b_end[z] + j_born[z]
+        lo0 = np.inf
+        hi0 = -np.inf
+        lo1 = np.inf
+        hi1 = -np.inf
+        for i in range(b_end[z], b_end[z + 1]):
+            a = states[i, 0]
+            c = states[i, 1]
+            if not (math.isfinite(a) and math.isfinite(c)):
+                return False, True, new_lw, log_c, -np.inf, -np.inf, lw, 0.0
+            lo0 = a if a < lo0 else lo0
+            hi0 = a if a > hi0 else hi0
+            lo1 = c if c < lo1 else lo1
+            hi1 = c if c > hi1 else hi1
+        box[z, 0] = lo0
+        box[z, 1] = hi0
+        box[z, 2] = lo1
+        box[z, 3] = hi1
+    if b_end[n_blk] != n:
+        return False, True, new_lw, log_c, -np.inf, -np.inf, lw, 0.0
     inv = np.empty((std.shape[0], 4), np.float64)
     for k in range(std.shape[0]):
         for d in range(4):
@@ -346,11 +390,25 @@ def gauss_update_linear(states, lw, Z, std, log_norm, log_kappa, log_pd, log_pm,
     for j in range(nz):
         i0, i1, j0, j1 = gate_cells(Z[j, 0], Z[j, 1], std[j, 0], std[j, 1], r,
                                     x0, cx, ni, y0, cy, nj)
+        hx = r * std[j, 0] * (1.0 + 1e-6) + 1e-9          # gate_cells' box
+        hy = r * std[j, 1] * (1.0 + 1e-6) + 1e-9
         s = 0.0
         nb = 0
-        for ci in range(i0, i1 + 1):
-            for p in range(starts[ci * nj + j0], starts[ci * nj + j1 + 1]):
-                i = order[p]
+        n_col = i1 - i0 + 1 if i1 >= i0 else 0
+        for seg in range(n_col + n_blk):  # the grid's columns of cells, then the blocks
+            if seg < n_col:
+                ci = i0 + seg
+                p0 = starts[ci * nj + j0]
+                p1 = starts[ci * nj + j1 + 1]
+            else:
+                z = seg - n_col
+                if not (box[z, 0] <= Z[j, 0] + hx and box[z, 1] >= Z[j, 0] - hx
+                        and box[z, 2] <= Z[j, 1] + hy and box[z, 3] >= Z[j, 1] - hy):
+                    continue
+                p0 = b_end[z]
+                p1 = b_end[z + 1]
+            for p in range(p0, p1):
+                i = order[p] if seg < n_col else p
                 d2 = _gate_d2_inv(states, i, Z, j, inv, j, r2)
                 if not d2 <= r2:
                     continue
@@ -385,8 +443,11 @@ def gauss_update_linear(states, lw, Z, std, log_norm, log_kappa, log_pd, log_pm,
             new_lw[i] = lw[i] + math.log(b[i])
         else:
             new_lw[i] = -np.inf
-        tot += e[i] * b[i]
-    return True, True, new_lw, log_c, (top + math.log(tot)) if tot > 0.0 else -np.inf, log_pred
+        v = e[i] * b[i]
+        tot += v
+        e[i] = v                          # the linear weight, e^{new_lw − top}
+    return (True, True, new_lw, log_c, (top + math.log(tot)) if tot > 0.0 else -np.inf,
+            log_pred, e, 1.0 / tot if tot > 0.0 else 0.0)
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
@@ -410,8 +471,10 @@ def gauss_update(states, lw, Z, std, log_norm, by_det, log_kappa, log_pd, log_pm
     :func:`gauss_update_linear` (called first here; :func:`..filter.update` calls it alone
     when it can, so a first run compiles the log route only if a frame needs it)."""
     if by_det:
-        ok, done, new_lw, log_c, log_mass, log_pred = gauss_update_linear(
-            states, lw, Z, std, log_norm, log_kappa, log_pd, log_pm, r2, cell_x, cell_y)
+        ok, done, new_lw, log_c, log_mass, log_pred, _, _ = gauss_update_linear(
+            states, lw, Z, std, log_norm, log_kappa, log_pd, log_pm, r2, cell_x, cell_y,
+            states.shape[0], (0.0, 0.0, cell_x, cell_y, 0, 0, np.empty(0, np.int64),
+                              _zero_start()), np.empty(0, np.int64))
         if done:
             return ok, new_lw, log_c, log_mass, log_pred
     n = states.shape[0]

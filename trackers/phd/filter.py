@@ -79,7 +79,7 @@ scene (p_D 0.9, 5 clutter boxes a frame) the mass then follows the true count wi
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from functools import lru_cache
 from typing import Iterable, Iterator, Optional, Protocol, Union
 
@@ -805,6 +805,8 @@ class BirthResult:
     j_per_det: np.ndarray
     mass_near: np.ndarray
     det_index: np.ndarray
+    #: the grid M(z)'s kernel bucketed the predicted particles on (the update reuses it)
+    grid: Optional[tuple] = field(default=None, repr=False, compare=False)
 
 
 def mass_near(predicted: ParticleSet, Z: np.ndarray, bp: BirthParams = BirthParams(),
@@ -819,6 +821,8 @@ def mass_near(predicted: ParticleSet, Z: np.ndarray, bp: BirthParams = BirthPara
     to bound.  ``std_z``: ``obs_std(Z[:, 2:4], lk)`` when the caller has it.  ``skip`` (N_z,)
     bool: detections whose M(z) the caller does not need (0 there); the others get the very
     floats of the whole call (the same grid: its cells come from every detection's noise)."""
+    if skip is None:
+        return _mass_near(predicted, Z, bp, lk, std_z)[0]
     Z = np.asarray(Z, dtype=np.float64).reshape(-1, OBS_DIM)
     if len(predicted) == 0 or len(Z) == 0:
         return np.zeros(len(Z))
@@ -826,23 +830,34 @@ def mass_near(predicted: ParticleSet, Z: np.ndarray, bp: BirthParams = BirthPara
         std_z = obs_std(Z[:, 2:4], lk)
     r2 = gate_threshold(bp.gate, OBS_DIM)
     cell = _grid_cell(std_z, r2)
-    if skip is not None:
-        full = np.zeros(len(Z))
-        need = np.flatnonzero(~skip)
-        if len(need):
-            full[need] = mass_near_at(predicted, Z[need], std_z[need], r2, cell)
-        return full
-    return mass_near_at(predicted, Z, std_z, r2, cell)
+    full = np.zeros(len(Z))
+    need = np.flatnonzero(~skip)
+    if len(need):
+        full[need] = mass_near_at(predicted, Z[need], std_z[need], r2, cell)[0]
+    return full
+
+
+def _mass_near(predicted: ParticleSet, Z: np.ndarray, bp: BirthParams, lk: LikelihoodParams,
+               std_z: Optional[np.ndarray]) -> tuple[np.ndarray, Optional[tuple]]:
+    """:func:`mass_near` and the grid its kernel bucketed the predicted particles on (None
+    when it made none), which the update reuses (:class:`GatedGaussian` ``persistent``)."""
+    Z = np.asarray(Z, dtype=np.float64).reshape(-1, OBS_DIM)
+    if len(predicted) == 0 or len(Z) == 0:
+        return np.zeros(len(Z)), None
+    if std_z is None:
+        std_z = obs_std(Z[:, 2:4], lk)
+    r2 = gate_threshold(bp.gate, OBS_DIM)
+    return mass_near_at(predicted, Z, std_z, r2, _grid_cell(std_z, r2))
 
 
 def mass_near_at(predicted: ParticleSet, Z: np.ndarray, std_z: np.ndarray, r2: float,
-                 cell: np.ndarray) -> np.ndarray:
-    """:func:`mass_near`'s kernel call on a grid of ``cell`` (2,)."""
-    ok, out = _kernels.mass_near_kernel(predicted.states, predicted.weights, Z, std_z, r2,
-                                        cell[0], cell[1])
+                 cell: np.ndarray) -> tuple[np.ndarray, tuple]:
+    """:func:`mass_near`'s kernel call on a grid of ``cell`` (2,): M(z) and the grid."""
+    ok, out, grid = _kernels.mass_near_kernel(predicted.states, predicted.weights, Z, std_z, r2,
+                                              cell[0], cell[1])
     if not ok:
         raise ValueError("mass_near: non-finite particle positions")
-    return out
+    return out, grid
 
 
 def _grid_cell(std: np.ndarray, r2: float) -> np.ndarray:
@@ -914,7 +929,7 @@ def birth(predicted: ParticleSet, Z, params: PHDParams, rng: np.random.Generator
         Z = as_observations(Z)
         noise = detection_noise(Z, params.likelihood)
     bp, lk = params.birth, params.likelihood
-    m_near = mass_near(predicted, Z, bp, lk, noise[0])
+    m_near, grid = _mass_near(predicted, Z, bp, lk, noise[0])
     j = allocate_births(m_near, bp)
     n = int(j.sum())
     st = stream(key_from(rng))
@@ -932,7 +947,7 @@ def birth(predicted: ParticleSet, Z, params: PHDParams, rng: np.random.Generator
     _kernels.birth_fill(Z, j, lw_det, st, lk.sigma_obs, lk.sigma_obs_min,
                         lk.sigma_obs_pos_ratio, bp.birth_spread, bp.birth_speed_mean,
                         bp.birth_speed_std, params.motion.min_size, states, log_w, det)
-    return BirthResult(ParticleSet(states, log_w), j, m_near, det)
+    return BirthResult(ParticleSet(states, log_w), j, m_near, det, grid)
 
 
 @dataclass(frozen=True)
@@ -959,12 +974,17 @@ class GatedGaussian:
     arrays.  ``Z`` (N_z, 4) the detections, ``params`` the likelihood's settings, ``r2`` the
     squared Mahalanobis gate radius (``tail_radius2(gate_tail)``, bound in :mod:`.gating`; the
     test is in float64 here, exactly the ellipsoid).  ``noise``: :func:`detection_noise` of
-    ``Z`` under ``params`` when the caller has it (read only with per-detection stds)."""
+    ``Z`` under ``params`` when the caller has it (read only with per-detection stds).
+    ``persistent`` = ``(n, grid, j)`` when the particles are ``n`` predicted ones followed by
+    the newborn, ``j`` (N_z,) of each detection in turn, and ``grid`` is the one M(z)'s
+    kernel bucketed the predicted on (:attr:`BirthResult.grid`): the update then buckets no
+    particle again (read only with per-detection stds)."""
 
     Z: np.ndarray
     params: LikelihoodParams
     r2: float
     noise: Optional[tuple[np.ndarray, np.ndarray]] = None
+    persistent: Optional[tuple[int, tuple, np.ndarray]] = None
 
 
 #: What :func:`update` takes as the likelihood: a dense (N, N_z) matrix, one
@@ -1066,13 +1086,17 @@ def _update_gaussian(particles: ParticleSet, g: GatedGaussian, log_kappa: np.nda
     else:
         std = obs_std(Z[:, 2:4] if by_det else particles.states[:, 4:6], lk)
         log_norm = np.log(std).sum(-1)
-    cell = _grid_cell(std if by_det else np.max(std[:, :2], axis=0, keepdims=True), g.r2)
     done = False
     if by_det:      # the linear route alone (weights within e^600: every PHD frame)
-        ok, done, new_lw, log_c, log_mass, log_pred = _kernels.gauss_update_linear(
+        if g.persistent is not None:            # its grid is built: no cell to size
+            (n_grid, grid, j_born), cell = g.persistent, (1.0, 1.0)
+        else:
+            n_grid, grid, j_born, cell = n, _NO_GRID, _NO_BLOCKS, _grid_cell(std, g.r2)
+        ok, done, new_lw, log_c, log_mass, log_pred, lin, scale = _kernels.gauss_update_linear(
             particles.states, lw, Z, std, log_norm, log_kappa, log_pd, log_pm,
-            float(g.r2), cell[0], cell[1])
+            float(g.r2), cell[0], cell[1], n_grid, grid, j_born)
     if not done:
+        cell = _grid_cell(std if by_det else np.max(std[:, :2], axis=0, keepdims=True), g.r2)
         ok, new_lw, log_c, log_mass, log_pred = _kernels.gauss_update(
             particles.states, lw, Z, std, log_norm, by_det, log_kappa, log_pd, log_pm,
             float(g.r2), cell[0], cell[1])
@@ -1082,9 +1106,16 @@ def _update_gaussian(particles: ParticleSet, g: GatedGaussian, log_kappa: np.nda
     log_den = np.where(np.isfinite(log_den), log_den, 0.0)              # κ = C = 0: term is 0
     out = ParticleSet(particles.states, new_lw, particles.labels, particles.extra)
     out.known_log_mass(log_mass)                                        # the kernel summed it
+    if done and scale > 0.0:
+        out.known_normalised(lin, scale)                                # (the resampling walk)
     particles.known_log_mass(log_pred)
     return UpdateResult(out, np.exp(log_c), kappa, np.exp(log_c - log_den),
                         p_miss * math.exp(log_pred))
+
+
+#: "no grid yet" and "no newborn block" for :func:`._kernels.gauss_update_linear`
+_NO_GRID = (0.0, 0.0, 1.0, 1.0, 0, 0, np.empty(0, np.int64), np.zeros(1, np.int64))
+_NO_BLOCKS = np.empty(0, np.int64)
 
 
 def _update_pairs(particles: ParticleSet, chunks: Iterable[LogGPairs], log_kappa: np.ndarray,
@@ -1313,7 +1344,9 @@ class PHDFilter:
             log_g: LogG = GatedGaussian(Z, self.likelihood.params,
                                         tail_radius2(p.gating.gate_tail, OBS_DIM),
                                         noise if self.likelihood.params == p.likelihood
-                                        else None)
+                                        else None,
+                                        None if born.grid is None
+                                        else (n, born.grid, born.j_per_det))
         else:
             log_g = gated_log_g(self.likelihood, candidates.states, Z, frame, p)
         updated = update(candidates, log_g, log_kappa, p.likelihood.p_miss)

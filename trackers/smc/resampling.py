@@ -29,24 +29,31 @@ def _systematic_index(lw, log_mass, u0, n):
     ``exp(lw − log_mass)`` (its last bin forced to 1, summed in order as ``np.cumsum``), the
     first bin whose CDF exceeds ``u_k`` (``searchsorted(side="right")``: zero-weight bins are
     never picked). The walk of :func:`_systematic_take` with no columns to copy."""
-    return _systematic_take(np.empty((lw.shape[0], 0), np.float64), lw, log_mass, u0, n)[0]
+    return _systematic_take(np.empty((lw.shape[0], 0), np.float64), lw, log_mass, u0, n,
+                            np.empty(0, np.float64), 0.0)[0]
+
+
+_NO_WEIGHTS = np.empty(0, np.float64)
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
-def _systematic_take(states, lw, log_mass, u0, n):
+def _systematic_take(states, lw, log_mass, u0, n, w, scale):
     """:func:`_systematic_index` and the ancestors' rows of ``states`` (N, D) in the same walk:
-    returns ``(idx (n,), states[idx] (n, D))`` with no exp or gather pass of its own."""
+    returns ``(idx (n,), states[idx] (n, D))`` with no exp or gather pass of its own.  With
+    ``w`` (N,) given (else empty), the normalised weights are ``w · scale`` instead of
+    ``exp(lw − log_mass)`` (:meth:`~.weights.ParticleSet.known_normalised`): no exp at all."""
     N = lw.shape[0]
     D = states.shape[1]
     idx = np.empty(n, np.int64)
     out = np.empty((n, D), np.float64)
+    lin = w.shape[0] == N
     j = 0
-    c = math.exp(lw[0] - log_mass) if N > 1 else 1.0
+    c = (w[0] * scale if lin else math.exp(lw[0] - log_mass)) if N > 1 else 1.0
     for k in range(n):
         u = (u0 + k) / n
         while j < N - 1 and c <= u:
             j += 1
-            c = c + math.exp(lw[j] - log_mass) if j < N - 1 else 1.0
+            c = c + (w[j] * scale if lin else math.exp(lw[j] - log_mass)) if j < N - 1 else 1.0
         idx[k] = j
         for d in range(D):
             out[k, d] = states[j, d]
@@ -139,8 +146,9 @@ def resample(ps: ParticleSet, n: int, rng: np.random.Generator,
         return ps.take(np.zeros(0, dtype=np.int64))
     lw = np.full(n, ps.log_mass - np.log(n))
     if scheme == "systematic":      # the log-mass is known: one walk that also copies the rows
+        w, scale = ps.__dict__.get("_normalised", (_NO_WEIGHTS, 0.0))
         idx, states = _systematic_take(ps.states, ps.log_weights, ps.log_mass,
-                                       float(rng.random()), n)
+                                       float(rng.random()), n, w, scale)
         return ParticleSet(states, lw, None if ps.labels is None else ps.labels[idx],
                            None if ps.extra is None else ps.extra[idx])
     idx = resample_indices(ps.log_weights, n, rng, scheme)

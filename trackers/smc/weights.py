@@ -126,15 +126,25 @@ class ParticleSet:
         PHD update's kernel): :attr:`log_mass` then needs no pass of its own."""
         self.__dict__["log_mass"] = float(log_mass)
 
+    def known_normalised(self, w: np.ndarray, scale: float) -> None:
+        """Record ``w · scale`` (N,), the normalised weights ``exp(log_weights − log_mass)``
+        as the code that made the weights summed them (the PHD update's kernel: linear
+        weights and their total): systematic resampling then walks them with no exp a
+        particle (:func:`.resampling.resample`).  Equal to the exps up to round-off."""
+        self.__dict__["_normalised"] = (w, float(scale))
+
     @property
     def mass(self) -> float:
         """Total weight ``exp(logsumexp(log_weights))`` (0 for an empty set)."""
         return float(np.exp(self.log_mass))
 
-    @property
+    @cached_property
     def weights(self) -> np.ndarray:
-        """Linear (unnormalised) weights, (N,)."""
-        return np.exp(self.log_weights)
+        """Linear (unnormalised) weights, (N,), computed once (read-only: callers share it;
+        the PHD filter's M(z) and its clutter model both read the predicted set's)."""
+        w = np.exp(self.log_weights)
+        w.setflags(write=False)
+        return w
 
     def ess(self) -> float:
         return ess(self.log_weights)
