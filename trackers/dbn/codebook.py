@@ -414,7 +414,7 @@ class ForegroundModel:
         small = self._small(frame.image)
         self.small = small
         if isinstance(self._model, Codebook):
-            raw = self._model.apply(small).astype(np.uint8)
+            raw = self._model.apply(small).view(np.uint8)      # bool as 0/1 bytes, no copy
         else:
             raw = (self._model.foreground(Frame(frame.index, frame.timestamp, small)) > 0
                    ).astype(np.uint8)
@@ -430,8 +430,8 @@ def blobs_from_mask(mask: np.ndarray, scale: float, min_area: int,
     full-resolution px, fill (N,) foreground fraction of the box)``, biggest first."""
     if mask.size == 0 or np.count_nonzero(mask) > max_foreground * mask.size:
         return np.zeros((0, 4)), np.zeros(0)
-    n, _lab, stats, _c = cv2.connectedComponentsWithStats(mask.astype(np.uint8), connectivity=8,
-                                                          ltype=cv2.CV_32S)
+    m8 = mask if mask.dtype == np.uint8 else mask.astype(np.uint8)
+    n, _lab, stats, _c = cv2.connectedComponentsWithStats(m8, connectivity=8, ltype=cv2.CV_32S)
     st = stats[1:n].astype(np.float64)
     area = st[:, cv2.CC_STAT_AREA]
     keep = area >= min_area * scale * scale

@@ -201,9 +201,10 @@ def select_windows(windows: np.ndarray, prob: np.ndarray, accept: float,
     """Indices of the windows kept: P >= ``accept``, greedily best first, each overlapping
     every kept one by at most ``overlap`` (intersection over the smaller box)."""
     w = np.asarray(windows, dtype=np.float64).reshape(-1, 4)
-    order = [i for i in np.argsort(-np.asarray(prob), kind="stable") if prob[i] >= accept]
+    prob = np.asarray(prob)
+    order = np.argsort(-prob, kind="stable")
     kept: list[int] = []
-    for i in order:
+    for i in order[prob[order] >= accept].tolist():
         if kept:
             k = w[kept]
             ix = np.maximum(0.0, np.minimum(w[i, 0] + w[i, 2], k[:, 0] + k[:, 2])
