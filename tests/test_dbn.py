@@ -1005,3 +1005,15 @@ def test_weighted_births_let_a_rejected_blob_give_light_newborn():
     ratio = w.weights[right].mean() / w.weights[~right].mean()
     p_right, p_left = 1 / (1 + np.exp(3.0)), 1 / (1 + np.exp(-3.0))
     assert ratio == pytest.approx(p_right / p_left, rel=0.1)
+
+
+def test_person_scale_median_is_numpys_float_for_float():
+    """The robust line's median (run every frame) is np.median's float: odd and even counts,
+    ties, one and two elements."""
+    from pfscope.trackers.dbn.scale import _median
+
+    rng = np.random.default_rng(5)
+    for n in (1, 2, 3, 4, 21, 400, 401):
+        for x in (rng.normal(0.0, 3.0, n), rng.integers(0, 4, n).astype(float),
+                  rng.uniform(0.1, 0.9, n)):
+            assert _median(x) == np.median(x), n
