@@ -375,10 +375,11 @@ class DBNPHDTracker(_AssociatingTracker):
         on_particles = apply in ("particle", "blob_particle")
         # the gated particles (each once) only when they are scored: a sort of every pair
         score_them = self.dbn is not None and len(rows) > 0 and (on_particles or want_p)
-        if score_them:
+        if not score_them:
+            log.scalar("dbn/particles/scored", 0)
+        else:
             uniq, inv = np.unique(rows, return_inverse=True)
-        log.scalar("dbn/particles/scored", len(uniq) if score_them else 0)
-        if score_them:
+            log.scalar("dbn/particles/scored", len(uniq))
             logits = self.dbn.logits(state_boxes(cand.states[uniq]), frame)
             if on_particles:
                 s_pairs = self.dbn.log_score(logits)[inv]
