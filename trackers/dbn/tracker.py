@@ -247,6 +247,14 @@ class DBNPHDTracker(_AssociatingTracker):
 
         self.background.prime(sample_frames(source, bp.median_frames, first, last))
 
+    def upcoming(self, frame: Frame) -> None:
+        """The pipeline's look-ahead on a recorded clip: ``frame`` is the one the next
+        :meth:`step` gets.  Its background stage (resize, codebook, morphology: ~a quarter of
+        the step) then runs on a helper thread, started as soon as this step's own mask is
+        done, while this frame's blobs, filter and association, the recording and the scoring
+        go on: the same masks in the same order (:meth:`ForegroundModel.upcoming`)."""
+        self.background.upcoming(frame)
+
     def config(self) -> dict:
         cfg = {"tracker": self.name, "params": to_dict(self.params)}
         if self.dbn is not None:
