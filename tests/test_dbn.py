@@ -1107,8 +1107,10 @@ def test_pipeline_announces_the_next_frame_of_a_recorded_clip(tmp_path):
                                if isinstance(it, Scalar)]))
 
     a, b = Rows(), Rows()
-    run(src, [Spy(rng=np.random.default_rng(0))], frames=10, start=3, hooks=[a], score=False)
-    run(src, [NoAhead(rng=np.random.default_rng(0))], frames=10, start=3, hooks=[b],
+    params = registry()["phd-bgsub"].params
+    run(src, [Spy(params, rng=np.random.default_rng(0))], frames=10, start=3, hooks=[a],
+        score=False)
+    run(src, [NoAhead(params, rng=np.random.default_rng(0))], frames=10, start=3, hooks=[b],
         score=False)
     assert calls == [c for k in range(3, 13)
                      for c in ((("next", k + 1), ("step", k)) if k < 12 else (("step", k),))]
