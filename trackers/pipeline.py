@@ -259,8 +259,8 @@ def run(source, trackers: Mapping[str, Tracker] | Sequence[Tracker], *,
             stream = prefetch(stream)  # decode the next frames while this one is tracked
             # a recorded clip: trackers with an `upcoming(frame)` hear of the next frame
             # before stepping this one (DBN-PHD starts its background stage on a thread)
-            ahead = [t.upcoming for t in lanes.values()
-                     if callable(getattr(t, "upcoming", None))]
+            ahead = [up for up in (getattr(t, "upcoming", None) for t in lanes.values())
+                     if callable(up)]
         for frame, nxt in (with_next(stream) if ahead else ((f, None) for f in stream)):
             if should_stop is not None and should_stop():
                 break
