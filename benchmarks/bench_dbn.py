@@ -83,6 +83,10 @@ def timed(cls):
     (stage → list of seconds, one per frame)."""
 
     class Timed(cls):
+        #: no look-ahead (:meth:`DBNPHDTracker.upcoming`): every stage runs inside the step,
+        #: on this thread, so the stage clock sees all of it
+        upcoming = None
+
         def __init__(self, *a, **kw):
             super().__init__(*a, **kw)
             self.stage_seconds: dict[str, list[float]] = {s: [] for s in self.stages}

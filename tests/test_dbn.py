@@ -1005,3 +1005,133 @@ def test_weighted_births_let_a_rejected_blob_give_light_newborn():
     ratio = w.weights[right].mean() / w.weights[~right].mean()
     p_right, p_left = 1 / (1 + np.exp(3.0)), 1 / (1 + np.exp(-3.0))
     assert ratio == pytest.approx(p_right / p_left, rel=0.1)
+
+
+def test_person_scale_median_is_numpys_float_for_float():
+    """The robust line's median (run every frame) is np.median's float: odd and even counts,
+    ties, one and two elements."""
+    from pfscope.trackers.dbn.scale import _median
+
+    rng = np.random.default_rng(5)
+    for n in (1, 2, 3, 4, 21, 400, 401):
+        for x in (rng.normal(0.0, 3.0, n), rng.integers(0, 4, n).astype(float),
+                  rng.uniform(0.1, 0.9, n)):
+            assert _median(x) == np.median(x), n
+
+
+def _moving_square_clip(n=12, h=60, w=80):
+    rng = np.random.default_rng(4)
+    bg = rng.integers(60, 160, (h, w, 3)).astype(np.uint8)
+    out = []
+    for k in range(n):
+        img = np.clip(bg.astype(np.int16) + rng.integers(-3, 4, bg.shape), 0, 255).astype(np.uint8)
+        img[20:44, 4 + 5 * k:16 + 5 * k] = (30, 30, 220)
+        out.append(img)
+    return out
+
+
+def test_background_look_ahead_gives_the_same_masks_on_the_helper_thread():
+    """ForegroundModel.upcoming: the next frame's stage runs on the helper thread once this
+    frame's mask is done, and every mask (and the codebook) is what computing it in mask() gives;
+    a frame other than the announced one is refused."""
+    import threading
+
+    from pfscope.trackers.dbn.codebook import ForegroundModel
+    from pfscope.trackers.types import Frame
+
+    imgs = _moving_square_clip()
+    frames = [Frame(k + 1, k / 10.0, im) for k, im in enumerate(imgs)]
+    bp = BackgroundParams(scale=0.5, morph_kernel=3, min_area=10)
+    plain, ahead = ForegroundModel(bp), ForegroundModel(bp)
+    plain.prime(imgs[:5])
+    ahead.prime(imgs[:5])
+    where = []
+    stage = ahead._stage
+    ahead._stage = lambda f: where.append((f.index, threading.current_thread().name)) or stage(f)
+    for k, fr in enumerate(frames):
+        if k + 1 < len(frames):
+            ahead.upcoming(frames[k + 1])
+        np.testing.assert_array_equal(ahead.mask(fr), plain.mask(fr))
+        np.testing.assert_array_equal(ahead.small, plain.small)
+    for name in ("v", "vv", "imin", "imax", "f", "lam", "p", "q"):
+        np.testing.assert_array_equal(getattr(ahead._model.book, name),
+                                      getattr(plain._model.book, name))
+    assert where[0] == (1, threading.current_thread().name)        # nothing announced it
+    assert [i for i, _ in where] == list(range(1, len(frames) + 1))  # each frame once, in order
+    assert all(t.startswith("pfscope-background") for _, t in where[1:])
+    other = ForegroundModel(bp)
+    other.prime(imgs[:5])
+    other.mask(frames[0])
+    other.upcoming(frames[1])
+    other.mask(frames[1])                     # computes frames[1]... and starts nothing more
+    other.upcoming(frames[3])
+    other.mask(frames[2])                     # starts frames[3] on the helper
+    with pytest.raises(RuntimeError, match="announced"):
+        other.mask(frames[4])
+
+
+def test_pipeline_announces_the_next_frame_of_a_recorded_clip(tmp_path):
+    """run(): a tracker with upcoming() hears of frame k+1 before step(k) on a recorded clip
+    (never after the last frame); phd-bgsub's tracks are the same with and without it."""
+    from pfscope.trackers.data.sources import ImageFolderSource
+    from pfscope.trackers.dbn.tracker import PHDBgsubTracker
+    from pfscope.trackers.pipeline import BaseHook
+
+    for k, im in enumerate(_moving_square_clip(16), 1):
+        cv2.imwrite(str(tmp_path / f"{k:06d}.png"), im)
+    src = ImageFolderSource(tmp_path)
+    calls = []
+
+    class Spy(PHDBgsubTracker):
+        name = "phd-bgsub"
+
+        def upcoming(self, frame):
+            calls.append(("next", frame.index))
+            super().upcoming(frame)
+
+        def step(self, frame, detections, level=None):
+            calls.append(("step", frame.index))
+            return super().step(frame, detections, level)
+
+    class NoAhead(PHDBgsubTracker):
+        upcoming = None
+
+    class Rows(BaseHook):
+        def __init__(self):
+            self.rows = []
+
+        def on_frame(self, r):
+            res = next(iter(r.results.values()))
+            self.rows.append((r.frame.index, res.tracks.ids.tolist(), res.tracks.boxes.tolist(),
+                              [(it.path, it.value) for st in res.stages for it in st.items
+                               if isinstance(it, Scalar)]))
+
+    a, b = Rows(), Rows()
+    params = registry()["phd-bgsub"].params
+    run(src, [Spy(params, rng=np.random.default_rng(0))], frames=10, start=3, hooks=[a],
+        score=False)
+    run(src, [NoAhead(params, rng=np.random.default_rng(0))], frames=10, start=3, hooks=[b],
+        score=False)
+    assert calls == [c for k in range(3, 13)
+                     for c in ((("next", k + 1), ("step", k)) if k < 12 else (("step", k),))]
+    assert a.rows == b.rows
+    blobs = [dict(sc)["dbn/blobs/count"] for *_, sc in a.rows]
+    assert min(blobs) >= 1                    # the square is a blob in every frame
+
+
+def test_with_next_pairs_each_frame_with_the_next_and_defers_a_read_error():
+    from pfscope.trackers.pipeline import with_next
+
+    assert list(with_next(iter([1, 2, 3]))) == [(1, 2), (2, 3), (3, None)]
+    assert list(with_next(iter([]))) == []
+
+    def broken():
+        yield 1
+        yield 2
+        raise InputError("frame 3: unreadable")
+
+    got = []
+    with pytest.raises(InputError, match="frame 3"):
+        for pair in with_next(broken()):
+            got.append(pair)
+    assert got == [(1, 2), (2, None)]          # frame 2 is handed out before the error

@@ -21,7 +21,7 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Mapping, Optional, Protocol, Sequence
+from typing import Callable, Iterator, Mapping, Optional, Protocol, Sequence
 
 from .api import Rows, StepResult, Tracker
 from .data.sources import prefetch
@@ -254,11 +254,19 @@ def run(source, trackers: Mapping[str, Tracker] | Sequence[Tracker], *,
                 if prepare is not None:
                     prepare(source, start, start + total - 1)
         stream = iter_frames(source, total, start)
+        ahead: list = []
         if getattr(source, "has_frames", False) and source.kind != "synthetic":
             stream = prefetch(stream)  # decode the next frames while this one is tracked
-        for frame in stream:
+            # a recorded clip: trackers with an `upcoming(frame)` hear of the next frame
+            # before stepping this one (DBN-PHD starts its background stage on a thread)
+            ahead = [up for up in (getattr(t, "upcoming", None) for t in lanes.values())
+                     if callable(up)]
+        for frame, nxt in (with_next(stream) if ahead else ((f, None) for f in stream)):
             if should_stop is not None and should_stop():
                 break
+            if nxt is not None:
+                for up in ahead:
+                    up(nxt)
             current = frame.index
             dets = det_fn(frame) if det_fn is not None else None
             gt = gt_table.ground_truth(frame.index) if gt_table is not None else None
@@ -324,6 +332,21 @@ def _check_frameless(source, lanes: Mapping[str, Tracker], det_name: Optional[st
                          f"{det_name!r} needs pixels; use the detections file (--detector file)")
 
 
+def with_next(frames: Iterator[Frame]) -> Iterator[tuple[Frame, Optional[Frame]]]:
+    """``(frame, next frame or None)`` pairs: the next frame is read before ``frame`` is
+    handed out.  An error reading it is raised after ``frame`` (as ``frames`` would)."""
+    it = iter(frames)
+    cur = next(it, None)
+    while cur is not None:
+        try:
+            nxt = next(it, None)
+        except BaseException:
+            yield cur, None
+            raise
+        yield cur, nxt
+        cur = nxt
+
+
 def score_rows(gt_table, rows: Rows, frames: int, start: int = 1) -> dict:
     """Sequence scores of a lane's tracks-file rows over frames ``start..start + frames - 1``."""
     from .data.motio import table_from_tracksets
@@ -334,4 +357,4 @@ def score_rows(gt_table, rows: Rows, frames: int, start: int = 1) -> dict:
 
 __all__ = ["run", "RunInfo", "FrameReport", "Outcome", "Hook", "BaseHook", "RunResult",
            "TracksFileHook", "resolve_detector_name", "frames_to_read", "iter_frames",
-           "score_rows"]
+           "with_next", "score_rows"]

@@ -260,16 +260,18 @@ class TrackPalette:
             if known.any():
                 out[known] = self.colors(ids[known], alpha)
             return out
-        uniq, inv = np.unique(ids, return_inverse=True)
-        for t in uniq.tolist():  # alive now (those with a colour count as live for the new)
+        # the distinct ids in increasing order (np.unique's), in Python: a frame has a few ids
+        # and this runs several times a frame, where np.unique's own cost was most of it
+        uniq = sorted(set(ids.tolist()))
+        for t in uniq:  # alive now (those with a colour count as live for the new)
             if t in self._index:
                 self._seen[t] = self.frame
-        ks = np.array([self.index_of(int(t)) for t in uniq.tolist()], dtype=np.int64)
+        ks = {t: self.index_of(t) for t in uniq}
         if len(self._seen) > 4 * len(self._pal):  # bounded: forget ids long gone
             self._seen = {t: f for t, f in self._seen.items()
                           if self.frame - f <= self.live_frames}
         out = np.empty((len(ids), 4), dtype=np.uint8)
-        out[:, :3] = self._pal[ks[inv]]
+        out[:, :3] = self._pal[[ks[t] for t in ids.tolist()]]
         out[:, 3] = alpha
         return out
 

@@ -43,6 +43,7 @@ MOG2/KNN (:mod:`pfscope.trackers.detect.bgsub`) behind one ``mask(frame)``.
 
 from __future__ import annotations
 
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 
 import cv2
@@ -374,6 +375,17 @@ def _take(book: _Book, pix: np.ndarray) -> _Book:
     return sub
 
 
+_HELPER: list[ThreadPoolExecutor] = []
+
+
+def _helper() -> ThreadPoolExecutor:
+    """The one thread :meth:`ForegroundModel.upcoming` runs the next frames' stage on (one
+    worker: the stages of a model run in the order they were submitted)."""
+    if not _HELPER:
+        _HELPER.append(ThreadPoolExecutor(1, thread_name_prefix="pfscope-background"))
+    return _HELPER[0]
+
+
 class ForegroundModel:
     """One ``mask(frame)`` over the codebook or OpenCV's MOG2/KNN: the cleaned (H', W') uint8
     foreground mask at ``params.scale`` (1 = foreground), after opening and closing."""
@@ -381,6 +393,8 @@ class ForegroundModel:
     def __init__(self, params: BackgroundParams = BackgroundParams()):
         self.params = params
         self.small: np.ndarray | None = None   # the last frame at the model's scale
+        self._next: Frame | None = None         # upcoming(): the frame after this one
+        self._ahead: tuple[Frame, Future] | None = None   # its stage, running on the helper
         k = int(round(params.morph_kernel * params.scale))
         self._kernel = (cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (k, k)) if k > 1 else None)
         if params.method == "codebook":
@@ -410,17 +424,40 @@ class ForegroundModel:
             return None
         return self._model.prime(np.stack([self._small(im) for im in images]))
 
-    def mask(self, frame: Frame) -> np.ndarray:
+    def _stage(self, frame: Frame) -> tuple[np.ndarray, np.ndarray]:
+        """``(small, mask)`` of ``frame``: resize, background model, opening and closing."""
         small = self._small(frame.image)
-        self.small = small
         if isinstance(self._model, Codebook):
-            raw = self._model.apply(small).astype(np.uint8)
+            raw = self._model.apply(small).view(np.uint8)      # bool as 0/1 bytes, no copy
         else:
             raw = (self._model.foreground(Frame(frame.index, frame.timestamp, small)) > 0
                    ).astype(np.uint8)
         if self._kernel is not None:
             raw = cv2.morphologyEx(raw, cv2.MORPH_OPEN, self._kernel)
             raw = cv2.morphologyEx(raw, cv2.MORPH_CLOSE, self._kernel)
+        return small, raw
+
+    def upcoming(self, frame: Frame) -> None:
+        """``frame`` is the one the next :meth:`mask` call gets (a recorded clip's look-ahead,
+        :func:`pfscope.trackers.pipeline.run`): once this frame's mask is done, the next
+        frame's stage runs on a helper thread while the caller goes on (OpenCV and the
+        codebook kernel release the GIL).  The model still sees the frames one after the
+        other, in order: the same masks and model as without the look-ahead."""
+        self._next = frame
+
+    def mask(self, frame: Frame) -> np.ndarray:
+        ahead, self._ahead = self._ahead, None
+        if ahead is not None:
+            small, raw = ahead[1].result()
+            if ahead[0] is not frame:
+                raise RuntimeError(f"ForegroundModel: frame {ahead[0].index} was announced "
+                                   f"as the next one (upcoming) but frame {frame.index} came")
+        else:
+            small, raw = self._stage(frame)
+        self.small = small
+        nxt, self._next = self._next, None
+        if nxt is not None and nxt is not frame:
+            self._ahead = (nxt, _helper().submit(self._stage, nxt))
         return raw
 
 
@@ -430,8 +467,8 @@ def blobs_from_mask(mask: np.ndarray, scale: float, min_area: int,
     full-resolution px, fill (N,) foreground fraction of the box)``, biggest first."""
     if mask.size == 0 or np.count_nonzero(mask) > max_foreground * mask.size:
         return np.zeros((0, 4)), np.zeros(0)
-    n, _lab, stats, _c = cv2.connectedComponentsWithStats(mask.astype(np.uint8), connectivity=8,
-                                                          ltype=cv2.CV_32S)
+    m8 = mask if mask.dtype == np.uint8 else mask.astype(np.uint8)
+    n, _lab, stats, _c = cv2.connectedComponentsWithStats(m8, connectivity=8, ltype=cv2.CV_32S)
     st = stats[1:n].astype(np.float64)
     area = st[:, cv2.CC_STAT_AREA]
     keep = area >= min_area * scale * scale

@@ -105,7 +105,7 @@ class PersonScale:
         if self._fit is None:
             y, h = self._foot, self._h
             a, b = _robust_line(y, h)
-            self._fit = (a, b, float(np.median(self._aspect)))
+            self._fit = (a, b, _median(self._aspect))
         return self._fit
 
     def size_at(self, foot_y) -> tuple[np.ndarray, np.ndarray]:
@@ -117,6 +117,18 @@ class PersonScale:
         return np.maximum(aspect * h, 4.0), h
 
 
+def _median(x: np.ndarray) -> float:
+    """``np.median`` of a 1-D float array without NaN: the same float (the middle element, or
+    the mean of the middle two, of the same partition) without its generic machinery, which
+    cost most of :func:`_robust_line` (run every frame)."""
+    n = len(x)
+    k = n // 2
+    if n % 2:
+        return float(np.partition(x, k)[k])
+    part = np.partition(x, (k - 1, k))
+    return float((part[k - 1] + part[k]) / 2)
+
+
 def _robust_line(y: np.ndarray, h: np.ndarray) -> tuple[float, float]:
     """``h ≈ a + b·y``: least squares, then twice more without points off by > 2.5 robust σ.
     A flat line (the median) when the rows span too little to fit a slope."""
@@ -126,7 +138,7 @@ def _robust_line(y: np.ndarray, h: np.ndarray) -> tuple[float, float]:
         dy = yy - my
         syy = float(dy @ dy)
         if len(yy) < 3 or syy < 1e-9 * max(1.0, my * my) * len(yy):
-            return float(np.median(hh)), 0.0
+            return _median(hh), 0.0
         b = float(dy @ (hh - mh)) / syy                    # closed-form least squares
         return float(mh - b * my), b
 
@@ -134,8 +146,9 @@ def _robust_line(y: np.ndarray, h: np.ndarray) -> tuple[float, float]:
     a, b = fit(m)
     for _ in range(2):
         r = h - (a + b * y)
-        med = np.median(r[m])
-        s = 1.4826 * np.median(np.abs(r[m] - med))
+        rm = r[m]
+        med = _median(rm)
+        s = 1.4826 * _median(np.abs(rm - med))
         if not s > 0:
             break
         keep = np.abs(r - med) <= 2.5 * s
@@ -201,9 +214,10 @@ def select_windows(windows: np.ndarray, prob: np.ndarray, accept: float,
     """Indices of the windows kept: P >= ``accept``, greedily best first, each overlapping
     every kept one by at most ``overlap`` (intersection over the smaller box)."""
     w = np.asarray(windows, dtype=np.float64).reshape(-1, 4)
-    order = [i for i in np.argsort(-np.asarray(prob), kind="stable") if prob[i] >= accept]
+    prob = np.asarray(prob)
+    order = np.argsort(-prob, kind="stable")
     kept: list[int] = []
-    for i in order:
+    for i in order[prob[order] >= accept].tolist():
         if kept:
             k = w[kept]
             ix = np.maximum(0.0, np.minimum(w[i, 0] + w[i, 2], k[:, 0] + k[:, 2])

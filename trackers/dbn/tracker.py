@@ -247,6 +247,14 @@ class DBNPHDTracker(_AssociatingTracker):
 
         self.background.prime(sample_frames(source, bp.median_frames, first, last))
 
+    def upcoming(self, frame: Frame) -> None:
+        """The pipeline's look-ahead on a recorded clip: ``frame`` is the one the next
+        :meth:`step` gets.  Its background stage (resize, codebook, morphology: ~a quarter of
+        the step) then runs on a helper thread, started as soon as this step's own mask is
+        done, while this frame's blobs, filter and association, the recording and the scoring
+        go on: the same masks in the same order (:meth:`ForegroundModel.upcoming`)."""
+        self.background.upcoming(frame)
+
     def config(self) -> dict:
         cfg = {"tracker": self.name, "params": to_dict(self.params)}
         if self.dbn is not None:
@@ -304,7 +312,9 @@ class DBNPHDTracker(_AssociatingTracker):
         if self.dbn is not None and frame.image.ndim == 3:
             # the features' pyramid level at the background's scale is that same resize
             self.dbn.frame_features(frame, {p.background.scale: self.background.small})
-        log.scalar("dbn/foreground/fraction", float(mask.mean()) if mask.size else 0.0)
+        # the mask is 0/1: its mean is the count over the size (the same float, no float64 pass)
+        log.scalar("dbn/foreground/fraction", np.count_nonzero(mask) / mask.size if mask.size
+                   else 0.0)
         if want_c:
             H, W = frame.image.shape[:2]
             full = cv2.resize(mask, (W, H), interpolation=cv2.INTER_NEAREST)
@@ -369,12 +379,15 @@ class DBNPHDTracker(_AssociatingTracker):
         cand = predicted.concat(newborn)
         rows, cols = _gated_pairs(cand.states, Z, fp, p.dbn.score_gate)
         log_g_pairs = gaussian_pairs(cand.states, Z, rows, cols, fp.likelihood)
-        uniq, inv = np.unique(rows, return_inverse=True)
         apply = p.dbn.apply
         on_particles = apply in ("particle", "blob_particle")
-        score_them = self.dbn is not None and len(uniq) and (on_particles or want_p)
-        log.scalar("dbn/particles/scored", len(uniq) if score_them else 0)
-        if score_them:
+        # the gated particles (each once) only when they are scored: a sort of every pair
+        score_them = self.dbn is not None and len(rows) > 0 and (on_particles or want_p)
+        if not score_them:
+            log.scalar("dbn/particles/scored", 0)
+        else:
+            uniq, inv = np.unique(rows, return_inverse=True)
+            log.scalar("dbn/particles/scored", len(uniq))
             logits = self.dbn.logits(state_boxes(cand.states[uniq]), frame)
             if on_particles:
                 s_pairs = self.dbn.log_score(logits)[inv]
