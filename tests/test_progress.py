@@ -226,6 +226,38 @@ def test_compile_kernels_covers_a_run():
     assert _signatures() == before
 
 
+def test_compile_kernels_covers_a_dbn_phd_run():
+    """Given the DBN-PHD tracker, the warm-up also compiles (or loads) the codebook and DBN
+    feature kernels with the types a run gives them: a DBN-PHD run's frames then compile no
+    kernel signature (a cold run says so in the warm-up's one line, not inside frame 1)."""
+    import numpy as np
+    from numba.core.registry import CPUDispatcher
+
+    import pfscope.trackers.dbn._codebook_kernels as CB
+    import pfscope.trackers.dbn._feature_kernels as FK
+    from pfscope.trackers.api import make_params, tracker_info
+    from pfscope.trackers.data.sources import open_source
+    from pfscope.trackers.pipeline import run
+    from pfscope.trackers.warmup import compile_kernels
+
+    def signatures():
+        return {**_signatures(),
+                **{f"{m.__name__}.{n}": set(map(str, d.signatures))
+                   for m in (CB, FK) for n, d in vars(m).items()
+                   if isinstance(d, CPUDispatcher)}}
+
+    def tracker():
+        return tracker_info("dbn-phd").cls(make_params("dbn-phd", None, {}),
+                                           rng=np.random.default_rng(1))
+
+    compile_kernels(trackers=[tracker()])
+    before = signatures()
+    assert all(before[f"{m.__name__}.{n}"] for m, n in ((CB, "detect"),
+                                                        (FK, "region_cell_sums")))
+    run(open_source(None), {"dbn-phd": tracker()}, frames=8, level="tracks")
+    assert signatures() == before
+
+
 def test_a_dlpf_run_warms_only_the_resampling_kernel(monkeypatch):
     """DLPF calls only systematic resampling: its warm-up does not compile (or load) the PHD
     filter's kernels, which would add seconds to its start; PHD-MT's does."""

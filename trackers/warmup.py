@@ -192,6 +192,34 @@ def _join(helper: "subprocess.Popen | None", timeout: float = 300.0) -> None:
         helper.wait()
 
 
+#: trackers with kernels of their own besides the PHD filter's: the codebook background
+#: (both) and the DBN features (dbn-phd)
+BACKGROUND_TRACKERS = frozenset({"dbn-phd", "phd-bgsub"})
+
+
+def _compile_background(trackers) -> None:
+    """The codebook and feature kernels of the ``trackers`` among :data:`BACKGROUND_TRACKERS`:
+    a fresh tracker with the same parameters runs 3 frames of a small built-in scene (the
+    kernels see the argument types a real run gives them, so no frame of the run compiles
+    again).  Once per tracker name and process."""
+    global _ready
+    todo = {getattr(t, "name", None): t for t in trackers
+            if getattr(t, "name", None) in BACKGROUND_TRACKERS}
+    todo = {n: t for n, t in todo.items() if ("background", n) not in _ready}
+    if not todo:
+        return
+    from .data.sources import open_source
+    from .data.synthetic import demo_config
+    from .pipeline import run
+
+    for name, t in todo.items():
+        twin = type(t)(t.params, rng=np.random.default_rng(0))
+        source = open_source(None, synthetic_config=demo_config(frames=3, width=320,
+                                                                height=240))
+        run(source, {name: twin}, frames=3, level="tracks", score=False, keep_rows=False)
+        _ready = _ready | {("background", name)}
+
+
 def index_kernel_needed(trackers) -> bool:
     """True when one of ``trackers`` resamples by ancestor indices (DLPF), a kernel the PHD
     filter does not call."""
@@ -199,7 +227,17 @@ def index_kernel_needed(trackers) -> bool:
 
 
 def compile_kernels(presets=("practical", "paper"), phd: bool = True,
-                    index: bool | None = None) -> float:
+                    index: bool | None = None, trackers=()) -> float:
+    """:func:`_compile_core`, then the background trackers' own kernels among ``trackers``
+    (:func:`_compile_background`); returns the seconds it took."""
+    t0 = time.perf_counter()
+    _compile_core(presets, phd, index)
+    _compile_background(trackers)
+    return time.perf_counter() - t0
+
+
+def _compile_core(presets=("practical", "paper"), phd: bool = True,
+                  index: bool | None = None) -> float:
     """Call every kernel once on made-up data (a compile on the first run after an install,
     a load from numba's cache afterwards); returns the seconds it took.  ``phd=False``: only
     the resampling kernel (DLPF's one).  ``index``: also the systematic resampling's index

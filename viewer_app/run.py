@@ -361,7 +361,7 @@ def prepare_kernels(trackers, *, enabled: bool = True, stream=None, delay: float
     try:
         with event.install_listener("numba:compile", Compiling()):
             compile_kernels(phd=phd_kernels_needed(trackers),
-                            index=index_kernel_needed(trackers))
+                            index=index_kernel_needed(trackers), trackers=list(trackers))
     finally:
         secs = notice.stop()
     return secs

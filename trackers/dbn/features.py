@@ -298,7 +298,10 @@ class FrameFeatures:
             shape[r] = n, y1 - y0, x1 - x0
             n += (y1 - y0) * (x1 - x0)
         ob, mag, cb = _bins(np.concatenate(gxs), np.concatenate(gys), np.concatenate(hsvs), c)
-        return region_cell_sums(ob, mag, cb, shape[:, 0], shape[:, 1], shape[:, 2],
+        # (rows of the transposed copy: always C-contiguous, so numba compiles one
+        # specialisation; a column of `shape` is contiguous only when there is one region)
+        starts, heights, widths = np.ascontiguousarray(shape.T)
+        return region_cell_sums(ob, mag, cb, starts, heights, widths,
                                 np.asarray(region_of, np.int64), yh, xh, yc, xc,
                                 c.orientations, c.colour_bins)
 
