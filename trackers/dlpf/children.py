@@ -53,6 +53,19 @@ def _bin_table(mh: int, ms: int, mv: int, s_min: float, v_min: float) -> np.ndar
     return lut
 
 
+@lru_cache(maxsize=8)
+def _bin_table_small(mh: int, ms: int, mv: int, s_min: float, v_min: float) -> np.ndarray:
+    """The table of :func:`hsv_bins` when every bin index fits in 7 bits (``mh·ms + mv`` ≤ 128):
+    hue → ``hue bin · ms``; saturation → its bin, +128 when too low for a chromatic bin; value
+    → ``mh·ms +`` its bin, +128 when too low.  A chromatic bin is then the sum of the first two
+    bytes and a value-only bin the third byte's low 7 bits (fewer array passes per pixel)."""
+    lut = _bin_table(mh, ms, mv, s_min, v_min).copy()
+    lut[0, :, 0] *= ms
+    lut[0, :, 2] += mh * ms
+    lut.flags.writeable = False
+    return lut
+
+
 def hsv_bins(bgr_pixels: np.ndarray, mh: int, ms: int, mv: int, s_min: float,
              v_min: float) -> np.ndarray:
     """Bin index (0..M−1) of each BGR pixel, (...,) int, ``M = mh·ms + mv`` (eq. (12)'s h(z)).
@@ -64,6 +77,10 @@ def hsv_bins(bgr_pixels: np.ndarray, mh: int, ms: int, mv: int, s_min: float,
     px = np.asarray(bgr_pixels, dtype=np.uint8)
     shape = px.shape[:-1]
     hsv = cv2.cvtColor(px.reshape(1, -1, 3), cv2.COLOR_BGR2HSV)
+    if mh * ms + mv <= 128:
+        q = cv2.LUT(hsv, _bin_table_small(mh, ms, mv, float(s_min), float(v_min))).reshape(-1, 3)
+        low = (q[:, 1] | q[:, 2]) >= 128
+        return np.where(low, q[:, 2] & 127, q[:, 0] + q[:, 1]).reshape(shape)
     q = cv2.LUT(hsv, _bin_table(mh, ms, mv, float(s_min), float(v_min))).reshape(-1, 3)
     hb, sb, vb = q[:, 0], q[:, 1], q[:, 2]
     dt = np.uint8 if mh * ms + mv <= 255 else np.int32
@@ -73,10 +90,11 @@ def hsv_bins(bgr_pixels: np.ndarray, mh: int, ms: int, mv: int, s_min: float,
 
 
 def _gather(image: np.ndarray, xs: np.ndarray, ys: np.ndarray) -> np.ndarray:
-    """``image[ys, xs]`` for in-image integer coordinates (N, S) → (N, S, C)."""
+    """``image[ys, xs]`` for in-image whole-number coordinates (N, S) (any dtype: float ones are
+    used as they are, no integer copy first) → (N, S, C)."""
     if xs.shape[0] < 32000:   # cv2.remap (nearest, exact at integer points) gathers fastest
         return cv2.remap(image, xs.astype(np.float32), ys.astype(np.float32), cv2.INTER_NEAREST)
-    return image[ys, xs]
+    return image[ys.astype(np.intp), xs.astype(np.intp)]
 
 
 def histograms(image: np.ndarray, boxes: np.ndarray, grid: tuple[int, int], mh: int, ms: int,
@@ -93,11 +111,10 @@ def histograms(image: np.ndarray, boxes: np.ndarray, grid: tuple[int, int], mh: 
     H, W = image.shape[:2]
     xs = np.clip(np.rint(b[:, :1] + b[:, 2:3] * (u[None] + 0.5)), 0, W - 1)
     ys = np.clip(np.rint(b[:, 1:2] + b[:, 3:4] * (v[None] + 0.5)), 0, H - 1)
-    bins = hsv_bins(_gather(image, xs.astype(np.intp), ys.astype(np.intp)),
-                    mh, ms, mv, s_min, v_min)                       # (N, S)
+    bins = hsv_bins(_gather(image, xs, ys), mh, ms, mv, s_min, v_min)   # (N, S)
     flat = (np.arange(n, dtype=np.intp)[:, None] * M + bins).ravel()
     counts = np.bincount(flat, minlength=n * M).reshape(n, M).astype(np.float64)
-    return counts / counts.sum(axis=1, keepdims=True)               # K of eq. (12)
+    return counts / float(len(u))     # K of eq. (12): every sample is in one bin
 
 
 def bhattacharyya(q_ref: np.ndarray, q: np.ndarray) -> np.ndarray:

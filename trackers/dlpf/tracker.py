@@ -468,6 +468,10 @@ class DLPFTracker:
         prior = self.scale_prior
         log = StageLog(self.stages, level)
         rows: Rows = []
+        # ---------------------------------------------------------------- motion (eqs. 1-7)
+        # the stage starts before the prediction and the Lucas-Kanade call (its largest cost:
+        # ~300 points/frame; marked after them, a stage clock counted LK as the step's "other")
+        log.stage("motion")
         labels = self.parents.labels
         assert labels is not None
         free = np.flatnonzero(labels == 0)
@@ -486,9 +490,6 @@ class DLPFTracker:
         self._set_track_flow(flow[:len(tpts)], ok[:len(tpts)])
         flow, ok = flow[len(tpts):], ok[len(tpts):]
         tboxes = self.predicted_track_boxes()
-
-        # ---------------------------------------------------------------- motion (eqs. 1-7)
-        log.stage("motion")
         tracked = mo.inside_boxes(pred[:, :2], tboxes, P.motion.mask_margin)
         m = mo.magnitude(flow, P.motion.cap)
         m[tracked] = 0.0                                          # §2.2: masked motion
