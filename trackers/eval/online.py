@@ -24,7 +24,7 @@ from ..errors import InputError
 from ..types import GroundTruth, TrackSet
 from .clear import ClearMatcher, detection_match, mota
 from .conventions import DISTRACTOR_IOU, check_convention, frame_convention, gt_masks
-from .ospa import DEFAULT_ALPHA, DEFAULT_C, DEFAULT_P, gospa, ospa
+from .ospa import DEFAULT_ALPHA, DEFAULT_C, DEFAULT_P, ospa_gospa
 from .overlap import box_centers, box_iou
 
 _EPS = np.finfo(float).eps
@@ -104,6 +104,8 @@ class _Scored:
 
 
 def _duplicates(ids: np.ndarray) -> np.ndarray:
+    if len(set(ids.tolist())) == len(ids):  # the usual case, without np.unique's cost
+        return ids[:0]
     u, n = np.unique(ids, return_counts=True)
     return u[n > 1]
 
@@ -147,8 +149,7 @@ class OnlineEvaluator:
     def __init__(self, *, iou_threshold: float = 0.5, ospa_c: float = DEFAULT_C,
                  ospa_p: float = DEFAULT_P, gospa_alpha: float = DEFAULT_ALPHA,
                  convention: str | None = None):
-        ospa(np.zeros((0, 2)), np.zeros((0, 2)), ospa_c, ospa_p)  # validates c and p early
-        gospa(np.zeros((0, 2)), np.zeros((0, 2)), ospa_c, ospa_p, gospa_alpha)
+        ospa_gospa(np.zeros((0, 2)), np.zeros((0, 2)), ospa_c, ospa_p, gospa_alpha)  # validates
         self.iou_threshold = float(iou_threshold)
         self.ospa_c, self.ospa_p = float(ospa_c), float(ospa_p)
         self.gospa_alpha = float(gospa_alpha)
@@ -175,11 +176,11 @@ class OnlineEvaluator:
         dist = np.linalg.norm(gc[step.rows] - tc[step.cols], axis=1)
         det_rows, det_cols = detection_match(s.iou, self.iou_threshold)
         n_true, n_est, tp = len(s.gt_idx), len(s.track_idx), len(step.rows)
+        d_ospa, d_gospa = ospa_gospa(gc, tc, self.ospa_c, self.ospa_p, self.gospa_alpha)
         m = FrameMetrics(
             frame=frame, n_true=n_true, n_est=n_est, tp=tp, fp=n_est - tp, fn=n_true - tp,
             idsw=int(step.switch.sum()),
-            ospa=ospa(gc, tc, self.ospa_c, self.ospa_p),
-            gospa=gospa(gc, tc, self.ospa_c, self.ospa_p, self.gospa_alpha),
+            ospa=d_ospa, gospa=d_gospa,
             match_gt_idx=g_idx, match_track_idx=t_idx, match_iou=s.iou[step.rows, step.cols],
             match_dist=dist,
             fp_idx=np.setdiff1d(s.track_idx, t_idx), fn_idx=np.setdiff1d(s.gt_idx, g_idx),
