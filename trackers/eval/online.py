@@ -110,6 +110,15 @@ def _duplicates(ids: np.ndarray) -> np.ndarray:
     return u[n > 1]
 
 
+def _without(n: int, idx: np.ndarray, drop: np.ndarray) -> np.ndarray:
+    """``np.setdiff1d(idx, drop)`` for indices into a length-``n`` array (sorted, distinct),
+    by a mask: a frame scores a few boxes, where setdiff1d's sort/isin cost was most of it."""
+    keep = np.zeros(n, dtype=bool)
+    keep[idx] = True
+    keep[drop] = False
+    return np.flatnonzero(keep)
+
+
 def score_frame(frame: int, gt: GroundTruth, tracks: TrackSet, iou_threshold: float,
                 convention: str | None = None, gt_name: str = "ground truth",
                 tracks_name: str = "tracks") -> _Scored:
@@ -131,7 +140,7 @@ def score_frame(frame: int, gt: GroundTruth, tracks: TrackSet, iou_threshold: fl
         ok = score[rows, cols] > _EPS
         dropped = np.sort(cols[ok][distractor[rows[ok]]]).astype(np.int64)
     keep_gt = np.flatnonzero(scored)
-    keep_tr = np.setdiff1d(np.arange(len(tracks)), dropped)
+    keep_tr = _without(len(tracks), np.arange(len(tracks)), dropped)
     return _Scored(gt_idx=keep_gt, track_idx=keep_tr, ignored_gt_idx=np.flatnonzero(~scored),
                    ignored_track_idx=dropped, gt_ids=gt.ids[keep_gt], track_ids=tracks.ids[keep_tr],
                    iou=iou_all[np.ix_(keep_gt, keep_tr)], convention=convention)
@@ -183,7 +192,8 @@ class OnlineEvaluator:
             ospa=d_ospa, gospa=d_gospa,
             match_gt_idx=g_idx, match_track_idx=t_idx, match_iou=s.iou[step.rows, step.cols],
             match_dist=dist,
-            fp_idx=np.setdiff1d(s.track_idx, t_idx), fn_idx=np.setdiff1d(s.gt_idx, g_idx),
+            fp_idx=_without(len(tracks), s.track_idx, t_idx),
+            fn_idx=_without(len(gt.ids), s.gt_idx, g_idx),
             switch_idx=t_idx[step.switch],
             ignored_gt_idx=s.ignored_gt_idx, ignored_track_idx=s.ignored_track_idx,
             det_tp=len(det_rows), det_iou_sum=float(s.iou[det_rows, det_cols].sum()),
