@@ -13,6 +13,7 @@ import pytest
 from pfscope.trackers.data.motio import MotTable, read_mot, write_mot
 from pfscope.trackers.errors import InputError
 from pfscope.trackers.eval import (OnlineEvaluator, box_iou, evaluate, format_table, gospa, ospa)
+from pfscope.trackers.eval.ospa import ospa_gospa
 from pfscope.trackers.types import GroundTruth, TrackSet
 
 C = 100.0  # the default OSPA cut-off, spelled out for the hand computations
@@ -188,7 +189,8 @@ def test_ospa_gospa_hand_values():
         ospa(x, y, p=0.5)
 
 
-def _ospa_brute(x, y, c, p):
+def _ospa_brute(x, y, c, p, alpha=None):
+    """OSPA (alpha None) or GOSPA by trying every assignment."""
     if len(x) > len(y):
         x, y = y, x
     m, n = len(x), len(y)
@@ -196,6 +198,8 @@ def _ospa_brute(x, y, c, p):
         return 0.0
     best = min(sum(min(c, float(np.linalg.norm(x[i] - y[j]))) ** p for i, j in enumerate(perm))
                for perm in itertools.permutations(range(n), m))
+    if alpha is not None:
+        return (best + c ** p / alpha * (n - m)) ** (1 / p)
     return ((best + c ** p * (n - m)) / n) ** (1 / p)
 
 
@@ -206,6 +210,11 @@ def test_ospa_agrees_with_brute_force_over_permutations():
         y = rng.uniform(0, 120, size=(rng.integers(0, 5), 2))
         c, p = float(rng.uniform(10, 80)), float(rng.choice([1.0, 2.0, 3.0]))
         assert ospa(x, y, c, p) == pytest.approx(_ospa_brute(x, y, c, p))
+        # the per-frame scorer's one-assignment pair gives both distances
+        a = float(rng.choice([0.5, 1.0, 2.0]))
+        o, g = ospa_gospa(x, y, c, p, a)
+        assert o == pytest.approx(_ospa_brute(x, y, c, p))
+        assert g == pytest.approx(_ospa_brute(x, y, c, p, a))
 
 
 # ----------------------------------------------------------------------------- bad input

@@ -385,3 +385,20 @@ def test_timed_stream_logs_at_the_latest_timelines(tmp_path):
                  for t, c in read_rrd(tmp_path / "t.rrd")["/e"])
     assert [(f, s) for f, s, _ in got] == [(5, 10), (9, 10), (9, 95)]
     assert ["a" in got[0][2], "b" in got[1][2], "c" in got[2][2]] == [True, True, True]
+
+
+def test_tracker_messages_land_at_their_frame(tmp_path, capsys):
+    """A tracker's messages (the stages' Event items, sent with the column rows) are rows of
+    their frame: the frame each message names, inside that frame's stage slots."""
+    out = tmp_path / "m.rrd"
+    rc, _, _ = _run(["record", "--frames", "30", "--out", out, "--quiet"], capsys)
+    assert rc == 0
+    rec = read_rrd(out)
+    rows = [(e, t, str(c["TextLog:text"][0])) for e, rs in rec.items()
+            if e.startswith("/log/") for t, c in rs]
+    assert len(rows) >= 3, sorted(rec)  # tracks confirmed at least
+    video = {t["frame"]: t["stage"] for t, _ in rec["/video"]}
+    for entity, t, text in rows:
+        assert text.startswith(f"frame {t['frame']}:"), (entity, t, text)
+        nxt = video.get(t["frame"] + 1)
+        assert video[t["frame"]] < t["stage"] and (nxt is None or t["stage"] < nxt), (entity, t)

@@ -24,7 +24,7 @@ from ..errors import InputError
 from ..types import GroundTruth, TrackSet
 from .clear import ClearMatcher, detection_match, mota
 from .conventions import DISTRACTOR_IOU, check_convention, frame_convention, gt_masks
-from .ospa import DEFAULT_ALPHA, DEFAULT_C, DEFAULT_P, gospa, ospa
+from .ospa import DEFAULT_ALPHA, DEFAULT_C, DEFAULT_P, ospa_gospa
 from .overlap import box_centers, box_iou
 
 _EPS = np.finfo(float).eps
@@ -104,8 +104,19 @@ class _Scored:
 
 
 def _duplicates(ids: np.ndarray) -> np.ndarray:
+    if len(set(ids.tolist())) == len(ids):  # the usual case, without np.unique's cost
+        return ids[:0]
     u, n = np.unique(ids, return_counts=True)
     return u[n > 1]
+
+
+def _without(n: int, idx: np.ndarray, drop: np.ndarray) -> np.ndarray:
+    """``np.setdiff1d(idx, drop)`` for indices into a length-``n`` array (sorted, distinct),
+    by a mask: a frame scores a few boxes, where setdiff1d's sort/isin cost was most of it."""
+    keep = np.zeros(n, dtype=bool)
+    keep[idx] = True
+    keep[drop] = False
+    return np.flatnonzero(keep)
 
 
 def score_frame(frame: int, gt: GroundTruth, tracks: TrackSet, iou_threshold: float,
@@ -129,7 +140,7 @@ def score_frame(frame: int, gt: GroundTruth, tracks: TrackSet, iou_threshold: fl
         ok = score[rows, cols] > _EPS
         dropped = np.sort(cols[ok][distractor[rows[ok]]]).astype(np.int64)
     keep_gt = np.flatnonzero(scored)
-    keep_tr = np.setdiff1d(np.arange(len(tracks)), dropped)
+    keep_tr = _without(len(tracks), np.arange(len(tracks)), dropped)
     return _Scored(gt_idx=keep_gt, track_idx=keep_tr, ignored_gt_idx=np.flatnonzero(~scored),
                    ignored_track_idx=dropped, gt_ids=gt.ids[keep_gt], track_ids=tracks.ids[keep_tr],
                    iou=iou_all[np.ix_(keep_gt, keep_tr)], convention=convention)
@@ -147,8 +158,7 @@ class OnlineEvaluator:
     def __init__(self, *, iou_threshold: float = 0.5, ospa_c: float = DEFAULT_C,
                  ospa_p: float = DEFAULT_P, gospa_alpha: float = DEFAULT_ALPHA,
                  convention: str | None = None):
-        ospa(np.zeros((0, 2)), np.zeros((0, 2)), ospa_c, ospa_p)  # validates c and p early
-        gospa(np.zeros((0, 2)), np.zeros((0, 2)), ospa_c, ospa_p, gospa_alpha)
+        ospa_gospa(np.zeros((0, 2)), np.zeros((0, 2)), ospa_c, ospa_p, gospa_alpha)  # validates
         self.iou_threshold = float(iou_threshold)
         self.ospa_c, self.ospa_p = float(ospa_c), float(ospa_p)
         self.gospa_alpha = float(gospa_alpha)
@@ -175,14 +185,15 @@ class OnlineEvaluator:
         dist = np.linalg.norm(gc[step.rows] - tc[step.cols], axis=1)
         det_rows, det_cols = detection_match(s.iou, self.iou_threshold)
         n_true, n_est, tp = len(s.gt_idx), len(s.track_idx), len(step.rows)
+        d_ospa, d_gospa = ospa_gospa(gc, tc, self.ospa_c, self.ospa_p, self.gospa_alpha)
         m = FrameMetrics(
             frame=frame, n_true=n_true, n_est=n_est, tp=tp, fp=n_est - tp, fn=n_true - tp,
             idsw=int(step.switch.sum()),
-            ospa=ospa(gc, tc, self.ospa_c, self.ospa_p),
-            gospa=gospa(gc, tc, self.ospa_c, self.ospa_p, self.gospa_alpha),
+            ospa=d_ospa, gospa=d_gospa,
             match_gt_idx=g_idx, match_track_idx=t_idx, match_iou=s.iou[step.rows, step.cols],
             match_dist=dist,
-            fp_idx=np.setdiff1d(s.track_idx, t_idx), fn_idx=np.setdiff1d(s.gt_idx, g_idx),
+            fp_idx=_without(len(tracks), s.track_idx, t_idx),
+            fn_idx=_without(len(gt.ids), s.gt_idx, g_idx),
             switch_idx=t_idx[step.switch],
             ignored_gt_idx=s.ignored_gt_idx, ignored_track_idx=s.ignored_track_idx,
             det_tp=len(det_rows), det_iou_sum=float(s.iou[det_rows, det_cols].sum()),

@@ -61,30 +61,10 @@ def _points(a) -> np.ndarray:
     return a
 
 
-def ospa(x, y, c: float = DEFAULT_C, p: float = DEFAULT_P) -> float:
-    """OSPA distance (Schuhmacher et al. 2008) between point sets x (m, D) and y (n, D).
-
-    Returns a value in [0, c]: 0 when both sets are empty, c when exactly one is.
-    """
-    _check(c, p)
-    x, y = _points(x), _points(y)
-    m, n = len(x), len(y)
-    if m == 0 and n == 0:
-        return 0.0
-    if m == 0 or n == 0:
-        return float(c)
-    if m > n:
-        x, y, m, n = y, x, n, m
-    total = _assigned_cost(x, y, c, p) + c ** p * (n - m)
-    return float((total / n) ** (1.0 / p))
-
-
-def gospa(x, y, c: float = DEFAULT_C, p: float = DEFAULT_P,
-          alpha: float = DEFAULT_ALPHA) -> float:
-    """GOSPA distance (Rahmathullah et al. 2017) between point sets x and y.
-
-    Not normalised by the set size: it grows with the number of targets. 0 when both are empty.
-    """
+def ospa_gospa(x, y, c: float = DEFAULT_C, p: float = DEFAULT_P,
+               alpha: float = DEFAULT_ALPHA) -> tuple[float, float]:
+    """(:func:`ospa`, :func:`gospa`) of the same point sets from ONE assignment (both minimise
+    the same cut-off cost of the smaller set into the larger; a per-frame scorer wants both)."""
     _check(c, p)
     if not (0 < alpha <= 2):
         raise ValueError(f"GOSPA alpha must be in (0, 2], got {alpha!r}")
@@ -93,4 +73,27 @@ def gospa(x, y, c: float = DEFAULT_C, p: float = DEFAULT_P,
     if m > n:
         x, y, m, n = y, x, n, m
     loc = _assigned_cost(x, y, c, p) if m else 0.0
-    return float((loc + c ** p / alpha * (n - m)) ** (1.0 / p))
+    if n == 0:
+        o = 0.0
+    elif m == 0:
+        o = float(c)
+    else:
+        o = float(((loc + c ** p * (n - m)) / n) ** (1.0 / p))
+    return o, float((loc + c ** p / alpha * (n - m)) ** (1.0 / p))
+
+
+def ospa(x, y, c: float = DEFAULT_C, p: float = DEFAULT_P) -> float:
+    """OSPA distance (Schuhmacher et al. 2008) between point sets x (m, D) and y (n, D).
+
+    Returns a value in [0, c]: 0 when both sets are empty, c when exactly one is.
+    """
+    return ospa_gospa(x, y, c, p)[0]
+
+
+def gospa(x, y, c: float = DEFAULT_C, p: float = DEFAULT_P,
+          alpha: float = DEFAULT_ALPHA) -> float:
+    """GOSPA distance (Rahmathullah et al. 2017) between point sets x and y.
+
+    Not normalised by the set size: it grows with the number of targets. 0 when both are empty.
+    """
+    return ospa_gospa(x, y, c, p, alpha)[1]
