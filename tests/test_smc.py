@@ -196,3 +196,20 @@ def test_systematic_resampling_walks_the_known_normalised_weights():
     skewed.known_normalised(one, 0.2)                  # every ancestor is particle 17
     out = resample(skewed, 40, np.random.default_rng(9))
     np.testing.assert_array_equal(out.states, np.repeat(ps.states[17:18], 40, 0))
+
+
+def test_log_mass_of_equal_weights_is_logsumexps_float():
+    """The equal-weight shortcut of ParticleSet.log_mass (resampled sets and their prediction)
+    gives logsumexp's very float; a set with one weight off, -inf or NaN takes the full pass."""
+    rng = np.random.default_rng(3)
+    for t in range(3000):
+        n = int(rng.integers(1, 30000))
+        v = float(rng.choice([rng.normal(0, 30), -rng.exponential(50), rng.uniform(-745, 700)]))
+        lw = np.full(n, v)
+        if t % 3 == 0:
+            lw[rng.integers(0, n)] = rng.choice([np.nextafter(v, np.inf), -np.inf, np.nan, v - 1])
+        got = ParticleSet(np.zeros((n, 2)), lw).log_mass
+        want = float(logsumexp(lw))
+        assert got == want or (np.isnan(got) and np.isnan(want)), (n, v, got, want)
+    assert ParticleSet(np.zeros((4, 2)), np.full(4, -np.inf)).log_mass == -np.inf
+    assert ParticleSet(np.zeros((0, 2)), np.zeros(0)).log_mass == -np.inf

@@ -114,7 +114,8 @@ class GridIndex:
     def __init__(self, xy: np.ndarray, cell: np.ndarray):
         xy = np.asarray(xy, dtype=np.float64)
         cell = np.asarray(cell, dtype=np.float64).reshape(2)
-        if not np.all(cell > 0) or not np.all(np.isfinite(cell)):
+        c0, c1 = float(cell[0]), float(cell[1])     # python tests: two numbers, ~7 us of ufuncs
+        if not (c0 > 0 and c1 > 0 and math.isfinite(c0) and math.isfinite(c1)):
             raise ValueError(f"GridIndex: cell sizes must be finite and > 0, got {cell}")
         self.n = len(xy)
         if self.n == 0:
@@ -124,7 +125,11 @@ class GridIndex:
             self.order = np.zeros(0, dtype=np.intp)
             self.keys = np.zeros(0, dtype=np.int64)
             return
-        lo, hi = xy.min(axis=0), xy.max(axis=0)
+        # per column: numpy's axis-0 reduction of an (N, 2) array walks it ~4x slower than a
+        # column's (the same minima and maxima, exact)
+        x, y = xy[:, 0], xy[:, 1]
+        lo = np.array([x.min(), y.min()])
+        hi = np.array([x.max(), y.max()])
         # Far-flung points would make the key space overflow: grow the cells until it fits.
         extent = np.floor((hi - lo) / cell) + 1
         while extent[0] * extent[1] > 2.0 ** 60:
@@ -132,8 +137,10 @@ class GridIndex:
             extent = np.floor((hi - lo) / cell) + 1
         self.origin, self.cell = lo, cell
         self.shape = extent.astype(np.int64)
-        ij = np.minimum(np.floor((xy - lo) / cell).astype(np.int64), self.shape - 1)
-        key = ij[:, 0] * self.shape[1] + ij[:, 1]
+        # the cell of each point, a column at a time (the same floats as on the (N, 2) array)
+        i = np.minimum(np.floor((x - lo[0]) / cell[0]).astype(np.int64), self.shape[0] - 1)
+        j = np.minimum(np.floor((y - lo[1]) / cell[1]).astype(np.int64), self.shape[1] - 1)
+        key = i * self.shape[1] + j
         self.order = np.argsort(key, kind="stable")
         self.keys = key[self.order]
 

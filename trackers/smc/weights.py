@@ -118,8 +118,13 @@ class ParticleSet:
     @cached_property
     def log_mass(self) -> float:
         """``logsumexp(log_weights)``, computed once (a set's arrays are never changed in
-        place: every operation returns a new set)."""
-        return float(logsumexp(self.log_weights))
+        place: every operation returns a new set).  Equal weights (every set systematic
+        resampling made, and its prediction) take a shortcut with logsumexp's very floats:
+        ``exp(a − max) = 1`` each, their sum ``n`` exactly, so the value is ``log n + a``."""
+        lw = self.log_weights
+        if len(lw) and np.isfinite(lw[0]) and lw.min() == lw.max():
+            return float((np.log(np.array([float(len(lw))])) + lw[:1])[0])
+        return float(logsumexp(lw))
 
     def known_log_mass(self, log_mass: float) -> None:
         """Record ``log_mass`` when the code that made the weights already summed them (the
