@@ -203,9 +203,8 @@ def _compile_background(trackers) -> None:
     kernels see the argument types a real run gives them, so no frame of the run compiles
     again).  Once per tracker name and process."""
     global _ready
-    todo = {getattr(t, "name", None): t for t in trackers
-            if getattr(t, "name", None) in BACKGROUND_TRACKERS}
-    todo = {n: t for n, t in todo.items() if ("background", n) not in _ready}
+    todo = {t.name: t for t in trackers if getattr(t, "name", None) in BACKGROUND_TRACKERS
+            and ("background", t.name) not in _ready}
     if not todo:
         return
     from .data.sources import open_source

@@ -146,7 +146,7 @@ def resample(ps: ParticleSet, n: int, rng: np.random.Generator,
         return ps.take(np.zeros(0, dtype=np.int64))
     lw = np.full(n, ps.log_mass - np.log(n))
     if scheme == "systematic":      # the log-mass is known: one walk that also copies the rows
-        w, scale = ps.__dict__.get("_normalised", (_NO_WEIGHTS, 0.0))
+        w, scale = ps.normalised or (_NO_WEIGHTS, 0.0)
         idx, states = _systematic_take(ps.states, ps.log_weights, ps.log_mass,
                                        float(rng.random()), n, w, scale)
         return ParticleSet(states, lw, None if ps.labels is None else ps.labels[idx],

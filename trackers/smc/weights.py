@@ -136,7 +136,12 @@ class ParticleSet:
         as the code that made the weights summed them (the PHD update's kernel: linear
         weights and their total): systematic resampling then walks them with no exp a
         particle (:func:`.resampling.resample`).  Equal to the exps up to round-off."""
-        self.__dict__["_normalised"] = (w, float(scale))
+        self.__dict__["_normalised"] = (w, float(scale))   # (a frozen dataclass)
+
+    @property
+    def normalised(self) -> "tuple[np.ndarray, float] | None":
+        """``(w, scale)`` recorded by :meth:`known_normalised`, else None."""
+        return self.__dict__.get("_normalised")
 
     @property
     def mass(self) -> float:
