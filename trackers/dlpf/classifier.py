@@ -60,9 +60,17 @@ from typing import Iterator, Optional
 import cv2
 import numpy as np
 
+from . import _hog_kernels as hk
+
 WIN_W, WIN_H = 64, 128
 CELL = 8            # HOG cell and block stride (px)
 BLOCK_LEN = 36      # 2x2 cells x 9 bins
+_WEIGHTS = hk.block_weights(4.0)     # the block's Gaussian (winSigma (16 + 16)/8) x cell split
+_L2HYS = 0.2
+# a 64x128 window's 7 x 15 blocks: (row of the descriptor's blocks (x outer, OpenCV's order),
+# place on the window's block grid (y outer))
+_WINDOW_SEL = np.array([(bu * 15 + bv, bv * 7 + bu) for bu in range(7) for bv in range(15)],
+                       dtype=np.int64)
 #: Fraction of the window the person occupies (Dalal & Triggs' 16-px context border).
 PERSON_W, PERSON_H = 0.5, 0.75
 
@@ -98,7 +106,8 @@ class HOGWindowClassifier:
     MODES = ("pyramid", "window")
 
     def __init__(self, weights: np.ndarray | None = None, bias: float | None = None, *,
-                 mode: str = "pyramid", scale_step: float = 1.1, threads: int = 1):
+                 mode: str = "pyramid", scale_step: float = 1.1, threads: int = 1,
+                 opencv_blocks: bool = False):
         if mode not in self.MODES:
             raise ValueError(f"classifier mode must be one of {', '.join(self.MODES)}, "
                              f"got {mode!r}")
@@ -108,6 +117,9 @@ class HOGWindowClassifier:
         if int(threads) < 1:
             raise ValueError(f"classifier threads must be >= 1, got {threads}")
         self.threads = int(threads)
+        #: blocks by OpenCV's ``HOGDescriptor.compute`` (one block at a time) instead of the
+        #: shared-sums kernel (:mod:`._hog_kernels`; same features up to float rounding)
+        self.opencv_blocks = bool(opencv_blocks)
         self._pool = None
         self.hog = cv2.HOGDescriptor()
         self.block_hog = _block_hog()
@@ -237,9 +249,12 @@ class HOGWindowClassifier:
         blocks = np.empty((len(ids), BLOCK_LEN), dtype=np.float32)
         # each block's top-left px in its region (1 px more on each side of a region so that
         # its border gradients see their real neighbours)
-        locs = np.empty((len(ids), 2), dtype=np.int32)
-        locs[:, 0] = 1 + CELL * (local % gw[breg])
-        locs[:, 1] = 1 + CELL * (local // gw[breg])
+        if self.opencv_blocks:
+            locs = np.empty((len(ids), 2), dtype=np.int32)
+            locs[:, 0] = 1 + CELL * (local % gw[breg])
+            locs[:, 1] = 1 + CELL * (local // gw[breg])
+        else:   # the kernel's (row of blocks, place on the region's block grid)
+            locs = np.stack([np.arange(len(ids)), local], axis=1)
         # level px (a, b) samples frame px ((a + 0.5)/s - 0.5, ...)
         inv_s = self.scale_step ** -rlev.astype(np.float64)
         tx = ((x0 * CELL - 1) + 0.5) * inv_s - 0.5
@@ -247,13 +262,13 @@ class HOGWindowClassifier:
         sizes = np.stack([(x1 - x0) * CELL + 2, (y1 - y0) * CELL + 2], axis=1).tolist()
         jobs = [(slice(cuts[r], cuts[r + 1]),
                  np.array([[inv_s[r], 0.0, tx[r]], [0.0, inv_s[r], ty[r]]]),
-                 tuple(sizes[r]), locs[cuts[r]:cuts[r + 1]])
+                 tuple(sizes[r]), locs[cuts[r]:cuts[r + 1]], int(gw[r]), int(gh[r]))
                 for r in range(nreg)]
         if drain is None:
             self._run_regions(grey, jobs, blocks)
         else:   # shared with a worker that is already running (score_with_exact)
             drain.start(grey, jobs, blocks)
-            drain.run(self.block_hog)
+            drain.run(self._block_hog(0))
             drain.wait()
         return blocks[binv.reshape(n, nb)].reshape(n, -1), inv
 
@@ -263,18 +278,24 @@ class HOGWindowClassifier:
         (OpenCV releases the GIL; each block is computed once, by one thread, so the result
         does not depend on the split)."""
         if self.threads <= 1 or len(jobs) < 2:
-            _regions_blocks(grey, jobs, blocks, self.block_hog)
+            _regions_blocks(grey, jobs, blocks, self._block_hog(0))
             return
         size = np.array([j[2][0] * j[2][1] for j in jobs], dtype=np.float64)
         mid = np.cumsum(size) - size / 2                 # each region's middle, by area so far
         share = np.minimum(mid * self.threads // size.sum(), self.threads - 1)
         parts = [[j for j, p in zip(jobs, share) if p == t] for t in range(self.threads)]
         pool, hogs, _ = self._workers()
-        futures = [pool.submit(_regions_blocks, grey, part, blocks, hog)
-                   for part, hog in zip(parts[1:], hogs[1:]) if part]
-        _regions_blocks(grey, parts[0], blocks, hogs[0])
+        futures = [pool.submit(_regions_blocks, grey, part, blocks, self._block_hog(t))
+                   for t, part in enumerate(parts) if t and part]
+        _regions_blocks(grey, parts[0], blocks, self._block_hog(0))
         for f in futures:
             f.result()
+
+    def _block_hog(self, thread: int) -> Optional[cv2.HOGDescriptor]:
+        """The block HOG of worker ``thread`` (0: the calling thread), None for the kernel."""
+        if not self.opencv_blocks:
+            return None
+        return self.block_hog if thread == 0 else self._workers()[1][thread]
 
     def _workers(self):
         """The worker threads (created on first use), one block HOG and one window HOG per
@@ -316,7 +337,11 @@ class HOGWindowClassifier:
             for i in idx:  # a few hundred windows: resize + HOG each (module docstring)
                 cv2.resize(padded[y0[i]:y1[i], x0[i]:x1[i]], (WIN_W, WIN_H), dst=buf,
                            interpolation=cv2.INTER_LINEAR)
-                out[i] = hog.compute(buf).reshape(-1)
+                if self.opencv_blocks:
+                    out[i] = hog.compute(buf).reshape(-1)
+                else:   # all 7 x 15 blocks of the window, in OpenCV's order
+                    hk.region_blocks(buf, WIN_W // CELL - 1, WIN_H // CELL - 1, 0, 0,
+                                     _WINDOW_SEL, _WEIGHTS, _L2HYS, out[i].reshape(-1, BLOCK_LEN))
 
         if hog is not None or self.threads <= 1 or n < 2 * self.threads:
             part(range(n), hog or self.hog)
@@ -357,14 +382,14 @@ class HOGWindowClassifier:
         ew = np.asarray(exact_windows, dtype=np.float64).reshape(-1, 4)
         if self.threads <= 1 or self.mode != "pyramid" or not len(w) or not len(ew):
             return self.score(grey, w), self.score(grey, ew, exact=True)
-        pool, bhogs, whogs = self._workers()
+        pool, _, whogs = self._workers()
         drain = _Drain()
 
         def worker():
             try:
                 vd = self._window_descriptors(grey, ew, hog=whogs[1])
                 drain.ready.wait()
-                drain.run(bhogs[1])
+                drain.run(self._block_hog(1))
                 return vd
             except BaseException as e:       # re-raised on the calling thread
                 drain.error = e
@@ -457,13 +482,19 @@ def _block_hog() -> cv2.HOGDescriptor:
 
 
 def _regions_blocks(grey: np.ndarray, jobs: list, blocks: np.ndarray,
-                    hog: cv2.HOGDescriptor) -> None:
-    """For each job ``(sel, M, size, locs)``: the level region ``warpAffine(grey, M, size)``
-    (inverse map, bilinear, replicated border) and its blocks at ``locs`` into ``blocks[sel]``."""
-    for sel, M, size, locs in jobs:
+                    hog: Optional[cv2.HOGDescriptor]) -> None:
+    """For each job ``(sel, M, size, locs, gw, gh)``: the level region ``warpAffine(grey, M,
+    size)`` (inverse map, bilinear, replicated border) and its blocks into ``blocks[sel]``:
+    with ``hog`` OpenCV's blocks at px ``locs``; without, the kernel's
+    (:func:`._hog_kernels.region_blocks`: ``locs`` = (row of ``blocks``, place on the
+    region's ``gw`` x ``gh`` block grid))."""
+    for sel, M, size, locs, gw, gh in jobs:
         region = cv2.warpAffine(grey, M, size, flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
                                 borderMode=cv2.BORDER_REPLICATE)
-        blocks[sel] = hog.compute(region, (CELL, CELL), (0, 0), locs).reshape(-1, BLOCK_LEN)
+        if hog is not None:
+            blocks[sel] = hog.compute(region, (CELL, CELL), (0, 0), locs).reshape(-1, BLOCK_LEN)
+        else:
+            hk.region_blocks(region, gw, gh, 1, 1, locs, _WEIGHTS, _L2HYS, blocks)
 
 
 def _regions(k: np.ndarray, cu: np.ndarray, cv: np.ndarray, wx: int, wy: int
