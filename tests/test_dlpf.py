@@ -757,3 +757,39 @@ def test_profile_clocks_hook_the_stages_a_dlpf_frame_runs(monkeypatch):
     total = sum(v["wall_ms"] for v in st.values())
     assert total == pytest.approx(1000 * r["loop_wall_s"] / 6, rel=1e-6)
     sys.modules.pop("bench_dlpf", None)
+
+
+# ------------------------------------------------------------------ the HOG blocks' kernel
+
+def test_shared_sum_blocks_equal_opencv_blocks_and_windows():
+    """The kernel's blocks (separable sums shared by overlapping blocks, gradient fused) are
+    OpenCV's HOG blocks up to float rounding: on a textured region with a flat patch and a
+    saturated edge, at every block of its grid and at the image border (an exact window's
+    blocks start at px 0, where the gradient reflects); opencv_blocks=True is OpenCV's path."""
+    import cv2
+    from pfscope.trackers.dlpf import _hog_kernels as hk
+    from pfscope.trackers.dlpf import classifier as C
+    img = _textured(seed=5, w=203, h=147)
+    img[40:80, 60:120] = 90                                     # flat: zero gradient
+    img[100:, 150:] = 255                                       # a hard edge
+    hog = C._block_hog()
+    gw, gh = (img.shape[1] - 2) // 8 - 1, (img.shape[0] - 2) // 8 - 1
+    places = np.arange(gw * gh)
+    sel = np.stack([places[::-1], places], axis=1)              # any row order
+    out = np.full((gw * gh, 36), np.nan, np.float32)
+    hk.region_blocks(img, gw, gh, 1, 1, sel, C._WEIGHTS, C._L2HYS, out)
+    locs = [(1 + 8 * (p % gw), 1 + 8 * (p // gw)) for p in places]
+    ref = hog.compute(img, (8, 8), (0, 0), locs).reshape(-1, 36)
+    assert np.abs(out[::-1] - ref).max() < 2e-6
+    win = cv2.resize(img[10:138, 20:84], (64, 128))
+    clf, ocv = HOGWindowClassifier(), HOGWindowClassifier(opencv_blocks=True)
+    box = np.array([[20.0, 10.0, 64.0, 128.0]])
+    d, _ = clf._descriptors(win, box - [20, 10, 0, 0], exact=True)    # the whole image
+    d_ref = cv2.HOGDescriptor().compute(win)
+    assert np.abs(d.reshape(-1) - d_ref.reshape(-1)).max() < 2e-6
+    assert np.array_equal(ocv.score(win, box - [20, 10, 0, 0], exact=True),
+                          ocv.decision(d_ref.reshape(1, -1)))
+    w = window_boxes(np.random.default_rng(1).uniform([40, 40], [160, 100], (60, 2)),
+                     np.full(60, 70.0))
+    assert np.abs(clf.score(img, w) - ocv.score(img, w)).max() < 1e-4
+    assert np.abs(clf.score(img, w, exact=True) - ocv.score(img, w, exact=True)).max() < 1e-4
