@@ -29,16 +29,22 @@ Cost (``mode``):
   resampled once from the frame
   (``cv2.warpAffine``, level px ``u`` samples frame px ``(u + 0.5)/s − 0.5`` like
   ``cv2.resize``; replicated border; 1 px more on each side so that border gradients see their
-  real neighbours) and its needed blocks are computed in one ``HOGDescriptor.compute`` call
-  with ``locations`` (a 16×16 "window" HOG: same cells, bins, Gaussian block weight, L2-Hys and
-  gamma as the 64×128 one); a window's descriptor is then a gather of its 7×15 blocks in
-  OpenCV's order (x outer).  At integer level offsets this equals OpenCV's descriptor of the
-  window on the level image exactly; elsewhere up to warpAffine's 1/32-px coordinate rounding
-  (tests/test_dlpf.py).  PETS09 frames 1–120: ~8.3 k blocks/frame instead of 310 × 105 = 32.5 k,
-  over ~630 k level px.  The HOG of those blocks is most of DLPF's time: with ``threads`` > 1
-  the regions are split into shares of equal area computed by that many threads (OpenCV
-  releases the GIL; each block is computed by one thread, so the margins do not depend on it).
-- ``"window"``: one ``cv2.resize`` + one ``HOGDescriptor.compute`` per window (a loop over a
+  real neighbours) and its needed blocks are computed by one kernel call
+  (:func:`._hog_kernels.region_blocks`: OpenCV's HOG blocks — gradient, 9 unsigned bins,
+  Gaussian block weight, bilinear cell split, L2-Hys, gamma — from sums shared by the
+  overlapping blocks: the block weights are separable, so each region row's horizontal sums
+  serve every block of its block column); a window's descriptor is then a gather of its 7×15
+  blocks in OpenCV's order (x outer).  At integer level offsets this equals OpenCV's
+  descriptor of the window on the level image up to float rounding (~1e-6); elsewhere up to
+  warpAffine's 1/32-px coordinate rounding (tests/test_dlpf.py).  ``opencv_blocks=True``
+  computes the blocks with OpenCV's ``HOGDescriptor.compute`` (``locations``, one block at a
+  time: each pixel's gradient visited by the four blocks over it; ~1.8x the kernel's CPU).
+  PETS09 frames 1–120: ~8.3 k blocks/frame instead of 310 × 105 = 32.5 k,
+  over ~630 k level px.  With ``threads`` > 1
+  the regions are split into shares of equal area computed by that many threads (the kernel
+  and OpenCV release the GIL; each block is computed by one thread, so the margins do not
+  depend on it).
+- ``"window"``: one ``cv2.resize`` + the kernel's 105 blocks per window (a loop over a
   few hundred windows, ~0.1 ms per window, split over ``threads``), no snapping.
 
 Both stack descriptors into (N, 3780) and score them with one matrix product ``D·w + b`` (or
