@@ -117,15 +117,13 @@ def _axpy(dst, a, src):
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def region_blocks(img, gw, gh, ox, oy, sel, w, l2hys, out):
-    """Blocks of one region into ``out[k]`` for each ``k, place`` in ``sel`` (place = ``bv *
-    gw + bu`` on the region's ``gw`` × ``gh`` block grid, block ``(bu, bv)`` at region px
-    ``(ox + 8 bu, oy + 8 bv)``).  ``grad`` (H, W, 2) float32 and ``qangle`` (H, W, 2) uint8
-    are ``HOGDescriptor.computeGradient``'s output; ``w`` is :func:`block_weights`; the layout
-    of a block is OpenCV's (cell x outer, cell y inner, 9 bins)."""
+    """HOG blocks of the uint8 image ``img`` into ``out[k]`` (36 floats) for each ``(k,
+    place)`` row of ``sel``: place ``bv * gw + bu`` on a ``gw`` × ``gh`` grid of blocks, block
+    ``(bu, bv)`` at px ``(ox + 8 bu, oy + 8 bv)`` (the grid must lie inside ``img``; gradients
+    at ``img``'s own border reflect, as OpenCV's).  ``w`` is :func:`block_weights`, ``l2hys``
+    the L2-Hys clip (0.2); the layout of a block is OpenCV's (cell x outer, cell y, 9 bins)."""
     rows = CELL * gh + CELL
     cols = CELL * gw + CELL
-    # horizontal sums R[r, bu, cx*9 + b] over the 16 columns of block column bu: each pixel
-    # is read once and added to the (one or two) block columns holding it
     L = gw * 2 * NBINS
     Rr = np.empty(L, dtype=np.float32)          # one row's horizontal sums [bu, cx, b]
     G0 = np.empty(cols, dtype=np.float32)
