@@ -330,6 +330,9 @@ def test_edges_report_the_tails_before_the_update():
     (1, np.zeros((2, 4)), "shape"),
     (1, [state(1, 2, w=0.0)], "positive"),
     (1, [state(NAN, 2)], "non-finite"),
+    (1, [state(1, 2), state(1, 2, h=np.inf)], "non-finite"),
+    (1, [state(1, 2), state(1, 2, h=-5.0)], "positive"),
+    (1, [state(1, 2, w=0.0), state(1, 2, w=NAN)], "non-finite"),   # the finite test first
 ])
 def test_bad_input_is_rejected(frame, states, msg):
     with pytest.raises(ValueError, match=msg):
@@ -790,3 +793,95 @@ def test_without_edge_arrays_the_tracks_are_the_same():
     for x, y in zip(with_edges, without, strict=True):
         for u, w in zip(x, y, strict=True):
             np.testing.assert_array_equal(u, w)
+
+
+# --------------------------------------------------------------------------- one-pass kernels
+
+def _random_tails(rng, T):
+    """Tails with known, unknown (NaN) velocities, one- and two-vertex tracks."""
+    tails = np.array([state(x, y, w, 2.5 * w, *(v if k % 3 else (NAN, NAN)))
+                      for k, (x, y, w, v) in enumerate(zip(rng.uniform(0, 300, T),
+                                                           rng.uniform(0, 200, T),
+                                                           rng.uniform(3, 60, T),
+                                                           rng.normal(0, 2, (T, 2))))])
+    tails[1::5, 3] = NAN                       # one unknown component: unknown velocity
+    prev = tails + rng.normal(0, 3, tails.shape)
+    tail_frame = rng.integers(20, 40, T)
+    prev_frame = np.where(rng.random(T) < 0.3, -1, tail_frame - rng.integers(1, 4, T))
+    return tails, prev, tail_frame.astype(np.int64), prev_frame.astype(np.int64)
+
+
+def test_frame_edges_kernel_is_the_numpy_spelling():
+    """The step's one-pass kernel (tail velocity, edge scores, admissible weights) gives the
+    same floats as tail_velocity + score_edges, and the same matching as
+    max_weight_matching on them."""
+    from pfscope.trackers.phd import _assoc_kernels as AK
+    from pfscope.trackers.phd.association import OBS_INDEX, _match_admissible
+
+    rng = np.random.default_rng(5)
+    p = AssocParams(depth=30)
+    for T, M in ((40, 30), (7, 9), (1, 1)):
+        tails, prev, tf, pf = _random_tails(rng, T)
+        frame = 41
+        new = np.array([state(x, y, w, 2.5 * w) for x, y, w in
+                        zip(rng.uniform(0, 300, M), rng.uniform(0, 200, M),
+                            rng.uniform(3, 60, M))])
+        v, b, c = tail_velocity(tails, prev, np.where(pf >= 0, tf - pf, 0), p)
+        sc = score_edges(tails, v, b, c, frame - tf, new, p)
+        gain, d2, weight, floor, w0, n_ok = AK.frame_edges(
+            tails, prev, tf, pf, frame, np.ascontiguousarray(new[:, OBS_INDEX]),
+            *p.kernel_args, float(p.speed_prior))
+        for got, want in ((gain, sc.gain), (d2, sc.d2), (weight, sc.weight), (floor, sc.floor)):
+            np.testing.assert_array_equal(got, want)
+        ok = sc.allowed & np.isfinite(sc.weight) & (sc.weight > 0)
+        np.testing.assert_array_equal(w0, np.where(ok, sc.weight, 0.0))
+        assert n_ok == ok.sum()
+        if T > 1:
+            assert 0 < n_ok < T * M            # both kinds of pairs are compared
+        for got, want in zip(_match_admissible(w0, n_ok),
+                             max_weight_matching(sc.weight, sc.allowed)):
+            np.testing.assert_array_equal(got, want)
+
+
+def _returning_numpy(a: GraphAssociator, frame: int, Z: np.ndarray) -> np.ndarray:
+    """GraphAssociator.returning spelt with numpy (tail_velocity + score_edges)."""
+    p = a.params
+    lost = ((a._length >= p.min_length) & (frame - a._tail_frame >= 2)
+            & (frame - a._tail_frame <= p.depth))
+    lost &= a._length >= p.revive_rate * (a._tail_frame - a._first_frame + 1)
+    if not lost.any() or not len(Z):
+        return np.zeros(len(Z), dtype=bool)
+    prev_gap = np.where(a._prev_frame[lost] >= 0, a._tail_frame[lost] - a._prev_frame[lost], 0)
+    v, b, c = tail_velocity(a._tail[lost], a._prev[lost], prev_gap, p)
+    sc = score_edges(a._tail[lost], v, b, c, frame - a._tail_frame[lost],
+                     np.concatenate([Z[:, :2], np.zeros((len(Z), 2)), Z[:, 2:]], axis=1), p)
+    return sc.allowed.any(axis=0)
+
+
+def test_returning_is_the_numpy_spelling():
+    """returning (one kernel pass): the detections inside the gate of a confirmed tail unseen
+    in the frame before, with estimates in at least revive_rate of its frames -- the same
+    mask as tail_velocity + score_edges on the selected tails."""
+    rng = np.random.default_rng(11)
+    p = AssocParams(depth=30, min_length=3, revive_rate=0.8)
+    a = GraphAssociator(p)
+    T = 60
+    tails, prev, tf, pf = _random_tails(rng, T)
+    tails[:, :2] *= 10.0                                  # spread over the detections' image
+    prev[:, :2] = tails[:, :2] + rng.normal(0, 3, (T, 2))
+    a._ids = np.arange(1, T + 1)
+    a._tail, a._prev, a._tail_frame, a._prev_frame = tails, prev, tf, pf
+    a._length = rng.integers(1, 8, T)
+    a._first_frame = tf - rng.integers(0, 9, T)
+    frame = 42
+    Z = np.column_stack([rng.uniform(0, 3000, 200), rng.uniform(0, 2000, 200),
+                         rng.uniform(3, 60, 200)])
+    Z = np.column_stack([Z, 2.5 * Z[:, 2]])
+    got = a.returning(frame, Z)
+    want = _returning_numpy(a, frame, Z)
+    assert got.dtype == bool and 5 < want.sum() < len(Z)     # both kinds of detections
+    np.testing.assert_array_equal(got, want)
+    # each condition on the tail matters: with all tails short, none is lost
+    a._length = np.full(T, p.min_length - 1)
+    assert not a.returning(frame, Z).any()
+    assert not a.returning(frame, Z[:0]).size

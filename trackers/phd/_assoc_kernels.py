@@ -109,3 +109,162 @@ def iou(a, b):
             union = area_a + b[j, 2] * b[j, 3] - inter
             out[i, j] = inter / (union if union > 1e-12 else 1e-12)
     return out
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def check_states(s):
+    """The association's input check of ``s`` (M, 6) states in one pass: 1 when a position or
+    size ``(y1, y2, w, h)`` is not finite, 2 when a width or height is not positive (NaN is
+    not), else 0 (:meth:`.association.GraphAssociator._check`)."""
+    code = 0
+    for j in range(s.shape[0]):
+        for k in (0, 1, 4, 5):
+            x = s[j, k]
+            if not (x - x == 0.0):      # inf - inf and NaN - NaN are NaN
+                return 1
+        if s[j, 4] <= 0.0 or s[j, 5] <= 0.0:
+            code = 2
+    return code
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
+def _vbc(tail, prev, t, d, so, so_min, ratio, speed_prior, vbc):
+    """Tail t's velocity and error growth (:func:`.association.tail_velocity`, the same floats)
+    into ``vbc`` (3, 2) = v, b, c; ``d`` the frames to its previous vertex (<= 0: none)."""
+    for k in range(2):
+        vbc[1, k] = 0.0
+        vbc[2, k] = 0.0
+    v0 = tail[t, 2]
+    v1 = tail[t, 3]
+    if (v0 - v0 == 0.0) and (v1 - v1 == 0.0):
+        vbc[0, 0] = v0
+        vbc[0, 1] = v1
+        return
+    if d > 0:
+        fd = float(d)
+        for k in range(2):
+            st = so * tail[t, 4 + k]
+            if not (st >= so_min or st != st):
+                st = so_min
+            sp = so * prev[t, 4 + k]
+            if not (sp >= so_min or sp != sp):
+                sp = so_min
+            var_t = (ratio * st) * (ratio * st)
+            var_p = (ratio * sp) * (ratio * sp)
+            vbc[0, k] = (tail[t, k] - prev[t, k]) / fd
+            vbc[1, k] = 2.0 * var_t / fd
+            vbc[2, k] = (var_t + var_p) / (fd * fd)
+    else:
+        for k in range(2):
+            vbc[0, k] = 0.0
+            g = speed_prior * tail[t, 4 + k]
+            vbc[2, k] = g * g
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
+def _var4v(tail, t, vbc, i, sv, ss, so, so_min, ratio, cc, cc2, out):
+    """:func:`_var4` with tail t's b, c in rows 1, 2 of ``vbc`` (3, 2) (:func:`_vbc`)."""
+    for k in range(2):
+        s = so * tail[t, 4 + k]
+        if not (s >= so_min or s != s):
+            s = so_min
+        r_y = (ratio * s) * (ratio * s)
+        r_wh = s * s
+        a = sv * tail[t, 4 + k]
+        s2 = (i - 1.0) * i * (2.0 * i - 1.0) / 6.0 + cc * i * (i - 1.0) + cc2 * i
+        out[k] = a * a * s2 + r_y + vbc[1, k] * i + vbc[2, k] * (i * i) + r_y
+        g = ss * tail[t, 4 + k]
+        out[2 + k] = g * g * i + 2.0 * r_wh
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def frame_edges(tail, prev, tail_frame, prev_frame, frame, z, depth, gate_d2, sv, ss, so,
+                so_min, ratio, cc, cc2, two_pi, speed_prior):
+    """:func:`edge_scores` of the live tails against ``z`` (M, 4) at ``frame`` with the tails'
+    velocity terms (:func:`.association.tail_velocity`) and gaps (``frame − tail_frame``)
+    taken in the same pass: ``tail``/``prev`` (T, 6), ``tail_frame``/``prev_frame`` (T,)
+    int64 (``prev_frame`` −1: one vertex).  Returns ``gain, d2, weight`` (T, M), ``floor``
+    (T,), ``w0`` (T, M): the weight where the edge is worth matching (inside the gate, finite
+    and positive: :func:`.association.max_weight_matching`), else 0.0, and how many are."""
+    T = tail.shape[0]
+    M = z.shape[0]
+    gain = np.empty((T, M), np.float64)
+    d2 = np.empty((T, M), np.float64)
+    weight = np.empty((T, M), np.float64)
+    w0 = np.empty((T, M), np.float64)
+    floor = np.empty(T, np.float64)
+    var = np.empty(4, np.float64)
+    lg = np.empty(4, np.float64)
+    vbc = np.empty((3, 2), np.float64)
+    n_ok = 0
+    for t in range(T):
+        d = tail_frame[t] - prev_frame[t] if prev_frame[t] >= 0 else 0
+        _vbc(tail, prev, t, d, so, so_min, ratio, speed_prior, vbc)
+        _var4v(tail, t, vbc, depth, sv, ss, so, so_min, ratio, cc, cc2, var)
+        for k in range(4):
+            lg[k] = math.log(two_pi * var[k])
+        floor[t] = -0.5 * gate_d2 - 0.5 * (((lg[0] + lg[1]) + lg[2]) + lg[3])
+        i = float(frame - tail_frame[t])
+        _var4v(tail, t, vbc, i, sv, ss, so, so_min, ratio, cc, cc2, var)
+        for k in range(4):
+            lg[k] = math.log(two_pi * var[k])
+        log_det = ((lg[0] + lg[1]) + lg[2]) + lg[3]
+        m0 = tail[t, 0] + i * vbc[0, 0]
+        m1 = tail[t, 1] + i * vbc[0, 1]
+        m2 = tail[t, 4]
+        m3 = tail[t, 5]
+        for j in range(M):
+            r0 = z[j, 0] - m0
+            r1 = z[j, 1] - m1
+            r2 = z[j, 2] - m2
+            r3 = z[j, 3] - m3
+            dd = ((r0 * r0 / var[0] + r1 * r1 / var[1]) + r2 * r2 / var[2]) + r3 * r3 / var[3]
+            d2[t, j] = dd
+            gn = -0.5 * dd - 0.5 * log_det
+            gain[t, j] = gn
+            w = gn - floor[t]
+            weight[t, j] = w
+            if dd <= gate_d2 and w - w == 0.0 and w > 0.0:
+                w0[t, j] = w
+                n_ok += 1
+            else:
+                w0[t, j] = 0.0
+    return gain, d2, weight, floor, w0, n_ok
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def revive_hits(tail, prev, tail_frame, prev_frame, first_frame, length, frame, z, min_length,
+                depth, revive_rate, gate_d2, sv, ss, so, so_min, ratio, cc, cc2, speed_prior):
+    """:meth:`.association.GraphAssociator.returning` in one pass: ``hit`` (N,) bool, the
+    detections ``z`` (N, 4) ``(cx, cy, w, h)`` inside the edge gate (:func:`edge_scores`'s
+    d², the same floats) of a confirmed tail unseen in the frame before ``frame`` (within
+    ``depth``) with estimates in at least ``revive_rate`` of its frames."""
+    N = z.shape[0]
+    hit = np.zeros(N, np.bool_)
+    var = np.empty(4, np.float64)
+    vbc = np.empty((3, 2), np.float64)
+    for t in range(tail.shape[0]):
+        gap = frame - tail_frame[t]
+        if not (length[t] >= min_length and gap >= 2 and gap <= depth):
+            continue
+        if not length[t] >= revive_rate * (tail_frame[t] - first_frame[t] + 1):
+            continue
+        d = tail_frame[t] - prev_frame[t] if prev_frame[t] >= 0 else 0
+        _vbc(tail, prev, t, d, so, so_min, ratio, speed_prior, vbc)
+        i = float(gap)
+        _var4v(tail, t, vbc, i, sv, ss, so, so_min, ratio, cc, cc2, var)
+        m0 = tail[t, 0] + i * vbc[0, 0]
+        m1 = tail[t, 1] + i * vbc[0, 1]
+        m2 = tail[t, 4]
+        m3 = tail[t, 5]
+        for j in range(N):
+            r0 = z[j, 0] - m0
+            r1 = z[j, 1] - m1
+            r2 = z[j, 2] - m2
+            r3 = z[j, 3] - m3
+            dd = ((r0 * r0 / var[0] + r1 * r1 / var[1]) + r2 * r2 / var[2]) + r3 * r3 / var[3]
+            if dd <= gate_d2:
+                hit[j] = True
+    return hit

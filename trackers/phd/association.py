@@ -243,6 +243,16 @@ class AssocParams:
 
         return gate_threshold(self.gate, len(OBS_INDEX))
 
+    @cached_property
+    def kernel_args(self) -> tuple:
+        """The floats :mod:`._assoc_kernels`' edge passes read, in their order: depth, gate_d2,
+        sigma_v, sigma_size, sigma_obs, sigma_obs_min, sigma_obs_pos_ratio, accel_to_position
+        and its square, 2π (once per parameter set, not per frame)."""
+        return (float(self.depth), float(self.gate_d2), float(self.sigma_v),
+                float(self.sigma_size), float(self.sigma_obs), float(self.sigma_obs_min),
+                float(self.sigma_obs_pos_ratio), float(self.accel_to_position),
+                float(self.accel_to_position ** 2), 2.0 * np.pi)
+
 
 # --------------------------------------------------------------------------- pure functions
 
@@ -465,6 +475,18 @@ def max_weight_matching(weights: np.ndarray, allowed: np.ndarray) -> tuple[np.nd
     return rows[keep].astype(np.int64), cols[keep].astype(np.int64)
 
 
+def _match_admissible(w0: np.ndarray, n_ok: int) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`max_weight_matching` of weights already zero outside the admissible edges (and
+    positive on them: :func:`._assoc_kernels.frame_edges`' ``w0``, ``n_ok`` of them)."""
+    if not n_ok:
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    from scipy.optimize import linear_sum_assignment
+
+    rows, cols = linear_sum_assignment(w0, maximize=True)
+    keep = w0[rows, cols] > 0.0
+    return rows[keep].astype(np.int64), cols[keep].astype(np.int64)
+
+
 #: Above this many (tail, new vertex) pairs a frame's edges are scored on the pairs inside the
 #: gate only (:func:`score_edge_pairs`) and matched on that sparse graph
 #: (:func:`sparse_max_weight_matching`): a clutter storm with thousands of estimates a frame
@@ -551,6 +573,17 @@ def _iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     (:func:`._assoc_kernels.iou`)."""
     return _assoc_kernels.iou(np.ascontiguousarray(a, dtype=np.float64).reshape(-1, 4),
                               np.ascontiguousarray(b, dtype=np.float64).reshape(-1, 4))
+
+
+def compile_step_kernels(params: AssocParams | None = None) -> None:
+    """Call the kernels of :meth:`GraphAssociator.step` and :meth:`~GraphAssociator.returning`
+    once with the argument types of a run (the warm-up, :mod:`pfscope.trackers.warmup`):
+    the input check, the frame's edges and the revive test."""
+    a = GraphAssociator(params if params is not None else AssocParams())
+    s = np.array([[100.0, 100.0, 1.0, 0.0, 30.0, 70.0]])
+    a.step(1, s, edges=False)
+    a.step(2, s, edges=False)
+    a.returning(3, s[:, OBS_INDEX])
 
 
 def boxes_xywh(states: np.ndarray) -> np.ndarray:
@@ -777,9 +810,11 @@ class GraphAssociator:
             return np.zeros((0, STATE_DIM))
         if s.ndim != 2 or s.shape[1] != STATE_DIM:
             raise ValueError(f"frame {frame}: expected states of shape (M, 6), got {s.shape}")
-        if not np.all(np.isfinite(s[:, OBS_INDEX])):
+        s = np.ascontiguousarray(s)
+        bad = _assoc_kernels.check_states(s)    # (one pass: ~10 small numpy calls' time)
+        if bad == 1:
             raise ValueError(f"frame {frame}: non-finite position or size in the estimates")
-        if np.any(s[:, 4:6] <= 0):
+        if bad == 2:
             raise ValueError(f"frame {frame}: estimates need positive width and height")
         return s
 
@@ -834,17 +869,27 @@ class GraphAssociator:
         gaps = frame - self._tail_frame
         sc = ep = None
         if T and M:
-            v, b, c = tail_velocity(self._tail, self._prev,
-                                    np.where(self._prev_frame >= 0, self._tail_frame - self._prev_frame, 0),
-                                    p)
             if T * M <= DENSE_MAX_PAIRS:
-                sc = score_edges(self._tail, v, b, c, gaps, new, p)
+                # tail_velocity, score_edges and the matching's admissible weights in one
+                # kernel pass (the same floats)
+                gain, d2, weight, floor, w0, n_ok = _assoc_kernels.frame_edges(
+                    self._tail, self._prev, self._tail_frame, self._prev_frame, frame,
+                    np.ascontiguousarray(new[:, OBS_INDEX]), *p.kernel_args,
+                    float(p.speed_prior))
+                if use_app or edges:
+                    sc = EdgeScores(gain=gain, d2=d2, floor=floor, weight=weight,
+                                    allowed=d2 <= p.gate_d2)
                 if use_app:
                     llr = self._app_model.llr(similarity(self._app, feats),
                                               self._app_n[:, None])
                     sc = replace(sc, weight=sc.weight + p.app_weight * llr)
-                rows, cols = max_weight_matching(sc.weight, sc.allowed)
+                    rows, cols = max_weight_matching(sc.weight, sc.allowed)
+                else:
+                    rows, cols = _match_admissible(w0, n_ok)
             else:   # a storm of estimates: the gated pairs only (DENSE_MAX_PAIRS)
+                v, b, c = tail_velocity(
+                    self._tail, self._prev,
+                    np.where(self._prev_frame >= 0, self._tail_frame - self._prev_frame, 0), p)
                 ep = score_edge_pairs(self._tail, v, b, c, gaps, new, p)
                 if use_app:
                     llr = self._app_model.llr(similarity_pairs(self._app, feats, ep.rows,
@@ -1036,19 +1081,17 @@ class GraphAssociator:
         had estimates in at least ``revive_rate`` of its frames so far (a person who was just
         missed, not clutter that fires now and then in one place)."""
         p = self.params
-        Z = np.asarray(Z, dtype=np.float64).reshape(-1, 4)
-        lost = (self._length >= p.min_length) & (frame - self._tail_frame >= 2) \
-            & (frame - self._tail_frame <= p.depth)
-        span = self._tail_frame - self._first_frame + 1
-        lost &= self._length >= p.revive_rate * span
-        if not lost.any() or not len(Z):
+        Z = np.ascontiguousarray(np.asarray(Z, dtype=np.float64).reshape(-1, 4))
+        if not len(self._ids) or not len(Z):
             return np.zeros(len(Z), dtype=bool)
-        prev_gap = np.where(self._prev_frame[lost] >= 0,
-                            self._tail_frame[lost] - self._prev_frame[lost], 0)
-        v, b, c = tail_velocity(self._tail[lost], self._prev[lost], prev_gap, p)
-        sc = score_edges(self._tail[lost], v, b, c, frame - self._tail_frame[lost],
-                         np.concatenate([Z[:, :2], np.zeros((len(Z), 2)), Z[:, 2:]], axis=1), p)
-        return sc.allowed.any(axis=0)
+        # the lost-track test, tail_velocity and score_edges' gate in one kernel pass (the
+        # same floats): most frames have no such track, and numpy spent ~20 small calls
+        depth, gate_d2, sv, ss, so, so_min, ratio, cc, cc2, _ = p.kernel_args
+        return _assoc_kernels.revive_hits(
+            self._tail, self._prev, self._tail_frame, self._prev_frame, self._first_frame,
+            self._length, int(frame), Z, int(p.min_length), int(p.depth),
+            float(p.revive_rate), gate_d2, sv, ss, so, so_min, ratio, cc, cc2,
+            float(p.speed_prior))
 
     def _extend_heads(self, frame: int, relinked: np.ndarray) -> None:
         """``extend_heads``: the tracks confirmed at ``frame`` (not re-linked) get rows in the
