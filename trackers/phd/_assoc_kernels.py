@@ -268,3 +268,32 @@ def revive_hits(tail, prev, tail_frame, prev_frame, first_frame, length, frame, 
             if dd <= gate_d2:
                 hit[j] = True
     return hit
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def advance(live_ids, tail, tail_frame, prev, prev_frame, length, new, rows, cols, frame,
+            next_id):
+    """The matching's outcome in place (:meth:`.association.GraphAssociator.step`, step 3):
+    each matched tail ``rows[p]`` moves to ``prev``, takes the new vertex ``cols[p]`` at
+    ``frame`` and one more vertex; returns ``ids`` (M,) -- the matched vertices their tail's
+    track id, the others new ids from ``next_id`` in input order -- and ``matched`` (M,)."""
+    M = new.shape[0]
+    ids = np.zeros(M, np.int64)
+    matched = np.zeros(M, np.bool_)
+    for p in range(rows.shape[0]):
+        r = rows[p]
+        c = cols[p]
+        ids[c] = live_ids[r]
+        matched[c] = True
+        for k in range(tail.shape[1]):
+            prev[r, k] = tail[r, k]
+            tail[r, k] = new[c, k]
+        prev_frame[r] = tail_frame[r]
+        tail_frame[r] = frame
+        length[r] += 1
+    n = next_id
+    for j in range(M):
+        if not matched[j]:
+            ids[j] = n
+            n += 1
+    return ids, matched

@@ -900,21 +900,15 @@ class GraphAssociator:
             rows = cols = np.zeros(0, dtype=np.int64)
 
         # 3. matched vertices continue their track; the others start new tracks (input order)
-        ids = np.zeros(M, dtype=np.int64)
-        ids[cols] = self._ids[rows]
-        unmatched = np.ones(M, dtype=bool)
-        unmatched[cols] = False
-        n_new = int(unmatched.sum())
-        new_ids = np.arange(self._next_id, self._next_id + n_new, dtype=np.int64)
+        # (one kernel pass over the matched pairs, in place)
+        ids, matched = _assoc_kernels.advance(self._ids, self._tail, self._tail_frame,
+                                              self._prev, self._prev_frame, self._length, new,
+                                              rows, cols, frame, self._next_id)
+        n_new = M - len(rows)
         self._next_id += n_new
-        ids[unmatched] = new_ids
-
-        self._prev[rows] = self._tail[rows]
-        self._prev_frame[rows] = self._tail_frame[rows]
-        self._tail[rows] = new[cols]
-        self._tail_frame[rows] = frame
-        self._length[rows] += 1
         if n_new:   # (most frames of a steady scene start no track: nothing to append)
+            unmatched = ~matched
+            new_ids = ids[unmatched]
             self._ids = np.concatenate([self._ids, new_ids])  # stays sorted: new ids are the largest
             self._tail = np.concatenate([self._tail, new[unmatched]])
             self._tail_frame = np.concatenate([self._tail_frame,
@@ -1025,8 +1019,10 @@ class GraphAssociator:
         frame's vertices, in place); with ``fill_gaps`` the buffered frames inside the re-linked
         gap are filled.  Returns ``(P, 2)`` pairs ``(new id, old id)``."""
         p = self.params
+        if not len(self._lost_ids):
+            return np.zeros((0, 2), dtype=np.int64)
         cand = np.flatnonzero((self._length == p.min_length) & (self._tail_frame == frame))
-        if not len(cand) or not len(self._lost_ids):
+        if not len(cand):
             return np.zeros((0, 2), dtype=np.int64)
         vbc = self._lost_vbc
         sc = score_relinks(self._lost, vbc[:, 0], vbc[:, 1], vbc[:, 2], self._lost_frame,
