@@ -885,3 +885,36 @@ def test_returning_is_the_numpy_spelling():
     a._length = np.full(T, p.min_length - 1)
     assert not a.returning(frame, Z).any()
     assert not a.returning(frame, Z[:0]).size
+
+
+def test_gap_rows_kernel_is_the_numpy_spelling():
+    """Gap filling's rows (one kernel pass): every (buffered frame, edge) pair with the frame
+    strictly inside the edge's gap, frame-major, the interpolated states and the fill_err
+    test -- the same pairs and floats as the numpy spelling."""
+    from pfscope.trackers.phd import _assoc_kernels as AK
+    from pfscope.trackers.phd.association import OBS_INDEX, interpolation_std
+
+    rng = np.random.default_rng(2)
+    E = 9
+    src = np.array([state(x, y, w, 2.5 * w, *v) for x, y, w, v in
+                    zip(rng.uniform(0, 300, E), rng.uniform(0, 200, E), rng.uniform(3, 60, E),
+                        rng.normal(0, 2, (E, 2)))])
+    dst = src + rng.normal(0, 5, src.shape)
+    src_frame = rng.integers(0, 30, E)
+    frame = src_frame + rng.integers(1, 12, E)
+    fs = np.arange(1, 40, 2)
+    fi, ei, st, likely, run = AK.gap_rows(fs, src, src_frame, dst, frame, 0.05, 0.1)
+    want_fi, want_ei = np.nonzero((src_frame[None, :] < fs[:, None])
+                                  & (fs[:, None] < frame[None, :]))
+    np.testing.assert_array_equal(fi, want_fi)
+    np.testing.assert_array_equal(ei, want_ei)
+    np.testing.assert_array_equal(run, np.searchsorted(fi, np.arange(len(fs) + 1)))
+    gap = frame - src_frame
+    t = ((fs[fi] - src_frame[ei]) / gap[ei])[:, None]
+    want = np.full((len(ei), 6), np.nan)
+    want[:, OBS_INDEX] = (1.0 - t) * src[ei][:, OBS_INDEX] + t * dst[ei][:, OBS_INDEX]
+    want[:, 2:4] = ((dst[:, [0, 1]] - src[:, [0, 1]]) / gap[:, None])[ei]
+    np.testing.assert_array_equal(st, want)
+    std = interpolation_std(0.05, fs[fi] - src_frame[ei], gap[ei])
+    np.testing.assert_array_equal(likely, std <= 0.1)
+    assert 0 < likely.sum() < len(likely)                  # both kinds of rows

@@ -297,3 +297,49 @@ def advance(live_ids, tail, tail_frame, prev, prev_frame, length, new, rows, col
             ids[j] = n
             n += 1
     return ids, matched
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def gap_rows(fs, src, src_frame, dst, frame, sigma_v, fill_err):
+    """Gap filling's rows (:meth:`.association.GraphAssociator._fill_gaps`): every (buffered
+    frame ``fs[k]``, edge ``e``) pair with the frame strictly inside the edge's gap
+    (``src_frame[e] < fs[k] < frame[e]``), frame-major and in edge order within a frame --
+    ``fi``, ``ei`` (R,) -- frame k's rows ``run[k]:run[k + 1]`` (``run`` (K + 1,)); their
+    states ``st`` (R, 6): the straight line between the edge's ends (``src``, ``dst`` (E, 6))
+    on (y1, y2, w, h), the mean velocity over the gap, NaN elsewhere; and ``likely`` (R,):
+    the line's error std there (:func:`.association.interpolation_std` under ``sigma_v``) at
+    most ``fill_err``.  The same floats as the numpy spelling."""
+    K = fs.shape[0]
+    E = src.shape[0]
+    R = 0
+    for k in range(K):
+        for e in range(E):
+            if src_frame[e] < fs[k] and fs[k] < frame[e]:
+                R += 1
+    fi = np.empty(R, np.int64)
+    ei = np.empty(R, np.int64)
+    run = np.empty(K + 1, np.int64)
+    st = np.full((R, 6), np.nan)
+    likely = np.empty(R, np.bool_)
+    n = 0
+    for k in range(K):
+        run[k] = n
+        for e in range(E):
+            if not (src_frame[e] < fs[k] and fs[k] < frame[e]):
+                continue
+            gap = frame[e] - src_frame[e]
+            ti = fs[k] - src_frame[e]
+            t = ti / gap
+            fi[n] = k
+            ei[n] = e
+            for j, c in enumerate((0, 1, 4, 5)):
+                st[n, c] = (1.0 - t) * src[e, c] + t * dst[e, c]
+            st[n, 2] = (dst[e, 0] - src[e, 0]) / gap
+            st[n, 3] = (dst[e, 1] - src[e, 1]) / gap
+            g = float(gap)
+            tf = float(ti)
+            likely[n] = (sigma_v * tf * (g - tf) / math.sqrt(3.0 * (g if g > 1.0 else 1.0))
+                         <= fill_err)
+            n += 1
+    run[K] = n
+    return fi, ei, st, likely, run

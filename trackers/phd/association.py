@@ -578,12 +578,16 @@ def _iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 def compile_step_kernels(params: AssocParams | None = None) -> None:
     """Call the kernels of :meth:`GraphAssociator.step` and :meth:`~GraphAssociator.returning`
     once with the argument types of a run (the warm-up, :mod:`pfscope.trackers.warmup`):
-    the input check, the frame's edges and the revive test."""
-    a = GraphAssociator(params if params is not None else AssocParams())
+    the input check, the frame's edges, the matching's outcome, the revive test and the gap
+    rows."""
+    a = GraphAssociator(replace(params if params is not None else AssocParams(),
+                                fill_gaps=True))
     s = np.array([[100.0, 100.0, 1.0, 0.0, 30.0, 70.0]])
     a.step(1, s, edges=False)
     a.step(2, s, edges=False)
     a.returning(3, s[:, OBS_INDEX])
+    a.step(3, s[:0], edges=False)
+    a.step(4, s, edges=False)     # a gap of one frame, filled
 
 
 def boxes_xywh(states: np.ndarray) -> np.ndarray:
@@ -1150,7 +1154,6 @@ class GraphAssociator:
         src, src_frame, dst, ids, gap = src[long], src_frame[long], dst[long], ids[long], gap[long]
         frame = frame[long]
         obs = OBS_INDEX
-        vel = (dst[:, [0, 1]] - src[:, [0, 1]]) / gap[:, None]
         lo, hi = int(src_frame.min()), int(frame.max())
         # the buffered frames strictly inside some gap (the buffer is in frame order)
         at = [n for n, b in enumerate(self._buffer) if lo < b[0] < hi]
@@ -1158,41 +1161,42 @@ class GraphAssociator:
             return
         fs = np.array([self._buffer[n][0] for n in at], dtype=np.int64)
         # every (frame, edge) pair with the frame inside the edge's gap, frame-major (each
-        # frame's rows in edge order); frame k's rows are run[k]:run[k + 1]
-        fi, ei = np.nonzero((src_frame[None, :] < fs[:, None]) & (fs[:, None] < frame[None, :]))
+        # frame's rows in edge order); frame k's rows are run[k]:run[k + 1]; their states
+        # and the fill_err test of the straight line in one kernel pass
+        fi, ei, st, likely, run = _assoc_kernels.gap_rows(
+            fs, np.ascontiguousarray(src), src_frame, np.ascontiguousarray(dst), frame,
+            float(self.scene_sigma_v), float(self.params.fill_err))
         if not len(ei):
             return
-        run = np.searchsorted(fi, np.arange(len(fs) + 1)).tolist()
-        t = ((fs[fi] - src_frame[ei]) / gap[ei])[:, None]
-        box = (1.0 - t) * src[ei][:, obs] + t * dst[ei][:, obs]
+        run = run.tolist()
         if self._cams:
+            box = st[:, obs]
             for k in range(len(fs)):
                 r = slice(run[k], run[k + 1])
                 if run[k] < run[k + 1]:
                     box[r] = self._back(box[r], int(fs[k]), frame[ei[r]])
+            st[:, obs] = box
         if self.params.fill_support > 0:
             # a gap of at most fill_free missing frames is filled anyway: the evidence is
             # looked up for the longer ones only (one edge's support is its own)
             ok = gap - 1 <= self.params.fill_free
             look = ~ok
             if look.any():
-                hits = np.bincount(ei, weights=self._gap_hits(at, run, box, look[ei]),
+                hits = np.bincount(ei, weights=self._gap_hits(at, run, st[:, obs], look[ei]),
                                    minlength=len(gap))
                 ok[look] = (hits / np.maximum(gap - 1, 1))[look] >= self.params.fill_support
             if not ok.any():
                 return
-            sel = np.flatnonzero(ok[ei])
-            fi, ei, box = fi[sel], ei[sel], box[sel]
-            run = np.searchsorted(fi, np.arange(len(fs) + 1)).tolist()
-        f_row = fs[fi]
-        st = np.full((len(ei), STATE_DIM), np.nan)
-        st[:, obs] = box
-        st[:, 2:4] = vel[ei]
+            sel = ok[ei]
+            if not sel.all():
+                fi, ei, st, likely = fi[sel], ei[sel], st[sel], likely[sel]
+                run = np.searchsorted(fi, np.arange(len(fs) + 1)).tolist()
         fid = ids[ei]
-        keep = (self._likely_rows(fs, run, st, f_row - src_frame[ei], gap[ei])
-                if self.params.fill_err > 0 else None)
+        keep = self._likely_rows(fs, run, st, likely) if self.params.fill_err > 0 else None
         for k, n in enumerate(at):
             r = slice(run[k], run[k + 1])
+            if run[k] == run[k + 1]:
+                continue
             rows, rid = st[r], fid[r]
             if keep is not None:
                 rows, rid = rows[keep[r]], rid[keep[r]]
@@ -1210,16 +1214,16 @@ class GraphAssociator:
             self._buffer[n] = (f, np.concatenate([bid, rid]), np.concatenate([bst, rows]),
                                np.concatenate([bfill, np.ones(len(rows), dtype=bool)]))
 
-    def _likely_rows(self, fs: np.ndarray, run: list, st: np.ndarray, t: np.ndarray,
-                     gap: np.ndarray) -> np.ndarray:
+    def _likely_rows(self, fs: np.ndarray, run: list, st: np.ndarray,
+                     likely: np.ndarray) -> np.ndarray:
         """``fill_err``: mask of the gap rows ``st`` (rows ``run[k]:run[k + 1]`` in frame
-        ``fs[k]``, ``t`` frames into gaps of ``gap``) whose straight line is likely right --
-        its error std (:func:`interpolation_std` under ``scene_sigma_v``) at most ``fill_err``
-        -- or that a detection of its frame (kept with extend_heads) overlaps by
-        ``fill_overlap``."""
-        keep = interpolation_std(self.scene_sigma_v, t, gap) <= self.params.fill_err
-        if keep.all():
-            return keep
+        ``fs[k]``) whose straight line is likely right -- ``likely``: its error std
+        (:func:`interpolation_std` under ``scene_sigma_v``) at most ``fill_err``
+        (:func:`._assoc_kernels.gap_rows`) -- or that a detection of its frame (kept with
+        extend_heads) overlaps by ``fill_overlap``."""
+        if likely.all():
+            return likely
+        keep = likely.copy()
         for k in range(len(fs)):
             r = slice(run[k], run[k + 1])
             if keep[r].all():
