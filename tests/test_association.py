@@ -918,3 +918,33 @@ def test_gap_rows_kernel_is_the_numpy_spelling():
     std = interpolation_std(0.05, fs[fi] - src_frame[ei], gap[ei])
     np.testing.assert_array_equal(likely, std <= 0.1)
     assert 0 < likely.sum() < len(likely)                  # both kinds of rows
+
+
+def test_head_pick_kernel_is_the_numpy_spelling():
+    """extend_heads' walk back, one frame (one kernel pass): the detection nearest the
+    prediction, none another row of the frame covers, inside the gate -- np.argmin's pick
+    on the numpy spelling of the distances and the overlap test."""
+    from pfscope.trackers.phd import _assoc_kernels as AK
+    from pfscope.trackers.phd.association import OBS_INDEX, _iou
+
+    rng = np.random.default_rng(4)
+    seen = set()
+    for _ in range(300):
+        N, B = rng.integers(0, 6), rng.integers(0, 4)
+        d = np.column_stack([rng.uniform(0, 100, (N, 2)), rng.uniform(10, 30, (N, 2))])
+        pred = np.array([50.0, 50.0, 20.0, 20.0]) + rng.normal(0, 5, 4)
+        var = rng.uniform(20, 200, 4)
+        rows = np.array([state(x, y, w, h) for x, y, w, h in
+                         np.column_stack([rng.uniform(0, 100, (B, 2)),
+                                          rng.uniform(10, 30, (B, 2))])]).reshape(-1, 6)
+        d2 = np.sum((d - pred) ** 2 / var, axis=1)
+        if B and N:
+            d2[_iou(d, rows[:, OBS_INDEX]).max(axis=1) >= 0.3] = np.inf
+        j = int(np.argmin(d2)) if N else -1
+        want = j if j >= 0 and d2[j] <= 9.0 else -1
+        got = AK.head_pick(d, pred, var, rows, 0.3, 9.0)
+        assert got == want
+        seen.add("none" if want < 0 else "pick")
+        if B and N and np.isinf(d2).any() and want >= 0:
+            seen.add("covered skipped")
+    assert seen == {"none", "pick", "covered skipped"}

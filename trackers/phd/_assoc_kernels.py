@@ -74,6 +74,36 @@ def edge_scores(tail, v, b, c, gaps, z, depth, gate_d2, sv, ss, so, so_min, rati
     return gain, d2, weight, floor
 
 
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
+def _iou1(ax, ay, aw, ah, bx, by, bw, bh):
+    """Intersection over union of two centre boxes (cx, cy, w, h)."""
+    aw2 = aw / 2
+    ah2 = ah / 2
+    bw2 = bw / 2
+    bh2 = bh / 2
+    # max(x, y) and min(x, y) spelt out by numba's own rule (y if y > x else x; y if
+    # y < x else x): the first run then compiles no builtin max / min overload for
+    # the helper process's kernels (K-means, association, resampling walk)
+    x = ax - aw2
+    y = bx - bw2
+    lo0 = y if y > x else x
+    x = ay - ah2
+    y = by - bh2
+    lo1 = y if y > x else x
+    x = ax + aw2
+    y = bx + bw2
+    hi0 = y if y < x else x
+    x = ay + ah2
+    y = by + bh2
+    hi1 = y if y < x else x
+    e0 = hi0 - lo0
+    e1 = hi1 - lo1
+    inter = (e0 if e0 > 0.0 else 0.0) * (e1 if e1 > 0.0 else 0.0)
+    union = aw * ah + bw * bh - inter
+    return inter / (union if union > 1e-12 else 1e-12)
+
+
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
 def iou(a, b):
     """(A, B) intersection over union of centre boxes ``a`` (A, 4), ``b`` (B, 4)
@@ -82,32 +112,9 @@ def iou(a, b):
     B = b.shape[0]
     out = np.empty((A, B), np.float64)
     for i in range(A):
-        aw = a[i, 2] / 2
-        ah = a[i, 3] / 2
-        area_a = a[i, 2] * a[i, 3]
         for j in range(B):
-            bw = b[j, 2] / 2
-            bh = b[j, 3] / 2
-            # max(x, y) and min(x, y) spelt out by numba's own rule (y if y > x else x; y if
-            # y < x else x): the first run then compiles no builtin max / min overload for
-            # the helper process's kernels (K-means, association, resampling walk)
-            x = a[i, 0] - aw
-            y = b[j, 0] - bw
-            lo0 = y if y > x else x
-            x = a[i, 1] - ah
-            y = b[j, 1] - bh
-            lo1 = y if y > x else x
-            x = a[i, 0] + aw
-            y = b[j, 0] + bw
-            hi0 = y if y < x else x
-            x = a[i, 1] + ah
-            y = b[j, 1] + bh
-            hi1 = y if y < x else x
-            e0 = hi0 - lo0
-            e1 = hi1 - lo1
-            inter = (e0 if e0 > 0.0 else 0.0) * (e1 if e1 > 0.0 else 0.0)
-            union = area_a + b[j, 2] * b[j, 3] - inter
-            out[i, j] = inter / (union if union > 1e-12 else 1e-12)
+            out[i, j] = _iou1(a[i, 0], a[i, 1], a[i, 2], a[i, 3],
+                              b[j, 0], b[j, 1], b[j, 2], b[j, 3])
     return out
 
 
@@ -343,3 +350,38 @@ def gap_rows(fs, src, src_frame, dst, frame, sigma_v, fill_err):
             n += 1
     run[K] = n
     return fi, ei, st, likely, run
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def head_pick(d, pred, var, rows, fill_overlap, gate_d2):
+    """One frame of ``extend_heads``' walk back (:meth:`.association.GraphAssociator.
+    _extend_heads`): the detection of ``d`` (N, 4) ``(cx, cy, w, h)`` nearest ``pred`` (4,)
+    in squared Mahalanobis distance under ``var`` (4,) -- none that a row of ``rows`` (B, 6)
+    overlaps by ``fill_overlap`` IoU or more, np.argmin's pick (first NaN, else first
+    minimum) -- or −1 when it is outside the gate ``gate_d2`` (or there is none)."""
+    best = -1
+    bv = np.inf
+    for i in range(d.shape[0]):
+        r0 = d[i, 0] - pred[0]
+        r1 = d[i, 1] - pred[1]
+        r2 = d[i, 2] - pred[2]
+        r3 = d[i, 3] - pred[3]
+        dd = ((r0 * r0 / var[0] + r1 * r1 / var[1]) + r2 * r2 / var[2]) + r3 * r3 / var[3]
+        if rows.shape[0]:
+            m = _iou1(d[i, 0], d[i, 1], d[i, 2], d[i, 3],
+                      rows[0, 0], rows[0, 1], rows[0, 4], rows[0, 5])
+            for b in range(1, rows.shape[0]):
+                u = _iou1(d[i, 0], d[i, 1], d[i, 2], d[i, 3],
+                          rows[b, 0], rows[b, 1], rows[b, 4], rows[b, 5])
+                if u > m or u != u:      # np.max: NaN propagates
+                    m = u
+            if m >= fill_overlap:
+                dd = np.inf
+        if dd != dd:                     # np.argmin: the first NaN
+            return -1
+        if best < 0 or dd < bv:
+            best = i
+            bv = dd
+    if best < 0 or not bv <= gate_d2:
+        return -1
+    return best

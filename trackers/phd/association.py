@@ -578,16 +578,19 @@ def _iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 def compile_step_kernels(params: AssocParams | None = None) -> None:
     """Call the kernels of :meth:`GraphAssociator.step` and :meth:`~GraphAssociator.returning`
     once with the argument types of a run (the warm-up, :mod:`pfscope.trackers.warmup`):
-    the input check, the frame's edges, the matching's outcome, the revive test and the gap
-    rows."""
+    the input check, the frame's edges, the matching's outcome, the revive test, the gap
+    rows and the walk back of extend_heads."""
     a = GraphAssociator(replace(params if params is not None else AssocParams(),
-                                fill_gaps=True))
+                                fill_gaps=True, extend_heads=True, min_length=3))
     s = np.array([[100.0, 100.0, 1.0, 0.0, 30.0, 70.0]])
-    a.step(1, s, edges=False)
-    a.step(2, s, edges=False)
-    a.returning(3, s[:, OBS_INDEX])
-    a.step(3, s[:0], edges=False)
-    a.step(4, s, edges=False)     # a gap of one frame, filled
+    z = s[:, OBS_INDEX]
+    a.step(1, s[:0], detections=z, edges=False)   # a detection before the track's first
+    for k in (2, 3):
+        a.step(k, s, detections=z, edges=False)
+    a.returning(4, z)
+    a.step(4, s[:0], detections=z, edges=False)
+    # a gap of one frame, filled; the track confirmed, its head extended back to frame 1
+    a.step(5, s, detections=z, edges=False)
 
 
 def boxes_xywh(states: np.ndarray) -> np.ndarray:
@@ -983,7 +986,7 @@ class GraphAssociator:
         self._buffer.append((frame, ids.copy(), new.copy(), np.zeros(M, dtype=bool)))
         if p.extend_heads:
             d = (np.zeros((0, 4)) if detections is None
-                 else np.asarray(detections, dtype=np.float64).reshape(-1, 4))
+                 else np.ascontiguousarray(np.asarray(detections, dtype=np.float64).reshape(-1, 4)))
             self._dets.append((frame, d))
             self._extend_heads(frame, relinked)
         finalised = []
@@ -1119,11 +1122,11 @@ class GraphAssociator:
                 pred[:2] -= v
                 n = frames[f]
                 fr, bid, bst, bfill = self._buffer[n]
-                d2 = np.sum((d - pred) ** 2 / var, axis=1)
-                if len(bst) and len(d):   # a detection another track's row covers is taken
-                    d2[_iou(d, bst[:, OBS_INDEX]).max(axis=1) >= p.fill_overlap] = np.inf
-                j = int(np.argmin(d2)) if len(d) else -1
-                if j < 0 or not d2[j] <= p.gate_d2:
+                # the nearest detection inside the gate that no row of the frame covers (a
+                # detection another track's row covers is taken), one kernel pass
+                j = _assoc_kernels.head_pick(d, pred, var, bst, float(p.fill_overlap),
+                                             float(p.gate_d2))
+                if j < 0:
                     if skip <= 0:   # no detection here (nor in the frames skipped): stop
                         break
                     skip -= 1
