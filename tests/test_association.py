@@ -948,3 +948,37 @@ def test_head_pick_kernel_is_the_numpy_spelling():
         if B and N and np.isinf(d2).any() and want >= 0:
             seen.add("covered skipped")
     assert seen == {"none", "pick", "covered skipped"}
+
+
+def _confirmed_numpy(all_ids, all_len, ids, min_length, extra_ids=None, extra_len=None):
+    if extra_ids is not None and len(extra_ids):
+        all_ids = np.concatenate([all_ids, extra_ids])
+        all_len = np.concatenate([all_len, extra_len])
+        order = np.argsort(all_ids, kind="stable")
+        all_ids, all_len = all_ids[order], all_len[order]
+    if len(ids) == 0 or len(all_ids) == 0:
+        return np.zeros(len(ids), dtype=bool)
+    pos = np.clip(np.searchsorted(all_ids, ids), 0, len(all_ids) - 1)
+    return (all_ids[pos] == ids) & (all_len[pos] >= min_length)
+
+
+def test_confirmed_rows_kernel_is_the_numpy_spelling():
+    """The confirmed test of held-back rows (one kernel pass): live tracks first, then the
+    tracks ended this frame (an id in both -- a re-linked track took a just-ended id -- is
+    the live one), unknown ids not confirmed."""
+    rng = np.random.default_rng(8)
+    a = GraphAssociator(AssocParams(min_length=4))
+    for _ in range(200):
+        live = np.unique(rng.integers(1, 40, rng.integers(0, 12)))
+        a._ids, a._length = live, rng.integers(1, 8, len(live))
+        extra = rng.choice(np.arange(1, 50), rng.integers(0, 6), replace=False)
+        elen = rng.integers(1, 8, len(extra))
+        ids = rng.integers(0, 52, rng.integers(0, 15))
+        for e, el in ((None, None), (extra, elen)):
+            got = a._confirmed_ids(ids, e, el)
+            want = _confirmed_numpy(live, a._length, ids, 4, e, el)
+            np.testing.assert_array_equal(got, want)
+    dup = GraphAssociator(AssocParams(min_length=4))
+    dup._ids, dup._length = np.array([3, 7]), np.array([9, 1])
+    assert dup._confirmed_ids(np.array([7, 3, 5]), np.array([7, 5]),
+                              np.array([9, 9])).tolist() == [False, True, True]

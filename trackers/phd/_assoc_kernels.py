@@ -385,3 +385,23 @@ def head_pick(d, pred, var, rows, fill_overlap, gate_d2):
     if best < 0 or not bv <= gate_d2:
         return -1
     return best
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def confirmed(live_ids, live_len, extra_ids, extra_len, ids, min_length):
+    """(R,) bool: ``ids`` whose track has at least ``min_length`` vertices, looked up in the
+    live tracks (``live_ids`` sorted ascending) first, then in ``extra_ids`` (tracks just
+    ended) -- :meth:`.association.GraphAssociator._confirmed_ids`."""
+    out = np.zeros(ids.shape[0], np.bool_)
+    L = live_ids.shape[0]
+    for r in range(ids.shape[0]):
+        x = ids[r]
+        pos = np.searchsorted(live_ids, x)
+        if pos < L and live_ids[pos] == x:
+            out[r] = live_len[pos] >= min_length
+            continue
+        for e in range(extra_ids.shape[0]):
+            if extra_ids[e] == x:
+                out[r] = extra_len[e] >= min_length
+                break
+    return out

@@ -121,6 +121,8 @@ from .gating import GridIndex, expand_runs
 
 #: Observable components of the state (y1, y2, w, h), maggio2007 §2 ``z = (y, w, h)``.
 OBS_INDEX = np.array([0, 1, 4, 5])
+#: no ids (an empty id / length array the kernels read)
+_NO_IDS = np.zeros(0, dtype=np.int64)
 #: Tracks-file ``conf`` of a row interpolated inside a linked gap (``fill_gaps``); rows of
 #: estimates get :data:`EST_CONF`.
 GAP_CONF = 0.5
@@ -579,7 +581,7 @@ def compile_step_kernels(params: AssocParams | None = None) -> None:
     """Call the kernels of :meth:`GraphAssociator.step` and :meth:`~GraphAssociator.returning`
     once with the argument types of a run (the warm-up, :mod:`pfscope.trackers.warmup`):
     the input check, the frame's edges, the matching's outcome, the revive test, the gap
-    rows and the walk back of extend_heads."""
+    rows, the walk back of extend_heads and the confirmed test of the rows."""
     a = GraphAssociator(replace(params if params is not None else AssocParams(),
                                 fill_gaps=True, extend_heads=True, min_length=3))
     s = np.array([[100.0, 100.0, 1.0, 0.0, 30.0, 70.0]])
@@ -591,6 +593,7 @@ def compile_step_kernels(params: AssocParams | None = None) -> None:
     a.step(4, s[:0], detections=z, edges=False)
     # a gap of one frame, filled; the track confirmed, its head extended back to frame 1
     a.step(5, s, detections=z, edges=False)
+    a.flush()                      # the confirmed test of the rows held back
 
 
 def boxes_xywh(states: np.ndarray) -> np.ndarray:
@@ -1260,18 +1263,12 @@ class GraphAssociator:
         return hit
 
     def _confirmed_ids(self, ids: np.ndarray, extra_ids=None, extra_len=None) -> np.ndarray:
-        """Mask of ``ids`` whose track has at least ``min_length`` vertices (live or just ended)."""
-        all_ids, all_len = self._ids, self._length
-        if extra_ids is not None and len(extra_ids):
-            all_ids = np.concatenate([all_ids, extra_ids])
-            all_len = np.concatenate([all_len, extra_len])
-            order = np.argsort(all_ids, kind="stable")
-            all_ids, all_len = all_ids[order], all_len[order]
-        if len(ids) == 0 or len(all_ids) == 0:
-            return np.zeros(len(ids), dtype=bool)
-        pos = np.clip(np.searchsorted(all_ids, ids), 0, len(all_ids) - 1)
-        found = all_ids[pos] == ids
-        return found & (all_len[pos] >= self.params.min_length)
+        """Mask of ``ids`` whose track has at least ``min_length`` vertices (live or just ended;
+        one kernel pass)."""
+        if extra_ids is None:
+            extra_ids, extra_len = _NO_IDS, _NO_IDS
+        return _assoc_kernels.confirmed(self._ids, self._length, extra_ids, extra_len, ids,
+                                        int(self.params.min_length))
 
     def flush(self) -> tuple[FinalRows, ...]:
         """End of sequence: the buffered rows (the last ``L`` frames) of confirmed tracks."""
