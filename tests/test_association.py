@@ -902,10 +902,13 @@ def test_gap_rows_kernel_is_the_numpy_spelling():
     dst = src + rng.normal(0, 5, src.shape)
     src_frame = rng.integers(0, 30, E)
     frame = src_frame + rng.integers(1, 12, E)
-    fs = np.arange(1, 40, 2)
-    fi, ei, st, likely, run = AK.gap_rows(fs, src, src_frame, dst, frame, 0.05, 0.1)
-    want_fi, want_ei = np.nonzero((src_frame[None, :] < fs[:, None])
-                                  & (fs[:, None] < frame[None, :]))
+    bf = np.arange(1, 60, 2)
+    at, fi, ei, st, likely, run = AK.gap_rows(bf, src, src_frame, dst, frame, 0.05, 0.1)
+    inside = (src_frame[None, :] < bf[:, None]) & (bf[:, None] < frame[None, :])
+    np.testing.assert_array_equal(at, np.flatnonzero(inside.any(axis=1)))
+    assert len(at) < len(bf)                               # frames without a pair left out
+    fs = bf[at]
+    want_fi, want_ei = np.nonzero(inside[at])
     np.testing.assert_array_equal(fi, want_fi)
     np.testing.assert_array_equal(ei, want_ei)
     np.testing.assert_array_equal(run, np.searchsorted(fi, np.arange(len(fs) + 1)))
@@ -982,3 +985,29 @@ def test_confirmed_rows_kernel_is_the_numpy_spelling():
     dup._ids, dup._length = np.array([3, 7]), np.array([9, 1])
     assert dup._confirmed_ids(np.array([7, 3, 5]), np.array([7, 5]),
                               np.array([9, 9])).tolist() == [False, True, True]
+
+
+def test_uncovered_kernel_is_the_numpy_spelling():
+    """Gap filling's overlap test (one kernel pass): a gap row is kept unless an estimate of
+    its frame (not a filled row) overlaps it by fill_overlap IoU or more."""
+    from pfscope.trackers.phd import _assoc_kernels as AK
+    from pfscope.trackers.phd.association import OBS_INDEX, _iou
+
+    rng = np.random.default_rng(6)
+    seen = set()
+    for _ in range(200):
+        R, B = rng.integers(1, 5), rng.integers(0, 5)
+        box = lambda n: np.column_stack([rng.uniform(0, 100, (n, 2)),
+                                         rng.uniform(10, 30, (n, 2))])
+        rows = np.array([state(*b) for b in box(R)]).reshape(-1, 6)
+        bst = np.array([state(*b) for b in box(B)]).reshape(-1, 6)
+        bfill = rng.random(B) < 0.4
+        est = bst[~bfill]
+        want = (_iou(rows[:, OBS_INDEX], est[:, OBS_INDEX]).max(axis=1) < 0.3 if len(est)
+                else np.ones(R, dtype=bool))
+        got = AK.uncovered(rows, bst, bfill, 0.3)
+        np.testing.assert_array_equal(got, want)
+        seen.update(want.tolist())
+        if len(est) and bfill.any():
+            seen.add("filled rows ignored")
+    assert seen == {True, False, "filled rows ignored"}

@@ -305,7 +305,7 @@ def test_first_run_compiles_each_kernel_once_in_one_process(tmp_path):
     """A first run's warm-up (empty numba cache, a second core: the helper compiles the filter's
     kernels but M(z), and the IoU of gap filling) compiles in this process the K-means kernels,
     the association's edge scores, input check, frame edges, matching outcome, revive test,
-    gap rows, head walk and confirmed test, and M(z) only, one specialisation each: none of the
+    gap rows and their overlap test, head walk and confirmed test, and M(z) only, one specialisation each: none of the
     helper's kernels again (the helper's calls have the run's very signatures, so they load
     from its cache), none for the 'paper' preset that 'practical' did not need, and nothing
     the run does not call.  numba's compile events, a fresh process."""
@@ -328,7 +328,7 @@ def test_first_run_compiles_each_kernel_once_in_one_process(tmp_path):
     top = _fresh_process(code, tmp_path)
     assert sorted(top) == ["advance", "check_states", "confirmed", "edge_scores", "farthest",
                            "frame_edges", "gap_rows", "head_pick", "lloyd", "mass_near_kernel",
-                           "prepare", "revive_hits"], top
+                           "prepare", "revive_hits", "uncovered"], top
 
 
 def test_early_helper_only_for_the_phd_kernels(monkeypatch):

@@ -307,39 +307,54 @@ def advance(live_ids, tail, tail_frame, prev, prev_frame, length, new, rows, col
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
-def gap_rows(fs, src, src_frame, dst, frame, sigma_v, fill_err):
+def gap_rows(bf, src, src_frame, dst, frame, sigma_v, fill_err):
     """Gap filling's rows (:meth:`.association.GraphAssociator._fill_gaps`): every (buffered
-    frame ``fs[k]``, edge ``e``) pair with the frame strictly inside the edge's gap
-    (``src_frame[e] < fs[k] < frame[e]``), frame-major and in edge order within a frame --
-    ``fi``, ``ei`` (R,) -- frame k's rows ``run[k]:run[k + 1]`` (``run`` (K + 1,)); their
-    states ``st`` (R, 6): the straight line between the edge's ends (``src``, ``dst`` (E, 6))
-    on (y1, y2, w, h), the mean velocity over the gap, NaN elsewhere; and ``likely`` (R,):
-    the line's error std there (:func:`.association.interpolation_std` under ``sigma_v``) at
-    most ``fill_err``.  The same floats as the numpy spelling."""
-    K = fs.shape[0]
+    frame, edge) pair with the frame strictly inside the edge's gap
+    (``src_frame[e] < f < frame[e]``; ``bf`` (B,) the buffered frames, in order).  Returns
+    ``at`` (K,): the buffer positions of the frames with a pair; the pairs frame-major and
+    in edge order within a frame -- ``fi`` (index into ``at``), ``ei`` (R,) -- frame k's rows
+    ``run[k]:run[k + 1]`` (``run`` (K + 1,)); their states ``st`` (R, 6): the straight line
+    between the edge's ends (``src``, ``dst`` (E, 6)) on (y1, y2, w, h), the mean velocity
+    over the gap, NaN elsewhere; and ``likely`` (R,): the line's error std there
+    (:func:`.association.interpolation_std` under ``sigma_v``) at most ``fill_err``.  The
+    same floats as the numpy spelling."""
+    B = bf.shape[0]
     E = src.shape[0]
     R = 0
-    for k in range(K):
+    K = 0
+    for k in range(B):
+        n = 0
         for e in range(E):
-            if src_frame[e] < fs[k] and fs[k] < frame[e]:
-                R += 1
+            if src_frame[e] < bf[k] and bf[k] < frame[e]:
+                n += 1
+        R += n
+        if n:
+            K += 1
+    at = np.empty(K, np.int64)
     fi = np.empty(R, np.int64)
     ei = np.empty(R, np.int64)
     run = np.empty(K + 1, np.int64)
     st = np.full((R, 6), np.nan)
     likely = np.empty(R, np.bool_)
     n = 0
-    for k in range(K):
-        run[k] = n
+    kk = 0
+    for k in range(B):
+        f = bf[k]
+        first = True
         for e in range(E):
-            if not (src_frame[e] < fs[k] and fs[k] < frame[e]):
+            if not (src_frame[e] < f and f < frame[e]):
                 continue
+            if first:
+                at[kk] = k
+                run[kk] = n
+                kk += 1
+                first = False
             gap = frame[e] - src_frame[e]
-            ti = fs[k] - src_frame[e]
+            ti = f - src_frame[e]
             t = ti / gap
-            fi[n] = k
+            fi[n] = kk - 1
             ei[n] = e
-            for j, c in enumerate((0, 1, 4, 5)):
+            for c in (0, 1, 4, 5):
                 st[n, c] = (1.0 - t) * src[e, c] + t * dst[e, c]
             st[n, 2] = (dst[e, 0] - src[e, 0]) / gap
             st[n, 3] = (dst[e, 1] - src[e, 1]) / gap
@@ -349,7 +364,7 @@ def gap_rows(fs, src, src_frame, dst, frame, sigma_v, fill_err):
                          <= fill_err)
             n += 1
     run[K] = n
-    return fi, ei, st, likely, run
+    return at, fi, ei, st, likely, run
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
@@ -404,4 +419,29 @@ def confirmed(live_ids, live_len, extra_ids, extra_len, ids, min_length):
             if extra_ids[e] == x:
                 out[r] = extra_len[e] >= min_length
                 break
+    return out
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def uncovered(rows, bst, bfill, fill_overlap):
+    """(R,) bool: the gap rows ``rows`` (R, 6) that no estimate of their frame (``bst`` (B, 6)
+    where not ``bfill``) overlaps by ``fill_overlap`` IoU or more (np.max's NaN rule); all
+    True when the frame has no estimate."""
+    R = rows.shape[0]
+    out = np.ones(R, np.bool_)
+    for i in range(R):
+        m = -np.inf
+        seen = False
+        nan = False
+        for b in range(bst.shape[0]):
+            if bfill[b]:
+                continue
+            seen = True
+            u = _iou1(rows[i, 0], rows[i, 1], rows[i, 4], rows[i, 5],
+                      bst[b, 0], bst[b, 1], bst[b, 4], bst[b, 5])
+            if u != u:
+                nan = True
+            elif u > m:
+                m = u
+        out[i] = not seen or (not nan and m < fill_overlap)
     return out

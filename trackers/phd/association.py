@@ -1149,38 +1149,32 @@ class GraphAssociator:
                    ids: np.ndarray) -> None:
         """Add interpolated rows to the buffered frames strictly between each chosen edge's ends
         (``src`` at ``src_frame`` → ``dst`` at ``frame``, one frame or one per edge).  The boxes
-        of every (buffered frame, edge) pair in one set of numpy calls, shared by the gap
-        support and the rows; the overlap tests and the buffer's rows one call per frame that
-        gets rows (at most ``depth`` frames)."""
-        gap = frame - src_frame
-        long = gap > 1
-        if not long.any() or not self._buffer:
+        of every (buffered frame, edge) pair in one kernel pass (:func:`._assoc_kernels.
+        gap_rows`), shared by the gap support and the rows; the overlap test and the buffer's
+        rows one call per frame that gets rows (at most ``depth`` frames)."""
+        if not self._buffer:
             return
         frame = np.broadcast_to(np.asarray(frame, dtype=np.int64), np.shape(src_frame))
-        src, src_frame, dst, ids, gap = src[long], src_frame[long], dst[long], ids[long], gap[long]
-        frame = frame[long]
+        gap = frame - src_frame
         obs = OBS_INDEX
-        lo, hi = int(src_frame.min()), int(frame.max())
-        # the buffered frames strictly inside some gap (the buffer is in frame order)
-        at = [n for n, b in enumerate(self._buffer) if lo < b[0] < hi]
-        if not at:
-            return
-        fs = np.array([self._buffer[n][0] for n in at], dtype=np.int64)
-        # every (frame, edge) pair with the frame inside the edge's gap, frame-major (each
-        # frame's rows in edge order); frame k's rows are run[k]:run[k + 1]; their states
-        # and the fill_err test of the straight line in one kernel pass
-        fi, ei, st, likely, run = _assoc_kernels.gap_rows(
-            fs, np.ascontiguousarray(src), src_frame, np.ascontiguousarray(dst), frame,
+        # every (buffered frame, edge) pair with the frame strictly inside the edge's gap
+        # (an edge of gap 1 has none), frame-major (each frame's rows in edge order): the
+        # frames with rows are self._buffer[at[k]], their rows run[k]:run[k + 1]; the rows'
+        # states and the fill_err test of the straight line in the same kernel pass
+        bf = np.fromiter((b[0] for b in self._buffer), np.int64, len(self._buffer))
+        at, fi, ei, st, likely, run = _assoc_kernels.gap_rows(
+            bf, np.ascontiguousarray(src), np.ascontiguousarray(src_frame),
+            np.ascontiguousarray(dst), np.ascontiguousarray(frame),
             float(self.scene_sigma_v), float(self.params.fill_err))
         if not len(ei):
             return
-        run = run.tolist()
+        at, run = at.tolist(), run.tolist()
+        fs = bf[at]
         if self._cams:
             box = st[:, obs]
             for k in range(len(fs)):
                 r = slice(run[k], run[k + 1])
-                if run[k] < run[k + 1]:
-                    box[r] = self._back(box[r], int(fs[k]), frame[ei[r]])
+                box[r] = self._back(box[r], int(fs[k]), frame[ei[r]])
             st[:, obs] = box
         if self.params.fill_support > 0:
             # a gap of at most fill_free missing frames is filled anyway: the evidence is
@@ -1191,29 +1185,28 @@ class GraphAssociator:
                 hits = np.bincount(ei, weights=self._gap_hits(at, run, st[:, obs], look[ei]),
                                    minlength=len(gap))
                 ok[look] = (hits / np.maximum(gap - 1, 1))[look] >= self.params.fill_support
-            if not ok.any():
-                return
             sel = ok[ei]
+            if not sel.any():
+                return
             if not sel.all():
                 fi, ei, st, likely = fi[sel], ei[sel], st[sel], likely[sel]
                 run = np.searchsorted(fi, np.arange(len(fs) + 1)).tolist()
         fid = ids[ei]
         keep = self._likely_rows(fs, run, st, likely) if self.params.fill_err > 0 else None
         for k, n in enumerate(at):
-            r = slice(run[k], run[k + 1])
             if run[k] == run[k + 1]:
                 continue
+            r = slice(run[k], run[k + 1])
             rows, rid = st[r], fid[r]
             if keep is not None:
                 rows, rid = rows[keep[r]], rid[keep[r]]
-            if not len(rows):
-                continue
+                if not len(rows):
+                    continue
             f, bid, bst, bfill = self._buffer[n]
             # a box another track's estimate already covers is not filled (the gap is then
             # the other track's frame: filling it would report one target twice)
-            est = bst[~bfill]
-            if len(est):
-                free = _iou(rows[:, obs], est[:, obs]).max(axis=1) < self.params.fill_overlap
+            free = _assoc_kernels.uncovered(rows, bst, bfill, float(self.params.fill_overlap))
+            if not free.all():
                 rows, rid = rows[free], rid[free]
                 if not len(rows):
                     continue
