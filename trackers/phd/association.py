@@ -988,8 +988,8 @@ class GraphAssociator:
         # 6. bounded-lag output: rows of frames <= k − L, judged with the lengths known now
         self._buffer.append((frame, ids.copy(), new.copy(), np.zeros(M, dtype=bool)))
         if p.extend_heads:
-            d = (np.zeros((0, 4)) if detections is None
-                 else np.ascontiguousarray(np.asarray(detections, dtype=np.float64).reshape(-1, 4)))
+            d = (np.zeros((0, 4)) if detections is None else
+                 np.ascontiguousarray(np.asarray(detections, dtype=np.float64).reshape(-1, 4)))
             self._dets.append((frame, d))
             self._extend_heads(frame, relinked)
         finalised = []
