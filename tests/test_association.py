@@ -330,6 +330,9 @@ def test_edges_report_the_tails_before_the_update():
     (1, np.zeros((2, 4)), "shape"),
     (1, [state(1, 2, w=0.0)], "positive"),
     (1, [state(NAN, 2)], "non-finite"),
+    (1, [state(1, 2), state(1, 2, h=np.inf)], "non-finite"),
+    (1, [state(1, 2), state(1, 2, h=-5.0)], "positive"),
+    (1, [state(1, 2, w=0.0), state(1, 2, w=NAN)], "non-finite"),   # the finite test first
 ])
 def test_bad_input_is_rejected(frame, states, msg):
     with pytest.raises(ValueError, match=msg):
@@ -790,3 +793,221 @@ def test_without_edge_arrays_the_tracks_are_the_same():
     for x, y in zip(with_edges, without, strict=True):
         for u, w in zip(x, y, strict=True):
             np.testing.assert_array_equal(u, w)
+
+
+# --------------------------------------------------------------------------- one-pass kernels
+
+def _random_tails(rng, T):
+    """Tails with known, unknown (NaN) velocities, one- and two-vertex tracks."""
+    tails = np.array([state(x, y, w, 2.5 * w, *(v if k % 3 else (NAN, NAN)))
+                      for k, (x, y, w, v) in enumerate(zip(rng.uniform(0, 300, T),
+                                                           rng.uniform(0, 200, T),
+                                                           rng.uniform(3, 60, T),
+                                                           rng.normal(0, 2, (T, 2))))])
+    tails[1::5, 3] = NAN                       # one unknown component: unknown velocity
+    prev = tails + rng.normal(0, 3, tails.shape)
+    tail_frame = rng.integers(20, 40, T)
+    prev_frame = np.where(rng.random(T) < 0.3, -1, tail_frame - rng.integers(1, 4, T))
+    return tails, prev, tail_frame.astype(np.int64), prev_frame.astype(np.int64)
+
+
+def test_frame_edges_kernel_is_the_numpy_spelling():
+    """The step's one-pass kernel (tail velocity, edge scores, admissible weights) gives the
+    same floats as tail_velocity + score_edges, and the same matching as
+    max_weight_matching on them."""
+    from pfscope.trackers.phd import _assoc_kernels as AK
+    from pfscope.trackers.phd.association import OBS_INDEX, _match_admissible
+
+    rng = np.random.default_rng(5)
+    p = AssocParams(depth=30)
+    for T, M in ((40, 30), (7, 9), (1, 1)):
+        tails, prev, tf, pf = _random_tails(rng, T)
+        frame = 41
+        new = np.array([state(x, y, w, 2.5 * w) for x, y, w in
+                        zip(rng.uniform(0, 300, M), rng.uniform(0, 200, M),
+                            rng.uniform(3, 60, M))])
+        v, b, c = tail_velocity(tails, prev, np.where(pf >= 0, tf - pf, 0), p)
+        sc = score_edges(tails, v, b, c, frame - tf, new, p)
+        gain, d2, weight, floor, w0, n_ok = AK.frame_edges(
+            tails, prev, tf, pf, frame, np.ascontiguousarray(new[:, OBS_INDEX]),
+            *p.kernel_args, float(p.speed_prior))
+        for got, want in ((gain, sc.gain), (d2, sc.d2), (weight, sc.weight), (floor, sc.floor)):
+            np.testing.assert_array_equal(got, want)
+        ok = sc.allowed & np.isfinite(sc.weight) & (sc.weight > 0)
+        np.testing.assert_array_equal(w0, np.where(ok, sc.weight, 0.0))
+        assert n_ok == ok.sum()
+        if T > 1:
+            assert 0 < n_ok < T * M            # both kinds of pairs are compared
+        for got, want in zip(_match_admissible(w0, n_ok),
+                             max_weight_matching(sc.weight, sc.allowed)):
+            np.testing.assert_array_equal(got, want)
+
+
+def _returning_numpy(a: GraphAssociator, frame: int, Z: np.ndarray) -> np.ndarray:
+    """GraphAssociator.returning spelt with numpy (tail_velocity + score_edges)."""
+    p = a.params
+    lost = ((a._length >= p.min_length) & (frame - a._tail_frame >= 2)
+            & (frame - a._tail_frame <= p.depth))
+    lost &= a._length >= p.revive_rate * (a._tail_frame - a._first_frame + 1)
+    if not lost.any() or not len(Z):
+        return np.zeros(len(Z), dtype=bool)
+    prev_gap = np.where(a._prev_frame[lost] >= 0, a._tail_frame[lost] - a._prev_frame[lost], 0)
+    v, b, c = tail_velocity(a._tail[lost], a._prev[lost], prev_gap, p)
+    sc = score_edges(a._tail[lost], v, b, c, frame - a._tail_frame[lost],
+                     np.concatenate([Z[:, :2], np.zeros((len(Z), 2)), Z[:, 2:]], axis=1), p)
+    return sc.allowed.any(axis=0)
+
+
+def test_returning_is_the_numpy_spelling():
+    """returning (one kernel pass): the detections inside the gate of a confirmed tail unseen
+    in the frame before, with estimates in at least revive_rate of its frames -- the same
+    mask as tail_velocity + score_edges on the selected tails."""
+    rng = np.random.default_rng(11)
+    p = AssocParams(depth=30, min_length=3, revive_rate=0.8)
+    a = GraphAssociator(p)
+    T = 60
+    tails, prev, tf, pf = _random_tails(rng, T)
+    tails[:, :2] *= 10.0                                  # spread over the detections' image
+    prev[:, :2] = tails[:, :2] + rng.normal(0, 3, (T, 2))
+    a._ids = np.arange(1, T + 1)
+    a._tail, a._prev, a._tail_frame, a._prev_frame = tails, prev, tf, pf
+    a._length = rng.integers(1, 8, T)
+    a._first_frame = tf - rng.integers(0, 9, T)
+    frame = 42
+    Z = np.column_stack([rng.uniform(0, 3000, 200), rng.uniform(0, 2000, 200),
+                         rng.uniform(3, 60, 200)])
+    Z = np.column_stack([Z, 2.5 * Z[:, 2]])
+    got = a.returning(frame, Z)
+    want = _returning_numpy(a, frame, Z)
+    assert got.dtype == bool and 5 < want.sum() < len(Z)     # both kinds of detections
+    np.testing.assert_array_equal(got, want)
+    # each condition on the tail matters: with all tails short, none is lost
+    a._length = np.full(T, p.min_length - 1)
+    assert not a.returning(frame, Z).any()
+    assert not a.returning(frame, Z[:0]).size
+
+
+def test_gap_rows_kernel_is_the_numpy_spelling():
+    """Gap filling's rows (one kernel pass): every (buffered frame, edge) pair with the frame
+    strictly inside the edge's gap, frame-major, the interpolated states and the fill_err
+    test -- the same pairs and floats as the numpy spelling."""
+    from pfscope.trackers.phd import _assoc_kernels as AK
+    from pfscope.trackers.phd.association import OBS_INDEX, interpolation_std
+
+    rng = np.random.default_rng(2)
+    E = 9
+    src = np.array([state(x, y, w, 2.5 * w, *v) for x, y, w, v in
+                    zip(rng.uniform(0, 300, E), rng.uniform(0, 200, E), rng.uniform(3, 60, E),
+                        rng.normal(0, 2, (E, 2)))])
+    dst = src + rng.normal(0, 5, src.shape)
+    src_frame = rng.integers(0, 30, E)
+    frame = src_frame + rng.integers(1, 12, E)
+    bf = np.arange(1, 60, 2)
+    at, fi, ei, st, likely, run = AK.gap_rows(bf, src, src_frame, dst, frame, 0.05, 0.1)
+    inside = (src_frame[None, :] < bf[:, None]) & (bf[:, None] < frame[None, :])
+    np.testing.assert_array_equal(at, np.flatnonzero(inside.any(axis=1)))
+    assert len(at) < len(bf)                               # frames without a pair left out
+    fs = bf[at]
+    want_fi, want_ei = np.nonzero(inside[at])
+    np.testing.assert_array_equal(fi, want_fi)
+    np.testing.assert_array_equal(ei, want_ei)
+    np.testing.assert_array_equal(run, np.searchsorted(fi, np.arange(len(fs) + 1)))
+    gap = frame - src_frame
+    t = ((fs[fi] - src_frame[ei]) / gap[ei])[:, None]
+    want = np.full((len(ei), 6), np.nan)
+    want[:, OBS_INDEX] = (1.0 - t) * src[ei][:, OBS_INDEX] + t * dst[ei][:, OBS_INDEX]
+    want[:, 2:4] = ((dst[:, [0, 1]] - src[:, [0, 1]]) / gap[:, None])[ei]
+    np.testing.assert_array_equal(st, want)
+    std = interpolation_std(0.05, fs[fi] - src_frame[ei], gap[ei])
+    np.testing.assert_array_equal(likely, std <= 0.1)
+    assert 0 < likely.sum() < len(likely)                  # both kinds of rows
+
+
+def test_head_pick_kernel_is_the_numpy_spelling():
+    """extend_heads' walk back, one frame (one kernel pass): the detection nearest the
+    prediction, none another row of the frame covers, inside the gate -- np.argmin's pick
+    on the numpy spelling of the distances and the overlap test."""
+    from pfscope.trackers.phd import _assoc_kernels as AK
+    from pfscope.trackers.phd.association import OBS_INDEX, _iou
+
+    rng = np.random.default_rng(4)
+    seen = set()
+    for _ in range(300):
+        N, B = rng.integers(0, 6), rng.integers(0, 4)
+        d = np.column_stack([rng.uniform(0, 100, (N, 2)), rng.uniform(10, 30, (N, 2))])
+        pred = np.array([50.0, 50.0, 20.0, 20.0]) + rng.normal(0, 5, 4)
+        var = rng.uniform(20, 200, 4)
+        rows = np.array([state(x, y, w, h) for x, y, w, h in
+                         np.column_stack([rng.uniform(0, 100, (B, 2)),
+                                          rng.uniform(10, 30, (B, 2))])]).reshape(-1, 6)
+        d2 = np.sum((d - pred) ** 2 / var, axis=1)
+        if B and N:
+            d2[_iou(d, rows[:, OBS_INDEX]).max(axis=1) >= 0.3] = np.inf
+        j = int(np.argmin(d2)) if N else -1
+        want = j if j >= 0 and d2[j] <= 9.0 else -1
+        got = AK.head_pick(d, pred, var, rows, 0.3, 9.0)
+        assert got == want
+        seen.add("none" if want < 0 else "pick")
+        if B and N and np.isinf(d2).any() and want >= 0:
+            seen.add("covered skipped")
+    assert seen == {"none", "pick", "covered skipped"}
+
+
+def _confirmed_numpy(all_ids, all_len, ids, min_length, extra_ids=None, extra_len=None):
+    if extra_ids is not None and len(extra_ids):
+        all_ids = np.concatenate([all_ids, extra_ids])
+        all_len = np.concatenate([all_len, extra_len])
+        order = np.argsort(all_ids, kind="stable")
+        all_ids, all_len = all_ids[order], all_len[order]
+    if len(ids) == 0 or len(all_ids) == 0:
+        return np.zeros(len(ids), dtype=bool)
+    pos = np.clip(np.searchsorted(all_ids, ids), 0, len(all_ids) - 1)
+    return (all_ids[pos] == ids) & (all_len[pos] >= min_length)
+
+
+def test_confirmed_rows_kernel_is_the_numpy_spelling():
+    """The confirmed test of held-back rows (one kernel pass): live tracks first, then the
+    tracks ended this frame (an id in both -- a re-linked track took a just-ended id -- is
+    the live one), unknown ids not confirmed."""
+    rng = np.random.default_rng(8)
+    a = GraphAssociator(AssocParams(min_length=4))
+    for _ in range(200):
+        live = np.unique(rng.integers(1, 40, rng.integers(0, 12)))
+        a._ids, a._length = live, rng.integers(1, 8, len(live))
+        extra = rng.choice(np.arange(1, 50), rng.integers(0, 6), replace=False)
+        elen = rng.integers(1, 8, len(extra))
+        ids = rng.integers(0, 52, rng.integers(0, 15))
+        for e, el in ((None, None), (extra, elen)):
+            got = a._confirmed_ids(ids, e, el)
+            want = _confirmed_numpy(live, a._length, ids, 4, e, el)
+            np.testing.assert_array_equal(got, want)
+    dup = GraphAssociator(AssocParams(min_length=4))
+    dup._ids, dup._length = np.array([3, 7]), np.array([9, 1])
+    assert dup._confirmed_ids(np.array([7, 3, 5]), np.array([7, 5]),
+                              np.array([9, 9])).tolist() == [False, True, True]
+
+
+def test_uncovered_kernel_is_the_numpy_spelling():
+    """Gap filling's overlap test (one kernel pass): a gap row is kept unless an estimate of
+    its frame (not a filled row) overlaps it by fill_overlap IoU or more."""
+    from pfscope.trackers.phd import _assoc_kernels as AK
+    from pfscope.trackers.phd.association import OBS_INDEX, _iou
+
+    rng = np.random.default_rng(6)
+    seen = set()
+    for _ in range(200):
+        R, B = rng.integers(1, 5), rng.integers(0, 5)
+        box = lambda n: np.column_stack([rng.uniform(0, 100, (n, 2)),
+                                         rng.uniform(10, 30, (n, 2))])
+        rows = np.array([state(*b) for b in box(R)]).reshape(-1, 6)
+        bst = np.array([state(*b) for b in box(B)]).reshape(-1, 6)
+        bfill = rng.random(B) < 0.4
+        est = bst[~bfill]
+        want = (_iou(rows[:, OBS_INDEX], est[:, OBS_INDEX]).max(axis=1) < 0.3 if len(est)
+                else np.ones(R, dtype=bool))
+        got = AK.uncovered(rows, bst, bfill, 0.3)
+        np.testing.assert_array_equal(got, want)
+        seen.update(want.tolist())
+        if len(est) and bfill.any():
+            seen.add("filled rows ignored")
+    assert seen == {True, False, "filled rows ignored"}

@@ -304,10 +304,12 @@ def _fresh_process(code: str, tmp_path) -> list:
 def test_first_run_compiles_each_kernel_once_in_one_process(tmp_path):
     """A first run's warm-up (empty numba cache, a second core: the helper compiles the filter's
     kernels but M(z), and the IoU of gap filling) compiles in this process the K-means kernels,
-    the association's edge scores and M(z) only, one specialisation each: none of the
-    helper's kernels again (the helper's calls have the run's very signatures, so they load
-    from its cache), none for the 'paper' preset that 'practical' did not need, and nothing
-    the run does not call.  numba's compile events, a fresh process."""
+    the association's edge scores, input check, frame edges, matching outcome, revive test,
+    gap rows and their overlap test, head walk and confirmed test, and M(z) only, one
+    specialisation each: none of the helper's kernels again (the helper's calls have the
+    run's very signatures, so they load from its cache), none for the 'paper' preset that
+    'practical' did not need, and nothing the run does not call.  numba's compile events, a
+    fresh process."""
     code = ("import os\n"
             "from numba.core import event as ev\n"
             "os.cpu_count = lambda: 2\n"
@@ -325,7 +327,9 @@ def test_first_run_compiles_each_kernel_once_in_one_process(tmp_path):
             "        depth -= 1\n"
             "print(' '.join(top))\n")
     top = _fresh_process(code, tmp_path)
-    assert sorted(top) == ["edge_scores", "farthest", "lloyd", "mass_near_kernel", "prepare"], top
+    assert sorted(top) == ["advance", "check_states", "confirmed", "edge_scores", "farthest",
+                           "frame_edges", "gap_rows", "head_pick", "lloyd", "mass_near_kernel",
+                           "prepare", "revive_hits", "uncovered"], top
 
 
 def test_early_helper_only_for_the_phd_kernels(monkeypatch):

@@ -65,13 +65,15 @@ def _compile_association(edges: bool = True, iou: bool = True) -> None:
     """The association's kernels (``edges``: the edge scores; ``iou``: the IoU of gap
     filling): the warm-up's tracks need more than its four frames of estimates to reach
     them."""
-    from .phd.association import AssocParams, _iou, score_edges, tail_velocity
+    from .phd.association import (AssocParams, _iou, compile_step_kernels, score_edges,
+                                  tail_velocity)
 
     s = np.array([[100.0, 100.0, 1.0, 0.0, 30.0, 70.0]])
     if edges:
         ap = AssocParams()
         v, b, c = tail_velocity(s, s, np.zeros(1, dtype=np.int64), ap)
         score_edges(s, v, b, c, np.ones(1, dtype=np.int64), s, ap)
+        compile_step_kernels(ap)
     if iou:
         _iou(s[:, [0, 1, 4, 5]], s[:, [0, 1, 4, 5]])
 

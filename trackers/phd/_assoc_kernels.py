@@ -74,6 +74,36 @@ def edge_scores(tail, v, b, c, gaps, z, depth, gate_d2, sv, ss, so, so_min, rati
     return gain, d2, weight, floor
 
 
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
+def _iou1(ax, ay, aw, ah, bx, by, bw, bh):
+    """Intersection over union of two centre boxes (cx, cy, w, h)."""
+    aw2 = aw / 2
+    ah2 = ah / 2
+    bw2 = bw / 2
+    bh2 = bh / 2
+    # max(x, y) and min(x, y) spelt out by numba's own rule (y if y > x else x; y if
+    # y < x else x): the first run then compiles no builtin max / min overload for
+    # the helper process's kernels (K-means, association, resampling walk)
+    x = ax - aw2
+    y = bx - bw2
+    lo0 = y if y > x else x
+    x = ay - ah2
+    y = by - bh2
+    lo1 = y if y > x else x
+    x = ax + aw2
+    y = bx + bw2
+    hi0 = y if y < x else x
+    x = ay + ah2
+    y = by + bh2
+    hi1 = y if y < x else x
+    e0 = hi0 - lo0
+    e1 = hi1 - lo1
+    inter = (e0 if e0 > 0.0 else 0.0) * (e1 if e1 > 0.0 else 0.0)
+    union = aw * ah + bw * bh - inter
+    return inter / (union if union > 1e-12 else 1e-12)
+
+
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
 def iou(a, b):
     """(A, B) intersection over union of centre boxes ``a`` (A, 4), ``b`` (B, 4)
@@ -82,30 +112,336 @@ def iou(a, b):
     B = b.shape[0]
     out = np.empty((A, B), np.float64)
     for i in range(A):
-        aw = a[i, 2] / 2
-        ah = a[i, 3] / 2
-        area_a = a[i, 2] * a[i, 3]
         for j in range(B):
-            bw = b[j, 2] / 2
-            bh = b[j, 3] / 2
-            # max(x, y) and min(x, y) spelt out by numba's own rule (y if y > x else x; y if
-            # y < x else x): the first run then compiles no builtin max / min overload for
-            # the helper process's kernels (K-means, association, resampling walk)
-            x = a[i, 0] - aw
-            y = b[j, 0] - bw
-            lo0 = y if y > x else x
-            x = a[i, 1] - ah
-            y = b[j, 1] - bh
-            lo1 = y if y > x else x
-            x = a[i, 0] + aw
-            y = b[j, 0] + bw
-            hi0 = y if y < x else x
-            x = a[i, 1] + ah
-            y = b[j, 1] + bh
-            hi1 = y if y < x else x
-            e0 = hi0 - lo0
-            e1 = hi1 - lo1
-            inter = (e0 if e0 > 0.0 else 0.0) * (e1 if e1 > 0.0 else 0.0)
-            union = area_a + b[j, 2] * b[j, 3] - inter
-            out[i, j] = inter / (union if union > 1e-12 else 1e-12)
+            out[i, j] = _iou1(a[i, 0], a[i, 1], a[i, 2], a[i, 3],
+                              b[j, 0], b[j, 1], b[j, 2], b[j, 3])
+    return out
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def check_states(s):
+    """The association's input check of ``s`` (M, 6) states in one pass: 1 when a position or
+    size ``(y1, y2, w, h)`` is not finite, 2 when a width or height is not positive (NaN is
+    not), else 0 (:meth:`.association.GraphAssociator._check`)."""
+    code = 0
+    for j in range(s.shape[0]):
+        for k in (0, 1, 4, 5):
+            x = s[j, k]
+            if not (x - x == 0.0):      # inf - inf and NaN - NaN are NaN
+                return 1
+        if s[j, 4] <= 0.0 or s[j, 5] <= 0.0:
+            code = 2
+    return code
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
+def _vbc(tail, prev, t, d, so, so_min, ratio, speed_prior, vbc):
+    """Tail t's velocity and error growth (:func:`.association.tail_velocity`, the same floats)
+    into ``vbc`` (3, 2) = v, b, c; ``d`` the frames to its previous vertex (<= 0: none)."""
+    for k in range(2):
+        vbc[1, k] = 0.0
+        vbc[2, k] = 0.0
+    v0 = tail[t, 2]
+    v1 = tail[t, 3]
+    if (v0 - v0 == 0.0) and (v1 - v1 == 0.0):
+        vbc[0, 0] = v0
+        vbc[0, 1] = v1
+        return
+    if d > 0:
+        fd = float(d)
+        for k in range(2):
+            st = so * tail[t, 4 + k]
+            if not (st >= so_min or st != st):
+                st = so_min
+            sp = so * prev[t, 4 + k]
+            if not (sp >= so_min or sp != sp):
+                sp = so_min
+            var_t = (ratio * st) * (ratio * st)
+            var_p = (ratio * sp) * (ratio * sp)
+            vbc[0, k] = (tail[t, k] - prev[t, k]) / fd
+            vbc[1, k] = 2.0 * var_t / fd
+            vbc[2, k] = (var_t + var_p) / (fd * fd)
+    else:
+        for k in range(2):
+            vbc[0, k] = 0.0
+            g = speed_prior * tail[t, 4 + k]
+            vbc[2, k] = g * g
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
+def _var4v(tail, t, vbc, i, sv, ss, so, so_min, ratio, cc, cc2, out):
+    """:func:`_var4` with tail t's b, c in rows 1, 2 of ``vbc`` (3, 2) (:func:`_vbc`)."""
+    for k in range(2):
+        s = so * tail[t, 4 + k]
+        if not (s >= so_min or s != s):
+            s = so_min
+        r_y = (ratio * s) * (ratio * s)
+        r_wh = s * s
+        a = sv * tail[t, 4 + k]
+        s2 = (i - 1.0) * i * (2.0 * i - 1.0) / 6.0 + cc * i * (i - 1.0) + cc2 * i
+        out[k] = a * a * s2 + r_y + vbc[1, k] * i + vbc[2, k] * (i * i) + r_y
+        g = ss * tail[t, 4 + k]
+        out[2 + k] = g * g * i + 2.0 * r_wh
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def frame_edges(tail, prev, tail_frame, prev_frame, frame, z, depth, gate_d2, sv, ss, so,
+                so_min, ratio, cc, cc2, two_pi, speed_prior):
+    """:func:`edge_scores` of the live tails against ``z`` (M, 4) at ``frame`` with the tails'
+    velocity terms (:func:`.association.tail_velocity`) and gaps (``frame − tail_frame``)
+    taken in the same pass: ``tail``/``prev`` (T, 6), ``tail_frame``/``prev_frame`` (T,)
+    int64 (``prev_frame`` −1: one vertex).  Returns ``gain, d2, weight`` (T, M), ``floor``
+    (T,), ``w0`` (T, M): the weight where the edge is worth matching (inside the gate, finite
+    and positive: :func:`.association.max_weight_matching`), else 0.0, and how many are."""
+    T = tail.shape[0]
+    M = z.shape[0]
+    gain = np.empty((T, M), np.float64)
+    d2 = np.empty((T, M), np.float64)
+    weight = np.empty((T, M), np.float64)
+    w0 = np.empty((T, M), np.float64)
+    floor = np.empty(T, np.float64)
+    var = np.empty(4, np.float64)
+    lg = np.empty(4, np.float64)
+    vbc = np.empty((3, 2), np.float64)
+    n_ok = 0
+    for t in range(T):
+        d = tail_frame[t] - prev_frame[t] if prev_frame[t] >= 0 else 0
+        _vbc(tail, prev, t, d, so, so_min, ratio, speed_prior, vbc)
+        _var4v(tail, t, vbc, depth, sv, ss, so, so_min, ratio, cc, cc2, var)
+        for k in range(4):
+            lg[k] = math.log(two_pi * var[k])
+        floor[t] = -0.5 * gate_d2 - 0.5 * (((lg[0] + lg[1]) + lg[2]) + lg[3])
+        i = float(frame - tail_frame[t])
+        _var4v(tail, t, vbc, i, sv, ss, so, so_min, ratio, cc, cc2, var)
+        for k in range(4):
+            lg[k] = math.log(two_pi * var[k])
+        log_det = ((lg[0] + lg[1]) + lg[2]) + lg[3]
+        m0 = tail[t, 0] + i * vbc[0, 0]
+        m1 = tail[t, 1] + i * vbc[0, 1]
+        m2 = tail[t, 4]
+        m3 = tail[t, 5]
+        for j in range(M):
+            r0 = z[j, 0] - m0
+            r1 = z[j, 1] - m1
+            r2 = z[j, 2] - m2
+            r3 = z[j, 3] - m3
+            dd = ((r0 * r0 / var[0] + r1 * r1 / var[1]) + r2 * r2 / var[2]) + r3 * r3 / var[3]
+            d2[t, j] = dd
+            gn = -0.5 * dd - 0.5 * log_det
+            gain[t, j] = gn
+            w = gn - floor[t]
+            weight[t, j] = w
+            if dd <= gate_d2 and w - w == 0.0 and w > 0.0:
+                w0[t, j] = w
+                n_ok += 1
+            else:
+                w0[t, j] = 0.0
+    return gain, d2, weight, floor, w0, n_ok
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def revive_hits(tail, prev, tail_frame, prev_frame, first_frame, length, frame, z, min_length,
+                depth, revive_rate, gate_d2, sv, ss, so, so_min, ratio, cc, cc2, speed_prior):
+    """:meth:`.association.GraphAssociator.returning` in one pass: ``hit`` (N,) bool, the
+    detections ``z`` (N, 4) ``(cx, cy, w, h)`` inside the edge gate (:func:`edge_scores`'s
+    d², the same floats) of a confirmed tail unseen in the frame before ``frame`` (within
+    ``depth``) with estimates in at least ``revive_rate`` of its frames."""
+    N = z.shape[0]
+    hit = np.zeros(N, np.bool_)
+    var = np.empty(4, np.float64)
+    vbc = np.empty((3, 2), np.float64)
+    for t in range(tail.shape[0]):
+        gap = frame - tail_frame[t]
+        if not (length[t] >= min_length and gap >= 2 and gap <= depth):
+            continue
+        if not length[t] >= revive_rate * (tail_frame[t] - first_frame[t] + 1):
+            continue
+        d = tail_frame[t] - prev_frame[t] if prev_frame[t] >= 0 else 0
+        _vbc(tail, prev, t, d, so, so_min, ratio, speed_prior, vbc)
+        i = float(gap)
+        _var4v(tail, t, vbc, i, sv, ss, so, so_min, ratio, cc, cc2, var)
+        m0 = tail[t, 0] + i * vbc[0, 0]
+        m1 = tail[t, 1] + i * vbc[0, 1]
+        m2 = tail[t, 4]
+        m3 = tail[t, 5]
+        for j in range(N):
+            r0 = z[j, 0] - m0
+            r1 = z[j, 1] - m1
+            r2 = z[j, 2] - m2
+            r3 = z[j, 3] - m3
+            dd = ((r0 * r0 / var[0] + r1 * r1 / var[1]) + r2 * r2 / var[2]) + r3 * r3 / var[3]
+            if dd <= gate_d2:
+                hit[j] = True
+    return hit
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def advance(live_ids, tail, tail_frame, prev, prev_frame, length, new, rows, cols, frame,
+            next_id):
+    """The matching's outcome in place (:meth:`.association.GraphAssociator.step`, step 3):
+    each matched tail ``rows[p]`` moves to ``prev``, takes the new vertex ``cols[p]`` at
+    ``frame`` and one more vertex; returns ``ids`` (M,) -- the matched vertices their tail's
+    track id, the others new ids from ``next_id`` in input order -- and ``matched`` (M,)."""
+    M = new.shape[0]
+    ids = np.zeros(M, np.int64)
+    matched = np.zeros(M, np.bool_)
+    for p in range(rows.shape[0]):
+        r = rows[p]
+        c = cols[p]
+        ids[c] = live_ids[r]
+        matched[c] = True
+        for k in range(tail.shape[1]):
+            prev[r, k] = tail[r, k]
+            tail[r, k] = new[c, k]
+        prev_frame[r] = tail_frame[r]
+        tail_frame[r] = frame
+        length[r] += 1
+    n = next_id
+    for j in range(M):
+        if not matched[j]:
+            ids[j] = n
+            n += 1
+    return ids, matched
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def gap_rows(bf, src, src_frame, dst, frame, sigma_v, fill_err):
+    """Gap filling's rows (:meth:`.association.GraphAssociator._fill_gaps`): every (buffered
+    frame, edge) pair with the frame strictly inside the edge's gap
+    (``src_frame[e] < f < frame[e]``; ``bf`` (B,) the buffered frames, in order).  Returns
+    ``at`` (K,): the buffer positions of the frames with a pair; the pairs frame-major and
+    in edge order within a frame -- ``fi`` (index into ``at``), ``ei`` (R,) -- frame k's rows
+    ``run[k]:run[k + 1]`` (``run`` (K + 1,)); their states ``st`` (R, 6): the straight line
+    between the edge's ends (``src``, ``dst`` (E, 6)) on (y1, y2, w, h), the mean velocity
+    over the gap, NaN elsewhere; and ``likely`` (R,): the line's error std there
+    (:func:`.association.interpolation_std` under ``sigma_v``) at most ``fill_err``.  The
+    same floats as the numpy spelling."""
+    B = bf.shape[0]
+    E = src.shape[0]
+    R = 0
+    K = 0
+    for k in range(B):
+        n = 0
+        for e in range(E):
+            if src_frame[e] < bf[k] and bf[k] < frame[e]:
+                n += 1
+        R += n
+        if n:
+            K += 1
+    at = np.empty(K, np.int64)
+    fi = np.empty(R, np.int64)
+    ei = np.empty(R, np.int64)
+    run = np.empty(K + 1, np.int64)
+    st = np.full((R, 6), np.nan)
+    likely = np.empty(R, np.bool_)
+    n = 0
+    kk = 0
+    for k in range(B):
+        f = bf[k]
+        first = True
+        for e in range(E):
+            if not (src_frame[e] < f and f < frame[e]):
+                continue
+            if first:
+                at[kk] = k
+                run[kk] = n
+                kk += 1
+                first = False
+            gap = frame[e] - src_frame[e]
+            ti = f - src_frame[e]
+            t = ti / gap
+            fi[n] = kk - 1
+            ei[n] = e
+            for c in (0, 1, 4, 5):
+                st[n, c] = (1.0 - t) * src[e, c] + t * dst[e, c]
+            st[n, 2] = (dst[e, 0] - src[e, 0]) / gap
+            st[n, 3] = (dst[e, 1] - src[e, 1]) / gap
+            g = float(gap)
+            tf = float(ti)
+            likely[n] = (sigma_v * tf * (g - tf) / math.sqrt(3.0 * (g if g > 1.0 else 1.0))
+                         <= fill_err)
+            n += 1
+    run[K] = n
+    return at, fi, ei, st, likely, run
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def head_pick(d, pred, var, rows, fill_overlap, gate_d2):
+    """One frame of ``extend_heads``' walk back (:meth:`.association.GraphAssociator.
+    _extend_heads`): the detection of ``d`` (N, 4) ``(cx, cy, w, h)`` nearest ``pred`` (4,)
+    in squared Mahalanobis distance under ``var`` (4,) -- none that a row of ``rows`` (B, 6)
+    overlaps by ``fill_overlap`` IoU or more, np.argmin's pick (first NaN, else first
+    minimum) -- or −1 when it is outside the gate ``gate_d2`` (or there is none)."""
+    best = -1
+    bv = np.inf
+    for i in range(d.shape[0]):
+        r0 = d[i, 0] - pred[0]
+        r1 = d[i, 1] - pred[1]
+        r2 = d[i, 2] - pred[2]
+        r3 = d[i, 3] - pred[3]
+        dd = ((r0 * r0 / var[0] + r1 * r1 / var[1]) + r2 * r2 / var[2]) + r3 * r3 / var[3]
+        if rows.shape[0]:
+            m = _iou1(d[i, 0], d[i, 1], d[i, 2], d[i, 3],
+                      rows[0, 0], rows[0, 1], rows[0, 4], rows[0, 5])
+            for b in range(1, rows.shape[0]):
+                u = _iou1(d[i, 0], d[i, 1], d[i, 2], d[i, 3],
+                          rows[b, 0], rows[b, 1], rows[b, 4], rows[b, 5])
+                if u > m or u != u:      # np.max: NaN propagates
+                    m = u
+            if m >= fill_overlap:
+                dd = np.inf
+        if dd != dd:                     # np.argmin: the first NaN
+            return -1
+        if best < 0 or dd < bv:
+            best = i
+            bv = dd
+    if best < 0 or not bv <= gate_d2:
+        return -1
+    return best
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def confirmed(live_ids, live_len, extra_ids, extra_len, ids, min_length):
+    """(R,) bool: ``ids`` whose track has at least ``min_length`` vertices, looked up in the
+    live tracks (``live_ids`` sorted ascending) first, then in ``extra_ids`` (tracks just
+    ended) -- :meth:`.association.GraphAssociator._confirmed_ids`."""
+    out = np.zeros(ids.shape[0], np.bool_)
+    L = live_ids.shape[0]
+    for r in range(ids.shape[0]):
+        x = ids[r]
+        pos = np.searchsorted(live_ids, x)
+        if pos < L and live_ids[pos] == x:
+            out[r] = live_len[pos] >= min_length
+            continue
+        for e in range(extra_ids.shape[0]):
+            if extra_ids[e] == x:
+                out[r] = extra_len[e] >= min_length
+                break
+    return out
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def uncovered(rows, bst, bfill, fill_overlap):
+    """(R,) bool: the gap rows ``rows`` (R, 6) that no estimate of their frame (``bst`` (B, 6)
+    where not ``bfill``) overlaps by ``fill_overlap`` IoU or more (np.max's NaN rule); all
+    True when the frame has no estimate."""
+    R = rows.shape[0]
+    out = np.ones(R, np.bool_)
+    for i in range(R):
+        m = -np.inf
+        seen = False
+        nan = False
+        for b in range(bst.shape[0]):
+            if bfill[b]:
+                continue
+            seen = True
+            u = _iou1(rows[i, 0], rows[i, 1], rows[i, 4], rows[i, 5],
+                      bst[b, 0], bst[b, 1], bst[b, 4], bst[b, 5])
+            if u != u:
+                nan = True
+            elif u > m:
+                m = u
+        out[i] = not seen or (not nan and m < fill_overlap)
     return out

@@ -121,6 +121,8 @@ from .gating import GridIndex, expand_runs
 
 #: Observable components of the state (y1, y2, w, h), maggio2007 §2 ``z = (y, w, h)``.
 OBS_INDEX = np.array([0, 1, 4, 5])
+#: no ids (an empty id / length array the kernels read)
+_NO_IDS = np.zeros(0, dtype=np.int64)
 #: Tracks-file ``conf`` of a row interpolated inside a linked gap (``fill_gaps``); rows of
 #: estimates get :data:`EST_CONF`.
 GAP_CONF = 0.5
@@ -242,6 +244,16 @@ class AssocParams:
         from .filter import gate_threshold  # scipy.stats, imported on first use
 
         return gate_threshold(self.gate, len(OBS_INDEX))
+
+    @cached_property
+    def kernel_args(self) -> tuple:
+        """The floats :mod:`._assoc_kernels`' edge passes read, in their order: depth, gate_d2,
+        sigma_v, sigma_size, sigma_obs, sigma_obs_min, sigma_obs_pos_ratio, accel_to_position
+        and its square, 2π (once per parameter set, not per frame)."""
+        return (float(self.depth), float(self.gate_d2), float(self.sigma_v),
+                float(self.sigma_size), float(self.sigma_obs), float(self.sigma_obs_min),
+                float(self.sigma_obs_pos_ratio), float(self.accel_to_position),
+                float(self.accel_to_position ** 2), 2.0 * np.pi)
 
 
 # --------------------------------------------------------------------------- pure functions
@@ -465,6 +477,18 @@ def max_weight_matching(weights: np.ndarray, allowed: np.ndarray) -> tuple[np.nd
     return rows[keep].astype(np.int64), cols[keep].astype(np.int64)
 
 
+def _match_admissible(w0: np.ndarray, n_ok: int) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`max_weight_matching` of weights already zero outside the admissible edges (and
+    positive on them: :func:`._assoc_kernels.frame_edges`' ``w0``, ``n_ok`` of them)."""
+    if not n_ok:
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    from scipy.optimize import linear_sum_assignment
+
+    rows, cols = linear_sum_assignment(w0, maximize=True)
+    keep = w0[rows, cols] > 0.0
+    return rows[keep].astype(np.int64), cols[keep].astype(np.int64)
+
+
 #: Above this many (tail, new vertex) pairs a frame's edges are scored on the pairs inside the
 #: gate only (:func:`score_edge_pairs`) and matched on that sparse graph
 #: (:func:`sparse_max_weight_matching`): a clutter storm with thousands of estimates a frame
@@ -551,6 +575,25 @@ def _iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     (:func:`._assoc_kernels.iou`)."""
     return _assoc_kernels.iou(np.ascontiguousarray(a, dtype=np.float64).reshape(-1, 4),
                               np.ascontiguousarray(b, dtype=np.float64).reshape(-1, 4))
+
+
+def compile_step_kernels(params: AssocParams | None = None) -> None:
+    """Call the kernels of :meth:`GraphAssociator.step` and :meth:`~GraphAssociator.returning`
+    once with the argument types of a run (the warm-up, :mod:`pfscope.trackers.warmup`):
+    the input check, the frame's edges, the matching's outcome, the revive test, the gap
+    rows, the walk back of extend_heads and the confirmed test of the rows."""
+    a = GraphAssociator(replace(params if params is not None else AssocParams(),
+                                fill_gaps=True, extend_heads=True, min_length=3))
+    s = np.array([[100.0, 100.0, 1.0, 0.0, 30.0, 70.0]])
+    z = s[:, OBS_INDEX]
+    a.step(1, s[:0], detections=z, edges=False)   # a detection before the track's first
+    for k in (2, 3):
+        a.step(k, s, detections=z, edges=False)
+    a.returning(4, z)
+    a.step(4, s[:0], detections=z, edges=False)
+    # a gap of one frame, filled; the track confirmed, its head extended back to frame 1
+    a.step(5, s, detections=z, edges=False)
+    a.flush()                      # the confirmed test of the rows held back
 
 
 def boxes_xywh(states: np.ndarray) -> np.ndarray:
@@ -777,9 +820,11 @@ class GraphAssociator:
             return np.zeros((0, STATE_DIM))
         if s.ndim != 2 or s.shape[1] != STATE_DIM:
             raise ValueError(f"frame {frame}: expected states of shape (M, 6), got {s.shape}")
-        if not np.all(np.isfinite(s[:, OBS_INDEX])):
+        s = np.ascontiguousarray(s)
+        bad = _assoc_kernels.check_states(s)    # (one pass: ~10 small numpy calls' time)
+        if bad == 1:
             raise ValueError(f"frame {frame}: non-finite position or size in the estimates")
-        if np.any(s[:, 4:6] <= 0):
+        if bad == 2:
             raise ValueError(f"frame {frame}: estimates need positive width and height")
         return s
 
@@ -834,17 +879,27 @@ class GraphAssociator:
         gaps = frame - self._tail_frame
         sc = ep = None
         if T and M:
-            v, b, c = tail_velocity(self._tail, self._prev,
-                                    np.where(self._prev_frame >= 0, self._tail_frame - self._prev_frame, 0),
-                                    p)
             if T * M <= DENSE_MAX_PAIRS:
-                sc = score_edges(self._tail, v, b, c, gaps, new, p)
+                # tail_velocity, score_edges and the matching's admissible weights in one
+                # kernel pass (the same floats)
+                gain, d2, weight, floor, w0, n_ok = _assoc_kernels.frame_edges(
+                    self._tail, self._prev, self._tail_frame, self._prev_frame, frame,
+                    np.ascontiguousarray(new[:, OBS_INDEX]), *p.kernel_args,
+                    float(p.speed_prior))
+                if use_app or edges:
+                    sc = EdgeScores(gain=gain, d2=d2, floor=floor, weight=weight,
+                                    allowed=d2 <= p.gate_d2)
                 if use_app:
                     llr = self._app_model.llr(similarity(self._app, feats),
                                               self._app_n[:, None])
                     sc = replace(sc, weight=sc.weight + p.app_weight * llr)
-                rows, cols = max_weight_matching(sc.weight, sc.allowed)
+                    rows, cols = max_weight_matching(sc.weight, sc.allowed)
+                else:
+                    rows, cols = _match_admissible(w0, n_ok)
             else:   # a storm of estimates: the gated pairs only (DENSE_MAX_PAIRS)
+                v, b, c = tail_velocity(
+                    self._tail, self._prev,
+                    np.where(self._prev_frame >= 0, self._tail_frame - self._prev_frame, 0), p)
                 ep = score_edge_pairs(self._tail, v, b, c, gaps, new, p)
                 if use_app:
                     llr = self._app_model.llr(similarity_pairs(self._app, feats, ep.rows,
@@ -855,21 +910,15 @@ class GraphAssociator:
             rows = cols = np.zeros(0, dtype=np.int64)
 
         # 3. matched vertices continue their track; the others start new tracks (input order)
-        ids = np.zeros(M, dtype=np.int64)
-        ids[cols] = self._ids[rows]
-        unmatched = np.ones(M, dtype=bool)
-        unmatched[cols] = False
-        n_new = int(unmatched.sum())
-        new_ids = np.arange(self._next_id, self._next_id + n_new, dtype=np.int64)
+        # (one kernel pass over the matched pairs, in place)
+        ids, matched = _assoc_kernels.advance(self._ids, self._tail, self._tail_frame,
+                                              self._prev, self._prev_frame, self._length, new,
+                                              rows, cols, frame, self._next_id)
+        n_new = M - len(rows)
         self._next_id += n_new
-        ids[unmatched] = new_ids
-
-        self._prev[rows] = self._tail[rows]
-        self._prev_frame[rows] = self._tail_frame[rows]
-        self._tail[rows] = new[cols]
-        self._tail_frame[rows] = frame
-        self._length[rows] += 1
         if n_new:   # (most frames of a steady scene start no track: nothing to append)
+            unmatched = ~matched
+            new_ids = ids[unmatched]
             self._ids = np.concatenate([self._ids, new_ids])  # stays sorted: new ids are the largest
             self._tail = np.concatenate([self._tail, new[unmatched]])
             self._tail_frame = np.concatenate([self._tail_frame,
@@ -939,8 +988,8 @@ class GraphAssociator:
         # 6. bounded-lag output: rows of frames <= k − L, judged with the lengths known now
         self._buffer.append((frame, ids.copy(), new.copy(), np.zeros(M, dtype=bool)))
         if p.extend_heads:
-            d = (np.zeros((0, 4)) if detections is None
-                 else np.asarray(detections, dtype=np.float64).reshape(-1, 4))
+            d = (np.zeros((0, 4)) if detections is None else
+                 np.ascontiguousarray(np.asarray(detections, dtype=np.float64).reshape(-1, 4)))
             self._dets.append((frame, d))
             self._extend_heads(frame, relinked)
         finalised = []
@@ -980,8 +1029,10 @@ class GraphAssociator:
         frame's vertices, in place); with ``fill_gaps`` the buffered frames inside the re-linked
         gap are filled.  Returns ``(P, 2)`` pairs ``(new id, old id)``."""
         p = self.params
+        if not len(self._lost_ids):
+            return np.zeros((0, 2), dtype=np.int64)
         cand = np.flatnonzero((self._length == p.min_length) & (self._tail_frame == frame))
-        if not len(cand) or not len(self._lost_ids):
+        if not len(cand):
             return np.zeros((0, 2), dtype=np.int64)
         vbc = self._lost_vbc
         sc = score_relinks(self._lost, vbc[:, 0], vbc[:, 1], vbc[:, 2], self._lost_frame,
@@ -1036,19 +1087,17 @@ class GraphAssociator:
         had estimates in at least ``revive_rate`` of its frames so far (a person who was just
         missed, not clutter that fires now and then in one place)."""
         p = self.params
-        Z = np.asarray(Z, dtype=np.float64).reshape(-1, 4)
-        lost = (self._length >= p.min_length) & (frame - self._tail_frame >= 2) \
-            & (frame - self._tail_frame <= p.depth)
-        span = self._tail_frame - self._first_frame + 1
-        lost &= self._length >= p.revive_rate * span
-        if not lost.any() or not len(Z):
+        Z = np.ascontiguousarray(np.asarray(Z, dtype=np.float64).reshape(-1, 4))
+        if not len(self._ids) or not len(Z):
             return np.zeros(len(Z), dtype=bool)
-        prev_gap = np.where(self._prev_frame[lost] >= 0,
-                            self._tail_frame[lost] - self._prev_frame[lost], 0)
-        v, b, c = tail_velocity(self._tail[lost], self._prev[lost], prev_gap, p)
-        sc = score_edges(self._tail[lost], v, b, c, frame - self._tail_frame[lost],
-                         np.concatenate([Z[:, :2], np.zeros((len(Z), 2)), Z[:, 2:]], axis=1), p)
-        return sc.allowed.any(axis=0)
+        # the lost-track test, tail_velocity and score_edges' gate in one kernel pass (the
+        # same floats): most frames have no such track, and numpy spent ~20 small calls
+        depth, gate_d2, sv, ss, so, so_min, ratio, cc, cc2, _ = p.kernel_args
+        return _assoc_kernels.revive_hits(
+            self._tail, self._prev, self._tail_frame, self._prev_frame, self._first_frame,
+            self._length, int(frame), Z, int(p.min_length), int(p.depth),
+            float(p.revive_rate), gate_d2, sv, ss, so, so_min, ratio, cc, cc2,
+            float(p.speed_prior))
 
     def _extend_heads(self, frame: int, relinked: np.ndarray) -> None:
         """``extend_heads``: the tracks confirmed at ``frame`` (not re-linked) get rows in the
@@ -1076,11 +1125,11 @@ class GraphAssociator:
                 pred[:2] -= v
                 n = frames[f]
                 fr, bid, bst, bfill = self._buffer[n]
-                d2 = np.sum((d - pred) ** 2 / var, axis=1)
-                if len(bst) and len(d):   # a detection another track's row covers is taken
-                    d2[_iou(d, bst[:, OBS_INDEX]).max(axis=1) >= p.fill_overlap] = np.inf
-                j = int(np.argmin(d2)) if len(d) else -1
-                if j < 0 or not d2[j] <= p.gate_d2:
+                # the nearest detection inside the gate that no row of the frame covers (a
+                # detection another track's row covers is taken), one kernel pass
+                j = _assoc_kernels.head_pick(d, pred, var, bst, float(p.fill_overlap),
+                                             float(p.gate_d2))
+                if j < 0:
                     if skip <= 0:   # no detection here (nor in the frames skipped): stop
                         break
                     skip -= 1
@@ -1100,87 +1149,80 @@ class GraphAssociator:
                    ids: np.ndarray) -> None:
         """Add interpolated rows to the buffered frames strictly between each chosen edge's ends
         (``src`` at ``src_frame`` → ``dst`` at ``frame``, one frame or one per edge).  The boxes
-        of every (buffered frame, edge) pair in one set of numpy calls, shared by the gap
-        support and the rows; the overlap tests and the buffer's rows one call per frame that
-        gets rows (at most ``depth`` frames)."""
-        gap = frame - src_frame
-        long = gap > 1
-        if not long.any() or not self._buffer:
+        of every (buffered frame, edge) pair in one kernel pass (:func:`._assoc_kernels.
+        gap_rows`), shared by the gap support and the rows; the overlap test and the buffer's
+        rows one call per frame that gets rows (at most ``depth`` frames)."""
+        if not self._buffer:
             return
         frame = np.broadcast_to(np.asarray(frame, dtype=np.int64), np.shape(src_frame))
-        src, src_frame, dst, ids, gap = src[long], src_frame[long], dst[long], ids[long], gap[long]
-        frame = frame[long]
+        gap = frame - src_frame
         obs = OBS_INDEX
-        vel = (dst[:, [0, 1]] - src[:, [0, 1]]) / gap[:, None]
-        lo, hi = int(src_frame.min()), int(frame.max())
-        # the buffered frames strictly inside some gap (the buffer is in frame order)
-        at = [n for n, b in enumerate(self._buffer) if lo < b[0] < hi]
-        if not at:
-            return
-        fs = np.array([self._buffer[n][0] for n in at], dtype=np.int64)
-        # every (frame, edge) pair with the frame inside the edge's gap, frame-major (each
-        # frame's rows in edge order); frame k's rows are run[k]:run[k + 1]
-        fi, ei = np.nonzero((src_frame[None, :] < fs[:, None]) & (fs[:, None] < frame[None, :]))
+        # every (buffered frame, edge) pair with the frame strictly inside the edge's gap
+        # (an edge of gap 1 has none), frame-major (each frame's rows in edge order): the
+        # frames with rows are self._buffer[at[k]], their rows run[k]:run[k + 1]; the rows'
+        # states and the fill_err test of the straight line in the same kernel pass
+        bf = np.fromiter((b[0] for b in self._buffer), np.int64, len(self._buffer))
+        at, fi, ei, st, likely, run = _assoc_kernels.gap_rows(
+            bf, np.ascontiguousarray(src), np.ascontiguousarray(src_frame),
+            np.ascontiguousarray(dst), np.ascontiguousarray(frame),
+            float(self.scene_sigma_v), float(self.params.fill_err))
         if not len(ei):
             return
-        run = np.searchsorted(fi, np.arange(len(fs) + 1)).tolist()
-        t = ((fs[fi] - src_frame[ei]) / gap[ei])[:, None]
-        box = (1.0 - t) * src[ei][:, obs] + t * dst[ei][:, obs]
+        at, run = at.tolist(), run.tolist()
+        fs = bf[at]
         if self._cams:
+            box = st[:, obs]
             for k in range(len(fs)):
                 r = slice(run[k], run[k + 1])
-                if run[k] < run[k + 1]:
-                    box[r] = self._back(box[r], int(fs[k]), frame[ei[r]])
+                box[r] = self._back(box[r], int(fs[k]), frame[ei[r]])
+            st[:, obs] = box
         if self.params.fill_support > 0:
             # a gap of at most fill_free missing frames is filled anyway: the evidence is
             # looked up for the longer ones only (one edge's support is its own)
             ok = gap - 1 <= self.params.fill_free
             look = ~ok
             if look.any():
-                hits = np.bincount(ei, weights=self._gap_hits(at, run, box, look[ei]),
+                hits = np.bincount(ei, weights=self._gap_hits(at, run, st[:, obs], look[ei]),
                                    minlength=len(gap))
                 ok[look] = (hits / np.maximum(gap - 1, 1))[look] >= self.params.fill_support
-            if not ok.any():
+            sel = ok[ei]
+            if not sel.any():
                 return
-            sel = np.flatnonzero(ok[ei])
-            fi, ei, box = fi[sel], ei[sel], box[sel]
-            run = np.searchsorted(fi, np.arange(len(fs) + 1)).tolist()
-        f_row = fs[fi]
-        st = np.full((len(ei), STATE_DIM), np.nan)
-        st[:, obs] = box
-        st[:, 2:4] = vel[ei]
+            if not sel.all():
+                fi, ei, st, likely = fi[sel], ei[sel], st[sel], likely[sel]
+                run = np.searchsorted(fi, np.arange(len(fs) + 1)).tolist()
         fid = ids[ei]
-        keep = (self._likely_rows(fs, run, st, f_row - src_frame[ei], gap[ei])
-                if self.params.fill_err > 0 else None)
+        keep = self._likely_rows(fs, run, st, likely) if self.params.fill_err > 0 else None
         for k, n in enumerate(at):
+            if run[k] == run[k + 1]:
+                continue
             r = slice(run[k], run[k + 1])
             rows, rid = st[r], fid[r]
             if keep is not None:
                 rows, rid = rows[keep[r]], rid[keep[r]]
-            if not len(rows):
-                continue
+                if not len(rows):
+                    continue
             f, bid, bst, bfill = self._buffer[n]
             # a box another track's estimate already covers is not filled (the gap is then
             # the other track's frame: filling it would report one target twice)
-            est = bst[~bfill]
-            if len(est):
-                free = _iou(rows[:, obs], est[:, obs]).max(axis=1) < self.params.fill_overlap
+            free = _assoc_kernels.uncovered(rows, bst, bfill, float(self.params.fill_overlap))
+            if not free.all():
                 rows, rid = rows[free], rid[free]
                 if not len(rows):
                     continue
             self._buffer[n] = (f, np.concatenate([bid, rid]), np.concatenate([bst, rows]),
                                np.concatenate([bfill, np.ones(len(rows), dtype=bool)]))
 
-    def _likely_rows(self, fs: np.ndarray, run: list, st: np.ndarray, t: np.ndarray,
-                     gap: np.ndarray) -> np.ndarray:
+    def _likely_rows(self, fs: np.ndarray, run: list, st: np.ndarray,
+                     likely: np.ndarray) -> np.ndarray:
         """``fill_err``: mask of the gap rows ``st`` (rows ``run[k]:run[k + 1]`` in frame
-        ``fs[k]``, ``t`` frames into gaps of ``gap``) whose straight line is likely right --
-        its error std (:func:`interpolation_std` under ``scene_sigma_v``) at most ``fill_err``
-        -- or that a detection of its frame (kept with extend_heads) overlaps by
-        ``fill_overlap``."""
-        keep = interpolation_std(self.scene_sigma_v, t, gap) <= self.params.fill_err
-        if keep.all():
-            return keep
+        ``fs[k]``) whose straight line is likely right -- ``likely``: its error std
+        (:func:`interpolation_std` under ``scene_sigma_v``) at most ``fill_err``
+        (:func:`._assoc_kernels.gap_rows`) -- or that a detection of its frame (kept with
+        extend_heads) overlaps by ``fill_overlap``."""
+        if likely.all():
+            return likely
+        keep = likely.copy()
         for k in range(len(fs)):
             r = slice(run[k], run[k + 1])
             if keep[r].all():
@@ -1214,18 +1256,12 @@ class GraphAssociator:
         return hit
 
     def _confirmed_ids(self, ids: np.ndarray, extra_ids=None, extra_len=None) -> np.ndarray:
-        """Mask of ``ids`` whose track has at least ``min_length`` vertices (live or just ended)."""
-        all_ids, all_len = self._ids, self._length
-        if extra_ids is not None and len(extra_ids):
-            all_ids = np.concatenate([all_ids, extra_ids])
-            all_len = np.concatenate([all_len, extra_len])
-            order = np.argsort(all_ids, kind="stable")
-            all_ids, all_len = all_ids[order], all_len[order]
-        if len(ids) == 0 or len(all_ids) == 0:
-            return np.zeros(len(ids), dtype=bool)
-        pos = np.clip(np.searchsorted(all_ids, ids), 0, len(all_ids) - 1)
-        found = all_ids[pos] == ids
-        return found & (all_len[pos] >= self.params.min_length)
+        """Mask of ``ids`` whose track has at least ``min_length`` vertices (live or just ended;
+        one kernel pass)."""
+        if extra_ids is None:
+            extra_ids, extra_len = _NO_IDS, _NO_IDS
+        return _assoc_kernels.confirmed(self._ids, self._length, extra_ids, extra_len, ids,
+                                        int(self.params.min_length))
 
     def flush(self) -> tuple[FinalRows, ...]:
         """End of sequence: the buffered rows (the last ``L`` frames) of confirmed tracks."""
