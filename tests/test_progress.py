@@ -325,7 +325,7 @@ def test_first_run_compiles_each_kernel_once_in_one_process(tmp_path):
             "        depth -= 1\n"
             "print(' '.join(top))\n")
     top = _fresh_process(code, tmp_path)
-    assert sorted(top) == ["edge_scores", "farthest", "lloyd", "mass_near_kernel", "prepare"], top
+    assert sorted(top) == ["edge_scores", "lloyd", "mass_near_kernel", "prepare", "split_clusters"], top
 
 
 def test_early_helper_only_for_the_phd_kernels(monkeypatch):

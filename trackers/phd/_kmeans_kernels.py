@@ -852,7 +852,7 @@ def split_clusters(X, S, w, centers, masses, labels, dmin, scale, split_above, n
     n_iter = 0
     budget = max_splits
     while budget > 0:
-        j = -1
+        j = np.int64(-1)                   # (not the literal: one split_neighbours compile)
         for c in range(K):
             if M[c] > split_above and not final[c] and (j < 0 or M[c] > M[j]):
                 j = c
