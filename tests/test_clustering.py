@@ -301,3 +301,30 @@ def test_every_split_candidate_of_a_crowd_is_looked_at(rule):
         assert np.all((c.masses <= 1.0 + 1e-9) | (c.masses >= 3.0))
     else:
         assert c.n_splits == n_pairs and c.kept.sum() == 2 * n_pairs + n_points
+
+
+def test_subsample_runs_on_every_nth_equal_weight_particle():
+    # equal weights (after resampling): K-means on every 2nd particle, each weighing twice
+    # as much -- the masses keep their total, the peaks stay where the full run puts them,
+    # the labels (taken when first read) are every particle's nearest centre
+    from pfscope.trackers.phd.filter import PHDParams
+
+    rng = np.random.default_rng(3)
+    ps = cloud(rng, A, 1.0, n=1001).concat(cloud(rng, B, 1.0, n=1001))
+    ps = ParticleSet(ps.states, np.full(len(ps), math.log(2.0 / len(ps))))
+    full = kmeans_peaks(ps, obs(A, B))
+    sub = kmeans_peaks(ps, obs(A, B), subsample=2)
+    assert sub._labels is None                          # not taken before they are read
+    assert sub.masses.sum() == pytest.approx(full.masses.sum(), rel=1e-12)
+    assert sub.kept.tolist() == full.kept.tolist() == [True, True]
+    np.testing.assert_allclose(sub.centers, full.centers, atol=1.0)
+    assert not np.array_equal(sub.centers, full.centers)          # (it did subsample)
+    inv = 1.0 / obs_std(sub.centers[:, 4:6], PHDParams().likelihood) ** 2
+    d2 = (((ps.states[:, None, [0, 1, 4, 5]] - sub.centers[None, :, [0, 1, 4, 5]]) ** 2)
+          * inv[None]).sum(-1)
+    assert sub.labels.tolist() == np.argmin(d2, axis=1).tolist()
+    # unequal weights: no subsample, the full run's answer
+    uneq = ParticleSet(ps.states, ps.log_weights + rng.uniform(0, 1e-3, len(ps)))
+    a, b = kmeans_peaks(uneq, obs(A, B)), kmeans_peaks(uneq, obs(A, B), subsample=2)
+    np.testing.assert_array_equal(a.centers, b.centers)
+    np.testing.assert_array_equal(a.labels, b.labels)

@@ -78,7 +78,9 @@ crossing), hence opt-in.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
+from functools import partial
+from typing import Callable, Optional
 
 import numpy as np
 
@@ -111,14 +113,26 @@ class Clusters:
 
     centers: np.ndarray
     masses: np.ndarray
-    labels: np.ndarray
+    _labels: Optional[np.ndarray]       # (None: ``_labeller`` gives them when first read)
     kept: np.ndarray
     origin: np.ndarray
     n_splits: int = 0
     n_iter: int = 0
+    _labeller: Optional[Callable[[], np.ndarray]] = field(default=None, repr=False,
+                                                          compare=False)
 
     def __len__(self) -> int:
         return len(self.masses)
+
+    @property
+    def labels(self) -> np.ndarray:
+        """(N,) int64 cluster of each particle (taken when first read, when K-means ran on a
+        subsample: only the particle-level stage data and the per-measurement estimates read
+        them)."""
+        if self._labels is None and self._labeller is not None:
+            object.__setattr__(self, "_labels", self._labeller())
+            object.__setattr__(self, "_labeller", None)
+        return self._labels
 
     @property
     def kept_centers(self) -> np.ndarray:
@@ -154,7 +168,8 @@ def _lloyd(X, states, w_rel, centers, params: PHDParams, max_iter, tol=0.0):
 def kmeans_peaks(ps: ParticleSet, Z, T: float = 0.6, *, params: PHDParams | None = None,
                  split_rule: str = "guarded", split_above: float = 1.0,
                  min_split_mass: float | None = None, max_iter: int = 50, max_splits: int = 64,
-                 extra_centers: np.ndarray | None = None, tol: float = 0.01) -> Clusters:
+                 extra_centers: np.ndarray | None = None, tol: float = 0.01,
+                 subsample: int = 1) -> Clusters:
     """Modified K-means of maggio2007 §3 on the particle PHD ``ps``; ``Z`` (N_z, 4) the frame's
     observations (or a :class:`~trackers.types.Detections`) initialise the centres.
 
@@ -164,7 +179,10 @@ def kmeans_peaks(ps: ParticleSet, Z, T: float = 0.6, *, params: PHDParams | None
     min_split_mass: guarded rule, both halves must reach it (default ``T``).  max_iter: Lloyd
     iterations per run (the first run and each split trial); max_splits: split attempts at
     most; tol: convergence tolerance, pixels (largest move of a centre's (y1, y2, w, h)).
-    So ``n_iter <= max_iter (1 + max_splits)``.  Deterministic (no randomness).
+    So ``n_iter <= max_iter (1 + max_splits)``.  subsample: when every particle weighs the
+    same (after resampling), K-means runs on every ``subsample``-th one (each weighing
+    ``n / n_sub`` times more: the masses keep their total); ``labels`` are then each particle's
+    nearest final centre, taken when first read.  Deterministic (no randomness).
     """
     if split_rule not in ("guarded", "literal"):
         raise ValueError(f"kmeans_peaks: split_rule must be 'guarded' or 'literal', got {split_rule!r}")
@@ -185,6 +203,13 @@ def kmeans_peaks(ps: ParticleSet, Z, T: float = 0.6, *, params: PHDParams | None
         extra = np.asarray(extra_centers, dtype=np.float64).reshape(-1, STATE_DIM)
         init = np.concatenate([init, extra])
         origin = np.concatenate([origin, np.full(len(extra), ORIGIN_EXTRA, dtype=np.int64)])
+    log_w = ps.log_weights
+    full = None
+    if subsample > 1 and n >= 2 * subsample and log_w[0] == log_w[-1] \
+            and np.isfinite(log_w[0]) and np.all(log_w == log_w[0]):
+        full = states
+        states = states[::subsample]
+        log_w = np.full(len(states), log_w[0] + math.log(n / len(states)))
     if n == 0:
         K = len(init)
         return Clusters(init, np.zeros(K), np.zeros(0, dtype=np.int64), np.zeros(K, dtype=bool),
@@ -196,7 +221,7 @@ def kmeans_peaks(ps: ParticleSet, Z, T: float = 0.6, *, params: PHDParams | None
     # (One kernel pass: _kmeans_kernels.prepare.)
     lmax, w_rel, shift, S, X = _kmeans_kernels.prepare(
         np.ascontiguousarray(states, dtype=np.float64),
-        np.ascontiguousarray(ps.log_weights, dtype=np.float64))
+        np.ascontiguousarray(log_w, dtype=np.float64))
     if not np.isfinite(lmax):
         K = len(init)
         return Clusters(init, np.zeros(K), np.zeros(n, dtype=np.int64), np.zeros(K, dtype=bool),
@@ -219,8 +244,24 @@ def kmeans_peaks(ps: ParticleSet, Z, T: float = 0.6, *, params: PHDParams | None
     if n_splits:
         origin = np.concatenate([origin, np.full(n_splits, ORIGIN_SPLIT, dtype=np.int64)])
     kept = masses >= T
+    if full is not None:
+        return Clusters(centers + shift, masses, None, kept, origin, n_splits, n_iter,
+                        partial(_nearest_labels, full, ps.log_weights, centers + shift, params))
     return Clusters(centers + shift, masses, labels.astype(np.int64, copy=False), kept, origin, n_splits,
                     n_iter)
+
+
+def _nearest_labels(states, log_w, centers, params: PHDParams) -> np.ndarray:
+    """(N,) each particle's nearest centre: :func:`._kmeans_kernels.prepare`, then
+    :func:`._kmeans_kernels.lloyd` with no iteration (its final assignment only), looking at
+    every centre (one dense pass is cheaper than the grid's first search from no labels)."""
+    _, w, shift, S, X = _kmeans_kernels.prepare(np.ascontiguousarray(states, dtype=np.float64),
+                                                np.ascontiguousarray(log_w, dtype=np.float64))
+    lk = params.likelihood
+    labels = _kmeans_kernels.lloyd(X, S, w, np.ascontiguousarray(centers - shift), 0, 0.0,
+                                   lk.sigma_obs, lk.sigma_obs_min, lk.sigma_obs_pos_ratio,
+                                   None)[1]
+    return labels.astype(np.int64, copy=False)
 
 
 #: :func:`measurement_estimates`: a detection must have won at least this share of a target

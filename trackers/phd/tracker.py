@@ -79,6 +79,8 @@ class ClusterParams:
                                     "§3) or 'measurement' (on a detection that won >= 0.5: "
                                     "the mean of the part of the cluster that detection "
                                     "explains; phd.clustering)")
+    subsample: int = param(2, "K-means runs on every n-th of the resampled (equal-weight) "
+                              "particles, 1: on all of them (PHD-MT; phd.clustering)")
 
     def __post_init__(self):
         if not self.T >= 0:
@@ -89,6 +91,9 @@ class ClusterParams:
         if self.estimate not in ("centre", "measurement"):
             raise ValueError(f"ClusterParams.estimate must be 'centre' or 'measurement', "
                              f"got {self.estimate!r}")
+        if not (isinstance(self.subsample, int) and self.subsample >= 1):
+            raise ValueError(f"ClusterParams.subsample must be an integer >= 1, "
+                             f"got {self.subsample!r}")
 
 
 @dataclass(frozen=True)
@@ -509,7 +514,7 @@ class PHDTracker(_AssociatingTracker):
         r = self.filter.step(dets, frame, revive)
         cp = self.params.clusters
         clusters = kmeans_peaks(r.resampled, r.observations, cp.T, params=self.filter.params,
-                                split_rule=cp.split_rule)
+                                split_rule=cp.split_rule, subsample=cp.subsample)
         if cp.estimate == "measurement":
             up = r.updated
             clusters = measurement_estimates(
