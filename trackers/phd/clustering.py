@@ -34,13 +34,22 @@ Readings (each a parameter of :func:`kmeans_peaks`):
 - **Convergence** (``tol``, ``max_iter``): Lloyd stops when the labels are stable, when no centre's
   observed part moved more than ``tol`` pixels (centres are then the means of the returned
   labels), or after ``max_iter`` iterations (labels are then the nearest centres).
+- **Subsample** (``subsample``, not in the paper; PHD-MT's ``clusters.subsample`` 2): after
+  resampling every particle weighs the same, and systematic resampling lays the copies of an
+  ancestor side by side, so every ``subsample``-th particle (each weighing ``n / n_sub`` times
+  more) is a stratified half of the same PHD: K-means on it costs about half and finds the
+  same peaks (bench scene, 4 and 16 targets: the same kept clusters on all 140 frames,
+  centres ~0.05 px apart at the median).  ``labels`` of every particle are then its nearest
+  final centre, taken when first read (particle-level stage data, per-measurement
+  estimates).  Unequal weights: every particle.
 - **No observations**: with no detection and no ``extra_centers`` the iteration starts from a
   single centre at the weighted mean of the particles (the split rule then separates peaks).
   ``extra_centers`` lets a caller add centres (e.g. the previous frame's peaks).
 
-Cost (DESIGN.md, linear in the number of targets): the Lloyd iterations are one numba kernel
-(:func:`._kmeans_kernels.lloyd`: assignment, then the weighted sums in one pass, no (N × K)
-temporaries).  With fewer than :data:`INDEX_MIN_CENTERS` centres the assignment looks at every
+Cost (DESIGN.md, linear in the number of targets): the split loop (candidates, pre-checks,
+local trials) is one numba kernel (:func:`._kmeans_kernels.split_clusters`), the Lloyd
+iterations another (:func:`._kmeans_kernels.lloyd`: assignment, then the weighted sums in
+one pass, no (N × K) temporaries).  With fewer than :data:`INDEX_MIN_CENTERS` centres the assignment looks at every
 centre, as plain K-means does; with more, each particle looks only at the centres near it (a
 grid of the centres, :func:`._kmeans_kernels.assign`), and the result is still *exact* — the same
 labels, ties to the lowest index included, the same d² floats: every centre's inverse variances
