@@ -139,53 +139,140 @@ def test_clustering_is_deterministic_and_survives_tiny_weights():
         kmeans_peaks(ps, obs(A), split_rule="bogus")
 
 
-def _precheck_one(centers, masses, dmin, far_of, j, lk, need):
-    """The guarded pre-check of one split candidate, as kmeans_peaks took it one at a time."""
-    from pfscope.trackers.phd.clustering import _split_neighbours
+def _split_one_at_a_time(ps, Z, T, rule, max_splits=64, max_iter=50, tol=0.01):
+    """kmeans_peaks' split loop spelt out in numpy, one candidate at a time (module docstring
+    of trackers.phd.clustering): the heaviest non-final candidate, its farthest member, its
+    nearest neighbours within twice its reach (by distance, then index), the guarded
+    pre-check, the local trial and its guarded acceptance."""
+    from pfscope.trackers.phd import _kmeans_kernels
+    from pfscope.trackers.phd.clustering import SPLIT_NEIGHBOURS, _lloyd
+    from pfscope.trackers.phd.filter import PHDParams
 
-    far = int(far_of[j])
-    if far < 0 or dmin[far] <= 0.0:
-        return False
-    return not masses[_split_neighbours(centers, j, dmin[far], lk)].sum() < need
+    params = PHDParams()
+    lk = params.likelihood
+    guarded = rule == "guarded"
+    init = np.zeros((len(Z), 6))
+    init[:, [0, 1, 4, 5]] = Z
+    _, w, shift, S, X = _kmeans_kernels.prepare(ps.states.copy(), ps.log_weights.copy())
+    scale = np.exp(ps.log_weights.max())
+    centers, labels, masses, dmin, n_iter = _lloyd(X, S, w, init - shift, params, max_iter, tol)
+    masses = masses * scale
+    final = np.zeros(len(centers), dtype=bool)
+    n_splits = 0
+    for _ in range(max_splits):
+        cand = np.flatnonzero((masses > 1.0) & ~final)
+        if not len(cand):
+            break
+        j = int(cand[np.argmax(masses[cand])])
+        members = np.flatnonzero(labels == j)
+        far = int(members[np.argmax(dmin[members])]) if len(members) else -1
+        if far < 0 or dmin[far] <= 0.0:
+            final[j] = True
+            continue
+        inv_j = 1.0 / obs_std(centers[j, 4:6], lk) ** 2
+        cols = [0, 1, 4, 5]
+        dc = np.sum((centers[:, cols] - centers[j, cols]) ** 2 * inv_j, axis=1)
+        near = np.flatnonzero(dc <= 4.0 * dmin[far])
+        near = np.sort(near[np.argsort(dc[near], kind="stable")][:SPLIT_NEIGHBOURS])
+        if guarded and masses[near].sum() < 2.0 * T:
+            final[j] = True
+            continue
+        sel = np.flatnonzero(np.isin(labels, near))
+        t_c, t_lab, t_m, t_d, it = _lloyd(X[sel], S[sel], w[sel],
+                                          np.concatenate([centers[near], S[far][None]]),
+                                          params, max_iter, tol)
+        n_iter += it
+        t_m = t_m * scale
+        pos = int(np.searchsorted(near, j))
+        if guarded and not (t_m[pos] >= T and t_m[-1] >= T):
+            final[j] = True
+            continue
+        centers = np.concatenate([centers, t_c[-1:]])
+        centers[near] = t_c[:-1]
+        masses = np.append(masses, t_m[-1])
+        masses[near] = t_m[:-1]
+        labels[sel] = np.append(near, len(centers) - 1)[t_lab]
+        dmin[sel] = t_d
+        final = np.append(final, False)
+        n_splits += 1
+    return centers + shift, masses, labels, n_splits, n_iter
+
+
+def _neighbours_reference(centers, j, reach2, n_max):
+    """A split's neighbourhood (j and its nearest clusters within twice j's reach, at most
+    n_max, by distance then index; ascending), in numpy."""
+    inv_j = 1.0 / obs_std(centers[j, 4:6]) ** 2
+    cols = [0, 1, 4, 5]
+    dc = np.sum((centers[:, cols] - centers[j, cols]) ** 2 * inv_j, axis=1)
+    near = np.flatnonzero(dc <= 4.0 * reach2)
+    return np.sort(near[np.argsort(dc[near], kind="stable")][:n_max])
 
 
 @pytest.mark.parametrize("seed", range(6))
-def test_split_prechecks_of_all_candidates_match_one_at_a_time(seed):
-    # the batched pre-check must give every candidate the answer (and the floats) of the
-    # one-at-a-time loop: nearest neighbours by distance then index (ties from duplicated
-    # centres), masses summed in index order, members on the centre, empty clusters, NaN
-    from pfscope.trackers.phd.clustering import _split_neighbours, _split_prechecks
+def test_split_neighbours_are_the_nearest_within_reach(seed):
+    # crowded and duplicated centres (distance ties), reaches exactly on a neighbour, NaN,
+    # inf and 0 reaches: the kernel's neighbourhood is the numpy one
+    from pfscope.trackers.phd._kmeans_kernels import split_neighbours
     from pfscope.trackers.phd.filter import LikelihoodParams
 
     rng = np.random.default_rng(seed)
     lk = LikelihoodParams()
     K = int(rng.integers(8, 40))
     centers = np.zeros((K, 6))
-    centers[:, :2] = rng.uniform(0, 40, (K, 2))          # crowded: several neighbours in reach
+    centers[:, :2] = rng.uniform(0, 40, (K, 2))
     centers[:, 4:6] = rng.uniform(10, 40, (K, 2))
     dup = rng.integers(0, K, K // 3)
-    centers[dup[1:]] = centers[dup[0]]                  # equal distances: ties
-    masses = rng.choice([0.3, 0.35, 0.4, 0.6, 1.05, 2.0], K)
-    dmin = rng.choice([0.0, 0.5, 2.0, 9.0, 40.0, 400.0, np.nan, np.inf], 3 * K)
-    far_of = rng.integers(-1, 3 * K, K)
-    for j in rng.integers(0, K, K // 2):                # reaches exactly on a neighbour
-        far_of[j] = int(rng.integers(0, 3 * K))
+    centers[dup[1:]] = centers[dup[0]]
+    out = np.empty(4, dtype=np.int64)
+    for j in range(K):
         e = int(rng.integers(0, K))
         inv_j = 1.0 / obs_std(centers[j, 4:6]) ** 2
-        dmin[far_of[j]] = np.sum((centers[e, [0, 1, 4, 5]] - centers[j, [0, 1, 4, 5]]) ** 2
-                                 * inv_j) / 4.0
-    order = rng.permutation(K)[: int(rng.integers(1, K + 1))]
-    for need in (1.2, 1.3, 2.0, -np.inf):
-        got, nears = _split_prechecks(centers, masses, dmin, far_of, order, lk, need)
-        want = [_precheck_one(centers, masses, dmin, far_of, j, lk, need) if need > -np.inf
-                else bool(far_of[j] >= 0 and not dmin[far_of[j]] <= 0.0) for j in order]
-        assert got.tolist() == want
-        for j, near in zip(order, nears):      # the trials' neighbours, when given
-            if near is not None:
-                assert near.tolist() == _split_neighbours(centers, j, dmin[far_of[j]],
-                                                          lk).tolist()
-        if need > -np.inf:
-            assert all(n is not None for n, g in zip(nears, got) if g)
+        on_e = np.sum((centers[e, [0, 1, 4, 5]] - centers[j, [0, 1, 4, 5]]) ** 2 * inv_j) / 4.0
+        for reach2 in (on_e, 0.5, 9.0, 400.0, 0.0, np.nan, np.inf):
+            n = split_neighbours(centers, K, j, reach2, 4, lk.sigma_obs, lk.sigma_obs_min,
+                                 lk.sigma_obs_pos_ratio, out)
+            assert out[:n].tolist() == _neighbours_reference(centers, j, reach2, 4).tolist()
+
+
+@pytest.mark.parametrize("seed", range(6))
+@pytest.mark.parametrize("rule", ["literal", "guarded"])
+def test_split_loop_matches_the_one_at_a_time_rule(seed, rule):
+    # the split loop's kernel must give the numpy loop's answer float for float: crowds with
+    # more neighbours in reach than a trial takes (nearest by distance, then index), merged
+    # targets (accepted splits), single heavy targets (rejected), duplicated detections
+    # (equal masses and distances: ties), a cloud all on one point (no member off the centre)
+    rng = np.random.default_rng(seed)
+    parts, Z = [], []
+    for _ in range(int(rng.integers(6, 14))):
+        c = [rng.uniform(0, 50), rng.uniform(0, 50), 0.0, 0.0, rng.uniform(8, 20),
+             rng.uniform(16, 40)]
+        k = int(rng.integers(0, 4))
+        if k == 0:                                   # two targets, one detection
+            d = list(c)
+            d[0] += c[4]
+            parts += [cloud(rng, c, 1.0, n=150), cloud(rng, d, 1.0, n=150)]
+        elif k == 1:                                 # one heavy target
+            parts.append(cloud(rng, c, float(rng.choice([1.05, 1.3, 1.8])), n=200))
+        elif k == 2:                                 # everything on the centre
+            parts.append(ParticleSet(np.tile(c, (40, 1)), np.full(40, math.log(1.5 / 40))))
+        else:
+            parts.append(cloud(rng, c, 0.7, n=100))
+        Z.append([c[0], c[1], c[4], c[5]])
+        if rng.random() < 0.3:
+            Z.append(Z[-1])                          # a duplicated detection
+    ps = parts[0]
+    for p in parts[1:]:
+        ps = ps.concat(p)
+    Z = np.array(Z)
+    for max_splits in (64, 2):
+        got = kmeans_peaks(ps, Z, 0.6, split_rule=rule, max_splits=max_splits)
+        centers, masses, labels, n_splits, n_iter = _split_one_at_a_time(ps, Z, 0.6, rule,
+                                                                         max_splits)
+        np.testing.assert_array_equal(got.centers, centers)
+        np.testing.assert_array_equal(got.masses, masses)
+        np.testing.assert_array_equal(got.labels, labels)
+        assert (got.n_splits, got.n_iter) == (n_splits, n_iter)
+        assert got.origin.tolist()[len(Z):] == [ORIGIN_SPLIT] * n_splits
 
 
 @pytest.mark.parametrize("rule", ["literal", "guarded"])
@@ -214,3 +301,30 @@ def test_every_split_candidate_of_a_crowd_is_looked_at(rule):
         assert np.all((c.masses <= 1.0 + 1e-9) | (c.masses >= 3.0))
     else:
         assert c.n_splits == n_pairs and c.kept.sum() == 2 * n_pairs + n_points
+
+
+def test_subsample_runs_on_every_nth_equal_weight_particle():
+    # equal weights (after resampling): K-means on every 2nd particle, each weighing twice
+    # as much -- the masses keep their total, the peaks stay where the full run puts them,
+    # the labels (taken when first read) are every particle's nearest centre
+    from pfscope.trackers.phd.filter import PHDParams
+
+    rng = np.random.default_rng(3)
+    ps = cloud(rng, A, 1.0, n=1001).concat(cloud(rng, B, 1.0, n=1001))
+    ps = ParticleSet(ps.states, np.full(len(ps), math.log(2.0 / len(ps))))
+    full = kmeans_peaks(ps, obs(A, B))
+    sub = kmeans_peaks(ps, obs(A, B), subsample=2)
+    assert sub._labels is None                          # not taken before they are read
+    assert sub.masses.sum() == pytest.approx(full.masses.sum(), rel=1e-12)
+    assert sub.kept.tolist() == full.kept.tolist() == [True, True]
+    np.testing.assert_allclose(sub.centers, full.centers, atol=1.0)
+    assert not np.array_equal(sub.centers, full.centers)          # (it did subsample)
+    inv = 1.0 / obs_std(sub.centers[:, 4:6], PHDParams().likelihood) ** 2
+    d2 = (((ps.states[:, None, [0, 1, 4, 5]] - sub.centers[None, :, [0, 1, 4, 5]]) ** 2)
+          * inv[None]).sum(-1)
+    assert sub.labels.tolist() == np.argmin(d2, axis=1).tolist()
+    # unequal weights: no subsample, the full run's answer
+    uneq = ParticleSet(ps.states, ps.log_weights + rng.uniform(0, 1e-3, len(ps)))
+    a, b = kmeans_peaks(uneq, obs(A, B)), kmeans_peaks(uneq, obs(A, B), subsample=2)
+    np.testing.assert_array_equal(a.centers, b.centers)
+    np.testing.assert_array_equal(a.labels, b.labels)

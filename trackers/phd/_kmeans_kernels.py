@@ -752,3 +752,176 @@ def lloyd(X, S, w, centers, max_iter, tol, sigma_obs, sigma_min, pos_ratio, grid
     for i in range(n):
         masses[labels[i]] += w[i]
     return centers, labels, masses, dmin, it
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def split_neighbours(centers, K, j, reach2, n_max, sigma_obs, sigma_min, pos_ratio, out):
+    """The clusters a split of cluster j is tried on, into ``out[:count]`` (ascending; returns
+    count): j and its nearest clusters among the first K, at most ``n_max``, whose centres lie
+    within twice j's reach (``reach2``: the d² of j's farthest member, under j's metric) -- by
+    distance then index when more are in reach.  The distance is ``Σ_d (c_d − j_d)² inv_d``
+    over (y1, y2, w, h) at j's size, summed in coordinate order (numpy's sum of 4 terms)."""
+    sw = sigma_obs * centers[j, 4]          # (:func:`_inv_var` of centre j)
+    sw = sigma_min if sigma_min > sw else sw
+    sh = sigma_obs * centers[j, 5]
+    sh = sigma_min if sigma_min > sh else sh
+    a = pos_ratio * sw
+    b = pos_ratio * sh
+    i0 = 1.0 / (a * a)
+    i1 = 1.0 / (b * b)
+    i2 = 1.0 / (sw * sw)
+    i3 = 1.0 / (sh * sh)
+    lim = 4.0 * reach2
+    dc = np.empty(K, np.float64)
+    cnt = 0
+    for c in range(K):
+        a = centers[c, 0] - centers[j, 0]
+        d = (a * a) * i0
+        a = centers[c, 1] - centers[j, 1]
+        d += (a * a) * i1
+        a = centers[c, 4] - centers[j, 4]
+        d += (a * a) * i2
+        a = centers[c, 5] - centers[j, 5]
+        d += (a * a) * i3
+        dc[c] = d
+        if d <= lim:
+            cnt += 1
+    if cnt <= n_max:
+        k = 0
+        for c in range(K):
+            if dc[c] <= lim:
+                out[k] = c
+                k += 1
+        return cnt
+    # a crowd: the n_max nearest (distance, then index), then by index
+    for k in range(n_max):
+        best = -1
+        for c in range(K):
+            if dc[c] <= lim:
+                dup = False
+                for q in range(k):
+                    if out[q] == c:
+                        dup = True
+                        break
+                if not dup and (best < 0 or dc[c] < dc[best]):
+                    best = c
+        out[k] = best
+    for k in range(1, n_max):               # then by index (insertion sort: a few entries)
+        e = out[k]
+        q = k
+        while q > 0 and out[q - 1] > e:
+            out[q] = out[q - 1]
+            q -= 1
+        out[q] = e
+    return n_max
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def split_clusters(X, S, w, centers, masses, labels, dmin, scale, split_above, need,
+                   min_split_mass, guarded, max_splits, n_near, max_iter, tol, sigma_obs,
+                   sigma_min, pos_ratio):
+    """The split loop of maggio2007 §3's modified K-means after the first Lloyd run
+    (clustering module docstring: the guarded and literal rules, the local trials), in one
+    pass: at most ``max_splits`` candidates -- clusters of mass above ``split_above`` not
+    final yet, heaviest first (the lowest index among equal masses) -- are looked at, one at
+    a time.  A candidate with no member off its centre, or (``guarded``) whose neighbourhood
+    (:func:`split_neighbours`, at most ``n_near`` clusters) holds less than ``need`` mass, is
+    final; else a new centre on its farthest member and :func:`lloyd` on the neighbourhood's
+    particles; ``guarded``: kept only if j and the new cluster both reach ``min_split_mass``.
+
+    ``X``, ``S``, ``w`` as for :func:`lloyd`; ``centers`` (K, 6), ``masses`` (K,) (times
+    ``scale``), ``labels``, ``dmin`` from the first Lloyd run (not modified).  Returns
+    ``(centers, masses, labels, dmin, n_splits, n_iter)`` (the new centres appended)."""
+    n = X.shape[0]
+    K = centers.shape[0]
+    cap = K + (max_splits if max_splits > 0 else 0)
+    C = np.empty((cap, 6), np.float64)
+    M = np.empty(cap, np.float64)
+    final = np.empty(cap, np.bool_)
+    for c in range(K):
+        for d in range(6):
+            C[c, d] = centers[c, d]
+        M[c] = masses[c]
+        final[c] = False
+    lab = labels.copy()
+    dm = dmin.copy()
+    far_of = farthest(lab, dm, K)
+    near = np.empty(n_near, np.int64)
+    is_local = np.empty(cap, np.bool_)
+    n_splits = 0
+    n_iter = 0
+    budget = max_splits
+    while budget > 0:
+        j = np.int64(-1)                   # (not the literal: one split_neighbours compile)
+        for c in range(K):
+            if M[c] > split_above and not final[c] and (j < 0 or M[c] > M[j]):
+                j = c
+        if j < 0:
+            break
+        budget -= 1
+        far = far_of[j]
+        if far < 0 or dm[far] <= 0.0:      # no member / all on the centre
+            final[j] = True
+            continue
+        nn = split_neighbours(C, K, j, dm[far], n_near, sigma_obs, sigma_min, pos_ratio, near)
+        if guarded:
+            tot = 0.0
+            for q in range(nn):
+                tot += M[near[q]]
+            if tot < need:                 # both halves could not reach min_split_mass
+                final[j] = True
+                continue
+        for c in range(K):
+            is_local[c] = False
+        for q in range(nn):
+            is_local[near[q]] = True
+        m = 0
+        for i in range(n):
+            if is_local[lab[i]]:
+                m += 1
+        sel = np.empty(m, np.int64)
+        Xs = np.empty((m, 4), np.float64)
+        Ss = np.empty((m, 6), np.float64)
+        ws = np.empty(m, np.float64)
+        k = 0
+        for i in range(n):
+            if is_local[lab[i]]:
+                sel[k] = i
+                for d in range(4):
+                    Xs[k, d] = X[i, d]
+                for d in range(6):
+                    Ss[k, d] = S[i, d]
+                ws[k] = w[i]
+                k += 1
+        init = np.empty((nn + 1, 6), np.float64)
+        for q in range(nn):
+            for d in range(6):
+                init[q, d] = C[near[q], d]
+        for d in range(6):
+            init[nn, d] = S[far, d]
+        t_c, t_lab, t_m, t_d, it = lloyd(Xs, Ss, ws, init, max_iter, tol, sigma_obs,
+                                         sigma_min, pos_ratio, None)
+        n_iter += it
+        pos = 0                            # np.searchsorted(near, j)
+        while pos < nn and near[pos] < j:
+            pos += 1
+        if guarded and not (t_m[pos] * scale >= min_split_mass
+                            and t_m[nn] * scale >= min_split_mass):
+            final[j] = True                # guarded rule: revert, this cluster is one target
+            continue
+        for q in range(nn):
+            for d in range(6):
+                C[near[q], d] = t_c[q, d]
+            M[near[q]] = t_m[q] * scale
+        for d in range(6):
+            C[K, d] = t_c[nn, d]
+        M[K] = t_m[nn] * scale
+        final[K] = False
+        for q in range(m):
+            t = t_lab[q]
+            lab[sel[q]] = near[t] if t < nn else K
+            dm[sel[q]] = t_d[q]
+        K += 1
+        n_splits += 1
+        far_of = farthest(lab, dm, K)
+    return C[:K].copy(), M[:K].copy(), lab, dm, n_splits, n_iter

@@ -79,6 +79,9 @@ class ClusterParams:
                                     "§3) or 'measurement' (on a detection that won >= 0.5: "
                                     "the mean of the part of the cluster that detection "
                                     "explains; phd.clustering)")
+    subsample: int = param(1, "K-means runs on every n-th of the resampled (equal-weight) "
+                              "particles, 1: on all of them (PHD-MT; practical: 2; "
+                              "phd.clustering)")
 
     def __post_init__(self):
         if not self.T >= 0:
@@ -89,6 +92,9 @@ class ClusterParams:
         if self.estimate not in ("centre", "measurement"):
             raise ValueError(f"ClusterParams.estimate must be 'centre' or 'measurement', "
                              f"got {self.estimate!r}")
+        if not (isinstance(self.subsample, int) and self.subsample >= 1):
+            raise ValueError(f"ClusterParams.subsample must be an integer >= 1, "
+                             f"got {self.subsample!r}")
 
 
 @dataclass(frozen=True)
@@ -382,7 +388,8 @@ PHD_PRACTICAL = PHDTrackerParams(
                         persist_frames=3, p_miss=0.1, revive_odds=1.0),
     assoc=AssocParams(fill_gaps=True, fill_support=0.25, fill_free=2, app_weight=2.0, extend_heads=True,
                       head_skip=2, fill_err=1 / 6),
-    rate=RateParams(per_second=True, learn_motion=True, camera_motion=True))
+    rate=RateParams(per_second=True, learn_motion=True, camera_motion=True),
+    clusters=ClusterParams(subsample=2))
 PHD_SCENE = with_options(PHD_PRACTICAL, {"filter.clutter.clutter_model": "scene"})
 #: The practical default of MT: the same association settings per second (re-linking
 #: included).  No gap filling: MT links clutter into tracks across gaps, and filling them
@@ -509,7 +516,7 @@ class PHDTracker(_AssociatingTracker):
         r = self.filter.step(dets, frame, revive)
         cp = self.params.clusters
         clusters = kmeans_peaks(r.resampled, r.observations, cp.T, params=self.filter.params,
-                                split_rule=cp.split_rule)
+                                split_rule=cp.split_rule, subsample=cp.subsample)
         if cp.estimate == "measurement":
             up = r.updated
             clusters = measurement_estimates(
