@@ -293,6 +293,65 @@ def test_runs_on_pets09_frames():
     assert len(on) >= 10 and np.mean(on) >= 0.35, (len(on), np.mean(on))
 
 
+def test_look_ahead_measures_the_next_frames_motion_on_a_helper_with_the_same_tracks(
+        monkeypatch):
+    """DLPFTracker.upcoming (the pipeline's look-ahead on a recorded clip): the next frame's
+    Lucas-Kanade call runs on the helper thread between the steps, and the tracks, the parents
+    and the rng are those of plain steps; a frame other than the announced one falls back to
+    the inline call with the prediction already drawn (still the same draws)."""
+    import threading
+
+    from pfscope.trackers.dlpf import tracker as T
+
+    src = open_source(sequence("PETS09-S2L1"))
+    frames = list(src.frames(limit=14, start=40))
+    where = []
+    real_lk = T.mo.lk_flow
+
+    def lk_spy(*a, **k):
+        where.append(threading.current_thread() is threading.main_thread())
+        return real_lk(*a, **k)
+
+    monkeypatch.setattr(T.mo, "lk_flow", lk_spy)
+
+    def go(announce):
+        tr = make_tracker("dlpf", seed=2, **{"parents.n": "150"})
+        rows = []
+        for k, f in enumerate(frames):
+            nxt = announce(k)
+            if nxt is not None:
+                tr.upcoming(nxt)
+            rows.extend(tr.step(f, None, "tracks").rows)
+        return tr, rows
+
+    plain, rows_p = go(lambda k: None)
+    assert where and all(where)                  # inline: on the calling thread
+    where.clear()
+    ahead, rows_a = go(lambda k: frames[k + 1] if k + 1 < len(frames) else None)
+    assert where and not any(where)              # every LK call on the helper
+    where.clear()
+    # frame 5 announces frame 7 but 6 comes: frame 6 is measured inline
+    odd, rows_o = go(lambda k: frames[k + 2] if k == 5 else
+                     (frames[k + 1] if k + 1 < len(frames) else None))
+    assert where.count(True) == 1
+    assert rows_p, "some track on PETS09 frames 40-53"
+    for tr, rows in ((ahead, rows_a), (odd, rows_o)):
+        assert len(rows) == len(rows_p)
+        for (fa, ta), (fb, tb) in zip(rows_p, rows):
+            assert fa == fb and np.array_equal(ta.ids, tb.ids)
+            assert np.array_equal(ta.boxes, tb.boxes)
+        assert np.array_equal(tr.parents.states, plain.parents.states)
+        assert tr.rng.bit_generator.state == plain.rng.bit_generator.state
+    # through the pipeline (a recorded clip is read ahead): the same tracks again
+    where.clear()
+    res = run(src, [make_tracker("dlpf", seed=2, **{"parents.n": "150"})], frames=14,
+              start=40, level="tracks")
+    assert not any(where[1:])
+    got = [(f, ts) for f, ts in res.rows["dlpf"]]
+    assert [(f, ts.ids.tolist(), ts.boxes.tolist()) for f, ts in got] == \
+        [(f, ts.ids.tolist(), ts.boxes.tolist()) for f, ts in rows_p]
+
+
 def test_wrong_frame_size_is_a_clear_error():
     tr = make_tracker("dlpf", seed=0)
     tr.step(Frame(1, 0.0, np.zeros((240, 320, 3), np.uint8)), None)

@@ -72,6 +72,7 @@ reports the boxes of its 3 earlier detections as rows of their frames.
 
 from __future__ import annotations
 
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Optional
 
@@ -356,6 +357,28 @@ def _with_changes(base, changes: dict):
 PAPER = _with_changes(DLPFParams(), PAPER_CHANGES)
 
 
+_HELPER: list[ThreadPoolExecutor] = []
+
+
+def _helper() -> ThreadPoolExecutor:
+    """The one thread :meth:`DLPFTracker.upcoming` measures the next frame's motion on."""
+    if not _HELPER:
+        _HELPER.append(ThreadPoolExecutor(1, thread_name_prefix="pfscope-dlpf-motion"))
+    return _HELPER[0]
+
+
+@dataclass
+class _Ahead:
+    """The next frame's motion stage begun at the end of a step (:meth:`DLPFTracker.upcoming`):
+    its free parents and their prediction (drawn then: the rng's next draws either way) and
+    the helper's ``(image, grey, (flow, ok) or None)`` of that frame."""
+
+    frame: Frame
+    free: np.ndarray
+    pred: np.ndarray
+    images: Future
+
+
 @register(presets={"default": DLPFParams(), "paper": PAPER, "landed": LANDED})
 class DLPFTracker:
     """DLPF (jung2013): parents on LK motion classify one HOG window each; confirmed people are
@@ -383,6 +406,8 @@ class DLPFTracker:
         self.tracks: list[_Track] = []
         self._prev_grey: Optional[np.ndarray] = None
         self._size: Optional[tuple[int, int]] = None
+        self._next: Optional[Frame] = None       # upcoming(): the frame the next step gets
+        self._ahead: Optional[_Ahead] = None     # its motion, begun on the helper thread
         self._next_id = 1
         self.scale_prior: Optional[ScalePrior] = None   # built at the first frame (needs H)
         self.windows_evaluated = 0   # running total, for efficiency figures
@@ -438,21 +463,60 @@ class DLPFTracker:
                           f"{track.parent} reset")
 
     # ------------------------------------------------------------------ the step
+    def upcoming(self, frame: Frame) -> None:
+        """The pipeline's look-ahead on a recorded clip (:func:`pfscope.trackers.pipeline.run`):
+        ``frame`` is the one the next :meth:`step` gets.  At the end of this step the free
+        parents' prediction into it is drawn (the rng's next draws either way) and its grey
+        image and the Lucas-Kanade call of its motion stage (~a fifth of the step; OpenCV
+        releases the GIL) run on a helper thread while the recording and the scoring of this
+        frame go on: the same flow, the same draws in the same order, the same tracks."""
+        self._next = frame
+
     def step(self, frame: Frame, detections: Optional[Detections],
              level: Optional[str] = None) -> StepResult:
+        # the helper's work for this frame is collected first: OpenCV's thread setting below
+        # is process-wide, and is never changed while the helper's LK runs
+        nxt, self._next = self._next, None
+        if self._ahead is not None:
+            self._ahead.images.exception()         # wait (an error: redone inline, below)
         # with classifier.threads > 1 the step spreads its work over its own threads; OpenCV's
         # internal ones (warpAffine, LK, colour conversions split over row bands) then only
         # contend with them for the same cores: off for the step, restored after it (results
         # do not depend on it; tests/test_dlpf.py)
         if self.params.classifier.threads <= 1:
-            return self._step(frame, level)
-        with opencv_threads(1):
-            return self._step(frame, level)
+            res = self._step(frame, level)
+        else:
+            with opencv_threads(1):
+                res = self._step(frame, level)
+        if nxt is not None and nxt is not frame:
+            self._look_ahead(nxt)
+        return res
+
+    def _look_ahead(self, nxt: Frame) -> None:
+        """Begin ``nxt``'s motion stage: the free parents' prediction (rng) now, its grey image
+        and the one Lucas-Kanade call on the helper thread."""
+        P = self.params
+        if self.parents is None or self._size is None or self._prev_grey is None:
+            return
+        assert self.parents.labels is not None
+        W, H = self._size
+        free = np.flatnonzero(self.parents.labels == 0)
+        pred = pa.predict(self.parents.states[free], P.parents.q_pos, P.parents.q_vel, self.rng,
+                          W, H)
+        pts = np.concatenate([self._track_flow_points(), pred[:, :2]])
+        self._ahead = _Ahead(nxt, free, pred,
+                             _helper().submit(_motion_images, nxt, self._prev_grey, pts,
+                                              P.motion.lk_window, P.motion.lk_levels))
 
     def _step(self, frame: Frame, level: Optional[str]) -> StepResult:
         P = self.params
-        img = to_bgr(check_image(frame, "dlpf"))
-        grey = to_gray(img)
+        ahead, self._ahead = self._ahead, None
+        lk = None     # the helper's flow and status of this frame's motion points
+        if ahead is not None and ahead.frame is frame and ahead.images.exception() is None:
+            img, grey, lk = ahead.images.result()
+        else:         # no look-ahead, or it failed: the same error is raised here
+            img = to_bgr(check_image(frame, "dlpf"))
+            grey = to_gray(img)
         H, W = grey.shape
         if self._size is not None and self._size != (W, H):
             raise ValueError(f"frame {frame.index}: dlpf: frame size changed from "
@@ -474,11 +538,17 @@ class DLPFTracker:
         log.stage("motion")
         labels = self.parents.labels
         assert labels is not None
-        free = np.flatnonzero(labels == 0)
-        pred = pa.predict(self.parents.states[free], P.parents.q_pos, P.parents.q_vel, rng, W, H)
+        if ahead is not None:   # drawn at the end of the last step (upcoming)
+            free, pred = ahead.free, ahead.pred
+        else:
+            free = np.flatnonzero(labels == 0)
+            pred = pa.predict(self.parents.states[free], P.parents.q_pos, P.parents.q_vel, rng,
+                              W, H)
         # one Lucas-Kanade call for the tracks' flow grids and the free parents (eq. (1))
         tpts = self._track_flow_points()
-        if self._prev_grey is not None and len(free) + len(tpts):
+        if lk is not None:      # measured on the helper thread (upcoming)
+            flow, ok = lk
+        elif self._prev_grey is not None and len(free) + len(tpts):
             # the step's own threads are idle here: OpenCV may split the points over them
             # (each point's flow is computed the same way whatever the thread count)
             with opencv_threads(max(cv2.getNumThreads(), P.classifier.threads)):
@@ -805,6 +875,18 @@ class DLPFTracker:
         return {"tracker": self.name, "paper": self.paper, "params": to_dict(self.params),
                 "classifier": self.classifier.describe(),
                 "classifier_info": dict(getattr(self.classifier, "info", {}))}
+
+
+def _motion_images(frame: Frame, prev_grey: np.ndarray, points: np.ndarray, win: int,
+                   levels: int) -> tuple[np.ndarray, np.ndarray, Optional[tuple]]:
+    """The look-ahead's helper-thread work for ``frame``: its BGR and grey images and the
+    Lucas-Kanade ``(flow, ok)`` of ``points`` from ``prev_grey`` (None when the size changed:
+    the step reports that)."""
+    img = to_bgr(check_image(frame, "dlpf"))
+    grey = to_gray(img)
+    if grey.shape != prev_grey.shape:
+        return img, grey, None
+    return img, grey, mo.lk_flow(prev_grey, grey, points, win=win, levels=levels)
 
 
 __all__ = ["DLPFTracker", "DLPFParams", "MotionParams", "ParentParams", "ClassifierParams",
