@@ -71,6 +71,33 @@ def test_hsv_binning_sends_grey_pixels_to_value_bins():
 
 # ------------------------------------------------------------------ confirmation, §2.2
 
+def test_children_of_all_tracks_predicted_at_once_equal_track_by_track():
+    """children.predict_tracks: the values and the rng draws of one predict() per track in
+    turn (with and without a measured shift), and the batched Bhattacharyya distances equal
+    the per-track ones."""
+    g = np.random.default_rng(1)
+    for trial in range(30):
+        sizes = [int(g.integers(1, 120)) for _ in range(int(g.integers(0, 6)))]
+        states = [g.normal(100, 30, (n, 6)) for n in sizes]
+        for st in states:
+            st[:, 2] = np.abs(st[:, 2]) + 10
+        shifts = [None if g.random() < 0.4 else g.normal(0, 5, 2) for _ in sizes]
+        r1, r2 = np.random.default_rng(trial), np.random.default_rng(trial)
+        one = [ch.predict(st, 0.7, 0.04, 0.02, r1, shift=sh) for st, sh in zip(states, shifts)]
+        all_ = ch.predict_tracks(states, shifts, 0.7, 0.04, 0.02, r2)
+        assert len(one) == len(all_)
+        assert all(np.array_equal(a, b) for a, b in zip(one, all_))
+        assert r1.bit_generator.state == r2.bit_generator.state
+        if sizes:
+            q = g.random((sum(sizes), 30))
+            refs = g.random((len(sizes), 30))
+            at = np.cumsum([0] + sizes)
+            B = ch.bhattacharyya(np.repeat(refs, sizes, axis=0), q)
+            for k in range(len(sizes)):
+                sl = slice(at[k], at[k + 1])
+                assert np.array_equal(B[sl], ch.bhattacharyya(refs[k], q[sl]))
+
+
 def test_confirmation_after_exactly_four_sequential_detections():
     c = Confirmer(count=4, max_gap=0)
     box = np.array([[100, 100, 30, 90]], float)

@@ -783,9 +783,9 @@ class DLPFTracker:
             return
         rng = self.rng
         H, W = img.shape[:2]
-        preds = [ch.predict(t.kids.states, C.damping, C.pos_sigma, C.scale_sigma, rng,
-                            shift=t.shift)
-                 for t in self.tracks]
+        preds = ch.predict_tracks([t.kids.states for t in self.tracks],
+                                  [t.shift for t in self.tracks], C.damping, C.pos_sigma,
+                                  C.scale_sigma, rng)
         for t, p in zip(self.tracks, preds):  # re-seed part of the children at the parent's hit
             k = int(round(C.inject * len(p)))
             if t.support is not None and k:
@@ -797,19 +797,22 @@ class DLPFTracker:
         # slow reference refresh (ours): the tracks whose parent has a hit
         refresh = [t for t in self.tracks if t.support is not None] if C.ref_update > 0 else []
         sizes = [len(p) for p in preds]
-        allb = np.concatenate([ch.boxes_of(p, t.aspect) for p, t in zip(preds, self.tracks)])
+        starts = np.cumsum([0] + sizes)
+        # all tracks' children at once (the same values as track by track)
+        allb = ch.boxes_of(np.concatenate(preds), np.repeat([t.aspect for t in self.tracks], sizes))
         # every child's box and every refreshed track's hit box: one gather, one bincount
         hist = ch.histograms(img, np.concatenate([allb, *(t.support[None] for t in refresh)]),
                              (C.grid_x, C.grid_y), C.Mh, C.Ms, C.Mv, C.s_min, C.v_min)
         for t, q in zip(refresh, hist[len(allb):]):
             t.ref = (1.0 - C.ref_update) * t.ref + C.ref_update * q
-        starts = np.cumsum([0] + sizes)
+        B_all = ch.bhattacharyya(np.repeat([t.ref for t in self.tracks], sizes, axis=0),
+                                 hist[:len(allb)])                # eq. (13)
+        lw_all = ch.log_weights(B_all, C.lam)                     # eq. (14)
         Bs, lws, boxes = [], [], []
         for k, t in enumerate(self.tracks):
             sl = slice(starts[k], starts[k + 1])
-            B = ch.bhattacharyya(t.ref, hist[sl])                 # eq. (13)
-            Bs.append(B)
-            lw = ch.log_weights(B, C.lam)                         # eq. (14)
+            Bs.append(B_all[sl])
+            lw = lw_all[sl]
             if t.support is not None and C.support_sigma > 0:
                 sc = t.support[:2] + t.support[2:] / 2
                 d2 = ((preds[k][:, :2] - sc) ** 2).sum(1)
