@@ -821,11 +821,13 @@ class DLPFTracker:
             boxes.append(allb[sl])
         # strongest first: the weaker track may not take its MAP inside a stronger one's box
         order = sorted(range(len(self.tracks)), key=lambda k: float(Bs[k].min()))
-        accepted: list[np.ndarray] = []
-        ended: list[tuple[_Track, str]] = []
-        for k in order:
-            t, lw, B, bx = self.tracks[k], lws[k], Bs[k], boxes[k]
-            overlapping = False
+        grid = (C.grid_x, C.grid_y)
+
+        def estimate(k: int, accepted: list) -> tuple:
+            """Track k's log-weights (children inside an accepted box zeroed), whether all its
+            children are inside one, its MAP index and its box."""
+            t, lw, bx = self.tracks[k], lws[k], boxes[k]
+            overlapping, j = False, -1
             if accepted:
                 ov = box_iou(bx, np.array(accepted)).max(axis=1) >= C.overlap_iou
                 if ov.all():
@@ -844,9 +846,50 @@ class DLPFTracker:
                                                   t.support[3:4], np.zeros(3)])[None],
                                   t.aspect)[0]
                 box = (1.0 - C.snap) * box + C.snap * sup
-            Best = float(ch.bhattacharyya(t.ref, ch.histograms(
-                img, box[None], (C.grid_x, C.grid_y), C.Mh, C.Ms, C.Mv, C.s_min, C.v_min))[0]) \
-                if C.estimate == "mean" else float(B[j])
+            return lw, overlapping, j, box
+
+        def why_end(t: _Track, box: np.ndarray, low: int, overlap: int,
+                    unsupported: int) -> Optional[str]:
+            cx, cy = box[0] + box[2] / 2, box[1] + box[3] / 2
+            if low >= C.lost_frames:
+                return f"likelihood below {C.lost_likelihood} for {low} frames"
+            if C.unsupported_frames and unsupported >= C.unsupported_frames:
+                return f"no classifier hit for {unsupported} frames"
+            if overlap >= C.merge_frames:
+                return f"inside a stronger track for {overlap} frames"
+            if not (0 <= cx < W and 0 <= cy < H):
+                return "left the image"
+            return None
+
+        # the estimates in that order as far as whether each track is kept is known without its
+        # distance B (unknown only for a track without a hit one low frame from its end): their
+        # boxes' B in one histogram call, the same values as one call per track
+        plan: list[tuple] = []
+        kept: list[np.ndarray] = []
+        for k in order:
+            t = self.tracks[k]
+            plan.append(estimate(k, kept))
+            if t.support is None and t.low + 1 >= C.lost_frames:
+                break
+            if why_end(t, plan[-1][3], 0, t.overlap + 1 if plan[-1][1] else 0,
+                       0 if t.support is not None else t.unsupported + 1) is None:
+                kept.append(plan[-1][3])
+        if C.estimate == "mean":
+            planned = ch.bhattacharyya(np.array([self.tracks[k].ref for k in order[:len(plan)]]),
+                                       ch.histograms(img, np.array([e[3] for e in plan]), grid,
+                                                     C.Mh, C.Ms, C.Mv, C.s_min, C.v_min))
+        accepted: list[np.ndarray] = []
+        ended: list[tuple[_Track, str]] = []
+        for i, k in enumerate(order):
+            t, B = self.tracks[k], Bs[k]
+            lw, overlapping, j, box = plan[i] if i < len(plan) else estimate(k, accepted)
+            if C.estimate == "map":
+                Best = float(B[j])
+            elif i < len(plan):
+                Best = float(planned[i])
+            else:
+                Best = float(ch.bhattacharyya(t.ref, ch.histograms(
+                    img, box[None], grid, C.Mh, C.Ms, C.Mv, C.s_min, C.v_min))[0])
             t.velocity = box[:2] + box[2:] / 2 - (t.box[:2] + t.box[2:] / 2)
             t.box, t.B = box, Best
             idx = resample_indices(lw, C.n, rng, "systematic")
@@ -856,15 +899,9 @@ class DLPFTracker:
             t.low = t.low + 1 if low else 0
             t.overlap = t.overlap + 1 if overlapping else 0
             t.unsupported = 0 if t.support is not None else t.unsupported + 1
-            cx, cy = box[0] + box[2] / 2, box[1] + box[3] / 2
-            if t.low >= C.lost_frames:
-                ended.append((t, f"likelihood below {C.lost_likelihood} for {t.low} frames"))
-            elif C.unsupported_frames and t.unsupported >= C.unsupported_frames:
-                ended.append((t, f"no classifier hit for {t.unsupported} frames"))
-            elif t.overlap >= C.merge_frames:
-                ended.append((t, f"inside a stronger track for {t.overlap} frames"))
-            elif not (0 <= cx < W and 0 <= cy < H):
-                ended.append((t, "left the image"))
+            why = why_end(t, box, t.low, t.overlap, t.unsupported)
+            if why is not None:
+                ended.append((t, why))
             else:
                 accepted.append(box)
         for t, why in ended:
