@@ -5,7 +5,9 @@ One frame (stages in order):
 
 ``motion``    free parents are predicted (eqs. (2)–(5)); Lucas–Kanade motion is measured at
               them (eq. (1), :mod:`.motion`), capped (eq. (6)), zeroed inside tracked regions,
-              scored (eq. (7)).
+              scored (eq. (7)).  On a recorded clip the prediction and the LK call are begun
+              at the end of the previous step, LK on a helper thread
+              (:meth:`DLPFTracker.upcoming`: the same draws and flow).
 ``parents``   free parents are resampled on those weights (eq. (8)), a fraction ``explore`` is
               re-drawn uniformly (ours: without it a person who starts walking where no parent
               is would never be found; a re-drawn parent only probes the motion in the frame
