@@ -63,6 +63,7 @@ import re
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from pathlib import Path
 from typing import Optional
@@ -192,7 +193,7 @@ def fmt(v) -> str:
 
 #: the profile's stages, in the order printed; "dlpf other" and "loop other" are what is left
 STAGES = ("decode", "lk flow", "classify", "confirm", "children", "dlpf other", "recorder",
-          "loop other")
+          "loop other", "lk flow (helper)")
 
 
 @contextlib.contextmanager
@@ -223,15 +224,19 @@ def dlpf_clocks(acc: dict):
             return
 
         def timed(*a, **k):
-            if depth.get(stage):            # a clocked call inside another of its stage
+            # a call on another thread (DLPF's look-ahead runs the next frame's LK on a helper
+            # while this frame is recorded) is its own stage, overlapped with the main thread's
+            on = stage if threading.current_thread() is threading.main_thread() else \
+                f"{stage} (helper)"
+            if depth.get(on):               # a clocked call inside another of its stage
                 return fn(*a, **k)
-            depth[stage] = True
+            depth[on] = True
             w0, c0 = pc(), tc()
             try:
                 return fn(*a, **k)
             finally:
-                add(stage, pc() - w0, tc() - c0)
-                depth[stage] = False
+                add(on, pc() - w0, tc() - c0)
+                depth[on] = False
 
         saved.append((owner, name, fn))
         setattr(owner, name, timed)

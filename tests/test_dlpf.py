@@ -71,6 +71,33 @@ def test_hsv_binning_sends_grey_pixels_to_value_bins():
 
 # ------------------------------------------------------------------ confirmation, §2.2
 
+def test_children_of_all_tracks_predicted_at_once_equal_track_by_track():
+    """children.predict_tracks: the values and the rng draws of one predict() per track in
+    turn (with and without a measured shift), and the batched Bhattacharyya distances equal
+    the per-track ones."""
+    g = np.random.default_rng(1)
+    for trial in range(30):
+        sizes = [int(g.integers(1, 120)) for _ in range(int(g.integers(0, 6)))]
+        states = [g.normal(100, 30, (n, 6)) for n in sizes]
+        for st in states:
+            st[:, 2] = np.abs(st[:, 2]) + 10
+        shifts = [None if g.random() < 0.4 else g.normal(0, 5, 2) for _ in sizes]
+        r1, r2 = np.random.default_rng(trial), np.random.default_rng(trial)
+        one = [ch.predict(st, 0.7, 0.04, 0.02, r1, shift=sh) for st, sh in zip(states, shifts)]
+        all_ = ch.predict_tracks(states, shifts, 0.7, 0.04, 0.02, r2)
+        assert len(one) == len(all_)
+        assert all(np.array_equal(a, b) for a, b in zip(one, all_))
+        assert r1.bit_generator.state == r2.bit_generator.state
+        if sizes:
+            q = g.random((sum(sizes), 30))
+            refs = g.random((len(sizes), 30))
+            at = np.cumsum([0] + sizes)
+            B = ch.bhattacharyya(np.repeat(refs, sizes, axis=0), q)
+            for k in range(len(sizes)):
+                sl = slice(at[k], at[k + 1])
+                assert np.array_equal(B[sl], ch.bhattacharyya(refs[k], q[sl]))
+
+
 def test_confirmation_after_exactly_four_sequential_detections():
     c = Confirmer(count=4, max_gap=0)
     box = np.array([[100, 100, 30, 90]], float)
@@ -291,6 +318,65 @@ def test_runs_on_pets09_frames():
     on = [bool((box_iou(ts.boxes[i:i + 1], gt.boxes[gt.frame == f]) >= 0.3).any())
           for f, ts in res.rows["dlpf"] for i in range(len(ts))]
     assert len(on) >= 10 and np.mean(on) >= 0.35, (len(on), np.mean(on))
+
+
+def test_look_ahead_measures_the_next_frames_motion_on_a_helper_with_the_same_tracks(
+        monkeypatch):
+    """DLPFTracker.upcoming (the pipeline's look-ahead on a recorded clip): the next frame's
+    Lucas-Kanade call runs on the helper thread between the steps, and the tracks, the parents
+    and the rng are those of plain steps; a frame other than the announced one falls back to
+    the inline call with the prediction already drawn (still the same draws)."""
+    import threading
+
+    from pfscope.trackers.dlpf import tracker as T
+
+    src = open_source(sequence("PETS09-S2L1"))
+    frames = list(src.frames(limit=14, start=40))
+    where = []
+    real_lk = T.mo.lk_flow
+
+    def lk_spy(*a, **k):
+        where.append(threading.current_thread() is threading.main_thread())
+        return real_lk(*a, **k)
+
+    monkeypatch.setattr(T.mo, "lk_flow", lk_spy)
+
+    def go(announce):
+        tr = make_tracker("dlpf", seed=2, **{"parents.n": "150"})
+        rows = []
+        for k, f in enumerate(frames):
+            nxt = announce(k)
+            if nxt is not None:
+                tr.upcoming(nxt)
+            rows.extend(tr.step(f, None, "tracks").rows)
+        return tr, rows
+
+    plain, rows_p = go(lambda k: None)
+    assert where and all(where)                  # inline: on the calling thread
+    where.clear()
+    ahead, rows_a = go(lambda k: frames[k + 1] if k + 1 < len(frames) else None)
+    assert where and not any(where)              # every LK call on the helper
+    where.clear()
+    # frame 5 announces frame 7 but 6 comes: frame 6 is measured inline
+    odd, rows_o = go(lambda k: frames[k + 2] if k == 5 else
+                     (frames[k + 1] if k + 1 < len(frames) else None))
+    assert where.count(True) == 1
+    assert rows_p, "some track on PETS09 frames 40-53"
+    for tr, rows in ((ahead, rows_a), (odd, rows_o)):
+        assert len(rows) == len(rows_p)
+        for (fa, ta), (fb, tb) in zip(rows_p, rows):
+            assert fa == fb and np.array_equal(ta.ids, tb.ids)
+            assert np.array_equal(ta.boxes, tb.boxes)
+        assert np.array_equal(tr.parents.states, plain.parents.states)
+        assert tr.rng.bit_generator.state == plain.rng.bit_generator.state
+    # through the pipeline (a recorded clip is read ahead): the same tracks again
+    where.clear()
+    res = run(src, [make_tracker("dlpf", seed=2, **{"parents.n": "150"})], frames=14,
+              start=40, level="tracks")
+    assert not any(where[1:])
+    got = [(f, ts) for f, ts in res.rows["dlpf"]]
+    assert [(f, ts.ids.tolist(), ts.boxes.tolist()) for f, ts in got] == \
+        [(f, ts.ids.tolist(), ts.boxes.tolist()) for f, ts in rows_p]
 
 
 def test_wrong_frame_size_is_a_clear_error():
@@ -754,7 +840,7 @@ def test_profile_clocks_hook_the_stages_a_dlpf_frame_runs(monkeypatch):
         assert st[stage]["wall_ms"] > 0, stage
     for stage in ("dlpf other", "loop other"):
         assert st[stage]["wall_ms"] >= 0 and st[stage]["cpu_ms"] >= -0.5, (stage, st[stage])
-    total = sum(v["wall_ms"] for v in st.values())
+    total = sum(v["wall_ms"] for s, v in st.items() if not s.endswith("(helper)"))
     assert total == pytest.approx(1000 * r["loop_wall_s"] / 6, rel=1e-6)
     sys.modules.pop("bench_dlpf", None)
 

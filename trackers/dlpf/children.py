@@ -161,6 +161,35 @@ def predict(states: np.ndarray, damping: float, pos_sigma: float, scale_sigma: f
     return new
 
 
+def predict_tracks(states: list[np.ndarray], shifts: list[Optional[np.ndarray]],
+                   damping: float, pos_sigma: float, scale_sigma: float,
+                   rng: np.random.Generator) -> list[np.ndarray]:
+    """:func:`predict` of several tracks' children (``shifts[k]`` the k-th track's), in one pass:
+    the same values and the same draws as one call per track in turn (one standard-normal
+    draw, read track by track as the x, y and log-height noise; ``normal(0, s)`` is ``s·z``)."""
+    sizes = [len(s) for s in states]
+    if not sizes:
+        return []
+    s = np.concatenate([np.asarray(x, dtype=np.float64).reshape(-1, 6) for x in states])
+    n = len(s)
+    z = rng.standard_normal(3 * n)
+    first = np.repeat(np.cumsum([0] + sizes[:-1]), sizes)     # each row's track's first row
+    size = np.repeat(sizes, sizes)
+    at = 2 * first + np.arange(n)                 # its x noise: z[3·first + (row − first)]
+    cur, prev = s[:, :3], s[:, 3:]
+    h = cur[:, 2]
+    dx, dy = damping * (cur[:, 0] - prev[:, 0]), damping * (cur[:, 1] - prev[:, 1])
+    for k, (a, b) in enumerate(zip(np.cumsum([0] + sizes[:-1]), np.cumsum(sizes))):
+        if shifts[k] is not None:
+            dx[a:b], dy[a:b] = float(shifts[k][0]), float(shifts[k][1])
+    new = np.empty_like(s)
+    new[:, 0] = cur[:, 0] + dx + z[at] * pos_sigma * h
+    new[:, 1] = cur[:, 1] + dy + z[at + size] * pos_sigma * h
+    new[:, 2] = h * np.exp(scale_sigma * z[at + 2 * size])
+    new[:, 3:] = cur
+    return np.split(new, np.cumsum(sizes)[:-1])
+
+
 def boxes_of(states: np.ndarray, aspect: float | np.ndarray) -> np.ndarray:
     """Child states → boxes ``(x, y, w, h)``."""
     s = np.asarray(states, dtype=np.float64).reshape(-1, 6)
@@ -175,4 +204,4 @@ def map_index(log_w: np.ndarray) -> int:
 
 
 __all__ = ["sample_grid", "hsv_bins", "histograms", "bhattacharyya", "log_weights", "spawn",
-           "predict", "boxes_of", "map_index"]
+           "predict", "predict_tracks", "boxes_of", "map_index"]

@@ -5,7 +5,9 @@ One frame (stages in order):
 
 ``motion``    free parents are predicted (eqs. (2)–(5)); Lucas–Kanade motion is measured at
               them (eq. (1), :mod:`.motion`), capped (eq. (6)), zeroed inside tracked regions,
-              scored (eq. (7)).
+              scored (eq. (7)).  On a recorded clip the prediction and the LK call are begun
+              at the end of the previous step, LK on a helper thread
+              (:meth:`DLPFTracker.upcoming`: the same draws and flow).
 ``parents``   free parents are resampled on those weights (eq. (8)), a fraction ``explore`` is
               re-drawn uniformly (ours: without it a person who starts walking where no parent
               is would never be found; a re-drawn parent only probes the motion in the frame
@@ -72,6 +74,7 @@ reports the boxes of its 3 earlier detections as rows of their frames.
 
 from __future__ import annotations
 
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Optional
 
@@ -356,6 +359,28 @@ def _with_changes(base, changes: dict):
 PAPER = _with_changes(DLPFParams(), PAPER_CHANGES)
 
 
+_HELPER: list[ThreadPoolExecutor] = []
+
+
+def _helper() -> ThreadPoolExecutor:
+    """The one thread :meth:`DLPFTracker.upcoming` measures the next frame's motion on."""
+    if not _HELPER:
+        _HELPER.append(ThreadPoolExecutor(1, thread_name_prefix="pfscope-dlpf-motion"))
+    return _HELPER[0]
+
+
+@dataclass
+class _Ahead:
+    """The next frame's motion stage begun at the end of a step (:meth:`DLPFTracker.upcoming`):
+    its free parents and their prediction (drawn then: the rng's next draws either way) and
+    the helper's ``(image, grey, (flow, ok) or None)`` of that frame."""
+
+    frame: Frame
+    free: np.ndarray
+    pred: np.ndarray
+    images: Future
+
+
 @register(presets={"default": DLPFParams(), "paper": PAPER, "landed": LANDED})
 class DLPFTracker:
     """DLPF (jung2013): parents on LK motion classify one HOG window each; confirmed people are
@@ -383,6 +408,8 @@ class DLPFTracker:
         self.tracks: list[_Track] = []
         self._prev_grey: Optional[np.ndarray] = None
         self._size: Optional[tuple[int, int]] = None
+        self._next: Optional[Frame] = None       # upcoming(): the frame the next step gets
+        self._ahead: Optional[_Ahead] = None     # its motion, begun on the helper thread
         self._next_id = 1
         self.scale_prior: Optional[ScalePrior] = None   # built at the first frame (needs H)
         self.windows_evaluated = 0   # running total, for efficiency figures
@@ -438,21 +465,60 @@ class DLPFTracker:
                           f"{track.parent} reset")
 
     # ------------------------------------------------------------------ the step
+    def upcoming(self, frame: Frame) -> None:
+        """The pipeline's look-ahead on a recorded clip (:func:`pfscope.trackers.pipeline.run`):
+        ``frame`` is the one the next :meth:`step` gets.  At the end of this step the free
+        parents' prediction into it is drawn (the rng's next draws either way) and its grey
+        image and the Lucas-Kanade call of its motion stage (~a fifth of the step; OpenCV
+        releases the GIL) run on a helper thread while the recording and the scoring of this
+        frame go on: the same flow, the same draws in the same order, the same tracks."""
+        self._next = frame
+
     def step(self, frame: Frame, detections: Optional[Detections],
              level: Optional[str] = None) -> StepResult:
+        # the helper's work for this frame is collected first: OpenCV's thread setting below
+        # is process-wide, and is never changed while the helper's LK runs
+        nxt, self._next = self._next, None
+        if self._ahead is not None:
+            self._ahead.images.exception()         # wait (an error: redone inline, below)
         # with classifier.threads > 1 the step spreads its work over its own threads; OpenCV's
         # internal ones (warpAffine, LK, colour conversions split over row bands) then only
         # contend with them for the same cores: off for the step, restored after it (results
         # do not depend on it; tests/test_dlpf.py)
         if self.params.classifier.threads <= 1:
-            return self._step(frame, level)
-        with opencv_threads(1):
-            return self._step(frame, level)
+            res = self._step(frame, level)
+        else:
+            with opencv_threads(1):
+                res = self._step(frame, level)
+        if nxt is not None and nxt is not frame:
+            self._look_ahead(nxt)
+        return res
+
+    def _look_ahead(self, nxt: Frame) -> None:
+        """Begin ``nxt``'s motion stage: the free parents' prediction (rng) now, its grey image
+        and the one Lucas-Kanade call on the helper thread."""
+        P = self.params
+        if self.parents is None or self._size is None or self._prev_grey is None:
+            return
+        assert self.parents.labels is not None
+        W, H = self._size
+        free = np.flatnonzero(self.parents.labels == 0)
+        pred = pa.predict(self.parents.states[free], P.parents.q_pos, P.parents.q_vel, self.rng,
+                          W, H)
+        pts = np.concatenate([self._track_flow_points(), pred[:, :2]])
+        self._ahead = _Ahead(nxt, free, pred,
+                             _helper().submit(_motion_images, nxt, self._prev_grey, pts,
+                                              P.motion.lk_window, P.motion.lk_levels))
 
     def _step(self, frame: Frame, level: Optional[str]) -> StepResult:
         P = self.params
-        img = to_bgr(check_image(frame, "dlpf"))
-        grey = to_gray(img)
+        ahead, self._ahead = self._ahead, None
+        lk = None     # the helper's flow and status of this frame's motion points
+        if ahead is not None and ahead.frame is frame and ahead.images.exception() is None:
+            img, grey, lk = ahead.images.result()
+        else:         # no look-ahead, or it failed: the same error is raised here
+            img = to_bgr(check_image(frame, "dlpf"))
+            grey = to_gray(img)
         H, W = grey.shape
         if self._size is not None and self._size != (W, H):
             raise ValueError(f"frame {frame.index}: dlpf: frame size changed from "
@@ -474,11 +540,17 @@ class DLPFTracker:
         log.stage("motion")
         labels = self.parents.labels
         assert labels is not None
-        free = np.flatnonzero(labels == 0)
-        pred = pa.predict(self.parents.states[free], P.parents.q_pos, P.parents.q_vel, rng, W, H)
+        if ahead is not None:   # drawn at the end of the last step (upcoming)
+            free, pred = ahead.free, ahead.pred
+        else:
+            free = np.flatnonzero(labels == 0)
+            pred = pa.predict(self.parents.states[free], P.parents.q_pos, P.parents.q_vel, rng,
+                              W, H)
         # one Lucas-Kanade call for the tracks' flow grids and the free parents (eq. (1))
         tpts = self._track_flow_points()
-        if self._prev_grey is not None and len(free) + len(tpts):
+        if lk is not None:      # measured on the helper thread (upcoming)
+            flow, ok = lk
+        elif self._prev_grey is not None and len(free) + len(tpts):
             # the step's own threads are idle here: OpenCV may split the points over them
             # (each point's flow is computed the same way whatever the thread count)
             with opencv_threads(max(cv2.getNumThreads(), P.classifier.threads)):
@@ -713,9 +785,9 @@ class DLPFTracker:
             return
         rng = self.rng
         H, W = img.shape[:2]
-        preds = [ch.predict(t.kids.states, C.damping, C.pos_sigma, C.scale_sigma, rng,
-                            shift=t.shift)
-                 for t in self.tracks]
+        preds = ch.predict_tracks([t.kids.states for t in self.tracks],
+                                  [t.shift for t in self.tracks], C.damping, C.pos_sigma,
+                                  C.scale_sigma, rng)
         for t, p in zip(self.tracks, preds):  # re-seed part of the children at the parent's hit
             k = int(round(C.inject * len(p)))
             if t.support is not None and k:
@@ -727,19 +799,22 @@ class DLPFTracker:
         # slow reference refresh (ours): the tracks whose parent has a hit
         refresh = [t for t in self.tracks if t.support is not None] if C.ref_update > 0 else []
         sizes = [len(p) for p in preds]
-        allb = np.concatenate([ch.boxes_of(p, t.aspect) for p, t in zip(preds, self.tracks)])
+        starts = np.cumsum([0] + sizes)
+        # all tracks' children at once (the same values as track by track)
+        allb = ch.boxes_of(np.concatenate(preds), np.repeat([t.aspect for t in self.tracks], sizes))
         # every child's box and every refreshed track's hit box: one gather, one bincount
         hist = ch.histograms(img, np.concatenate([allb, *(t.support[None] for t in refresh)]),
                              (C.grid_x, C.grid_y), C.Mh, C.Ms, C.Mv, C.s_min, C.v_min)
         for t, q in zip(refresh, hist[len(allb):]):
             t.ref = (1.0 - C.ref_update) * t.ref + C.ref_update * q
-        starts = np.cumsum([0] + sizes)
+        B_all = ch.bhattacharyya(np.repeat([t.ref for t in self.tracks], sizes, axis=0),
+                                 hist[:len(allb)])                # eq. (13)
+        lw_all = ch.log_weights(B_all, C.lam)                     # eq. (14)
         Bs, lws, boxes = [], [], []
         for k, t in enumerate(self.tracks):
             sl = slice(starts[k], starts[k + 1])
-            B = ch.bhattacharyya(t.ref, hist[sl])                 # eq. (13)
-            Bs.append(B)
-            lw = ch.log_weights(B, C.lam)                         # eq. (14)
+            Bs.append(B_all[sl])
+            lw = lw_all[sl]
             if t.support is not None and C.support_sigma > 0:
                 sc = t.support[:2] + t.support[2:] / 2
                 d2 = ((preds[k][:, :2] - sc) ** 2).sum(1)
@@ -748,11 +823,13 @@ class DLPFTracker:
             boxes.append(allb[sl])
         # strongest first: the weaker track may not take its MAP inside a stronger one's box
         order = sorted(range(len(self.tracks)), key=lambda k: float(Bs[k].min()))
-        accepted: list[np.ndarray] = []
-        ended: list[tuple[_Track, str]] = []
-        for k in order:
-            t, lw, B, bx = self.tracks[k], lws[k], Bs[k], boxes[k]
-            overlapping = False
+        grid = (C.grid_x, C.grid_y)
+
+        def estimate(k: int, accepted: list) -> tuple:
+            """Track k's log-weights (children inside an accepted box zeroed), whether all its
+            children are inside one, its MAP index and its box."""
+            t, lw, bx = self.tracks[k], lws[k], boxes[k]
+            overlapping, j = False, -1
             if accepted:
                 ov = box_iou(bx, np.array(accepted)).max(axis=1) >= C.overlap_iou
                 if ov.all():
@@ -771,9 +848,50 @@ class DLPFTracker:
                                                   t.support[3:4], np.zeros(3)])[None],
                                   t.aspect)[0]
                 box = (1.0 - C.snap) * box + C.snap * sup
-            Best = float(ch.bhattacharyya(t.ref, ch.histograms(
-                img, box[None], (C.grid_x, C.grid_y), C.Mh, C.Ms, C.Mv, C.s_min, C.v_min))[0]) \
-                if C.estimate == "mean" else float(B[j])
+            return lw, overlapping, j, box
+
+        def why_end(t: _Track, box: np.ndarray, low: int, overlap: int,
+                    unsupported: int) -> Optional[str]:
+            cx, cy = box[0] + box[2] / 2, box[1] + box[3] / 2
+            if low >= C.lost_frames:
+                return f"likelihood below {C.lost_likelihood} for {low} frames"
+            if C.unsupported_frames and unsupported >= C.unsupported_frames:
+                return f"no classifier hit for {unsupported} frames"
+            if overlap >= C.merge_frames:
+                return f"inside a stronger track for {overlap} frames"
+            if not (0 <= cx < W and 0 <= cy < H):
+                return "left the image"
+            return None
+
+        # the estimates in that order as far as whether each track is kept is known without its
+        # distance B (unknown only for a track without a hit one low frame from its end): their
+        # boxes' B in one histogram call, the same values as one call per track
+        plan: list[tuple] = []
+        kept: list[np.ndarray] = []
+        for k in order:
+            t = self.tracks[k]
+            plan.append(estimate(k, kept))
+            if t.support is None and t.low + 1 >= C.lost_frames:
+                break
+            if why_end(t, plan[-1][3], 0, t.overlap + 1 if plan[-1][1] else 0,
+                       0 if t.support is not None else t.unsupported + 1) is None:
+                kept.append(plan[-1][3])
+        if C.estimate == "mean":
+            planned = ch.bhattacharyya(np.array([self.tracks[k].ref for k in order[:len(plan)]]),
+                                       ch.histograms(img, np.array([e[3] for e in plan]), grid,
+                                                     C.Mh, C.Ms, C.Mv, C.s_min, C.v_min))
+        accepted: list[np.ndarray] = []
+        ended: list[tuple[_Track, str]] = []
+        for i, k in enumerate(order):
+            t, B = self.tracks[k], Bs[k]
+            lw, overlapping, j, box = plan[i] if i < len(plan) else estimate(k, accepted)
+            if C.estimate == "map":
+                Best = float(B[j])
+            elif i < len(plan):
+                Best = float(planned[i])
+            else:
+                Best = float(ch.bhattacharyya(t.ref, ch.histograms(
+                    img, box[None], grid, C.Mh, C.Ms, C.Mv, C.s_min, C.v_min))[0])
             t.velocity = box[:2] + box[2:] / 2 - (t.box[:2] + t.box[2:] / 2)
             t.box, t.B = box, Best
             idx = resample_indices(lw, C.n, rng, "systematic")
@@ -783,15 +901,9 @@ class DLPFTracker:
             t.low = t.low + 1 if low else 0
             t.overlap = t.overlap + 1 if overlapping else 0
             t.unsupported = 0 if t.support is not None else t.unsupported + 1
-            cx, cy = box[0] + box[2] / 2, box[1] + box[3] / 2
-            if t.low >= C.lost_frames:
-                ended.append((t, f"likelihood below {C.lost_likelihood} for {t.low} frames"))
-            elif C.unsupported_frames and t.unsupported >= C.unsupported_frames:
-                ended.append((t, f"no classifier hit for {t.unsupported} frames"))
-            elif t.overlap >= C.merge_frames:
-                ended.append((t, f"inside a stronger track for {t.overlap} frames"))
-            elif not (0 <= cx < W and 0 <= cy < H):
-                ended.append((t, "left the image"))
+            why = why_end(t, box, t.low, t.overlap, t.unsupported)
+            if why is not None:
+                ended.append((t, why))
             else:
                 accepted.append(box)
         for t, why in ended:
@@ -805,6 +917,18 @@ class DLPFTracker:
         return {"tracker": self.name, "paper": self.paper, "params": to_dict(self.params),
                 "classifier": self.classifier.describe(),
                 "classifier_info": dict(getattr(self.classifier, "info", {}))}
+
+
+def _motion_images(frame: Frame, prev_grey: np.ndarray, points: np.ndarray, win: int,
+                   levels: int) -> tuple[np.ndarray, np.ndarray, Optional[tuple]]:
+    """The look-ahead's helper-thread work for ``frame``: its BGR and grey images and the
+    Lucas-Kanade ``(flow, ok)`` of ``points`` from ``prev_grey`` (None when the size changed:
+    the step reports that)."""
+    img = to_bgr(check_image(frame, "dlpf"))
+    grey = to_gray(img)
+    if grey.shape != prev_grey.shape:
+        return img, grey, None
+    return img, grey, mo.lk_flow(prev_grey, grey, points, win=win, levels=levels)
 
 
 __all__ = ["DLPFTracker", "DLPFParams", "MotionParams", "ParentParams", "ClassifierParams",
