@@ -88,7 +88,8 @@ def em_rate(num: float, den: float, prior: float, a: float) -> float:
     frame in them (1 / memory once the memory is full), ``prior`` the prior mean.  Clipped to
     [BETA_FLOOR, 1]."""
     n0 = PRIOR_FRAMES * a
-    return float(np.clip((num + n0 * prior) / (den + n0), BETA_FLOOR, 1.0))
+    # np.clip's float without its array machinery (three calls a frame; NaN stays NaN)
+    return float(min(max((num + n0 * prior) / (den + n0), BETA_FLOOR), 1.0))
 #: memory entries whose faded weight is below this are dropped
 MIN_WEIGHT = 1e-3
 

@@ -529,6 +529,8 @@ class SceneModel:
     Averages are over about ``clutter_memory`` frames."""
 
     _LOG_SIZE_FLOOR = 0.05 ** 2    # log-size variance floor (5 % of the size)
+    _FLOOR_EYE = _LOG_SIZE_FLOOR * np.eye(2)
+    _FLOOR_EYE.flags.writeable = False
 
     def __init__(self, params: "PHDParams"):
         self.cl, self.sp = params.clutter, params.score
@@ -618,8 +620,9 @@ class SceneModel:
             ls = np.log(Z[:, 2:4])      # the log sizes, once (the same floats thrice)
             if len(Z):
                 self._see_sizes(Z, ls)
-            cov = self.size_m2 - np.outer(self.size_m1, self.size_m1)
-            cov = 0.5 * (cov + cov.T) + self._LOG_SIZE_FLOOR * np.eye(2)
+            m1 = self.size_m1
+            cov = self.size_m2 - m1[:, None] * m1[None, :]     # np.outer's very product
+            cov = 0.5 * (cov + cov.T) + self._FLOOR_EYE
             d = ls - self.size_m1
             sol = np.linalg.solve(cov, d.T).T
             log_size = (-0.5 * np.einsum("ij,ij->i", d, sol) - math.log(2 * math.pi)
