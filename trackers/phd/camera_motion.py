@@ -131,12 +131,13 @@ def _robust_fit(prev: np.ndarray, cur: np.ndarray, links: np.ndarray, pos_std: f
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
-def _pairwise(a, lo, n):
-    """numpy's float64 ``add.reduce`` of the contiguous ``a[lo:lo + n]``: its pairwise
-    summation, the same floats as ``a[lo:lo + n].sum()``: runs of at most 128 by
+def _pairwise(a, n):
+    """numpy's float64 ``add.reduce`` of the contiguous ``a[:n]``: its pairwise summation,
+    the same floats as ``a[:n].sum()``: runs of at most 128 by
     :func:`_pairwise_block`, a longer run as ``pw(lo, h) + pw(lo + h, n − h)`` with ``h`` half
     of it rounded down to 8s -- that recursion walked with an explicit stack (numba's cache
     cannot reload a recursive function: a reloaded one crashed)."""
+    lo = np.int64(0)        # not the literal 0: one specialisation of the block (below)
     if n <= 128:
         return _pairwise_block(a, lo, n)
     # per open run: its start, length, and 0 / 1 / 2 = none / its left half / both halves
@@ -204,7 +205,9 @@ def _fit_kernel(prev, cur, links, base, speed_var, H, out):
     link's still-camera variance per corner coordinate in box sizes, ``2 (σ_y² + σ_size² /
     4)``.  Returns (found, s, t_x, t_y, H, significant); ``found`` False: no link, or no
     inlier."""
-    m = 0
+    # counters start as np.int64, not as a literal 0: numba would compile the kernels they are
+    # passed to once more for the literal (a second specialisation: compile time only)
+    m = np.int64(0)
     for i in range(links.shape[0]):
         if links[i] >= 0:
             m += 1
@@ -215,7 +218,7 @@ def _fit_kernel(prev, cur, links, base, speed_var, H, out):
     wt = np.empty((m, 2))
     hyp = np.empty((2 * MAX_HYPOTHESES, 3))          # (s, t_x, t_y) per hypothesis
     d2_id = np.empty(m)
-    k = 0
+    k = np.int64(0)
     for i in range(links.shape[0]):
         if links[i] < 0:
             continue
@@ -243,12 +246,13 @@ def _fit_kernel(prev, cur, links, base, speed_var, H, out):
     # least-squares motion (the scale then also from how far apart they are)
     buf = np.empty(max(8, 4 * m))
     sel = np.empty(m, dtype=np.int64)
+    two = np.int64(2)
     for a in range(m):
         for b in range(a + 1, m):
             if nh - n1 >= MAX_HYPOTHESES:
                 break
             sel[0], sel[1] = a, b
-            hyp[nh, 0], hyp[nh, 1], hyp[nh, 2] = _scale_shift(src, dst, wt, sel, 2, buf, H)
+            hyp[nh, 0], hyp[nh, 1], hyp[nh, 2] = _scale_shift(src, dst, wt, sel, two, buf, H)
             nh += 1
     # every hypothesis scored by its truncated residuals over every link (MSAC)
     best = 0
@@ -257,14 +261,14 @@ def _fit_kernel(prev, cur, links, base, speed_var, H, out):
     for h in range(nh):
         for i in range(m):
             r[i] = _clip_d2(_link_d2(src, dst, wt, i, hyp[h, 0], hyp[h, 1], hyp[h, 2]))
-        cost = _pairwise(r, 0, m)
+        cost = _pairwise(r, m)
         if cost != cost:           # np.argmin: the first NaN
             best = h
             break
         if cost < low:
             low = cost
             best = h
-    n_in = 0
+    n_in = np.int64(0)
     for i in range(m):
         if _link_d2(src, dst, wt, i, hyp[best, 0], hyp[best, 1], hyp[best, 2]) <= INLIER_D2:
             sel[n_in] = i
@@ -280,7 +284,7 @@ def _fit_kernel(prev, cur, links, base, speed_var, H, out):
         n_ok += d <= INLIER_D2
         r[i] = _clip_d2(d)
         d2_id[i] = _clip_d2(d2_id[i])
-    gain = _pairwise(d2_id, 0, m) - _pairwise(r, 0, m)
+    gain = _pairwise(d2_id, m) - _pairwise(r, m)
     out[0], out[1], out[2] = s, t0, t1
     out[3] = 1.0 if n_ok >= MIN_LINKS and gain > LR_MARGIN else 0.0
     return True
@@ -313,18 +317,18 @@ def _scale_shift(src, dst, wt, sel, n, buf, H):
             for c in range(2):
                 dp = src[sel[j], e, c] - ps[c]
                 buf[4 * j + 2 * e + c] = wt[sel[j], c] * dp * dp
-    den = _pairwise(buf, 0, 4 * n)
+    den = _pairwise(buf, 4 * n)
     for j in range(n):
         for e in range(2):
             for c in range(2):
                 buf[4 * j + 2 * e + c] = (wt[sel[j], c] * (src[sel[j], e, c] - ps[c])
                                           * (dst[sel[j], e, c] - qs[c]))
-    s = _pairwise(buf, 0, 4 * n) / den if den > 0 else 1.0
+    s = _pairwise(buf, 4 * n) / den if den > 0 else 1.0
     for j in range(n):
         for e in range(2):
             for c in range(2):
                 buf[4 * j + 2 * e + c] = wt[sel[j], c] * src[sel[j], e, c] * src[sel[j], e, c]
-    H[0, 0] = _pairwise(buf, 0, 4 * n)
+    H[0, 0] = _pairwise(buf, 4 * n)
     return s, qs[0] - s * ps[0], qs[1] - s * ps[1]
 
 
