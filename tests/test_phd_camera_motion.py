@@ -307,3 +307,101 @@ def test_camera_continuity_does_not_call_a_walking_group_a_pan():
             moved += est.step(q, z, np.arange(n), 0.075, 0.15, SPEED_VAR,
                               FPS * cm.MEMORY_S) is not None
     assert moved <= 75, moved
+
+
+def _robust_fit_numpy(prev, cur, links, pos_std, size_std, speed_var):
+    """The camera fit in its numpy array form (the definition the kernel must reproduce bit
+    for bit): (s, t, H, significant) or None."""
+    def scale_shift(src, dst, wt):
+        w = np.broadcast_to(wt, src.shape)
+        sw = w.sum(axis=(-3, -2))
+        ps = (w * src).sum(axis=(-3, -2)) / sw
+        qs = (w * dst).sum(axis=(-3, -2)) / sw
+        dp, dq = src - ps[..., None, None, :], dst - qs[..., None, None, :]
+        den = (w * dp * dp).sum(axis=(-3, -2, -1))
+        s = np.where(den > 0, (w * dp * dq).sum(axis=(-3, -2, -1)) / np.where(den > 0, den, 1.0),
+                     1.0)
+        return s, qs - s[..., None] * ps
+
+    def corners(b):
+        half = b[:, 2:4] / 2.0
+        return np.stack([b[:, :2] - half, b[:, :2] + half], axis=1)
+
+    has = np.flatnonzero(links >= 0)
+    if not len(has):
+        return None
+    q, z = prev[links[has]], cur[has]
+    src, dst = corners(q), corners(z)
+    size = z[:, None, 2:4]
+    wh = z[:, 2] * z[:, 3]
+    var = 2.0 * (pos_std ** 2 + size_std ** 2 / 4) + speed_var * wh[:, None, None] / size ** 2
+    wt = 1.0 / (var * size ** 2)
+    d2_id = np.sum((src - dst) ** 2 * wt, axis=(1, 2))
+
+    def d2(s, t):
+        s = np.asarray(s, dtype=np.float64)[..., None, None, None]
+        return np.sum((s * src + np.asarray(t)[..., None, None, :] - dst) ** 2 * wt,
+                      axis=(-2, -1))
+
+    h = slice(0, cm.MAX_HYPOTHESES)
+    sh = np.sqrt(wh[h] / (q[h, 2] * q[h, 3]))
+    th = z[h, :2] - sh[:, None] * q[h, :2]
+    if len(has) > 1:
+        ii, jj = np.triu_indices(len(has), 1)
+        k = np.stack([ii[:cm.MAX_HYPOTHESES], jj[:cm.MAX_HYPOTHESES]], axis=1)
+        s_ab, t_ab = scale_shift(src[k], dst[k], wt[k])
+        sh, th = np.concatenate([sh, s_ab]), np.concatenate([th, t_ab])
+    cost = np.minimum(d2(sh, th), cm.INLIER_D2).sum(axis=1)
+    best = int(np.argmin(cost))
+    inl = d2(sh[best], th[best]) <= cm.INLIER_D2
+    if not inl.any():
+        return None
+    s, t = scale_shift(src[inl], dst[inl], wt[inl])
+    s = float(s)
+    r = d2(s, t)
+    gain = float(np.minimum(d2_id, cm.INLIER_D2).sum() - np.minimum(r, cm.INLIER_D2).sum())
+    ok = int((r <= cm.INLIER_D2).sum()) >= cm.MIN_LINKS and gain > cm.LR_MARGIN
+    w = np.broadcast_to(wt[inl], src[inl].shape)
+    H = np.zeros((3, 3))
+    H[0, 0] = float((w * src[inl] * src[inl]).sum())
+    H[0, 1:] = H[1:, 0] = (w * src[inl]).sum(axis=(0, 1))
+    H[1, 1], H[2, 2] = w.sum(axis=(0, 1))
+    return s, np.asarray(t, dtype=np.float64), H, ok
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_robust_fit_kernel_is_the_numpy_form_bit_for_bit(seed):
+    """The one-pass kernel of the camera fit gives the very floats of the array form (the same
+    sums in numpy's order: 4-term sums in order, longer ones pairwise), on still and moving
+    cameras, outlier links, unlinked detections, and frames of up to 60 links (pairwise sums
+    past 128 terms, the hypothesis caps)."""
+    rng = np.random.default_rng(seed)
+    seen = {"none": 0, "significant": 0, "still": 0}
+    for _ in range(300):
+        n = int(rng.integers(0, rng.choice([5, 15, 61])))
+        npv = int(rng.integers(max(n, 1), n + 5))
+        prev = np.column_stack([rng.uniform(0, 800, npv), rng.uniform(0, 600, npv),
+                                rng.uniform(10, 60, npv), rng.uniform(30, 150, npv)])
+        links = rng.permutation(npv)[:n] if n else np.zeros(0, dtype=np.int64)
+        links = np.where(rng.random(n) < rng.uniform(0, 0.5), -1, links)
+        s = rng.choice([1.0, rng.uniform(0.9, 1.1)])
+        cur = prev[np.maximum(links, 0)].copy()
+        cur[:, :2] = (s * cur[:, :2] + rng.normal(0, 10, 2) * rng.integers(0, 2)
+                      + rng.normal(0, rng.uniform(0.1, 5), (n, 2)))
+        cur[:, 2:4] = s * cur[:, 2:4] * np.exp(rng.normal(0, 0.05, (n, 2)))
+        out = rng.random(n) < 0.2
+        cur[out, :2] += rng.normal(0, 80, (int(out.sum()), 2))
+        args = (rng.uniform(0.02, 0.2), rng.uniform(0.05, 0.3),
+                rng.choice([0.0, rng.uniform(0, 0.05)]))
+        want = _robust_fit_numpy(prev, cur, links, *args)
+        got = cm._robust_fit(prev, cur, links, *args)
+        assert (got is None) == (want is None)
+        if want is None:
+            seen["none"] += 1
+            continue
+        seen["significant" if want[3] else "still"] += 1
+        assert got.s == want[0] and isinstance(got.s, float)
+        np.testing.assert_array_equal(got.t, want[1])
+        np.testing.assert_array_equal(got.H, want[2])
+        assert got.significant == want[3]
+    assert min(seen.values()) > 0

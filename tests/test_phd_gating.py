@@ -428,3 +428,38 @@ def test_a_clutter_storm_runs_in_bounded_memory_with_finite_weights():
     assert max(out["particles"]) <= PHDParams().resampling.max_particles + cap
     assert out["clusters"][0] >= 2000                  # one centre per detection at least
     assert out["peak_rss_mb"] < 1024, out
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_gate_sums_one_pass_grid_is_grid_index_bit_for_bit(seed):
+    """gate_sums' one-pass grid (counting sort in the kernel) is GridIndex's: the same cells,
+    keys and stable order, so the same floats; sparse grids (a far-flung point, which also
+    grows the cells) take GridIndex itself, and agree too."""
+    from pfscope.trackers.phd.gating import GridIndex, _gate_sums, _gate_sums_grid, _median0
+
+    rng = np.random.default_rng(seed)
+    taken = []
+    for far in (False, True, False, True):
+        pts = np.empty((int(rng.integers(50, 600)), 4))
+        pts[:, :2] = rng.uniform(0, [640, 480], (len(pts), 2))
+        pts[:, 2] = rng.uniform(10, 60, len(pts))
+        pts[:, 3] = pts[:, 2] * rng.uniform(1.5, 3, len(pts))
+        if far:
+            pts[0, :2] = [1e15, -1e15]
+        pts[len(pts) // 2:, :2] = np.round(pts[len(pts) // 2:, :2] / 16) * 16   # cell edges
+        Z = pts[rng.integers(0, len(pts), 30)] + rng.normal(0, 3, (30, 4))
+        w, e = rng.uniform(0, 1, len(pts)), rng.uniform(1, 30, len(pts))
+        r2, std = gate_threshold(0.99, 4), obs_std(Z[:, 2:4])
+        cell = 2.0 * _median0(np.sqrt(r2) * std[:, :2] * (1 + 1e-6) + 1e-9)
+        index = GridIndex(pts[:, :2], cell)
+        S0, E0, C0 = np.zeros(len(Z)), np.zeros(len(Z)), np.zeros(len(Z), np.int64)
+        _gate_sums(pts, w, e, Z, std, float(r2), index.order.astype(np.int64), index.keys,
+                   float(index.origin[0]), float(index.origin[1]), float(index.cell[0]),
+                   float(index.cell[1]), int(index.shape[0]), int(index.shape[1]), S0, E0, C0)
+        S, E, C = gate_sums(pts, Z, r2, std, w, e)
+        assert C.sum() > len(Z)
+        assert np.array_equal(S, S0) and np.array_equal(E, E0) and np.array_equal(C, C0)
+        S1, E1, C1 = np.zeros(len(Z)), np.zeros(len(Z)), np.zeros(len(Z), np.int64)
+        taken.append(_gate_sums_grid(pts, w, e, Z, std, float(r2), float(cell[0]),
+                                     float(cell[1]), S1, E1, C1))
+    assert taken == [True, False, True, False]

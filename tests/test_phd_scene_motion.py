@@ -218,3 +218,43 @@ def test_phd_mt_links_each_frame_once_for_learner_and_score_model():
     before = ch.length.copy()
     ch.observe(np.array([[0.0, 0.0, 1.0, 1.0]]), key=5)
     assert ch.length.tolist() == before.tolist()
+
+
+def _link_numpy(prev, cur):
+    """:func:`link` in its numpy array form (the definition the kernel must reproduce)."""
+    from pfscope.trackers.phd.scene_motion import LINK_DIST, LINK_LOG_SIZE
+
+    out = np.full(len(cur), -1, dtype=np.int64)
+    if not len(prev) or not len(cur):
+        return out
+    dx = (cur[:, None, 0] - prev[None, :, 0]) / cur[:, None, 2]
+    dy = (cur[:, None, 1] - prev[None, :, 1]) / cur[:, None, 3]
+    d = np.where(np.abs(np.log(cur[:, None, 3] / prev[None, :, 3])) < LINK_LOG_SIZE,
+                 np.hypot(dx, dy), np.inf)
+    j, i = np.argmin(d, axis=1), np.argmin(d, axis=0)
+    rows = np.arange(len(cur))
+    ok = (i[j] == rows) & (d[rows, j] < LINK_DIST)
+    out[ok] = j[ok]
+    return out
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_link_kernel_is_the_numpy_form(seed):
+    """The links' one-pass kernel gives the array form's links: mutual nearest within one box
+    size and similar height, the first of equal distances (duplicate boxes), none across an
+    empty frame."""
+    rng = np.random.default_rng(seed)
+    found = 0
+    for t in range(400):
+        npv, nc = int(rng.integers(0, 30)), int(rng.integers(0, 30))
+        prev = np.column_stack([rng.uniform(0, 300, npv), rng.uniform(0, 200, npv),
+                                rng.uniform(10, 40, npv), rng.uniform(20, 90, npv)])
+        cur = prev[rng.integers(0, max(npv, 1), nc)] if npv else np.zeros((0, 4))
+        cur = cur + rng.normal(0, rng.uniform(0.5, 20), cur.shape)
+        cur[:, 2:] = np.abs(cur[:, 2:]) + 1
+        if t % 5 == 0 and len(cur) > 1:
+            cur[1] = cur[0]                               # equal distances
+        want = _link_numpy(prev, cur)
+        np.testing.assert_array_equal(link(prev, cur), want)
+        found += int((want >= 0).sum())
+    assert found > 100

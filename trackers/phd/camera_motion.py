@@ -48,10 +48,10 @@ hypotheses are scored).
 from __future__ import annotations
 
 import math
-from functools import lru_cache
 from typing import Optional
 
 import numpy as np
+from numba import njit
 
 #: inlier links needed before a camera motion is believed (one link is a person's own motion)
 MIN_LINKS = 2
@@ -68,12 +68,6 @@ MEMORY_S = 1.0
 IDENTITY = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
 
 
-def corners(boxes: np.ndarray) -> np.ndarray:
-    """(N, 2, 2) top-left and bottom-right corners of boxes ``(cx, cy, w, h)`` (N, 4)."""
-    half = boxes[:, 2:4] / 2.0
-    return np.stack([boxes[:, :2] - half, boxes[:, :2] + half], axis=1)
-
-
 def apply(A: np.ndarray, pts: np.ndarray) -> np.ndarray:
     """Points (..., 2) mapped by the 2×3 transform ``A``."""
     return pts @ A[:, :2].T + A[:, 2]
@@ -82,21 +76,6 @@ def apply(A: np.ndarray, pts: np.ndarray) -> np.ndarray:
 def scale(A: np.ndarray) -> float:
     """The similarity's scale ``s`` (``A[:, :2] = s R``)."""
     return float(math.sqrt(abs(A[0, 0] * A[1, 1] - A[0, 1] * A[1, 0])))
-
-
-def _scale_shift(src: np.ndarray, dst: np.ndarray, wt: np.ndarray) -> tuple:
-    """Weighted least squares of ``dst ≈ s src + t`` over points (..., n, 2, 2) with weights
-    ``wt`` (..., n, 1 or 2, 2) per coordinate: ``(s, t)`` of shapes (...) and (..., 2) (one
-    fit per leading index)."""
-    w = np.broadcast_to(wt, src.shape)
-    sw = w.sum(axis=(-3, -2))
-    ps = (w * src).sum(axis=(-3, -2)) / sw
-    qs = (w * dst).sum(axis=(-3, -2)) / sw
-    dp, dq = src - ps[..., None, None, :], dst - qs[..., None, None, :]
-    den = (w * dp * dp).sum(axis=(-3, -2, -1))
-    s = np.where(den > 0, (w * dp * dq).sum(axis=(-3, -2, -1)) / np.where(den > 0, den, 1.0),
-                 1.0)
-    return s, qs - s[..., None] * ps
 
 
 def _matrix(s: float, t: np.ndarray) -> np.ndarray:
@@ -115,16 +94,6 @@ def fit(prev: np.ndarray, cur: np.ndarray, links: np.ndarray,
     return None if r is None or not r.significant else _matrix(r.s, r.t)
 
 
-@lru_cache(maxsize=64)
-def _link_pairs(n: int) -> np.ndarray:
-    """(P, 2) the first :data:`MAX_HYPOTHESES` pairs ``i < j`` of ``n`` links, in
-    ``np.triu_indices`` order (read-only; the same few ``n`` come back every frame)."""
-    ii, jj = np.triu_indices(n, 1)
-    k = np.stack([ii[:MAX_HYPOTHESES], jj[:MAX_HYPOTHESES]], axis=1)
-    k.flags.writeable = False
-    return k
-
-
 class _Fit:
     """One frame's robust fit: scale ``s``, shift ``t`` (2,), its information matrix ``H``
     (3×3 over ``(s, t_x, t_y)``, the inverse covariance of the weighted least squares on the
@@ -136,64 +105,250 @@ class _Fit:
         self.s, self.t, self.H, self.significant = s, t, H, significant
 
 
-def _information(src: np.ndarray, wt: np.ndarray) -> np.ndarray:
-    """Information matrix (3×3 over ``(s, t_x, t_y)``) of ``dst = s src + t`` from points
-    ``src`` (n, 2, 2) with weights ``wt`` (n, 1 or 2, 2) per coordinate."""
-    w = np.broadcast_to(wt, src.shape)
-    sw = w.sum(axis=(0, 1))                        # per axis
-    swx = (w * src).sum(axis=(0, 1))
-    H = np.zeros((3, 3))
-    H[0, 0] = float((w * src * src).sum())
-    H[0, 1:] = H[1:, 0] = swx
-    H[1, 1], H[2, 2] = sw
-    return H
-
-
 def _robust_fit(prev: np.ndarray, cur: np.ndarray, links: np.ndarray, pos_std: float,
                 size_std: float, speed_var: float) -> Optional[_Fit]:
-    """:func:`fit`'s robust estimate on one or more links (None without a link)."""
-    has = np.flatnonzero(links >= 0)
-    if not len(has):
-        return None
-    q, z = prev[links[has]], cur[has]
-    src, dst = corners(q), corners(z)
-    size = z[:, None, 2:4]                              # residuals in box sizes of frame k
-    wh = z[:, 2] * z[:, 3]
-    # a corner = centre ± size / 2: per detection σ_y² + σ_size² / 4, two detections a link
-    var = 2.0 * (pos_std ** 2 + size_std ** 2 / 4) + speed_var * wh[:, None, None] / size ** 2
-    wt = 1.0 / (var * size ** 2)                        # per px² of each link and axis
-    d2_id = np.sum((src - dst) ** 2 * wt, axis=(1, 2))
+    """:func:`fit`'s robust estimate on one or more links (None without a link, or without an
+    inlier): one numba pass (:func:`_fit_kernel`).
 
-    def d2(s, t) -> np.ndarray:
-        """(..., n) squared residuals in noise variances of every link under ``s p + t``."""
-        s = np.asarray(s, dtype=np.float64)[..., None, None, None]
-        return np.sum((s * src + np.asarray(t)[..., None, None, :] - dst) ** 2 * wt,
-                      axis=(-2, -1))
-
-    # one hypothesis per link: its size ratio and the shift of its centre
-    h = slice(0, MAX_HYPOTHESES)
-    sh = np.sqrt(wh[h] / (q[h, 2] * q[h, 3]))
-    th = z[h, :2] - sh[:, None] * q[h, :2]
-    # ... and one per pair of links: their least-squares motion (the scale then also
-    # from how far apart they are, not only from their noisy sizes)
-    if len(has) > 1:
-        k = _link_pairs(len(has))                                              # (P, 2)
-        s_ab, t_ab = _scale_shift(src[k], dst[k], wt[k])
-        sh, th = np.concatenate([sh, s_ab]), np.concatenate([th, t_ab])
-    cost = np.minimum(d2(sh, th), INLIER_D2).sum(axis=1)
-    best = int(np.argmin(cost))
-    inl = d2(sh[best], th[best]) <= INLIER_D2
-    if not inl.any():
+    Per link, its corners (top-left, bottom-right) in both frames and per axis the weight
+    ``1 / (var · size²)`` per px², ``var = 2 (σ_y² + σ_size² / 4) + speed_var · w h / size²``
+    in box sizes of frame k (a corner = centre ± size / 2: per detection σ_y² + σ_size² / 4,
+    two detections a link, plus the person's own step).  Hypotheses: one per link (its size
+    ratio and the shift of its centre) and one per pair of links (their weighted least-squares
+    ``s p + t``: the scale then also from how far apart they are, not only from their noisy
+    sizes), the first :data:`MAX_HYPOTHESES` of each.  Each is scored by its truncated
+    residuals over all links (each at most :data:`INLIER_D2`), the best one's inliers are
+    refitted by weighted least squares; the likelihood-ratio test: the links' truncated
+    squared residual must drop below the identity's by :data:`LR_MARGIN`, on at least
+    :data:`MIN_LINKS` inliers (a link either motion calls an outlier costs both the same)."""
+    H, out = np.zeros((3, 3)), np.empty(4)
+    if not _fit_kernel(np.ascontiguousarray(prev, dtype=np.float64),
+                       np.ascontiguousarray(cur, dtype=np.float64),
+                       np.ascontiguousarray(links, dtype=np.int64),
+                       2.0 * (pos_std ** 2 + size_std ** 2 / 4), float(speed_var), H, out):
         return None
-    s, t = _scale_shift(src[inl], dst[inl], wt[inl])
-    s = float(s)
-    # likelihood-ratio test: the links' truncated squared residual (each link's at most
-    # INLIER_D2: a link either motion calls an outlier costs both the same) must drop below
-    # the identity's by LR_MARGIN, on at least MIN_LINKS inliers
-    r = d2(s, t)
-    gain = float(np.minimum(d2_id, INLIER_D2).sum() - np.minimum(r, INLIER_D2).sum())
-    ok = int((r <= INLIER_D2).sum()) >= MIN_LINKS and gain > LR_MARGIN
-    return _Fit(s, np.asarray(t, dtype=np.float64), _information(src[inl], wt[inl]), ok)
+    return _Fit(float(out[0]), out[1:3].copy(), H, bool(out[3]))
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def _pairwise(a, n):
+    """numpy's float64 ``add.reduce`` of the contiguous ``a[:n]``: its pairwise summation,
+    the same floats as ``a[:n].sum()``: runs of at most 128 by
+    :func:`_pairwise_block`, a longer run as ``pw(lo, h) + pw(lo + h, n − h)`` with ``h`` half
+    of it rounded down to 8s -- that recursion walked with an explicit stack (numba's cache
+    cannot reload a recursive function: a reloaded one crashed)."""
+    lo = np.int64(0)        # not the literal 0: one specialisation of the block (below)
+    if n <= 128:
+        return _pairwise_block(a, lo, n)
+    # per open run: its start, length, and 0 / 1 / 2 = none / its left half / both halves
+    # summed (the left half's sum in left[])
+    st = np.empty((64, 3), dtype=np.int64)
+    left = np.empty(64)
+    st[0, 0], st[0, 1], st[0, 2] = lo, n, 0
+    sp = 1
+    v = 0.0
+    while sp > 0:
+        top = sp - 1
+        if st[top, 1] <= 128 or st[top, 2] == 2:
+            v = (_pairwise_block(a, st[top, 0], st[top, 1]) if st[top, 1] <= 128
+                 else left[top] + v)
+            sp -= 1
+            if sp > 0 and st[sp - 1, 2] == 1:
+                left[sp - 1] = v
+            continue
+        h = st[top, 1] // 2
+        h -= h % 8
+        st[top, 2] += 1
+        if st[top, 2] == 1:
+            st[sp, 0], st[sp, 1] = st[top, 0], h
+        else:
+            st[sp, 0], st[sp, 1] = st[top, 0] + h, st[top, 1] - h
+        st[sp, 2] = 0
+        sp += 1
+    return v
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def _pairwise_block(a, lo, n):
+    """numpy's pairwise sum of ``a[lo:lo + n]``, ``n`` <= 128: under 8 terms in order, else
+    eight running sums added as a tree, then the rest in order."""
+    if n < 8:
+        res = 0.0
+        for i in range(lo, lo + n):
+            res += a[i]
+        return res
+    r0, r1, r2, r3 = a[lo], a[lo + 1], a[lo + 2], a[lo + 3]
+    r4, r5, r6, r7 = a[lo + 4], a[lo + 5], a[lo + 6], a[lo + 7]
+    i = 8
+    while i < n - (n % 8):
+        r0 += a[lo + i]
+        r1 += a[lo + i + 1]
+        r2 += a[lo + i + 2]
+        r3 += a[lo + i + 3]
+        r4 += a[lo + i + 4]
+        r5 += a[lo + i + 5]
+        r6 += a[lo + i + 6]
+        r7 += a[lo + i + 7]
+        i += 8
+    res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+    while i < n:
+        res += a[lo + i]
+        i += 1
+    return res
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def _fit_kernel(prev, cur, links, base, speed_var, H, out):
+    """:func:`_robust_fit` in one pass, the same floats as its numpy form (each element's
+    expression the same; the 4-term sums over a link's corners and the per-axis sums over
+    links in order, as numpy reduces them; the longer sums :func:`_pairwise`).  ``base``: a
+    link's still-camera variance per corner coordinate in box sizes, ``2 (σ_y² + σ_size² /
+    4)``.  Returns (found, s, t_x, t_y, H, significant); ``found`` False: no link, or no
+    inlier."""
+    # counters start as np.int64, not as a literal 0: numba would compile the kernels they are
+    # passed to once more for the literal (a second specialisation: compile time only)
+    m = np.int64(0)
+    for i in range(links.shape[0]):
+        if links[i] >= 0:
+            m += 1
+    if m == 0:
+        return False
+    src = np.empty((m, 2, 2))
+    dst = np.empty((m, 2, 2))
+    wt = np.empty((m, 2))
+    hyp = np.empty((2 * MAX_HYPOTHESES, 3))          # (s, t_x, t_y) per hypothesis
+    d2_id = np.empty(m)
+    k = np.int64(0)
+    for i in range(links.shape[0]):
+        if links[i] < 0:
+            continue
+        p = links[i]
+        wh = cur[i, 2] * cur[i, 3]
+        for c in range(2):
+            hq = prev[p, 2 + c] / 2.0
+            hz = cur[i, 2 + c] / 2.0
+            src[k, 0, c] = prev[p, c] - hq
+            src[k, 1, c] = prev[p, c] + hq
+            dst[k, 0, c] = cur[i, c] - hz
+            dst[k, 1, c] = cur[i, c] + hz
+            sz = cur[i, 2 + c] * cur[i, 2 + c]
+            wt[k, c] = 1.0 / ((base + speed_var * wh / sz) * sz)
+        d2_id[k] = _link_d2(src, dst, wt, k, 1.0, 0.0, 0.0)
+        if k < MAX_HYPOTHESES:
+            # one hypothesis per link: its size ratio and the shift of its centre
+            s = math.sqrt(wh / (prev[p, 2] * prev[p, 3]))
+            hyp[k, 0] = s
+            hyp[k, 1] = cur[i, 0] - s * prev[p, 0]
+            hyp[k, 2] = cur[i, 1] - s * prev[p, 1]
+        k += 1
+    nh = n1 = min(m, MAX_HYPOTHESES)
+    # ... and one per pair of links (the first ones in np.triu_indices order): their
+    # least-squares motion (the scale then also from how far apart they are)
+    buf = np.empty(max(8, 4 * m))
+    sel = np.empty(m, dtype=np.int64)
+    two = np.int64(2)
+    for a in range(m):
+        for b in range(a + 1, m):
+            if nh - n1 >= MAX_HYPOTHESES:
+                break
+            sel[0], sel[1] = a, b
+            hyp[nh, 0], hyp[nh, 1], hyp[nh, 2] = _scale_shift(src, dst, wt, sel, two, buf, H)
+            nh += 1
+    # every hypothesis scored by its truncated residuals over every link (MSAC)
+    best = 0
+    low = np.inf
+    r = np.empty(m)
+    for h in range(nh):
+        for i in range(m):
+            r[i] = _clip_d2(_link_d2(src, dst, wt, i, hyp[h, 0], hyp[h, 1], hyp[h, 2]))
+        cost = _pairwise(r, m)
+        if cost != cost:           # np.argmin: the first NaN
+            best = h
+            break
+        if cost < low:
+            low = cost
+            best = h
+    n_in = np.int64(0)
+    for i in range(m):
+        if _link_d2(src, dst, wt, i, hyp[best, 0], hyp[best, 1], hyp[best, 2]) <= INLIER_D2:
+            sel[n_in] = i
+            n_in += 1
+    if n_in == 0:
+        return False
+    # the best one's inliers refitted by weighted least squares, with their information
+    s, t0, t1 = _scale_shift(src, dst, wt, sel, n_in, buf, H)
+    # likelihood-ratio test against a still camera, on at least MIN_LINKS inliers
+    n_ok = 0
+    for i in range(m):
+        d = _link_d2(src, dst, wt, i, s, t0, t1)
+        n_ok += d <= INLIER_D2
+        r[i] = _clip_d2(d)
+        d2_id[i] = _clip_d2(d2_id[i])
+    gain = _pairwise(d2_id, m) - _pairwise(r, m)
+    out[0], out[1], out[2] = s, t0, t1
+    out[3] = 1.0 if n_ok >= MIN_LINKS and gain > LR_MARGIN else 0.0
+    return True
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def _scale_shift(src, dst, wt, sel, n, buf, H):
+    """Weighted least squares of ``dst ≈ s src + t`` over the links ``sel[:n]`` (corners
+    ``src``, ``dst`` (m, 2, 2), weights ``wt`` (m, 2) per axis): ``(s, t_x, t_y)``; ``H``
+    (3×3) gets its information matrix over ``(s, t_x, t_y)`` (the inverse covariance).
+    Sums in numpy's order of the array form (per axis over links and corners in order; the
+    scalar sums pairwise, ``buf`` (>= 4 n) their terms)."""
+    ps = np.empty(2)
+    qs = np.empty(2)
+    for c in range(2):
+        sw = 0.0
+        sp = 0.0
+        sq = 0.0
+        for j in range(n):
+            for e in range(2):
+                sw += wt[sel[j], c]
+                sp += wt[sel[j], c] * src[sel[j], e, c]
+                sq += wt[sel[j], c] * dst[sel[j], e, c]
+        ps[c] = sp / sw
+        qs[c] = sq / sw
+        H[0, 1 + c] = H[1 + c, 0] = sp
+        H[1 + c, 1 + c] = sw
+    for j in range(n):
+        for e in range(2):
+            for c in range(2):
+                dp = src[sel[j], e, c] - ps[c]
+                buf[4 * j + 2 * e + c] = wt[sel[j], c] * dp * dp
+    den = _pairwise(buf, 4 * n)
+    for j in range(n):
+        for e in range(2):
+            for c in range(2):
+                buf[4 * j + 2 * e + c] = (wt[sel[j], c] * (src[sel[j], e, c] - ps[c])
+                                          * (dst[sel[j], e, c] - qs[c]))
+    s = _pairwise(buf, 4 * n) / den if den > 0 else 1.0
+    for j in range(n):
+        for e in range(2):
+            for c in range(2):
+                buf[4 * j + 2 * e + c] = wt[sel[j], c] * src[sel[j], e, c] * src[sel[j], e, c]
+    H[0, 0] = _pairwise(buf, 4 * n)
+    return s, qs[0] - s * ps[0], qs[1] - s * ps[1]
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def _link_d2(src, dst, wt, i, s, t0, t1):
+    """Link ``i``'s squared residual in noise variances under ``s p + t`` (its four terms in
+    order)."""
+    acc = 0.0
+    for e in range(2):
+        d = s * src[i, e, 0] + t0 - dst[i, e, 0]
+        acc += d * d * wt[i, 0]
+        d = s * src[i, e, 1] + t1 - dst[i, e, 1]
+        acc += d * d * wt[i, 1]
+    return acc
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def _clip_d2(d):
+    """``np.minimum(d, INLIER_D2)`` (NaN stays NaN)."""
+    return d if (d != d or d < INLIER_D2) else INLIER_D2
 
 
 class CameraMotion:

@@ -88,7 +88,8 @@ def em_rate(num: float, den: float, prior: float, a: float) -> float:
     frame in them (1 / memory once the memory is full), ``prior`` the prior mean.  Clipped to
     [BETA_FLOOR, 1]."""
     n0 = PRIOR_FRAMES * a
-    return float(np.clip((num + n0 * prior) / (den + n0), BETA_FLOOR, 1.0))
+    # np.clip's float without its array machinery (three calls a frame; NaN stays NaN)
+    return float(min(max((num + n0 * prior) / (den + n0), BETA_FLOOR), 1.0))
 #: memory entries whose faded weight is below this are dropped
 MIN_WEIGHT = 1e-3
 
@@ -122,35 +123,40 @@ class PlaceClutter:
         frames = max(1.0, self.cl.repeat_memory * self.cl.clutter_memory)
         return 1.0 - 1.0 / frames if frames > 1 else 0.0
 
-    def _weight_in_gates(self, Z: np.ndarray, watched: bool = False):
+    def _weight_in_gates(self, Z: np.ndarray, watched: bool = False,
+                         std: Optional[np.ndarray] = None):
         """``S(z)`` (N_z,): the memory's faded clutter weight inside each z's gate; with
-        ``watched`` also ``E(z)``, the faded frames the oldest of them has been remembered."""
+        ``watched`` also ``E(z)``, the faded frames the oldest of them has been remembered.
+        ``std``: ``obs_std(Z[:, 2:4], lk)`` when the caller has it."""
         from .filter import OBS_DIM, gate_threshold, obs_std
 
         S = np.zeros(len(Z))
         E = np.zeros(len(Z))
         if len(Z) and len(self.mem_w):
             r2 = gate_threshold(self.cl.clutter_gate, OBS_DIM)
-            S, E, _ = gate_sums(self.mem_z, Z, r2, obs_std(Z[:, 2:4], self.lk), self.mem_w,
-                                self.mem_e)
+            S, E, _ = gate_sums(self.mem_z, Z, r2,
+                                obs_std(Z[:, 2:4], self.lk) if std is None else std,
+                                self.mem_w, self.mem_e)
         return (S, E) if watched else S
 
-    def place_rate(self, Z: np.ndarray) -> np.ndarray:
+    def place_rate(self, Z: np.ndarray, std: Optional[np.ndarray] = None) -> np.ndarray:
         """Each detection's place's clutter rate per frame (N_z,; 0 where no clutter fell): the
         posterior mean of a Poisson rate with the Gamma prior of mean β and ``PRIOR_FRAMES``
         frames, ``(S + n0 β) / (E + n0)``, from the clutter seen there (S, faded) over the
         frames the place has been watched (E, faded alike).  A spot that fires on every frame
         climbs towards 1 (the ``gate`` model there; E/(E + n0) of it, E at most the memory's
         1/(1 − δ) frames); a place where clutter fell once sinks towards β·n0/(E + n0) as it
-        stays quiet."""
-        S, E = self._weight_in_gates(Z, watched=True)
+        stays quiet.  ``std``: the detections' observation stds when the caller has them."""
+        S, E = self._weight_in_gates(Z, watched=True, std=std)
         r = (S + PRIOR_FRAMES * self.beta) / (E + PRIOR_FRAMES)
         return np.where(S > 0, np.minimum(r, 1.0), 0.0)
 
-    def log_kappa(self, Z: np.ndarray, log_v: Optional[np.ndarray] = None) -> np.ndarray:
+    def log_kappa(self, Z: np.ndarray, log_v: Optional[np.ndarray] = None,
+                  std: Optional[np.ndarray] = None) -> np.ndarray:
         """``log κ_r(z)`` (N_z,) of this frame's detections (``-inf`` where no clutter fell).
-        ``log_v``: the clutter gates' ``log V(z)`` when the caller has them."""
-        rate = self.place_rate(Z)
+        ``log_v``, ``std``: the clutter gates' ``log V(z)`` and the detections' observation
+        stds (:func:`.filter.obs_std`) when the caller has them."""
+        rate = self.place_rate(Z, std)
         with np.errstate(divide="ignore"):
             return np.log(rate) + _unit_density(Z, self.cl, self.lk, log_v)
 
@@ -215,22 +221,37 @@ class NearClutter:
         self._exposure = 0.0
         self._gate: Optional[tuple] = None      # (lk, cl, widened lk, gate) of log_kappa
 
+    def _wide(self) -> tuple:
+        """(the likelihood widened by :data:`NEAR_SCALE`, the birth gate at the clutter gate),
+        built again only when the settings change."""
+        from .filter import BirthParams
+
+        if self._gate is None or self._gate[0] is not self.lk or self._gate[1] is not self.cl:
+            self._gate = (self.lk, self.cl, _widened(self.lk, NEAR_SCALE),
+                          BirthParams(gate=self.cl.clutter_gate))
+        return self._gate[2:]
+
+    def wide_std(self, Z: np.ndarray) -> np.ndarray:
+        """The detections' observation stds times :data:`NEAR_SCALE` (N_z, 4): the gates of
+        κ_n's mass and of :class:`DuplicateBoxes` (:func:`.filter.obs_std` of the widened
+        likelihood, the same floats)."""
+        from .filter import obs_std
+
+        return obs_std(Z[:, 2:4], self._wide()[0])
+
     def log_kappa(self, Z: np.ndarray, predicted, log_v: Optional[np.ndarray] = None,
-                  chained: Optional[np.ndarray] = None) -> np.ndarray:
+                  chained: Optional[np.ndarray] = None,
+                  std: Optional[np.ndarray] = None) -> np.ndarray:
         """``log κ_n(z)`` (N_z,); ``-inf`` where ``chained`` (those continue a chain: no κ_n,
-        module docstring), whose predicted mass is then not summed."""
-        from .filter import BirthParams, mass_near
+        module docstring), whose predicted mass is then not summed.  ``std``: :meth:`wide_std`
+        of ``Z`` when the caller has it."""
+        from .filter import mass_near
 
         self._exposure = float(predicted.mass) if predicted is not None else 0.0
         if predicted is None or not len(Z):
             return np.full(len(Z), -np.inf)
-        if self._gate is None or self._gate[0] is not self.lk or self._gate[1] is not self.cl:
-            # the widened noise and the gate, built again only when the settings change
-            wide = replace(self.lk, sigma_obs=self.lk.sigma_obs * NEAR_SCALE,
-                           sigma_obs_min=self.lk.sigma_obs_min * NEAR_SCALE)
-            self._gate = (self.lk, self.cl, wide, BirthParams(gate=self.cl.clutter_gate))
-        wide, bp = self._gate[2:]
-        m = mass_near(predicted, Z, bp, wide, skip=chained)
+        wide, bp = self._wide()
+        m = mass_near(predicted, Z, bp, wide, std_z=std, skip=chained)
         with np.errstate(divide="ignore"):
             return np.log(self.nu * np.minimum(m, 1.0)) + _unit_density(Z, self.cl, self.lk,
                                                                          log_v)
@@ -281,13 +302,15 @@ class DuplicateBoxes:
         self.den = 0.0
         self._pairs: Optional[tuple] = None
 
-    def log_kappa(self, Z: np.ndarray, log_v: Optional[np.ndarray] = None) -> np.ndarray:
+    def log_kappa(self, Z: np.ndarray, log_v: Optional[np.ndarray] = None,
+                  std: Optional[np.ndarray] = None) -> np.ndarray:
         """``log κ_d(z)`` (N_z,; ``-inf`` where z has no neighbour); ``log_v`` as
-        :meth:`PlaceClutter.log_kappa`'s."""
+        :meth:`PlaceClutter.log_kappa`'s; ``std``: the detections' observation stds times
+        :data:`NEAR_SCALE` (:meth:`NearClutter.wide_std`) when the caller has them."""
         self._pairs = None
         if self.cl.duplicate_prior <= 0 or len(Z) < 2:
             return np.full(len(Z), -np.inf)
-        std, r2 = _wide_gate(Z, self.cl, self.lk, NEAR_SCALE)
+        std, r2 = _wide_gate(Z, self.cl, self.lk, NEAR_SCALE, std)
         n = gate_sums(Z, Z, r2, std, np.ones(len(Z)), ordered=False)[2] - 1   # not z itself
         self._pairs = (Z, std, r2, n)
         with np.errstate(divide="ignore"):
@@ -320,14 +343,21 @@ def _unit_density(Z: np.ndarray, cl: "ClutterParams", lk: "LikelihoodParams",
     return -(log_gate_volume(Z, cl, lk) if log_v is None else log_v)
 
 
+def _widened(lk: "LikelihoodParams", scale: float) -> "LikelihoodParams":
+    """The likelihood with its observation stds times ``scale``."""
+    return lk if scale == 1.0 else replace(lk, sigma_obs=lk.sigma_obs * scale,
+                                           sigma_obs_min=lk.sigma_obs_min * scale)
+
+
 def _wide_gate(Z: np.ndarray, cl: "ClutterParams", lk: "LikelihoodParams",
-               scale: float) -> tuple[np.ndarray, float]:
-    """The detections' observation stds times ``scale`` and the ``clutter_gate`` radius r²."""
+               scale: float, std: Optional[np.ndarray] = None) -> tuple[np.ndarray, float]:
+    """The detections' observation stds times ``scale`` (``std`` when the caller has them)
+    and the ``clutter_gate`` radius r²."""
     from .filter import OBS_DIM, gate_threshold, obs_std
 
-    wide = lk if scale == 1.0 else replace(lk, sigma_obs=lk.sigma_obs * scale,
-                                            sigma_obs_min=lk.sigma_obs_min * scale)
-    return obs_std(Z[:, 2:4], wide), gate_threshold(cl.clutter_gate, OBS_DIM)
+    if std is None:
+        std = obs_std(Z[:, 2:4], _widened(lk, scale))
+    return std, gate_threshold(cl.clutter_gate, OBS_DIM)
 
 
 def neighbour_pairs(Z: np.ndarray, cl: "ClutterParams", lk: "LikelihoodParams",
@@ -348,13 +378,14 @@ def neighbour_pairs(Z: np.ndarray, cl: "ClutterParams", lk: "LikelihoodParams",
 
 
 def neighbours(Z: np.ndarray, cl: "ClutterParams", lk: "LikelihoodParams",
-               scale: float = 1.0) -> np.ndarray:
+               scale: float = 1.0, std: Optional[np.ndarray] = None) -> np.ndarray:
     """(N_z,) int: the other detections of the frame inside each detection's ``clutter_gate``
     ellipsoid, its observation stds times ``scale`` (the pairs of :func:`neighbour_pairs`,
-    counted by :func:`.gating.gate_sums` without forming them)."""
+    counted by :func:`.gating.gate_sums` without forming them).  ``std``: those stds when the
+    caller has them."""
     if len(Z) < 2:
         return np.zeros(len(Z), dtype=np.int64)
-    std, r2 = _wide_gate(Z, cl, lk, scale)
+    std, r2 = _wide_gate(Z, cl, lk, scale, std)
     return gate_sums(Z, Z, r2, std, np.ones(len(Z)), ordered=False)[2] - 1
 
 

@@ -493,11 +493,14 @@ def log_clutter_density(Z: np.ndarray, cl: ClutterParams = ClutterParams(),
     return np.full(len(Z), -np.inf)
 
 
-def log_gate_volume(Z: np.ndarray, cl: ClutterParams, lk: LikelihoodParams) -> np.ndarray:
+def log_gate_volume(Z: np.ndarray, cl: ClutterParams, lk: LikelihoodParams,
+                    std: Optional[np.ndarray] = None) -> np.ndarray:
     """``log V(z)`` (N_z,): the volume of the ``clutter_gate`` confidence ellipsoid of the
     observation noise around each z (:func:`log_clutter_density` is ``log clutter_rate − log
-    V``; the learnt clutter's parts share one per frame, :meth:`SceneModel.log_kappa`)."""
-    std = obs_std(Z[:, 2:4], lk)
+    V``; the learnt clutter's parts share one per frame, :meth:`SceneModel.log_kappa`).
+    ``std``: ``obs_std(Z[:, 2:4], lk)`` when the caller has it."""
+    if std is None:
+        std = obs_std(Z[:, 2:4], lk)
     r2 = gate_threshold(cl.clutter_gate, OBS_DIM)
     d = OBS_DIM
     log_unit_ball = 0.5 * d * math.log(math.pi) - math.lgamma(0.5 * d + 1)
@@ -526,6 +529,8 @@ class SceneModel:
     Averages are over about ``clutter_memory`` frames."""
 
     _LOG_SIZE_FLOOR = 0.05 ** 2    # log-size variance floor (5 % of the size)
+    _FLOOR_EYE = _LOG_SIZE_FLOOR * np.eye(2)
+    _FLOOR_EYE.flags.writeable = False
 
     def __init__(self, params: "PHDParams"):
         self.cl, self.sp = params.clutter, params.score
@@ -615,39 +620,45 @@ class SceneModel:
             ls = np.log(Z[:, 2:4])      # the log sizes, once (the same floats thrice)
             if len(Z):
                 self._see_sizes(Z, ls)
-            cov = self.size_m2 - np.outer(self.size_m1, self.size_m1)
-            cov = 0.5 * (cov + cov.T) + self._LOG_SIZE_FLOOR * np.eye(2)
+            m1 = self.size_m1
+            cov = self.size_m2 - m1[:, None] * m1[None, :]     # np.outer's very product
+            cov = 0.5 * (cov + cov.T) + self._FLOOR_EYE
             d = ls - self.size_m1
             sol = np.linalg.solve(cov, d.T).T
             log_size = (-0.5 * np.einsum("ij,ij->i", d, sol) - math.log(2 * math.pi)
                         - 0.5 * math.log(np.linalg.det(cov)) - ls.sum(1))
             with np.errstate(divide="ignore"):
                 log_kappa = math.log(self.rate) - math.log(self._area(frame)) + log_size
+            # the detections' observation stds, once a frame for every part that reads them
+            std = obs_std(Z[:, 2:4], self.lk)
             if self.cl.near_learn and len(Z):
                 a = 1.0 / min(self.frames + 5, self.cl.clutter_memory)
-                self.near = (1 - a) * self.near + a * self._neighbours(Z)
+                self.near = (1 - a) * self.near + a * self._neighbours(Z, std)
             # log V(z) of the clutter gate, once for every part spread as the 'gate' model
             # (log_clutter_density at rate λ is log λ − log V: the same floats)
-            log_v = log_gate_volume(Z, self.cl, self.lk)
+            log_v = log_gate_volume(Z, self.cl, self.lk, std)
             if self.near > 0:
                 log_kappa = np.logaddexp(log_kappa, math.log(self.near) - log_v)
             if self.place is not None:
                 self.place.cl = self.people.cl = self.cl
-                log_rep = self.place.log_kappa(Z, log_v)
+                log_rep = self.place.log_kappa(Z, log_v, std)
+                # ... and times NEAR_SCALE, for the near-people and the duplicate terms
+                std_wide = self.people.wide_std(Z)
                 # a detection that continues a chain of mutually nearest detections is a
                 # person's or a spot's, not a box beside a person (those do not chain): κ_n
                 # is 0 there, so it takes no share of it in the EM (the update alike with
                 # learn_update 'model')
                 self._chained = self.chains.length >= 1
                 log_near = np.where(self._chained, -np.inf,
-                                    self.people.log_kappa(Z, predicted, log_v, self._chained))
+                                    self.people.log_kappa(Z, predicted, log_v, self._chained,
+                                                          std_wide))
                 shadow = np.logaddexp(np.logaddexp(log_kappa, log_rep), log_near)
                 log_dup = np.full(len(Z), -np.inf)
                 if self.cl.learn_update == "model":
                     # a second box on a person already boxed, which a Poisson κ cannot
                     # express: the duplicate term (.clutter.DuplicateBoxes) joins the mixture
                     self.dups.cl = self.cl
-                    log_dup = self.dups.log_kappa(Z, log_v)
+                    log_dup = self.dups.log_kappa(Z, log_v, std_wide)
                     shadow = np.logaddexp(shadow, log_dup)
                     log_used = shadow
                 else:
@@ -668,10 +679,11 @@ class SceneModel:
             return birth, log_kappa - self.log_score_ratio(scores)
         return birth, log_kappa
 
-    def _neighbours(self, Z: np.ndarray) -> float:
+    def _neighbours(self, Z: np.ndarray, std: Optional[np.ndarray] = None) -> float:
         """Mean number of other detections inside each detection's ``clutter_gate`` ellipsoid
-        (grid-indexed pairs, :func:`~.gating.gate_pairs`)."""
-        return float(neighbours(Z, self.cl, self.lk).mean())
+        (grid-indexed pairs, :func:`~.gating.gate_pairs`); ``std``: the detections'
+        observation stds when the caller has them."""
+        return float(neighbours(Z, self.cl, self.lk, std=std).mean())
 
     def log_score_ratio(self, scores: np.ndarray) -> np.ndarray:
         """``log p(s|target) − log p(s|clutter)``, clipped to ±max_log_ratio: the fit on the

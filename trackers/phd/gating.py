@@ -309,7 +309,12 @@ def gate_sums(obs: np.ndarray, Z: np.ndarray, r2: float, std_z: np.ndarray, w: n
                    S, E, C)
         return S, E, C
     half = math.sqrt(r2) * std[:, :2] * (1 + 1e-6) + 1e-9      # gate_pairs' query boxes
-    index = GridIndex(obs[:, :2], 2.0 * _median0(half))
+    cell = 2.0 * _median0(half)
+    if _gate_sums_grid(obs, w, e, Z, std, float(r2), float(cell[0]), float(cell[1]), S, E, C):
+        return S, E, C
+    # a grid the one-pass build does not take (non-finite values, a sparse key space):
+    # GridIndex, then the same pass
+    index = GridIndex(obs[:, :2], cell)
     _gate_sums(obs, w, e, Z, std, float(r2), index.order.astype(np.int64, copy=False),
                index.keys, float(index.origin[0]), float(index.origin[1]),
                float(index.cell[0]), float(index.cell[1]), int(index.shape[0]),
@@ -318,6 +323,59 @@ def gate_sums(obs: np.ndarray, Z: np.ndarray, r2: float, std_z: np.ndarray, w: n
 
 
 _NO_GRID = np.zeros(0, dtype=np.int64)
+#: the one-pass grid of :func:`_gate_sums_grid` sorts its points by counting when the grid has
+#: at most this many cells per point (plus a constant); sparser grids go through GridIndex
+COUNT_SORT_CELLS = 8
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def _gate_sums_grid(obs, w, e, Z, std, r2, cx, cy, S, E, C):
+    """:func:`gate_sums`' grid path in one pass: the :class:`GridIndex` of ``obs[:, :2]`` on
+    cells ``(cx, cy)`` (the same origin, grown cells, shape, keys and stable order: grown until
+    the key space fits, each point's cell clipped to the grid, points sorted by key and by
+    index within a key -- here by counting), then :func:`_gate_sums`.  False (nothing
+    written) where GridIndex must decide: a non-finite cell or point, or more than
+    ``COUNT_SORT_CELLS`` cells per point."""
+    n = obs.shape[0]
+    if not (cx > 0 and cy > 0 and math.isfinite(cx) and math.isfinite(cy)):
+        return False
+    x0, y0, x1, y1 = obs[0, 0], obs[0, 1], obs[0, 0], obs[0, 1]
+    for i in range(n):
+        x, y = obs[i, 0], obs[i, 1]
+        if not (math.isfinite(x) and math.isfinite(y)):
+            return False
+        x0 = x if x < x0 else x0
+        y0 = y if y < y0 else y0
+        x1 = x if x > x1 else x1
+        y1 = y if y > y1 else y1
+    # GridIndex's float extent (np.floor: a float, as there; math.floor would be an integer)
+    ex = np.floor((x1 - x0) / cx) + 1.0
+    ey = np.floor((y1 - y0) / cy) + 1.0
+    while ex * ey > 2.0 ** 60:
+        cx, cy = cx * 2.0, cy * 2.0
+        ex = np.floor((x1 - x0) / cx) + 1.0
+        ey = np.floor((y1 - y0) / cy) + 1.0
+    if ex * ey > COUNT_SORT_CELLS * n + 4096:
+        return False
+    ni, nj = np.int64(ex), np.int64(ey)
+    key = np.empty(n, dtype=np.int64)
+    count = np.zeros(ni * nj + 1, dtype=np.int64)
+    for p in range(n):
+        i = min(np.int64(math.floor((obs[p, 0] - x0) / cx)), ni - 1)
+        j = min(np.int64(math.floor((obs[p, 1] - y0) / cy)), nj - 1)
+        key[p] = i * nj + j
+        count[key[p] + 1] += 1
+    for k in range(ni * nj):
+        count[k + 1] += count[k]
+    order = np.empty(n, dtype=np.int64)
+    keys = np.empty(n, dtype=np.int64)
+    for p in range(n):
+        at = count[key[p]]
+        order[at] = p
+        keys[at] = key[p]
+        count[key[p]] = at + 1
+    _gate_sums(obs, w, e, Z, std, r2, order, keys, x0, y0, cx, cy, ni, nj, S, E, C)
+    return True
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)

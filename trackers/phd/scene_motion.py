@@ -54,6 +54,7 @@ import math
 from typing import Optional
 
 import numpy as np
+from numba import njit
 
 from . import camera_motion
 
@@ -79,16 +80,47 @@ def link(prev: np.ndarray, cur: np.ndarray) -> np.ndarray:
     out = np.full(len(cur), -1, dtype=np.int64)
     if not len(prev) or not len(cur) or len(prev) * len(cur) > MAX_PAIRS:
         return out
-    dx = (cur[:, None, 0] - prev[None, :, 0]) / cur[:, None, 2]
-    dy = (cur[:, None, 1] - prev[None, :, 1]) / cur[:, None, 3]
-    d = np.hypot(dx, dy)
-    d = np.where(np.abs(np.log(cur[:, None, 3] / prev[None, :, 3])) < LINK_LOG_SIZE, d, np.inf)
-    j = np.argmin(d, axis=1)                        # cur -> nearest prev
-    i = np.argmin(d, axis=0)                        # prev -> nearest cur
-    rows = np.arange(len(cur))
-    ok = (i[j] == rows) & (d[rows, j] < LINK_DIST)
-    out[ok] = j[ok]
+    _link(np.ascontiguousarray(prev, dtype=np.float64),
+          np.ascontiguousarray(cur, dtype=np.float64), out)
     return out
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def _link(prev, cur, out):
+    """:func:`link`'s pass into ``out`` (−1s): the distance of every pair in box sizes of
+    ``cur`` (``hypot(Δx / w, Δy / h)``, ∞ where the heights differ by ``LINK_LOG_SIZE`` or
+    more), each side's nearest (the first of equals, as ``np.argmin``), kept where mutual and
+    within ``LINK_DIST``."""
+    nc, npv = cur.shape[0], prev.shape[0]
+    d = np.empty((nc, npv))
+    for a in range(nc):
+        for b in range(npv):
+            v = math.hypot((cur[a, 0] - prev[b, 0]) / cur[a, 2],
+                           (cur[a, 1] - prev[b, 1]) / cur[a, 3])
+            d[a, b] = v if abs(math.log(cur[a, 3] / prev[b, 3])) < LINK_LOG_SIZE else np.inf
+    j = np.empty(nc, dtype=np.int64)
+    for a in range(nc):
+        j[a] = _first_min(d[a])
+    col = np.empty(nc)
+    for a in range(nc):
+        # mutual: the nearest cur of this one's nearest prev is this one
+        b = j[a]
+        for k in range(nc):
+            col[k] = d[k, b]
+        if _first_min(col) == a and d[a, b] < LINK_DIST:
+            out[a] = b
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def _first_min(v):
+    """``np.argmin(v)``: the first smallest, or the first NaN."""
+    best, low = 0, v[0]
+    for k in range(1, v.shape[0]):
+        if low != low:
+            break
+        if v[k] < low or v[k] != v[k]:
+            best, low = k, v[k]
+    return best
 
 
 def robust_std(x: np.ndarray) -> float:
