@@ -34,7 +34,7 @@ Readings (each a parameter of :func:`kmeans_peaks`):
 - **Convergence** (``tol``, ``max_iter``): Lloyd stops when the labels are stable, when no centre's
   observed part moved more than ``tol`` pixels (centres are then the means of the returned
   labels), or after ``max_iter`` iterations (labels are then the nearest centres).
-- **Subsample** (``subsample``, not in the paper; 2 in PHD-MT's ``practical`` preset): after
+- **Subsample** (``subsample``, not in the paper; an option, default 1: every particle): after
   resampling every particle weighs the same, and systematic resampling lays the copies of an
   ancestor side by side, so every ``subsample``-th particle (each weighing ``n / n_sub`` times
   more) is a stratified half of the same PHD: K-means on it costs about half and finds the

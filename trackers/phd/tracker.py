@@ -80,8 +80,8 @@ class ClusterParams:
                                     "the mean of the part of the cluster that detection "
                                     "explains; phd.clustering)")
     subsample: int = param(1, "K-means runs on every n-th of the resampled (equal-weight) "
-                              "particles, 1: on all of them (PHD-MT; practical: 2; "
-                              "phd.clustering)")
+                              "particles, 1: on all of them (PHD-MT; 2 halves "
+                              "K-means' cost; phd.clustering)")
 
     def __post_init__(self):
         if not self.T >= 0:
@@ -388,8 +388,7 @@ PHD_PRACTICAL = PHDTrackerParams(
                         persist_frames=3, p_miss=0.1, revive_odds=1.0),
     assoc=AssocParams(fill_gaps=True, fill_support=0.25, fill_free=2, app_weight=2.0, extend_heads=True,
                       head_skip=2, fill_err=1 / 6),
-    rate=RateParams(per_second=True, learn_motion=True, camera_motion=True),
-    clusters=ClusterParams(subsample=2))
+    rate=RateParams(per_second=True, learn_motion=True, camera_motion=True))
 PHD_SCENE = with_options(PHD_PRACTICAL, {"filter.clutter.clutter_model": "scene"})
 #: The practical default of MT: the same association settings per second (re-linking
 #: included).  No gap filling: MT links clutter into tracks across gaps, and filling them
