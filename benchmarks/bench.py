@@ -699,6 +699,22 @@ def bench_stonesoup(args) -> dict:
 
 # ----------------------------------------------------------------------------- end to end
 
+#: the build backend whose editable build compiles the kernels (``pip install -e .``)
+INSTALL_BACKEND = C.REPO / "viewer_app" / "_backend" / "pfscope_build_backend.py"
+
+
+def _install_compile_applies() -> "str | None":
+    """None when the ``pfscope`` that runs is this checkout's editable install (the install-time
+    compile maps this checkout's folders: numba's cache is keyed by the source files' place),
+    else why not."""
+    import pfscope.trackers
+
+    where = Path(pfscope.trackers.__file__).resolve().parent
+    if where != (C.REPO / "trackers").resolve() or not INSTALL_BACKEND.is_file():
+        return f"pfscope runs from {where}, not this checkout's editable install"
+    return None
+
+
 def _first_run(cmd: list, cache: str, cwd: str) -> float:
     """Wall seconds of ``cmd`` (a fresh process) with numba's cache in ``cache``."""
     import subprocess
@@ -901,6 +917,14 @@ def bench_endtoend(args) -> dict:
         cold = _first_run(cmd, cache, tmp)
         warm_s = [_first_run(cmd, cache, tmp) for _ in range(args.e2e_warm_repeat)]
         warm_run = C.median(warm_s)
+        # the first run after `pip install -e .`: the install's compile (the build backend's
+        # subprocess, compile_for_install) into another empty cache, then the same record
+        installed = _install_compile_applies()
+        if installed is None:
+            aot_cache = str(Path(tmp) / "numba-cache-install")
+            install_s = _first_run([sys.executable, str(INSTALL_BACKEND), str(C.REPO)],
+                                   aot_cache, tmp)
+            after_install = _first_run(cmd, aot_cache, tmp)
         # DBN-PHD's own kernels (codebook, features) are not in the cache yet: its first run
         # compiles them; the second is the warm one
         dbn_cmd = [exe, "record", "--tracker", "dbn-phd", "--frames", "5", "--force",
@@ -909,14 +933,26 @@ def bench_endtoend(args) -> dict:
         dbn = _first_run(dbn_cmd, cache, tmp)
     print(f"\n=== first run: `pfscope record` (built-in scene, 150 frames), a fresh process "
           f"each ===")
-    print(C.table(["run", "seconds"], [["cold (empty numba cache)", f"{cold:.1f}"],
+    aot = ([["`pip install -e .`'s numba compile (empty cache)", f"{install_s:.1f}"],
+            ["first run after `pip install -e .`", f"{after_install:.1f}"]]
+           if installed is None else [])
+    print(C.table(["run", "seconds"], [*aot,
                                        ["warm (median of "
                                         f"{len(warm_s)})", f"{warm_run:.1f}"],
+                                       *([["first run after `pip install -e .` / warm",
+                                           f"{after_install / warm_run:.2f}x"]] if aot else []),
+                                       ["cold: no install-time compile (a wheel install; "
+                                        "empty numba cache)", f"{cold:.1f}"],
                                        ["cold / warm", f"{cold / warm_run:.2f}x"],
                                        ["dbn-phd, 5 frames (its own kernels compile)",
                                         f"{dbn_first:.1f}"],
                                        ["dbn-phd, 5 frames (warm)", f"{dbn:.1f}"]]))
+    if installed is not None:
+        print(f"NOT RUN: the install-time compile ({installed})")
     out["first_run"] = {"cold_s": cold, "warm_s": warm_s, "ratio": cold / warm_run,
+                        **({"install_compile_s": install_s, "after_install_s": after_install,
+                            "after_install_ratio": after_install / warm_run} if aot
+                           else {"install_compile": f"not run: {installed}"}),
                         "dbn_phd_5_frames_first_s": dbn_first, "dbn_phd_5_frames_s": dbn,
                         "loadavg": list(os.getloadavg())}
     return out
