@@ -34,7 +34,8 @@ Sections (all by default; ``--only`` picks some):
 ``endtoend``   (only with ``--only``) what a user meets: pfscope's whole PHD-MT step
                (``--e2e-preset``, default practical) vs Stone Soup's SMC-PHD + extraction at
                ``--ss-targets``, one seed, with PHD-MT's per-stage split; fresh-process
-               ``pfscope record`` with an empty numba cache (cold) vs filled (warm); a
+               ``pfscope record`` with an empty numba cache (cold) vs filled (warm), and
+               the first one after ``pip install -e .``'s kernel compile (its seconds); a
                5-frame DBN-PHD run's wall time; the detector-free trackers' whole-process
                fps on PETS09-S2L1 (``--e2e-detector-free``: ``pfscope record PETS09-S2L1
                --tracker T --level tracks`` in a fresh process, numba's cache warm, frames /
@@ -850,7 +851,8 @@ def bench_endtoend(args) -> dict:
     (k-means of round(mass) centres, ``_extract``) on the same detections, one seed, in one
     pipeline run; (2) ``pfscope record`` (the built-in scene, 150 frames) in a fresh process
     with an empty numba cache (cold: the first run after an install) and again with it
-    filled (warm); (3) the start of a 5-frame DBN-PHD run, first (its own kernels compile:
+    filled (warm), and the install-time compile of ``pip install -e .`` (the build backend's
+    subprocess, another empty cache) with the first record after it; (3) the start of a 5-frame DBN-PHD run, first (its own kernels compile:
     the PHD-MT runs before leave only the PHD filter's in the cache) and warm; (4) the
     detector-free trackers' whole-process fps on PETS09-S2L1 (:func:`detector_free_section`)."""
     import _stonesoup as S

@@ -98,6 +98,19 @@ def _compile_filter_share() -> None:
     _compile_association(edges=False)
 
 
+def _cloud(Z: np.ndarray, per: int, rng: np.random.Generator):
+    """A made-up particle cloud around observations ``Z`` as the filter leaves it: ``per``
+    particles each, C-ordered float64 states and log-weights, mass ≈ 1 per observation."""
+    from .smc import ParticleSet
+
+    n = per * len(Z)
+    states = np.empty((n, 6))
+    src = np.repeat(np.arange(len(Z)), per)
+    states[:, [0, 1, 4, 5]] = Z[src] + rng.normal(0.0, 3.0, (n, 4))
+    states[:, 2:4] = rng.normal(0.0, 1.0, (n, 2))
+    return ParticleSet(states, np.full(n, np.log(len(Z) / n)))
+
+
 def _compile_main_share() -> None:
     """The warm-up's own share on a first run while the helper compiles the filter's
     (:func:`compile_kernels`): the K-means kernels (dense specialisation), the association's
@@ -109,17 +122,11 @@ def _compile_main_share() -> None:
     from .phd.clustering import kmeans_peaks
     from .phd.filter import as_observations, detection_noise, mass_near
     from .phd.tracker import PHD_PRACTICAL
-    from .smc import ParticleSet
 
     rng = np.random.default_rng(1)
     params = PHD_PRACTICAL
     Z = as_observations(_walkers(0, rng))
-    n = 1500 * len(Z)
-    states = np.empty((n, 6))
-    src = np.repeat(np.arange(len(Z)), n // len(Z))
-    states[:, [0, 1, 4, 5]] = Z[src] + rng.normal(0.0, 3.0, (n, 4))
-    states[:, 2:4] = rng.normal(0.0, 1.0, (n, 2))
-    ps = ParticleSet(states, np.full(n, np.log(len(Z) / n)))
+    ps = _cloud(Z, 1500, rng)
     cp, fp = params.clusters, params.filter
     kmeans_peaks(ps, Z, cp.T, params=fp, split_rule=cp.split_rule)
     _compile_association(iou=False)
@@ -307,7 +314,6 @@ def _compile_dense_kmeans() -> None:
     from .phd.clustering import INDEX_MIN_CENTERS, kmeans_peaks
     from .phd.filter import as_observations
     from .phd.tracker import PHD_PRACTICAL
-    from .smc import ParticleSet
     from .types import Detections
 
     rng = np.random.default_rng(3)
@@ -315,12 +321,7 @@ def _compile_dense_kmeans() -> None:
     xy = np.column_stack([np.linspace(20, 600, m), np.tile([150.0, 300.0], m // 2)])
     Z = as_observations(Detections(np.column_stack([xy, np.full(m, 30.0), np.full(m, 70.0)]),
                                    np.full(m, 0.9)))
-    n = 500 * len(Z)
-    states = np.empty((n, 6))
-    src = np.repeat(np.arange(len(Z)), n // len(Z))
-    states[:, [0, 1, 4, 5]] = Z[src] + rng.normal(0.0, 3.0, (n, 4))
-    states[:, 2:4] = rng.normal(0.0, 1.0, (n, 2))
-    ps = ParticleSet(states, np.full(n, np.log(len(Z) / n)))
+    ps = _cloud(Z, 500, rng)
     cp = PHD_PRACTICAL.clusters
     kmeans_peaks(ps, Z, cp.T, params=PHD_PRACTICAL.filter, split_rule=cp.split_rule)
 
