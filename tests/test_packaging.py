@@ -88,8 +88,9 @@ def test_install_compile_failure_is_one_line_and_never_fails_the_install(tmp_pat
 @pytest.mark.slow
 def test_after_the_install_compile_a_first_run_compiles_nothing(tmp_path):
     """The install-time compile (the backend's subprocess, an empty numba cache) leaves nothing
-    for the first `pfscope record` of each kernel tracker (a fresh process, the same cache):
-    numba's compile events during the records are none."""
+    for the first `pfscope record` of each kernel tracker, nor for a crowded scene's K-means
+    grid search (a fresh process, the same cache): numba's compile events during the records
+    are none."""
     import os
     import subprocess
     import sys
@@ -100,7 +101,10 @@ def test_after_the_install_compile_a_first_run_compiles_nothing(tmp_path):
                          text=True, timeout=900)
     assert out.returncode == 0, out.stderr[-2000:]
     runs = [["--tracker", "phd"], ["--tracker", "phd", "--preset", "paper"],
-            ["--tracker", "dbn-phd"], ["--tracker", "phd-bgsub"], ["--tracker", "dlpf"]]
+            ["--tracker", "dbn-phd"], ["--tracker", "phd-bgsub"], ["--tracker", "dlpf"],
+            # a crowded scene: frames with 16 or more centres take the K-means' grid search
+            # (this one's frames 20-30 do, seed 0)
+            ["--tracker", "phd", "--targets", "40", "--frames", "30"]]
     code = ("import sys\n"
             f"sys.path.insert(0, {str(folder)!r})\n"
             "import pfscope_build_backend as B\n"
@@ -116,4 +120,5 @@ def test_after_the_install_compile_a_first_run_compiles_nothing(tmp_path):
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True,
                          text=True, timeout=900)
     assert out.returncode == 0, out.stderr[-2000:]
-    assert out.stdout.split("COMPILED")[-1].split() == [], out.stdout[-2000:]
+    compiled = out.stdout.split("COMPILED")[-1].split()
+    assert compiled == [], compiled
