@@ -119,7 +119,7 @@ def compile_kernels(root: Path = ROOT, timeout: float | None = None) -> bool:
         return False
     # pip shows a backend's output only with -v
     print(out.stdout, end="")
-    print(f"pfscope: numba kernels compiled into the cache in "
+    print(f"pfscope: numba kernels compiled (or found) in numba's cache in "
           f"{time.perf_counter() - t0:.1f} s (the first run loads them)")
     return True
 
