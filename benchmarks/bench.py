@@ -34,7 +34,8 @@ Sections (all by default; ``--only`` picks some):
 ``endtoend``   (only with ``--only``) what a user meets: pfscope's whole PHD-MT step
                (``--e2e-preset``, default practical) vs Stone Soup's SMC-PHD + extraction at
                ``--ss-targets``, one seed, with PHD-MT's per-stage split; fresh-process
-               ``pfscope record`` with an empty numba cache (cold) vs filled (warm); a
+               ``pfscope record`` with an empty numba cache (cold) vs filled (warm), and
+               the first one after ``pip install -e .``'s kernel compile (its seconds); a
                5-frame DBN-PHD run's wall time; the detector-free trackers' whole-process
                fps on PETS09-S2L1 (``--e2e-detector-free``: ``pfscope record PETS09-S2L1
                --tracker T --level tracks`` in a fresh process, numba's cache warm, frames /
@@ -699,6 +700,22 @@ def bench_stonesoup(args) -> dict:
 
 # ----------------------------------------------------------------------------- end to end
 
+#: the build backend whose editable build compiles the kernels (``pip install -e .``)
+INSTALL_BACKEND = C.REPO / "viewer_app" / "_backend" / "pfscope_build_backend.py"
+
+
+def _install_compile_applies() -> "str | None":
+    """None when the ``pfscope`` that runs is this checkout's editable install (the install-time
+    compile maps this checkout's folders: numba's cache is keyed by the source files' place),
+    else why not."""
+    import pfscope.trackers
+
+    where = Path(pfscope.trackers.__file__).resolve().parent
+    if where != (C.REPO / "trackers").resolve() or not INSTALL_BACKEND.is_file():
+        return f"pfscope runs from {where}, not this checkout's editable install"
+    return None
+
+
 def _first_run(cmd: list, cache: str, cwd: str) -> float:
     """Wall seconds of ``cmd`` (a fresh process) with numba's cache in ``cache``."""
     import subprocess
@@ -834,7 +851,8 @@ def bench_endtoend(args) -> dict:
     (k-means of round(mass) centres, ``_extract``) on the same detections, one seed, in one
     pipeline run; (2) ``pfscope record`` (the built-in scene, 150 frames) in a fresh process
     with an empty numba cache (cold: the first run after an install) and again with it
-    filled (warm); (3) the start of a 5-frame DBN-PHD run, first (its own kernels compile:
+    filled (warm), and the install-time compile of ``pip install -e .`` (the build backend's
+    subprocess, another empty cache) with the first record after it; (3) the start of a 5-frame DBN-PHD run, first (its own kernels compile:
     the PHD-MT runs before leave only the PHD filter's in the cache) and warm; (4) the
     detector-free trackers' whole-process fps on PETS09-S2L1 (:func:`detector_free_section`)."""
     import _stonesoup as S
@@ -901,6 +919,14 @@ def bench_endtoend(args) -> dict:
         cold = _first_run(cmd, cache, tmp)
         warm_s = [_first_run(cmd, cache, tmp) for _ in range(args.e2e_warm_repeat)]
         warm_run = C.median(warm_s)
+        # the first run after `pip install -e .`: the install's compile (the build backend's
+        # subprocess, compile_for_install) into another empty cache, then the same record
+        installed = _install_compile_applies()
+        if installed is None:
+            aot_cache = str(Path(tmp) / "numba-cache-install")
+            install_s = _first_run([sys.executable, str(INSTALL_BACKEND), str(C.REPO)],
+                                   aot_cache, tmp)
+            after_install = _first_run(cmd, aot_cache, tmp)
         # DBN-PHD's own kernels (codebook, features) are not in the cache yet: its first run
         # compiles them; the second is the warm one
         dbn_cmd = [exe, "record", "--tracker", "dbn-phd", "--frames", "5", "--force",
@@ -909,14 +935,26 @@ def bench_endtoend(args) -> dict:
         dbn = _first_run(dbn_cmd, cache, tmp)
     print(f"\n=== first run: `pfscope record` (built-in scene, 150 frames), a fresh process "
           f"each ===")
-    print(C.table(["run", "seconds"], [["cold (empty numba cache)", f"{cold:.1f}"],
+    aot = ([["`pip install -e .`'s numba compile (empty cache)", f"{install_s:.1f}"],
+            ["first run after `pip install -e .`", f"{after_install:.1f}"]]
+           if installed is None else [])
+    print(C.table(["run", "seconds"], [*aot,
                                        ["warm (median of "
                                         f"{len(warm_s)})", f"{warm_run:.1f}"],
+                                       *([["first run after `pip install -e .` / warm",
+                                           f"{after_install / warm_run:.2f}x"]] if aot else []),
+                                       ["cold: no install-time compile (a wheel install; "
+                                        "empty numba cache)", f"{cold:.1f}"],
                                        ["cold / warm", f"{cold / warm_run:.2f}x"],
                                        ["dbn-phd, 5 frames (its own kernels compile)",
                                         f"{dbn_first:.1f}"],
                                        ["dbn-phd, 5 frames (warm)", f"{dbn:.1f}"]]))
+    if installed is not None:
+        print(f"NOT RUN: the install-time compile ({installed})")
     out["first_run"] = {"cold_s": cold, "warm_s": warm_s, "ratio": cold / warm_run,
+                        **({"install_compile_s": install_s, "after_install_s": after_install,
+                            "after_install_ratio": after_install / warm_run} if aot
+                           else {"install_compile": f"not run: {installed}"}),
                         "dbn_phd_5_frames_first_s": dbn_first, "dbn_phd_5_frames_s": dbn,
                         "loadavg": list(os.getloadavg())}
     return out

@@ -100,6 +100,19 @@ def _compile_filter_share() -> None:
     _compile_association(edges=False)
 
 
+def _cloud(Z: np.ndarray, per: int, rng: np.random.Generator):
+    """A made-up particle cloud around observations ``Z`` as the filter leaves it: ``per``
+    particles each, C-ordered float64 states and log-weights, mass ≈ 1 per observation."""
+    from .smc import ParticleSet
+
+    n = per * len(Z)
+    states = np.empty((n, 6))
+    src = np.repeat(np.arange(len(Z)), per)
+    states[:, [0, 1, 4, 5]] = Z[src] + rng.normal(0.0, 3.0, (n, 4))
+    states[:, 2:4] = rng.normal(0.0, 1.0, (n, 2))
+    return ParticleSet(states, np.full(n, np.log(len(Z) / n)))
+
+
 def _compile_main_share() -> None:
     """The warm-up's own share on a first run while the helper compiles the filter's
     (:func:`compile_kernels`): the K-means kernels (dense specialisation), the association's
@@ -111,17 +124,11 @@ def _compile_main_share() -> None:
     from .phd.clustering import kmeans_peaks
     from .phd.filter import as_observations, detection_noise, mass_near
     from .phd.tracker import PHD_PRACTICAL
-    from .smc import ParticleSet
 
     rng = np.random.default_rng(1)
     params = PHD_PRACTICAL
     Z = as_observations(_walkers(0, rng))
-    n = 1500 * len(Z)
-    states = np.empty((n, 6))
-    src = np.repeat(np.arange(len(Z)), n // len(Z))
-    states[:, [0, 1, 4, 5]] = Z[src] + rng.normal(0.0, 3.0, (n, 4))
-    states[:, 2:4] = rng.normal(0.0, 1.0, (n, 2))
-    ps = ParticleSet(states, np.full(n, np.log(len(Z) / n)))
+    ps = _cloud(Z, 1500, rng)
     cp, fp = params.clusters, params.filter
     kmeans_peaks(ps, Z, cp.T, params=fp, split_rule=cp.split_rule)
     _compile_association(iou=False)
@@ -142,7 +149,7 @@ def _start_helper() -> "subprocess.Popen | None":
     (the same ``NUMBA_CACHE_DIR`` and interpreter), started only on a first run on a machine
     with a second core; None otherwise (or when it cannot start: this process then compiles
     everything itself, as it would anyway)."""
-    if (os.cpu_count() or 1) < 2:
+    if (os.cpu_count() or 1) < 2 or not _helper_allowed:
         return None
     from .phd import _kernels
 
@@ -158,6 +165,8 @@ def _start_helper() -> "subprocess.Popen | None":
 
 
 _early: "subprocess.Popen | None" = None     # the helper started by start_helper_early
+#: False: no helper process (the install-time compile: its child could not import pfscope)
+_helper_allowed = True
 
 
 def start_helper_early(names) -> None:
@@ -277,5 +286,82 @@ def _compile_core(presets=("practical", "paper"), phd: bool = True,
     return time.perf_counter() - t0
 
 
+#: what :func:`compile_for_install` runs through the real pipeline: (tracker, preset)
+INSTALL_RUNS = (("phd", "practical"), ("phd", "paper"), ("dbn-phd", None), ("phd-bgsub", None),
+                ("dlpf", None))
+
+
+def _compiles(fn) -> "tuple[float, list]":
+    """Call ``fn()``; returns its seconds and the kernels numba compiled meanwhile (the
+    outermost of each compile: a kernel called inside another is part of that one's)."""
+    from numba.core import event
+
+    depth, top = 0, []
+    t0 = time.perf_counter()
+    with event.install_recorder("numba:compile") as rec:
+        fn()
+    for _, e in rec.buffer:
+        if e.is_start:
+            if depth == 0:
+                top.append(e.data["dispatcher"].py_func.__qualname__)
+            depth += 1
+        else:
+            depth -= 1
+    return time.perf_counter() - t0, top
+
+
+def _compile_dense_kmeans() -> None:
+    """The K-means grid search (``clustering.INDEX_MIN_CENTERS`` or more centres), which the
+    warm-up leaves to the first crowded frame: a cloud around twice that many walkers."""
+    from .phd.clustering import INDEX_MIN_CENTERS, kmeans_peaks
+    from .phd.filter import as_observations
+    from .phd.tracker import PHD_PRACTICAL
+    from .types import Detections
+
+    rng = np.random.default_rng(3)
+    m = 2 * int(INDEX_MIN_CENTERS)
+    xy = np.column_stack([np.linspace(20, 600, m), np.tile([150.0, 300.0], m // 2)])
+    Z = as_observations(Detections(np.column_stack([xy, np.full(m, 30.0), np.full(m, 70.0)]),
+                                   np.full(m, 0.9)))
+    ps = _cloud(Z, 500, rng)
+    cp = PHD_PRACTICAL.clusters
+    kmeans_peaks(ps, Z, cp.T, params=PHD_PRACTICAL.filter, split_rule=cp.split_rule)
+
+
+def compile_for_install(frames: int = 8, stream=None) -> float:
+    """Compile every numba kernel the trackers call into numba's cache, for ``pip install -e
+    .`` (the build backend, ``viewer_app/_backend``): the warm-up's kernels
+    (:func:`compile_kernels`, both presets, the resampling index kernel, the background
+    trackers' kernels), the dense K-means it leaves out, then each of :data:`INSTALL_RUNS`
+    through the real pipeline over ``frames`` frames of the built-in scene (default
+    parameters; every report level's path), so a kernel any of those steps calls is compiled
+    whether or not it is listed here.  One line per part on ``stream`` (stdout): its seconds
+    and the kernels it compiled.  No helper process.  Returns the seconds."""
+    global _helper_allowed
+    from .api import make_tracker
+    from .data.sources import open_source
+    from .pipeline import run
+
+    stream = sys.stdout if stream is None else stream
+    _helper_allowed = False
+    t0 = time.perf_counter()
+
+    def say(what, secs, top):
+        names = ", ".join(sorted(set(top))) or "nothing new"
+        stream.write(f"pfscope: {what}: {secs:.1f} s, compiled {names}\n")
+        stream.flush()
+
+    bg = [make_tracker(n) for n in sorted(BACKGROUND_TRACKERS)]
+    say("warm-up kernels", *_compiles(lambda: compile_kernels(index=True, trackers=bg)))
+    say("K-means grid search", *_compiles(_compile_dense_kmeans))
+    for name, preset in INSTALL_RUNS:
+        def go(name=name, preset=preset):
+            for level, k in (("particles", frames), ("tracks", 3)):
+                tr = make_tracker(name, preset=preset)
+                run(open_source(None), {name: tr}, frames=k, level=level)
+        say(f"{name}{f' ({preset})' if preset else ''} on the built-in scene", *_compiles(go))
+    return time.perf_counter() - t0
+
+
 __all__ = ["KERNEL_TRACKERS", "RESAMPLE_ONLY", "uses_kernels", "phd_kernels_needed",
-           "index_kernel_needed", "compile_kernels", "start_helper_early"]
+           "index_kernel_needed", "compile_kernels", "start_helper_early", "compile_for_install"]
