@@ -1154,7 +1154,9 @@ class GraphAssociator:
         rows one call per frame that gets rows (at most ``depth`` frames)."""
         if not self._buffer:
             return
-        frame = np.broadcast_to(np.asarray(frame, dtype=np.int64), np.shape(src_frame))
+        # a writable copy always: a broadcast view of one element stays read-only and numba
+        # would compile gap_rows a second time for that array type
+        frame = np.broadcast_to(np.asarray(frame, dtype=np.int64), np.shape(src_frame)).copy()
         gap = frame - src_frame
         obs = OBS_INDEX
         # every (buffered frame, edge) pair with the frame strictly inside the edge's gap
