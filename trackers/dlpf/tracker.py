@@ -479,7 +479,7 @@ class DLPFTracker:
         nxt, self._next = self._next, None
         log = StageLog(self.stages, level)
         # the motion stage starts here: its Lucas-Kanade call, begun on the helper at the end
-        # of the last step (upcoming), is what the step waits for first (~0.3-0.5 of the LK's
+        # of the last step (upcoming), is what the step waits for first (about half of the LK's
         # wall: the rest overlaps the recording of the last frame); clocked outside any stage,
         # that wait was the profile's "other"
         log.stage("motion")
