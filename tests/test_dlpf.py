@@ -379,6 +379,53 @@ def test_look_ahead_measures_the_next_frames_motion_on_a_helper_with_the_same_tr
         [(f, ts.ids.tolist(), ts.boxes.tolist()) for f, ts in rows_p]
 
 
+def test_the_wait_for_the_helpers_motion_is_on_the_motion_stage_clock(monkeypatch):
+    """The step's first act with a look-ahead is waiting for the helper's Lucas-Kanade call:
+    that wait is part of the motion stage (the profiles time stages between StageLog.stage()
+    marks and result(); outside them it was the step's unexplained "other")."""
+    import time
+
+    from pfscope.trackers.dlpf import tracker as T
+    from pfscope.trackers.report import StageLog
+
+    frames = list(open_source(sequence("PETS09-S2L1")).frames(limit=4, start=40))
+    slow = 0.25
+    real = T._motion_images
+
+    def slow_images(*a, **k):          # a helper slower than the time between the steps
+        time.sleep(slow)
+        return real(*a, **k)
+
+    monkeypatch.setattr(T, "_motion_images", slow_images)
+    marks = []
+    stage0, result0 = StageLog.stage, StageLog.result
+
+    def stage(self, name):
+        marks.append((name, time.perf_counter()))
+        return stage0(self, name)
+
+    def result(self):
+        marks.append((None, time.perf_counter()))
+        return result0(self)
+
+    monkeypatch.setattr(StageLog, "stage", stage)
+    monkeypatch.setattr(StageLog, "result", result)
+    tr = make_tracker("dlpf", seed=2, **{"parents.n": "150"})
+    for k, f in enumerate(frames):
+        if k + 1 < len(frames):
+            tr.upcoming(frames[k + 1])
+        marks.clear()
+        t0 = time.perf_counter()
+        tr.step(f, None, "tracks")
+        wall = time.perf_counter() - t0
+        if k == 0:
+            continue                   # the first frame's motion is measured inline
+        assert wall >= slow * 0.9      # the step did wait for the helper ...
+        assert marks[0][0] == "motion"
+        clocked = marks[-1][1] - marks[0][1]
+        assert wall - clocked < 0.5 * slow     # ... inside the motion stage's clock
+
+
 def test_wrong_frame_size_is_a_clear_error():
     tr = make_tracker("dlpf", seed=0)
     tr.step(Frame(1, 0.0, np.zeros((240, 320, 3), np.uint8)), None)

@@ -476,9 +476,15 @@ class DLPFTracker:
 
     def step(self, frame: Frame, detections: Optional[Detections],
              level: Optional[str] = None) -> StepResult:
+        nxt, self._next = self._next, None
+        log = StageLog(self.stages, level)
+        # the motion stage starts here: its Lucas-Kanade call, begun on the helper at the end
+        # of the last step (upcoming), is what the step waits for first (about half of the LK's
+        # wall: the rest overlaps the recording of the last frame); clocked outside any stage,
+        # that wait was the profile's "other"
+        log.stage("motion")
         # the helper's work for this frame is collected first: OpenCV's thread setting below
         # is process-wide, and is never changed while the helper's LK runs
-        nxt, self._next = self._next, None
         if self._ahead is not None:
             self._ahead.images.exception()         # wait (an error: redone inline, below)
         # with classifier.threads > 1 the step spreads its work over its own threads; OpenCV's
@@ -486,10 +492,10 @@ class DLPFTracker:
         # contend with them for the same cores: off for the step, restored after it (results
         # do not depend on it; tests/test_dlpf.py)
         if self.params.classifier.threads <= 1:
-            res = self._step(frame, level)
+            res = self._step(frame, log)
         else:
             with opencv_threads(1):
-                res = self._step(frame, level)
+                res = self._step(frame, log)
         if nxt is not None and nxt is not frame:
             self._look_ahead(nxt)
         return res
@@ -510,7 +516,8 @@ class DLPFTracker:
                              _helper().submit(_motion_images, nxt, self._prev_grey, pts,
                                               P.motion.lk_window, P.motion.lk_levels))
 
-    def _step(self, frame: Frame, level: Optional[str]) -> StepResult:
+    def _step(self, frame: Frame, log: StageLog) -> StepResult:
+        """The step's stages; ``log`` is in its motion stage (begun by :meth:`step`)."""
         P = self.params
         ahead, self._ahead = self._ahead, None
         lk = None     # the helper's flow and status of this frame's motion points
@@ -532,12 +539,10 @@ class DLPFTracker:
             self.scale_prior = ScalePrior(H, forget=P.parents.prior_forget,
                                           min_samples=P.parents.prior_min_samples)
         prior = self.scale_prior
-        log = StageLog(self.stages, level)
         rows: Rows = []
         # ---------------------------------------------------------------- motion (eqs. 1-7)
-        # the stage starts before the prediction and the Lucas-Kanade call (its largest cost:
-        # ~300 points/frame; marked after them, a stage clock counted LK as the step's "other")
-        log.stage("motion")
+        # (begun in step(): the stage clock covers the prediction and the Lucas-Kanade call,
+        # its largest cost, ~400 points/frame, or the wait for the helper's)
         labels = self.parents.labels
         assert labels is not None
         if ahead is not None:   # drawn at the end of the last step (upcoming)
