@@ -249,7 +249,9 @@ def revive_hits(tail, prev, tail_frame, prev_frame, first_frame, length, frame, 
     d², the same floats) of a confirmed tail unseen in the frame before ``frame`` (within
     ``depth``) with estimates in at least ``revive_rate`` of its frames."""
     N = z.shape[0]
-    hit = np.zeros(N, np.bool_)
+    hit = np.empty(N, np.bool_)      # np.empty + a fill: no np.zeros overload to compile
+    for j in range(N):
+        hit[j] = False
     var = np.empty(4, np.float64)
     vbc = np.empty((3, 2), np.float64)
     for t in range(tail.shape[0]):
@@ -285,8 +287,11 @@ def advance(live_ids, tail, tail_frame, prev, prev_frame, length, new, rows, col
     ``frame`` and one more vertex; returns ``ids`` (M,) -- the matched vertices their tail's
     track id, the others new ids from ``next_id`` in input order -- and ``matched`` (M,)."""
     M = new.shape[0]
-    ids = np.zeros(M, np.int64)
-    matched = np.zeros(M, np.bool_)
+    ids = np.empty(M, np.int64)
+    matched = np.empty(M, np.bool_)
+    for i in range(M):
+        ids[i] = 0
+        matched[i] = False
     for p in range(rows.shape[0]):
         r = rows[p]
         c = cols[p]
@@ -407,7 +412,9 @@ def confirmed(live_ids, live_len, extra_ids, extra_len, ids, min_length):
     """(R,) bool: ``ids`` whose track has at least ``min_length`` vertices, looked up in the
     live tracks (``live_ids`` sorted ascending) first, then in ``extra_ids`` (tracks just
     ended) -- :meth:`.association.GraphAssociator._confirmed_ids`."""
-    out = np.zeros(ids.shape[0], np.bool_)
+    out = np.empty(ids.shape[0], np.bool_)
+    for r in range(ids.shape[0]):
+        out[r] = False
     L = live_ids.shape[0]
     for r in range(ids.shape[0]):
         x = ids[r]
