@@ -14,9 +14,10 @@ from numba import njit
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
       no_cpython_wrapper=True)
-def _var4(tail, t, v, b, c, i, sv, ss, so, so_min, ratio, cc, cc2, out):
+def _var4(tail, t, b0, b1, c0, c1, i, sv, ss, so, so_min, ratio, cc, cc2, out):
     """Variances of the four observable components of tail t's prediction ``i`` frames on
-    (:func:`.association.propagate`) into ``out`` (4,)."""
+    (:func:`.association.propagate`) into ``out`` (4,); ``b0, b1, c0, c1`` its error growth
+    (:func:`.association.tail_velocity`)."""
     for k in range(2):
         s = so * tail[t, 4 + k]
         if not (s >= so_min or s != s):
@@ -25,9 +26,43 @@ def _var4(tail, t, v, b, c, i, sv, ss, so, so_min, ratio, cc, cc2, out):
         r_wh = s * s
         a = sv * tail[t, 4 + k]
         s2 = (i - 1.0) * i * (2.0 * i - 1.0) / 6.0 + cc * i * (i - 1.0) + cc2 * i
-        out[k] = a * a * s2 + r_y + b[t, k] * i + c[t, k] * (i * i) + r_y
+        bk = b0 if k == 0 else b1
+        ck = c0 if k == 0 else c1
+        out[k] = a * a * s2 + r_y + bk * i + ck * (i * i) + r_y
         g = ss * tail[t, 4 + k]
         out[2 + k] = g * g * i + 2.0 * r_wh
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
+def _tail_row(tail, t, v0, v1, b0, b1, c0, c1, i, z, depth, gate_d2, sv, ss, so, so_min,
+              ratio, cc, cc2, two_pi, var, lg, gain, d2, weight):
+    """Tail t's row of :func:`edge_scores` (velocity ``v0, v1``, error growth ``b0, b1, c0,
+    c1``, gap ``i`` frames) into ``gain``, ``d2``, ``weight`` (T, M); returns its floor (the
+    gain at the gate's edge ``depth`` frames on).  ``var``, ``lg`` (4,): scratch."""
+    _var4(tail, t, b0, b1, c0, c1, depth, sv, ss, so, so_min, ratio, cc, cc2, var)
+    for k in range(4):
+        lg[k] = math.log(two_pi * var[k])
+    floor = -0.5 * gate_d2 - 0.5 * (((lg[0] + lg[1]) + lg[2]) + lg[3])
+    _var4(tail, t, b0, b1, c0, c1, i, sv, ss, so, so_min, ratio, cc, cc2, var)
+    for k in range(4):
+        lg[k] = math.log(two_pi * var[k])
+    log_det = ((lg[0] + lg[1]) + lg[2]) + lg[3]
+    m0 = tail[t, 0] + i * v0
+    m1 = tail[t, 1] + i * v1
+    m2 = tail[t, 4]
+    m3 = tail[t, 5]
+    for j in range(z.shape[0]):
+        r0 = z[j, 0] - m0
+        r1 = z[j, 1] - m1
+        r2 = z[j, 2] - m2
+        r3 = z[j, 3] - m3
+        d = ((r0 * r0 / var[0] + r1 * r1 / var[1]) + r2 * r2 / var[2]) + r3 * r3 / var[3]
+        d2[t, j] = d
+        gn = -0.5 * d - 0.5 * log_det
+        gain[t, j] = gn
+        weight[t, j] = gn - floor
+    return floor
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
@@ -48,29 +83,9 @@ def edge_scores(tail, v, b, c, gaps, z, depth, gate_d2, sv, ss, so, so_min, rati
     var = np.empty(4, np.float64)
     lg = np.empty(4, np.float64)
     for t in range(T):
-        _var4(tail, t, v, b, c, depth, sv, ss, so, so_min, ratio, cc, cc2, var)
-        for k in range(4):
-            lg[k] = math.log(two_pi * var[k])
-        floor[t] = -0.5 * gate_d2 - 0.5 * (((lg[0] + lg[1]) + lg[2]) + lg[3])
-        i = gaps[t]
-        _var4(tail, t, v, b, c, i, sv, ss, so, so_min, ratio, cc, cc2, var)
-        for k in range(4):
-            lg[k] = math.log(two_pi * var[k])
-        log_det = ((lg[0] + lg[1]) + lg[2]) + lg[3]
-        m0 = tail[t, 0] + i * v[t, 0]
-        m1 = tail[t, 1] + i * v[t, 1]
-        m2 = tail[t, 4]
-        m3 = tail[t, 5]
-        for j in range(M):
-            r0 = z[j, 0] - m0
-            r1 = z[j, 1] - m1
-            r2 = z[j, 2] - m2
-            r3 = z[j, 3] - m3
-            d = ((r0 * r0 / var[0] + r1 * r1 / var[1]) + r2 * r2 / var[2]) + r3 * r3 / var[3]
-            d2[t, j] = d
-            gn = -0.5 * d - 0.5 * log_det
-            gain[t, j] = gn
-            weight[t, j] = gn - floor[t]
+        floor[t] = _tail_row(tail, t, v[t, 0], v[t, 1], b[t, 0], b[t, 1], c[t, 0], c[t, 1],
+                             gaps[t], z, depth, gate_d2, sv, ss, so, so_min, ratio, cc, cc2,
+                             two_pi, var, lg, gain, d2, weight)
     return gain, d2, weight, floor
 
 
@@ -169,23 +184,6 @@ def _vbc(tail, prev, t, d, so, so_min, ratio, speed_prior, vbc):
             vbc[2, k] = g * g
 
 
-@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
-      no_cpython_wrapper=True)
-def _var4v(tail, t, vbc, i, sv, ss, so, so_min, ratio, cc, cc2, out):
-    """:func:`_var4` with tail t's b, c in rows 1, 2 of ``vbc`` (3, 2) (:func:`_vbc`)."""
-    for k in range(2):
-        s = so * tail[t, 4 + k]
-        if not (s >= so_min or s != s):
-            s = so_min
-        r_y = (ratio * s) * (ratio * s)
-        r_wh = s * s
-        a = sv * tail[t, 4 + k]
-        s2 = (i - 1.0) * i * (2.0 * i - 1.0) / 6.0 + cc * i * (i - 1.0) + cc2 * i
-        out[k] = a * a * s2 + r_y + vbc[1, k] * i + vbc[2, k] * (i * i) + r_y
-        g = ss * tail[t, 4 + k]
-        out[2 + k] = g * g * i + 2.0 * r_wh
-
-
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
 def frame_edges(tail, prev, tail_frame, prev_frame, frame, z, depth, gate_d2, sv, ss, so,
                 so_min, ratio, cc, cc2, two_pi, speed_prior):
@@ -209,31 +207,13 @@ def frame_edges(tail, prev, tail_frame, prev_frame, frame, z, depth, gate_d2, sv
     for t in range(T):
         d = tail_frame[t] - prev_frame[t] if prev_frame[t] >= 0 else 0
         _vbc(tail, prev, t, d, so, so_min, ratio, speed_prior, vbc)
-        _var4v(tail, t, vbc, depth, sv, ss, so, so_min, ratio, cc, cc2, var)
-        for k in range(4):
-            lg[k] = math.log(two_pi * var[k])
-        floor[t] = -0.5 * gate_d2 - 0.5 * (((lg[0] + lg[1]) + lg[2]) + lg[3])
-        i = float(frame - tail_frame[t])
-        _var4v(tail, t, vbc, i, sv, ss, so, so_min, ratio, cc, cc2, var)
-        for k in range(4):
-            lg[k] = math.log(two_pi * var[k])
-        log_det = ((lg[0] + lg[1]) + lg[2]) + lg[3]
-        m0 = tail[t, 0] + i * vbc[0, 0]
-        m1 = tail[t, 1] + i * vbc[0, 1]
-        m2 = tail[t, 4]
-        m3 = tail[t, 5]
+        f = _tail_row(tail, t, vbc[0, 0], vbc[0, 1], vbc[1, 0], vbc[1, 1], vbc[2, 0],
+                      vbc[2, 1], float(frame - tail_frame[t]), z, depth, gate_d2, sv, ss, so,
+                      so_min, ratio, cc, cc2, two_pi, var, lg, gain, d2, weight)
+        floor[t] = f
         for j in range(M):
-            r0 = z[j, 0] - m0
-            r1 = z[j, 1] - m1
-            r2 = z[j, 2] - m2
-            r3 = z[j, 3] - m3
-            dd = ((r0 * r0 / var[0] + r1 * r1 / var[1]) + r2 * r2 / var[2]) + r3 * r3 / var[3]
-            d2[t, j] = dd
-            gn = -0.5 * dd - 0.5 * log_det
-            gain[t, j] = gn
-            w = gn - floor[t]
-            weight[t, j] = w
-            if dd <= gate_d2 and w - w == 0.0 and w > 0.0:
+            w = weight[t, j]
+            if d2[t, j] <= gate_d2 and w - w == 0.0 and w > 0.0:
                 w0[t, j] = w
                 n_ok += 1
             else:
@@ -263,7 +243,8 @@ def revive_hits(tail, prev, tail_frame, prev_frame, first_frame, length, frame, 
         d = tail_frame[t] - prev_frame[t] if prev_frame[t] >= 0 else 0
         _vbc(tail, prev, t, d, so, so_min, ratio, speed_prior, vbc)
         i = float(gap)
-        _var4v(tail, t, vbc, i, sv, ss, so, so_min, ratio, cc, cc2, var)
+        _var4(tail, t, vbc[1, 0], vbc[1, 1], vbc[2, 0], vbc[2, 1], i, sv, ss, so, so_min, ratio,
+              cc, cc2, var)
         m0 = tail[t, 0] + i * vbc[0, 0]
         m1 = tail[t, 1] + i * vbc[0, 1]
         m2 = tail[t, 4]
