@@ -924,7 +924,8 @@ def bench_endtoend(args) -> dict:
         installed = _install_compile_applies()
         if installed is None:
             aot_cache = str(Path(tmp) / "numba-cache-install")
-            install_s = _first_run([sys.executable, str(INSTALL_BACKEND), str(C.REPO)],
+            install_s = _first_run([sys.executable, str(INSTALL_BACKEND), "--editable",
+                                    str(C.REPO)],
                                    aot_cache, tmp)
             after_install = _first_run(cmd, aot_cache, tmp)
         # DBN-PHD's own kernels (codebook, features) are not in the cache yet: its first run

@@ -1,6 +1,6 @@
-"""pfscope's build backend: setuptools' own (every hook unchanged), plus, for an editable
-install (``pip install -e .``) only, the numba kernels compiled into numba's cache at install
-time, so the first run after the install starts as fast as a later one.
+"""pfscope's build backend: setuptools' own (every hook unchanged), plus the numba kernels
+compiled into numba's cache at build time, so the first run after ``pip install -e .`` or
+``pip install .`` starts as fast as a later one.
 
 ``pyproject.toml`` names this module (``build-backend``, ``backend-path``); it lives alone in
 its folder, so that folder on ``sys.path`` shadows nothing.
@@ -9,7 +9,7 @@ its folder, so that folder on ``sys.path`` shadows nothing.
   numpy, scipy, opencv-python-headless) with the specifiers of ``[project].dependencies``, or
   pinned to the version the target environment already has (numba's cache index records
   numba's version: a cache written by another version would be compiled again at first run).
-  A wheel or sdist build needs none of them (its kernels compile at first run, as before).
+  ``get_requires_for_build_wheel`` adds the same list.  An sdist build needs none of them.
 * ``build_editable``: setuptools' ``build_editable``, then, in a subprocess of the same
   interpreter with the build environment's ``sys.path`` and a bounded time
   (``PFSCOPE_INSTALL_COMPILE_TIMEOUT``, default 900 s), ``pfscope.trackers.warmup.
@@ -17,15 +17,27 @@ its folder, so that folder on ``sys.path`` shadows nothing.
   install maps them (real paths: numba's cache is keyed by the source file's location).
   ``PFSCOPE_INSTALL_COMPILE=0`` skips it.  Any failure prints one line to stderr and never
   fails the install: the first run then compiles, as without this step.
+* ``build_wheel`` (``pip install .``): setuptools' ``build_wheel``, then the same compile with
+  ``pfscope`` imported from the unpacked wheel, and numba's cache files it wrote there
+  (``__pycache__/*.nbi``, ``*.nbc``, next to the modules: numba's in-tree cache, whose index
+  is keyed by the source's content hash, numba's version and the CPU, not by the path) added
+  to the wheel and its ``RECORD``.  On another CPU or numba they are not used (numba compiles
+  as without them).  ``PFSCOPE_INSTALL_COMPILE=0`` builds a wheel without them (for a wheel
+  meant for other machines).
 """
 
 from __future__ import annotations
 
+import base64
+import hashlib
 import os
 import re
+import shutil
 import subprocess
 import sys
+import tempfile
 import time
+import zipfile
 from pathlib import Path
 
 if __name__ != "__main__":          # the compile's subprocess (below) needs no setuptools
@@ -75,9 +87,13 @@ def kernel_requirements(root: Path = ROOT, installed: dict | None = None) -> lis
             for d in deps if _name(d) in KERNEL_LIBS]
 
 
-def get_requires_for_build_editable(config_settings=None):
-    reqs = list(_orig.get_requires_for_build_editable(config_settings))
-    if os.environ.get("PFSCOPE_INSTALL_COMPILE", "1") != "0":
+def _compile_wanted() -> bool:
+    return os.environ.get("PFSCOPE_INSTALL_COMPILE", "1") != "0"
+
+
+def _with_kernel_libs(reqs) -> list:
+    reqs = list(reqs)
+    if _compile_wanted():
         try:
             reqs += kernel_requirements()
         except Exception as e:                      # never fail the install over it
@@ -86,22 +102,80 @@ def get_requires_for_build_editable(config_settings=None):
     return reqs
 
 
+def get_requires_for_build_editable(config_settings=None):
+    return _with_kernel_libs(_orig.get_requires_for_build_editable(config_settings))
+
+
+def get_requires_for_build_wheel(config_settings=None):
+    return _with_kernel_libs(_orig.get_requires_for_build_wheel(config_settings))
+
+
 def build_editable(wheel_directory, config_settings=None, metadata_directory=None):
     name = _orig.build_editable(wheel_directory, config_settings, metadata_directory)
-    if os.environ.get("PFSCOPE_INSTALL_COMPILE", "1") != "0":
+    if _compile_wanted():
         compile_kernels()
     return name
 
 
-def compile_kernels(root: Path = ROOT, timeout: float | None = None) -> bool:
-    """Run :func:`compile_for_install` in a subprocess (see the module's doc); True when it
-    succeeded, else one line on stderr and False."""
+def build_wheel(wheel_directory, config_settings=None, metadata_directory=None):
+    name = _orig.build_wheel(wheel_directory, config_settings, metadata_directory)
+    if _compile_wanted():
+        add_kernel_cache(Path(wheel_directory) / name)
+    return name
+
+
+def _record_line(arcname: str, data: bytes) -> str:
+    digest = base64.urlsafe_b64encode(hashlib.sha256(data).digest()).rstrip(b"=").decode()
+    return f"{arcname},sha256={digest},{len(data)}"
+
+
+def add_kernel_cache(wheel: Path, timeout: float | None = None) -> int:
+    """Compile the kernels with ``pfscope`` imported from ``wheel`` unpacked, and add numba's
+    cache files written next to its modules to ``wheel`` (rewritten under a temporary name,
+    then renamed) and to its ``RECORD``.  Returns how many files were added (0 when the
+    compile failed: one line on stderr, the wheel unchanged)."""
+    with tempfile.TemporaryDirectory(prefix="pfscope-wheel-") as tmp:
+        unpacked = Path(tmp) / "w"
+        with zipfile.ZipFile(wheel) as z:
+            z.extractall(unpacked)
+            names = z.namelist()
+        if not compile_kernels(unpacked, timeout=timeout, mode="--wheel"):
+            return 0
+        cache = sorted(p for p in unpacked.rglob("__pycache__/*")
+                       if p.suffix in (".nbi", ".nbc"))
+        (record,) = [n for n in names if n.endswith(".dist-info/RECORD")]
+        part = wheel.with_name(wheel.name + ".incomplete")
+        with zipfile.ZipFile(wheel) as src, \
+                zipfile.ZipFile(part, "w", zipfile.ZIP_DEFLATED) as dst:
+            lines = src.read(record).decode().splitlines()
+            for info in src.infolist():
+                if info.filename != record:
+                    dst.writestr(info, src.read(info))
+            for p in cache:
+                arc = p.relative_to(unpacked).as_posix()
+                data = p.read_bytes()
+                dst.writestr(arc, data)
+                lines.insert(len(lines) - 1, _record_line(arc, data))   # RECORD stays last
+            dst.writestr(record, "\n".join(lines) + "\n")
+        os.replace(part, wheel)
+    print(f"pfscope: {len(cache)} numba cache files added to {wheel.name}")
+    return len(cache)
+
+
+def compile_kernels(root: Path = ROOT, timeout: float | None = None,
+                    mode: str = "--editable") -> bool:
+    """Run :func:`compile_for_install` in a subprocess (see the module's doc): ``pfscope``
+    mapped to ``root``'s source folders (``mode`` "--editable") or imported from ``root``, an
+    unpacked wheel ("--wheel"), numba's cache next to the modules.  True when it succeeded,
+    else one line on stderr and False."""
     timeout = float(os.environ.get("PFSCOPE_INSTALL_COMPILE_TIMEOUT", 900)
                     if timeout is None else timeout)
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in sys.path if p)}
+    if mode == "--wheel":
+        env.pop("NUMBA_CACHE_DIR", None)            # the cache must land next to the modules
     t0 = time.perf_counter()
     try:
-        out = subprocess.run([sys.executable, str(Path(__file__).resolve()), str(root)],
+        out = subprocess.run([sys.executable, str(Path(__file__).resolve()), mode, str(root)],
                              env=env, stdin=subprocess.DEVNULL, capture_output=True,
                              text=True, timeout=timeout)
     except subprocess.TimeoutExpired:
@@ -146,7 +220,14 @@ def map_packages(root: Path) -> None:
 if __name__ == "__main__":                          # the subprocess of compile_kernels
     sys.path[:] = [p for p in sys.path
                    if Path(p or ".").resolve() != Path(__file__).resolve().parent]
-    map_packages(Path(sys.argv[1]))
+    if sys.argv[1] == "--wheel":
+        sys.path.insert(0, sys.argv[2])
+        import pfscope
+
+        if not Path(pfscope.__file__).resolve().is_relative_to(Path(sys.argv[2]).resolve()):
+            sys.exit(f"pfscope imported from {pfscope.__file__}, not the wheel")
+    else:
+        map_packages(Path(sys.argv[2]))
     from pfscope.trackers.warmup import compile_for_install
 
     compile_for_install()
