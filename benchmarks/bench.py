@@ -944,8 +944,9 @@ def bench_endtoend(args) -> dict:
                                         f"{len(warm_s)})", f"{warm_run:.1f}"],
                                        *([["first run after `pip install -e .` / warm",
                                            f"{after_install / warm_run:.2f}x"]] if aot else []),
-                                       ["cold: no install-time compile (a wheel install; "
-                                        "empty numba cache)", f"{cold:.1f}"],
+                                       ["cold: no install-time compile (another CPU, "
+                                        "PFSCOPE_INSTALL_COMPILE=0; empty numba cache)",
+                                        f"{cold:.1f}"],
                                        ["cold / warm", f"{cold / warm_run:.2f}x"],
                                        ["dbn-phd, 5 frames (its own kernels compile)",
                                         f"{dbn_first:.1f}"],
