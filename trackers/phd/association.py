@@ -123,6 +123,18 @@ from .gating import GridIndex, expand_runs
 OBS_INDEX = np.array([0, 1, 4, 5])
 #: no ids (an empty id / length array the kernels read)
 _NO_IDS = np.zeros(0, dtype=np.int64)
+
+
+def _empty(shape, dtype=np.float64) -> np.ndarray:
+    a = np.zeros(shape, dtype=dtype)
+    a.setflags(write=False)
+    return a
+
+
+#: a step's edge arrays when nobody asked for them (``edges=False``): empty, shared, read-only
+_NO_EDGES = dict(edges_src=_empty((0, STATE_DIM)), edges_src_id=_empty(0, np.int64),
+                 edges_dst_index=_empty(0, np.int64), edges_gain=_empty(0),
+                 edges_weight=_empty(0), edges_gap=_empty(0, np.int64), chosen=_empty(0, bool))
 #: Tracks-file ``conf`` of a row interpolated inside a linked gap (``fill_gaps``); rows of
 #: estimates get :data:`EST_CONF`.
 GAP_CONF = 0.5
@@ -470,9 +482,7 @@ def max_weight_matching(weights: np.ndarray, allowed: np.ndarray) -> tuple[np.nd
     if not ok.any():
         return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
     w = np.where(ok, weights, 0.0)
-    from scipy.optimize import linear_sum_assignment  # slow to import; not needed for --help
-
-    rows, cols = linear_sum_assignment(w, maximize=True)
+    rows, cols = _lsa()(w, maximize=True)
     keep = ok[rows, cols]
     return rows[keep].astype(np.int64), cols[keep].astype(np.int64)
 
@@ -482,11 +492,22 @@ def _match_admissible(w0: np.ndarray, n_ok: int) -> tuple[np.ndarray, np.ndarray
     positive on them: :func:`._assoc_kernels.frame_edges`' ``w0``, ``n_ok`` of them)."""
     if not n_ok:
         return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
-    from scipy.optimize import linear_sum_assignment
-
-    rows, cols = linear_sum_assignment(w0, maximize=True)
+    rows, cols = _lsa()(w0, maximize=True)
     keep = w0[rows, cols] > 0.0
-    return rows[keep].astype(np.int64), cols[keep].astype(np.int64)
+    return rows[keep].astype(np.int64, copy=False), cols[keep].astype(np.int64, copy=False)
+
+
+_LSA = None
+
+
+def _lsa():
+    """scipy's ``linear_sum_assignment``, imported on first use (slow to import; not needed
+    for --help) and kept (an import statement in the matching costs a few us a frame)."""
+    global _LSA
+    if _LSA is None:
+        from scipy.optimize import linear_sum_assignment
+        _LSA = linear_sum_assignment
+    return _LSA
 
 
 #: Above this many (tail, new vertex) pairs a frame's edges are scored on the pairs inside the
@@ -852,9 +873,11 @@ class GraphAssociator:
         M = len(new)
 
         # 1. forget tails older than K frames: their tracks end (bounded memory)
-        expired = frame - self._tail_frame > p.depth
-        ended_ids, ended_len = self._ids[expired], self._length[expired]
+        gaps = frame - self._tail_frame
+        expired = gaps > p.depth
+        ended_ids = ended_len = _NO_IDS     # (most frames end no track: no indexing)
         if expired.any():
+            ended_ids, ended_len = self._ids[expired], self._length[expired]
             self._remember_lost(expired)
             keep = ~expired
             self._ids, self._tail, self._tail_frame = self._ids[keep], self._tail[keep], self._tail_frame[keep]
@@ -862,6 +885,7 @@ class GraphAssociator:
             self._length = self._length[keep]
             self._first, self._first_frame = self._first[keep], self._first_frame[keep]
             self._app, self._app_n = self._app[keep], self._app_n[keep]
+            gaps = gaps[keep]
         if len(self._lost_ids):
             keep = frame - self._lost_frame <= p.relink_depth
             if not keep.all():
@@ -870,13 +894,12 @@ class GraphAssociator:
                 self._lost_vbc, self._lost_len = self._lost_vbc[keep], self._lost_len[keep]
                 self._lost_app, self._lost_app_n = self._lost_app[keep], self._lost_app_n[keep]
         use_app = features is not None and p.app_weight > 0
-        feats = self._check_features(features, M) if use_app else np.full((M, APP_DIM), np.nan)
+        feats = self._check_features(features, M) if use_app else None  # (None: all NaN)
         if use_app:
             self._app_model.observe_different(feats)
 
         # 2. score every (tail, new vertex) edge and match
         T = len(self._ids)
-        gaps = frame - self._tail_frame
         sc = ep = None
         if T and M:
             if T * M <= DENSE_MAX_PAIRS:
@@ -941,9 +964,13 @@ class GraphAssociator:
             self._app[rows] = np.where(np.isfinite(old), np.where(np.isfinite(f), mix, old), f)
             self._app_n[rows] += np.isfinite(f[:, 0])
         if n_new:
-            self._app = np.concatenate([self._app, feats[unmatched]])
-            self._app_n = np.concatenate([self._app_n,
-                                          np.isfinite(feats[unmatched, 0]).astype(float)])
+            if feats is None:   # no features: the new tracks' colour models are unknown
+                self._app = np.concatenate([self._app, np.full((n_new, APP_DIM), np.nan)])
+                self._app_n = np.concatenate([self._app_n, np.zeros(n_new)])
+            else:
+                self._app = np.concatenate([self._app, feats[unmatched]])
+                self._app_n = np.concatenate([self._app_n,
+                                              np.isfinite(feats[unmatched, 0]).astype(float)])
 
         # 4. edges for the observer: admissible pairs only
         if edges and (sc is not None or ep is not None):
@@ -966,11 +993,7 @@ class GraphAssociator:
                                edges_gain=e_gain, edges_weight=e_weight,
                                edges_gap=gaps[er].astype(np.int64), chosen=chosen)
         else:
-            edge_arrays = dict(edges_src=np.zeros((0, STATE_DIM)),
-                               edges_src_id=np.zeros(0, dtype=np.int64),
-                               edges_dst_index=np.zeros(0, dtype=np.int64), edges_gain=np.zeros(0),
-                               edges_weight=np.zeros(0), edges_gap=np.zeros(0, dtype=np.int64),
-                               chosen=np.zeros(0, dtype=bool))
+            edge_arrays = _NO_EDGES
 
         # 5. gap filling: rows for the frames strictly inside each chosen edge of gap > 1
         if p.fill_gaps and len(rows):
@@ -982,7 +1005,7 @@ class GraphAssociator:
         # 5b. re-linking: a track confirmed now may continue a recently ended one (renames it
         # in the live arrays, the buffer and ``ids``)
         relinked = self._relink(frame, ids) if p.relink_depth > 0 else np.zeros((0, 2), np.int64)
-        lengths = self._length[np.searchsorted(self._ids, ids)]
+        lengths = self._length[self._ids.searchsorted(ids)]
         confirmed = lengths >= p.min_length
 
         # 6. bounded-lag output: rows of frames <= k − L, judged with the lengths known now
@@ -991,9 +1014,13 @@ class GraphAssociator:
             d = (np.zeros((0, 4)) if detections is None else
                  np.ascontiguousarray(np.asarray(detections, dtype=np.float64).reshape(-1, 4)))
             self._dets.append((frame, d))
-            self._extend_heads(frame, relinked)
+            # (the tracks confirmed at this frame are those of its vertices whose length is
+            # min_length now: most frames have none, and the walk back is not entered)
+            if (lengths == p.min_length).any():
+                self._extend_heads(frame, relinked)
         finalised = []
-        while self._buffer and self._buffer[0][0] <= frame - self.lag:
+        last = frame - self.lag
+        while self._buffer and self._buffer[0][0] <= last:
             if self._dets and self._dets[0][0] == self._buffer[0][0]:
                 self._dets.popleft()
             f, bid, bst, bfill = self._buffer.popleft()
