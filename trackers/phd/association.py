@@ -1182,8 +1182,11 @@ class GraphAssociator:
         if not self._buffer:
             return
         # a writable copy always: a broadcast view of one element stays read-only and numba
-        # would compile gap_rows a second time for that array type
-        frame = np.broadcast_to(np.asarray(frame, dtype=np.int64), np.shape(src_frame)).copy()
+        # would compile gap_rows a second time for that array type (filled by assignment, which
+        # broadcasts like np.broadcast_to(...).copy() at a fraction of its Python cost)
+        fr = np.empty(np.shape(src_frame), dtype=np.int64)
+        fr[...] = frame
+        frame = fr
         gap = frame - src_frame
         obs = OBS_INDEX
         # every (buffered frame, edge) pair with the frame strictly inside the edge's gap
@@ -1222,6 +1225,8 @@ class GraphAssociator:
                 run = np.searchsorted(fi, np.arange(len(fs) + 1)).tolist()
         fid = ids[ei]
         keep = self._likely_rows(fs, run, st, likely) if self.params.fill_err > 0 else None
+        if keep is not None and keep.all():
+            keep = None     # (every row kept: no masks a frame)
         for k, n in enumerate(at):
             if run[k] == run[k + 1]:
                 continue
