@@ -131,6 +131,9 @@ def _empty(shape, dtype=np.float64) -> np.ndarray:
     return a
 
 
+#: one True (read-only), appended to a frame's filled flags
+_TRUE1 = np.ones(1, dtype=bool)
+_TRUE1.setflags(write=False)
 #: a step's edge arrays when nobody asked for them (``edges=False``): empty, shared, read-only
 _NO_EDGES = dict(edges_src=_empty((0, STATE_DIM)), edges_src_id=_empty(0, np.int64),
                  edges_dst_index=_empty(0, np.int64), edges_gain=_empty(0),
@@ -1167,8 +1170,8 @@ class GraphAssociator:
                 st = np.full((1, STATE_DIM), np.nan)
                 st[0, OBS_INDEX] = d[j]
                 st[0, 2:4] = v
-                self._buffer[n] = (fr, np.append(bid, self._ids[t]), np.concatenate([bst, st]),
-                                   np.append(bfill, True))
+                self._buffer[n] = (fr, np.concatenate([bid, self._ids[t:t + 1]]),
+                                   np.concatenate([bst, st]), np.concatenate([bfill, _TRUE1]))
                 x = d[j]
                 f -= 1
 
@@ -1193,7 +1196,7 @@ class GraphAssociator:
         # (an edge of gap 1 has none), frame-major (each frame's rows in edge order): the
         # frames with rows are self._buffer[at[k]], their rows run[k]:run[k + 1]; the rows'
         # states and the fill_err test of the straight line in the same kernel pass
-        bf = np.fromiter((b[0] for b in self._buffer), np.int64, len(self._buffer))
+        bf = self._buffer_frames()
         at, fi, ei, st, likely, run = _assoc_kernels.gap_rows(
             bf, np.ascontiguousarray(src), np.ascontiguousarray(src_frame),
             np.ascontiguousarray(dst), np.ascontiguousarray(frame),
@@ -1246,6 +1249,15 @@ class GraphAssociator:
                     continue
             self._buffer[n] = (f, np.concatenate([bid, rid]), np.concatenate([bst, rows]),
                                np.concatenate([bfill, np.ones(len(rows), dtype=bool)]))
+
+    def _buffer_frames(self) -> np.ndarray:
+        """(B,) int64 frames of the held-back rows (strictly increasing): an arange when they
+        are consecutive (the usual case: no frame number skipped), else read off the buffer."""
+        buf = self._buffer
+        f0, f1 = buf[0][0], buf[-1][0]
+        if f1 - f0 + 1 == len(buf):
+            return np.arange(f0, f1 + 1, dtype=np.int64)
+        return np.fromiter((b[0] for b in buf), np.int64, len(buf))
 
     def _likely_rows(self, fs: np.ndarray, run: list, st: np.ndarray,
                      likely: np.ndarray) -> np.ndarray:
