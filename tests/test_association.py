@@ -887,6 +887,18 @@ def test_returning_is_the_numpy_spelling():
     assert not a.returning(frame, Z[:0]).size
 
 
+def test_buffer_frames_are_the_held_back_frames():
+    """Gap filling reads the held-back frames as an array: an arange when the frame numbers
+    are consecutive, the buffer's own numbers when some were skipped (a frame jump)."""
+    for frames in (range(1, 30), [1, 2, 3, 5, 8, 9, 10, 14, 20, 21, 22, 23, 30, 31, 40, 41]):
+        a = GraphAssociator(AssocParams(depth=5, fill_gaps=True))
+        for k in frames:
+            a.step(k, [state(10.0 + k, 20.0)])
+            got = a._buffer_frames()
+            assert got.dtype == np.int64
+            np.testing.assert_array_equal(got, [b[0] for b in a._buffer])
+
+
 def test_gap_rows_kernel_is_the_numpy_spelling():
     """Gap filling's rows (one kernel pass): every (buffered frame, edge) pair with the frame
     strictly inside the edge's gap, frame-major, the interpolated states and the fill_err

@@ -24,16 +24,14 @@ def _as_boxes(boxes, name: str) -> np.ndarray:
 def xywh_to_cxcywh(boxes: np.ndarray) -> np.ndarray:
     """(N,4) top-left boxes -> (N,4) centre boxes ``(cx, cy, w, h)``."""
     out = np.array(boxes, dtype=np.float64, copy=True).reshape(-1, 4)
-    out[:, 0] += out[:, 2] / 2.0
-    out[:, 1] += out[:, 3] / 2.0
+    out[:, :2] += out[:, 2:] / 2.0      # (both columns in one operation: the same floats)
     return out
 
 
 def cxcywh_to_xywh(boxes: np.ndarray) -> np.ndarray:
     """(N,4) centre boxes ``(cx, cy, w, h)`` -> (N,4) top-left boxes."""
     out = np.array(boxes, dtype=np.float64, copy=True).reshape(-1, 4)
-    out[:, 0] -= out[:, 2] / 2.0
-    out[:, 1] -= out[:, 3] / 2.0
+    out[:, :2] -= out[:, 2:] / 2.0
     return out
 
 

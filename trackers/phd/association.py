@@ -123,6 +123,21 @@ from .gating import GridIndex, expand_runs
 OBS_INDEX = np.array([0, 1, 4, 5])
 #: no ids (an empty id / length array the kernels read)
 _NO_IDS = np.zeros(0, dtype=np.int64)
+
+
+def _empty(shape, dtype=np.float64) -> np.ndarray:
+    a = np.zeros(shape, dtype=dtype)
+    a.setflags(write=False)
+    return a
+
+
+#: one True (read-only), appended to a frame's filled flags
+_TRUE1 = np.ones(1, dtype=bool)
+_TRUE1.setflags(write=False)
+#: a step's edge arrays when nobody asked for them (``edges=False``): empty, shared, read-only
+_NO_EDGES = dict(edges_src=_empty((0, STATE_DIM)), edges_src_id=_empty(0, np.int64),
+                 edges_dst_index=_empty(0, np.int64), edges_gain=_empty(0),
+                 edges_weight=_empty(0), edges_gap=_empty(0, np.int64), chosen=_empty(0, bool))
 #: Tracks-file ``conf`` of a row interpolated inside a linked gap (``fill_gaps``); rows of
 #: estimates get :data:`EST_CONF`.
 GAP_CONF = 0.5
@@ -470,9 +485,7 @@ def max_weight_matching(weights: np.ndarray, allowed: np.ndarray) -> tuple[np.nd
     if not ok.any():
         return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
     w = np.where(ok, weights, 0.0)
-    from scipy.optimize import linear_sum_assignment  # slow to import; not needed for --help
-
-    rows, cols = linear_sum_assignment(w, maximize=True)
+    rows, cols = _lsa()(w, maximize=True)
     keep = ok[rows, cols]
     return rows[keep].astype(np.int64), cols[keep].astype(np.int64)
 
@@ -482,11 +495,22 @@ def _match_admissible(w0: np.ndarray, n_ok: int) -> tuple[np.ndarray, np.ndarray
     positive on them: :func:`._assoc_kernels.frame_edges`' ``w0``, ``n_ok`` of them)."""
     if not n_ok:
         return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
-    from scipy.optimize import linear_sum_assignment
-
-    rows, cols = linear_sum_assignment(w0, maximize=True)
+    rows, cols = _lsa()(w0, maximize=True)
     keep = w0[rows, cols] > 0.0
-    return rows[keep].astype(np.int64), cols[keep].astype(np.int64)
+    return rows[keep].astype(np.int64, copy=False), cols[keep].astype(np.int64, copy=False)
+
+
+_LSA = None
+
+
+def _lsa():
+    """scipy's ``linear_sum_assignment``, imported on first use (slow to import; not needed
+    for --help) and kept (an import statement in the matching costs a few us a frame)."""
+    global _LSA
+    if _LSA is None:
+        from scipy.optimize import linear_sum_assignment
+        _LSA = linear_sum_assignment
+    return _LSA
 
 
 #: Above this many (tail, new vertex) pairs a frame's edges are scored on the pairs inside the
@@ -852,9 +876,11 @@ class GraphAssociator:
         M = len(new)
 
         # 1. forget tails older than K frames: their tracks end (bounded memory)
-        expired = frame - self._tail_frame > p.depth
-        ended_ids, ended_len = self._ids[expired], self._length[expired]
+        gaps = frame - self._tail_frame
+        expired = gaps > p.depth
+        ended_ids = ended_len = _NO_IDS     # (most frames end no track: no indexing)
         if expired.any():
+            ended_ids, ended_len = self._ids[expired], self._length[expired]
             self._remember_lost(expired)
             keep = ~expired
             self._ids, self._tail, self._tail_frame = self._ids[keep], self._tail[keep], self._tail_frame[keep]
@@ -862,6 +888,7 @@ class GraphAssociator:
             self._length = self._length[keep]
             self._first, self._first_frame = self._first[keep], self._first_frame[keep]
             self._app, self._app_n = self._app[keep], self._app_n[keep]
+            gaps = gaps[keep]
         if len(self._lost_ids):
             keep = frame - self._lost_frame <= p.relink_depth
             if not keep.all():
@@ -870,13 +897,12 @@ class GraphAssociator:
                 self._lost_vbc, self._lost_len = self._lost_vbc[keep], self._lost_len[keep]
                 self._lost_app, self._lost_app_n = self._lost_app[keep], self._lost_app_n[keep]
         use_app = features is not None and p.app_weight > 0
-        feats = self._check_features(features, M) if use_app else np.full((M, APP_DIM), np.nan)
+        feats = self._check_features(features, M) if use_app else None  # (None: all NaN)
         if use_app:
             self._app_model.observe_different(feats)
 
         # 2. score every (tail, new vertex) edge and match
         T = len(self._ids)
-        gaps = frame - self._tail_frame
         sc = ep = None
         if T and M:
             if T * M <= DENSE_MAX_PAIRS:
@@ -941,9 +967,13 @@ class GraphAssociator:
             self._app[rows] = np.where(np.isfinite(old), np.where(np.isfinite(f), mix, old), f)
             self._app_n[rows] += np.isfinite(f[:, 0])
         if n_new:
-            self._app = np.concatenate([self._app, feats[unmatched]])
-            self._app_n = np.concatenate([self._app_n,
-                                          np.isfinite(feats[unmatched, 0]).astype(float)])
+            if feats is None:   # no features: the new tracks' colour models are unknown
+                self._app = np.concatenate([self._app, np.full((n_new, APP_DIM), np.nan)])
+                self._app_n = np.concatenate([self._app_n, np.zeros(n_new)])
+            else:
+                self._app = np.concatenate([self._app, feats[unmatched]])
+                self._app_n = np.concatenate([self._app_n,
+                                              np.isfinite(feats[unmatched, 0]).astype(float)])
 
         # 4. edges for the observer: admissible pairs only
         if edges and (sc is not None or ep is not None):
@@ -966,11 +996,7 @@ class GraphAssociator:
                                edges_gain=e_gain, edges_weight=e_weight,
                                edges_gap=gaps[er].astype(np.int64), chosen=chosen)
         else:
-            edge_arrays = dict(edges_src=np.zeros((0, STATE_DIM)),
-                               edges_src_id=np.zeros(0, dtype=np.int64),
-                               edges_dst_index=np.zeros(0, dtype=np.int64), edges_gain=np.zeros(0),
-                               edges_weight=np.zeros(0), edges_gap=np.zeros(0, dtype=np.int64),
-                               chosen=np.zeros(0, dtype=bool))
+            edge_arrays = _NO_EDGES
 
         # 5. gap filling: rows for the frames strictly inside each chosen edge of gap > 1
         if p.fill_gaps and len(rows):
@@ -982,7 +1008,7 @@ class GraphAssociator:
         # 5b. re-linking: a track confirmed now may continue a recently ended one (renames it
         # in the live arrays, the buffer and ``ids``)
         relinked = self._relink(frame, ids) if p.relink_depth > 0 else np.zeros((0, 2), np.int64)
-        lengths = self._length[np.searchsorted(self._ids, ids)]
+        lengths = self._length[self._ids.searchsorted(ids)]
         confirmed = lengths >= p.min_length
 
         # 6. bounded-lag output: rows of frames <= k − L, judged with the lengths known now
@@ -991,9 +1017,13 @@ class GraphAssociator:
             d = (np.zeros((0, 4)) if detections is None else
                  np.ascontiguousarray(np.asarray(detections, dtype=np.float64).reshape(-1, 4)))
             self._dets.append((frame, d))
-            self._extend_heads(frame, relinked)
+            # (the tracks confirmed at this frame are those of its vertices whose length is
+            # min_length now: most frames have none, and the walk back is not entered)
+            if (lengths == p.min_length).any():
+                self._extend_heads(frame, relinked)
         finalised = []
-        while self._buffer and self._buffer[0][0] <= frame - self.lag:
+        last = frame - self.lag
+        while self._buffer and self._buffer[0][0] <= last:
             if self._dets and self._dets[0][0] == self._buffer[0][0]:
                 self._dets.popleft()
             f, bid, bst, bfill = self._buffer.popleft()
@@ -1140,8 +1170,8 @@ class GraphAssociator:
                 st = np.full((1, STATE_DIM), np.nan)
                 st[0, OBS_INDEX] = d[j]
                 st[0, 2:4] = v
-                self._buffer[n] = (fr, np.append(bid, self._ids[t]), np.concatenate([bst, st]),
-                                   np.append(bfill, True))
+                self._buffer[n] = (fr, np.concatenate([bid, self._ids[t:t + 1]]),
+                                   np.concatenate([bst, st]), np.concatenate([bfill, _TRUE1]))
                 x = d[j]
                 f -= 1
 
@@ -1155,15 +1185,18 @@ class GraphAssociator:
         if not self._buffer:
             return
         # a writable copy always: a broadcast view of one element stays read-only and numba
-        # would compile gap_rows a second time for that array type
-        frame = np.broadcast_to(np.asarray(frame, dtype=np.int64), np.shape(src_frame)).copy()
+        # would compile gap_rows a second time for that array type (filled by assignment, which
+        # broadcasts like np.broadcast_to(...).copy() at a fraction of its Python cost)
+        fr = np.empty(np.shape(src_frame), dtype=np.int64)
+        fr[...] = frame
+        frame = fr
         gap = frame - src_frame
         obs = OBS_INDEX
         # every (buffered frame, edge) pair with the frame strictly inside the edge's gap
         # (an edge of gap 1 has none), frame-major (each frame's rows in edge order): the
         # frames with rows are self._buffer[at[k]], their rows run[k]:run[k + 1]; the rows'
         # states and the fill_err test of the straight line in the same kernel pass
-        bf = np.fromiter((b[0] for b in self._buffer), np.int64, len(self._buffer))
+        bf = self._buffer_frames()
         at, fi, ei, st, likely, run = _assoc_kernels.gap_rows(
             bf, np.ascontiguousarray(src), np.ascontiguousarray(src_frame),
             np.ascontiguousarray(dst), np.ascontiguousarray(frame),
@@ -1195,6 +1228,8 @@ class GraphAssociator:
                 run = np.searchsorted(fi, np.arange(len(fs) + 1)).tolist()
         fid = ids[ei]
         keep = self._likely_rows(fs, run, st, likely) if self.params.fill_err > 0 else None
+        if keep is not None and keep.all():
+            keep = None     # (every row kept: no masks a frame)
         for k, n in enumerate(at):
             if run[k] == run[k + 1]:
                 continue
@@ -1214,6 +1249,15 @@ class GraphAssociator:
                     continue
             self._buffer[n] = (f, np.concatenate([bid, rid]), np.concatenate([bst, rows]),
                                np.concatenate([bfill, np.ones(len(rows), dtype=bool)]))
+
+    def _buffer_frames(self) -> np.ndarray:
+        """(B,) int64 frames of the held-back rows (strictly increasing): an arange when they
+        are consecutive (the usual case: no frame number skipped), else read off the buffer."""
+        buf = self._buffer
+        f0, f1 = buf[0][0], buf[-1][0]
+        if f1 - f0 + 1 == len(buf):
+            return np.arange(f0, f1 + 1, dtype=np.int64)
+        return np.fromiter((b[0] for b in buf), np.int64, len(buf))
 
     def _likely_rows(self, fs: np.ndarray, run: list, st: np.ndarray,
                      likely: np.ndarray) -> np.ndarray:

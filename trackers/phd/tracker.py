@@ -58,7 +58,7 @@ from ..params import param, part, to_dict, with_options
 from ..report import Boxes, Points, Segments, StageLog
 from ..types import Detections, Frame, TrackSet, xywh_to_cxcywh
 from .association import (EST_CONF, GAP_CONF, AssocParams, AssocResult, FinalRows,
-                          GraphAssociator)
+                          GraphAssociator, boxes_xywh)
 from .appearance import box_features
 from .camera_motion import MEMORY_S as CAMERA_MEMORY_S, scale as camera_scale, warp_states
 from .clustering import Clusters, kmeans_peaks, measurement_estimates
@@ -322,7 +322,7 @@ class _AssociatingTracker:
                                    edges=log.wants("clusters"))
         self._report_association(frame, res, log)
         keep = res.confirmed
-        return StepResult(TrackSet(res.ids[keep], res.boxes[keep]),
+        return StepResult(TrackSet(res.ids[keep], boxes_xywh(res.states[keep])),
                           _rows(res.finalised, self._flagged), log.result())
 
     def _report_association(self, frame: Frame, res: AssocResult, log: StageLog) -> None:
