@@ -926,3 +926,30 @@ def test_shared_sum_blocks_equal_opencv_blocks_and_windows():
                      np.full(60, 70.0))
     assert np.abs(clf.score(img, w) - ocv.score(img, w)).max() < 1e-4
     assert np.abs(clf.score(img, w, exact=True) - ocv.score(img, w, exact=True)).max() < 1e-4
+
+
+def test_margins_from_the_blocks_equal_the_gathered_descriptors_margins():
+    """The pyramid's linear margins are summed straight from the distinct blocks
+    (window_margins, no (N, 3780) descriptor array) in numpy's einsum order: the same floats
+    as decision() of the gathered descriptors, so the tracks do not change."""
+    import platform
+    from pfscope.trackers.dlpf import _hog_kernels as hk
+    clf = HOGWindowClassifier()
+    rng = np.random.default_rng(3)
+    blocks = (rng.random((400, 36)) ** 3 * 0.3).astype(np.float32)
+    for n in (1, 2, 7, 260):
+        binv = rng.integers(0, 400, (n, 105))
+        ref = np.einsum("ij,j->i", blocks[binv].reshape(n, -1), clf.weights)
+        out = np.empty(n, np.float32)
+        hk.window_margins(blocks, binv, clf.weights, out)
+        assert np.abs(out - ref).max() < 1e-5
+        if platform.machine() in ("x86_64", "AMD64"):     # numpy's SSE einsum loop
+            assert np.array_equal(out, ref)
+    img = _textured(seed=4)
+    w = window_boxes(rng.uniform([30, 30], [370, 270], (150, 2)),
+                     np.exp(rng.uniform(np.log(30), np.log(120), 150)))
+    m = clf.score(img, w)
+    ref = clf.decision(clf.descriptors(img, w))
+    assert np.abs(m - ref).max() < 1e-5
+    if platform.machine() in ("x86_64", "AMD64"):
+        assert np.array_equal(m, ref)
