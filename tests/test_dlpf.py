@@ -953,3 +953,26 @@ def test_margins_from_the_blocks_equal_the_gathered_descriptors_margins():
     assert np.abs(m - ref).max() < 1e-5
     if platform.machine() in ("x86_64", "AMD64"):
         assert np.array_equal(m, ref)
+
+
+def test_kernel_resampling_is_opencvs_warpaffine_byte_for_byte():
+    """The HOG kernel resamples each pyramid region itself with OpenCV's fixed-point
+    warpAffine arithmetic (no OpenCV call): the same bytes as cv2.warpAffine for up- and
+    down-scaling levels, regions inside the frame and regions sticking out of any side
+    (replicated border)."""
+    import cv2
+    from pfscope.trackers.dlpf import _hog_kernels as hk
+    img = _textured(seed=7, w=211, h=149)
+    img[::17] = 255                                             # sharp rows and columns
+    img[:, ::13] = 0
+    for k in (-4, -1, 0, 1, 3, 7):
+        a = 1.1 ** -k                                           # level scale 1.1**k
+        for tx0, ty0 in ((-23, -9), (5.5, 3.25), (150, 100), (-3, 120), (190, -40)):
+            size = (int(70 / a) + 2, int(90 / a) + 2)
+            tx, ty = (tx0 + 0.5) * a - 0.5, (ty0 + 0.5) * a - 0.5
+            M = np.array([[a, 0.0, tx], [0.0, a, ty]])
+            ref = cv2.warpAffine(img, M, size, flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
+                                 borderMode=cv2.BORDER_REPLICATE)
+            out = np.empty((size[1], size[0]), np.uint8)
+            hk.warp_region(img, a, tx, ty, out)
+            assert np.array_equal(out, ref), (k, tx0, ty0)

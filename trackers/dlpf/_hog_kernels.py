@@ -18,13 +18,15 @@ normalisation of each wanted block.  Same features as OpenCV's blocks up to floa
 ~1e-6, tests/test_dlpf.py) at ~0.55x OpenCV's CPU on the pyramid's regions of PETS09-S2L1
 (gradient included).  No ``fastmath``.
 
+:func:`warp_region` resamples a pyramid region from the frame with OpenCV's own fixed-point
+``warpAffine`` arithmetic (the same bytes, ~0.7x OpenCV's CPU on these separable maps);
 :func:`window_margins` (the linear SVM's margins summed from the blocks, no descriptor array)
 and :func:`region_layout` (the pyramid's regions and distinct blocks, integer work) are the
 classifier's bookkeeping.
 
 Compile: ~4.5 CPU s for :func:`region_blocks` on the first call after an install (one
 signature; numba's cache after that: loading it ~0.2 s), ~1.7–2 s for :func:`region_layout`,
-~0.7 s for :func:`window_margins` (each ~0.01 s from the cache once numba is loaded);
+~0.8 s for :func:`warp_region`, ~0.7 s for :func:`window_margins` (each ~0.01 s from the cache once numba is loaded);
 :func:`compile_kernels` makes those calls (``pip install -e .`` runs a DLPF frame loop, which
 compiles them too).
 """
@@ -218,10 +220,74 @@ def compile_kernels() -> None:
     img = np.zeros((CELL * 3 + 2, CELL * 3 + 2), dtype=np.uint8)
     region_blocks(img, 2, 2, 1, 1, np.zeros((1, 2), dtype=np.int64), block_weights(), 0.2,
                   np.zeros((1, 4 * NBINS), dtype=np.float32))
+    warp_region(img, 1.0, 0.0, 0.0, np.empty_like(img))
     one = np.zeros(1, dtype=np.int64)
     region_layout(one, one, one, 8, 16)
     window_margins(np.zeros((1, 4 * NBINS), dtype=np.float32), np.zeros((1, 105), np.int64),
                    np.zeros(105 * 4 * NBINS, dtype=np.float32), np.zeros(1, dtype=np.float32))
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def _round_even(v):
+    """``cvRound`` of a double: nearest integer, halves to even (as ``np.rint``)."""
+    r = math.floor(v)
+    d = v - r                                   # exact below 2**52
+    if d > 0.5 or (d == 0.5 and r - 2.0 * math.floor(r * 0.5) != 0.0):
+        r += 1.0
+    return np.int64(r)
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def warp_region(grey, a, tx, ty, img):
+    """``cv2.warpAffine(grey, [[a, 0, tx], [0, a, ty]], img's size, INTER_LINEAR |
+    WARP_INVERSE_MAP, BORDER_REPLICATE)`` into ``img``, with OpenCV's own fixed-point
+    arithmetic (source coordinates rounded to 1/32 px from 1/1024 steps, the 4 neighbours
+    weighted by (32 − f)·f products, +2^14 >> 15, each neighbour's coordinate clamped to the
+    image): the same bytes.  The map is separable (no rotation), so each source row's
+    horizontal blend serves every output row that reads it."""
+    Hs, Ws = grey.shape
+    H, W = img.shape
+    ix0 = np.empty(W, dtype=np.int64)
+    ix1 = np.empty(W, dtype=np.int64)
+    fx = np.empty(W, dtype=np.int32)
+    X0 = _round_even(tx * 1024.0) + 16
+    for x in range(W):
+        X = (X0 + _round_even(a * x * 1024.0)) >> 5
+        i0 = X >> 5
+        fx[x] = np.int32(X & 31)
+        i1 = i0 + 1
+        ix0[x] = 0 if i0 < 0 else (Ws - 1 if i0 > Ws - 1 else i0)
+        ix1[x] = 0 if i1 < 0 else (Ws - 1 if i1 > Ws - 1 else i1)
+    h0 = np.empty(W, dtype=np.int32)      # the horizontal blends of source rows s0, s0 + 1
+    h1 = np.empty(W, dtype=np.int32)
+    have0 = -1
+    have1 = -1
+    for y in range(H):
+        Y = (_round_even((a * y + ty) * 1024.0) + 16) >> 5
+        j0 = Y >> 5
+        fy = np.int32(Y & 31)
+        gy = np.int32(32) - fy
+        j1 = j0 + 1
+        j0 = 0 if j0 < 0 else (Hs - 1 if j0 > Hs - 1 else j0)
+        j1 = 0 if j1 < 0 else (Hs - 1 if j1 > Hs - 1 else j1)
+        if j0 != have0:
+            if j0 == have1:
+                for x in range(W):
+                    h0[x] = h1[x]
+            else:
+                r = grey[j0]
+                for x in range(W):
+                    h0[x] = np.int32(r[ix0[x]]) * (np.int32(32) - fx[x]) + np.int32(r[ix1[x]]) * fx[x]
+            have0 = j0
+        if j1 != have1:
+            r = grey[j1]
+            for x in range(W):
+                h1[x] = np.int32(r[ix0[x]]) * (np.int32(32) - fx[x]) + np.int32(r[ix1[x]]) * fx[x]
+            have1 = j1
+        out = img[y]
+        for x in range(W):
+            out[x] = np.uint8(((h0[x] * gy + h1[x] * fy) * np.int32(32) + np.int32(16384))
+                              >> np.int32(15))
 
 
 @njit(cache=True, nogil=True, error_model="numpy")

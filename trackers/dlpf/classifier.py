@@ -27,7 +27,8 @@ Cost (``mode``):
   rectangles overlap or share an edge, one pairwise test over the frame's distinct windows: the
   4-connected components of the union of their cells, without rasterising it); each region is
   resampled once from the frame
-  (``cv2.warpAffine``, level px ``u`` samples frame px ``(u + 0.5)/s − 0.5`` like
+  (``cv2.warpAffine``'s bytes, computed by :func:`._hog_kernels.warp_region` with OpenCV's
+  fixed-point arithmetic; level px ``u`` samples frame px ``(u + 0.5)/s − 0.5`` like
   ``cv2.resize``; replicated border; 1 px more on each side so that border gradients see their
   real neighbours) and its needed blocks are computed by one kernel call
   (:func:`._hog_kernels.region_blocks`: OpenCV's HOG blocks — gradient, 9 unsigned bins,
@@ -243,6 +244,7 @@ class HOGWindowClassifier:
         if len(w) == 0:
             return (np.empty((0, BLOCK_LEN), np.float32), np.zeros((0, nb), np.int64),
                     np.zeros(0, np.int64))
+        grey = np.ascontiguousarray(grey)
         k, cu, cv = self._levels(w)
         _, first, inv = np.unique(_pack(k, cu, cv), return_index=True,
                                   return_inverse=True)          # duplicates scored once
@@ -498,15 +500,18 @@ def _regions_blocks(grey: np.ndarray, jobs: list, blocks: np.ndarray,
     """For each job ``(sel, M, size, locs, gw, gh)``: the level region ``warpAffine(grey, M,
     size)`` (inverse map, bilinear, replicated border) and its blocks into ``blocks[sel]``:
     with ``hog`` OpenCV's blocks at px ``locs``; without, the kernel's
-    (:func:`._hog_kernels.region_blocks`: ``locs`` = (row of ``blocks``, place on the
-    region's ``gw`` x ``gh`` block grid))."""
+    (:func:`._hog_kernels.warp_region`: warpAffine's bytes by numba, then
+    :func:`._hog_kernels.region_blocks`; ``locs`` = (row of ``blocks``, place on the region's
+    ``gw`` x ``gh`` block grid))."""
     for sel, M, size, locs, gw, gh in jobs:
+        if hog is None:     # numba resamples the region (OpenCV's bytes, no OpenCV call)
+            region = np.empty((size[1], size[0]), dtype=np.uint8)
+            hk.warp_region(grey, M[0, 0], M[0, 2], M[1, 2], region)
+            hk.region_blocks(region, gw, gh, 1, 1, locs, _WEIGHTS, _L2HYS, blocks)
+            continue
         region = cv2.warpAffine(grey, M, size, flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
                                 borderMode=cv2.BORDER_REPLICATE)
-        if hog is not None:
-            blocks[sel] = hog.compute(region, (CELL, CELL), (0, 0), locs).reshape(-1, BLOCK_LEN)
-        else:
-            hk.region_blocks(region, gw, gh, 1, 1, locs, _WEIGHTS, _L2HYS, blocks)
+        blocks[sel] = hog.compute(region, (CELL, CELL), (0, 0), locs).reshape(-1, BLOCK_LEN)
 
 
 def _regions(k: np.ndarray, cu: np.ndarray, cv: np.ndarray, wx: int, wy: int
