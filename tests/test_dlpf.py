@@ -926,3 +926,53 @@ def test_shared_sum_blocks_equal_opencv_blocks_and_windows():
                      np.full(60, 70.0))
     assert np.abs(clf.score(img, w) - ocv.score(img, w)).max() < 1e-4
     assert np.abs(clf.score(img, w, exact=True) - ocv.score(img, w, exact=True)).max() < 1e-4
+
+
+def test_margins_from_the_blocks_equal_the_gathered_descriptors_margins():
+    """The pyramid's linear margins are summed straight from the distinct blocks
+    (window_margins, no (N, 3780) descriptor array) in numpy's einsum order: the same floats
+    as decision() of the gathered descriptors, so the tracks do not change."""
+    import platform
+    from pfscope.trackers.dlpf import _hog_kernels as hk
+    clf = HOGWindowClassifier()
+    rng = np.random.default_rng(3)
+    blocks = (rng.random((400, 36)) ** 3 * 0.3).astype(np.float32)
+    for n in (1, 2, 7, 260):
+        binv = rng.integers(0, 400, (n, 105))
+        ref = np.einsum("ij,j->i", blocks[binv].reshape(n, -1), clf.weights)
+        out = np.empty(n, np.float32)
+        hk.window_margins(blocks, binv, clf.weights, out)
+        assert np.abs(out - ref).max() < 1e-5
+        if platform.machine() in ("x86_64", "AMD64"):     # numpy's SSE einsum loop
+            assert np.array_equal(out, ref)
+    img = _textured(seed=4)
+    w = window_boxes(rng.uniform([30, 30], [370, 270], (150, 2)),
+                     np.exp(rng.uniform(np.log(30), np.log(120), 150)))
+    m = clf.score(img, w)
+    ref = clf.decision(clf.descriptors(img, w))
+    assert np.abs(m - ref).max() < 1e-5
+    if platform.machine() in ("x86_64", "AMD64"):
+        assert np.array_equal(m, ref)
+
+
+def test_kernel_resampling_is_opencvs_warpaffine_byte_for_byte():
+    """The HOG kernel resamples each pyramid region itself with OpenCV's fixed-point
+    warpAffine arithmetic (no OpenCV call): the same bytes as cv2.warpAffine for up- and
+    down-scaling levels, regions inside the frame and regions sticking out of any side
+    (replicated border)."""
+    import cv2
+    from pfscope.trackers.dlpf import _hog_kernels as hk
+    img = _textured(seed=7, w=211, h=149)
+    img[::17] = 255                                             # sharp rows and columns
+    img[:, ::13] = 0
+    for k in (-4, -1, 0, 1, 3, 7):
+        a = 1.1 ** -k                                           # level scale 1.1**k
+        for tx0, ty0 in ((-23, -9), (5.5, 3.25), (150, 100), (-3, 120), (190, -40)):
+            size = (int(70 / a) + 2, int(90 / a) + 2)
+            tx, ty = (tx0 + 0.5) * a - 0.5, (ty0 + 0.5) * a - 0.5
+            M = np.array([[a, 0.0, tx], [0.0, a, ty]])
+            ref = cv2.warpAffine(img, M, size, flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
+                                 borderMode=cv2.BORDER_REPLICATE)
+            out = np.empty((size[1], size[0]), np.uint8)
+            hk.warp_region(img, a, tx, ty, out)
+            assert np.array_equal(out, ref), (k, tx0, ty0)

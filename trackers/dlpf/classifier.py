@@ -27,14 +27,18 @@ Cost (``mode``):
   rectangles overlap or share an edge, one pairwise test over the frame's distinct windows: the
   4-connected components of the union of their cells, without rasterising it); each region is
   resampled once from the frame
-  (``cv2.warpAffine``, level px ``u`` samples frame px ``(u + 0.5)/s − 0.5`` like
+  (``cv2.warpAffine``'s bytes, computed by :func:`._hog_kernels.warp_region` with OpenCV's
+  fixed-point arithmetic; level px ``u`` samples frame px ``(u + 0.5)/s − 0.5`` like
   ``cv2.resize``; replicated border; 1 px more on each side so that border gradients see their
   real neighbours) and its needed blocks are computed by one kernel call
   (:func:`._hog_kernels.region_blocks`: OpenCV's HOG blocks — gradient, 9 unsigned bins,
   Gaussian block weight, bilinear cell split, L2-Hys, gamma — from sums shared by the
   overlapping blocks: the block weights are separable, so each region row's horizontal sums
-  serve every block of its block column); a window's descriptor is then a gather of its 7×15
-  blocks in OpenCV's order (x outer).  At integer level offsets this equals OpenCV's
+  serve every block of its block column); a window's descriptor is its 7×15 blocks in
+  OpenCV's order (x outer), and the linear SVM's margin is summed straight from the blocks
+  (:func:`._hog_kernels.window_margins`, in numpy's einsum order: the same floats as the
+  gathered descriptors' ``D·w``) — no (N, 3780) array.  The regions, their rectangles and the
+  distinct blocks come from one integer kernel (:func:`._hog_kernels.region_layout`).  At integer level offsets this equals OpenCV's
   descriptor of the window on the level image up to float rounding (~1e-6); elsewhere up to
   warpAffine's 1/32-px coordinate rounding (tests/test_dlpf.py).  ``opencv_blocks=True``
   computes the blocks with OpenCV's ``HOGDescriptor.compute`` (``locations``, one block at a
@@ -212,55 +216,57 @@ class HOGWindowClassifier:
 
     def _pyramid_descriptors(self, grey: np.ndarray, w: np.ndarray,
                              drain: Optional["_Drain"] = None) -> tuple[np.ndarray, np.ndarray]:
+        blocks, binv, inv = self._pyramid_blocks(grey, w, drain)
+        return blocks[binv].reshape(len(binv), -1), inv
+
+    def _pyramid_margins(self, grey: np.ndarray, w: np.ndarray,
+                         drain: Optional["_Drain"] = None) -> tuple[np.ndarray, np.ndarray]:
+        """SVM margins of the distinct snapped windows and each window's index among them.
+        The linear SVM's margins come from the blocks directly (:func:`._hog_kernels.
+        window_margins`: the same floats as :meth:`decision` of the gathered descriptors);
+        another ``decision`` (the IKSVM's) gets the descriptors."""
+        blocks, binv, inv = self._pyramid_blocks(grey, w, drain)
+        if type(self).decision is not HOGWindowClassifier.decision:
+            return self.decision(blocks[binv].reshape(len(binv), -1)), inv
+        m = np.empty(len(binv), dtype=np.float32)
+        if len(binv):
+            hk.window_margins(blocks, binv, self.weights, m)
+        return m.astype(np.float64) + self.bias, inv
+
+    def _pyramid_blocks(self, grey: np.ndarray, w: np.ndarray,
+                        drain: Optional["_Drain"] = None
+                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The distinct HOG blocks (M, 36) of the snapped windows, each distinct window's 105
+        blocks as rows of them (n, 105) in OpenCV's descriptor order, and each window's index
+        among the distinct windows."""
+        wx, wy = WIN_W // CELL, WIN_H // CELL            # window: 8 x 16 cells, 7 x 15 blocks
+        nb = (wx - 1) * (wy - 1)
         if len(w) == 0:
-            return np.empty((0, self.hog.getDescriptorSize()), np.float32), np.zeros(0, np.int64)
+            return (np.empty((0, BLOCK_LEN), np.float32), np.zeros((0, nb), np.int64),
+                    np.zeros(0, np.int64))
+        grey = np.ascontiguousarray(grey)
         k, cu, cv = self._levels(w)
         _, first, inv = np.unique(_pack(k, cu, cv), return_index=True,
                                   return_inverse=True)          # duplicates scored once
         k, cu, cv = k[first], cu[first], cv[first]
         inv = inv.reshape(-1)
-        n = len(k)
-        wx, wy = WIN_W // CELL, WIN_H // CELL            # window: 8 x 16 cells, 7 x 15 blocks
-        nb = (wx - 1) * (wy - 1)
         # each connected group of touching windows of one level is one region of the level
         # image, resampled once; each block of it that some window uses is computed once
-        nreg, reg = _regions(k, cu, cv, wx, wy)
-        big = np.iinfo(np.int64).max
-        x0, y0 = np.full(nreg, big), np.full(nreg, big)
-        x1, y1 = np.full(nreg, -big), np.full(nreg, -big)
-        np.minimum.at(x0, reg, cu)
-        np.minimum.at(y0, reg, cv)
-        np.maximum.at(x1, reg, cu + wx)
-        np.maximum.at(y1, reg, cv + wy)
-        rlev = np.empty(nreg, dtype=np.int64)
-        rlev[reg] = k
-        # every block of every window, in OpenCV's order (x outer, y inner), as its place on
-        # its region's block grid (regions one after the other): a block two windows share
-        # has one place (they are in one region), so marking the places used gives the
-        # distinct blocks, grouped by region, without sorting
+        # (hk.region_layout: the regions, their cell rectangles, the distinct blocks grouped
+        # by region and each window's blocks among them)
+        _, x0, y0, x1, y1, rlev, binv, local, cuts = hk.region_layout(k, cu, cv, wx, wy)
+        nreg = len(x0)
         gw, gh = x1 - x0 - 1, y1 - y0 - 1
-        off = np.concatenate([[0], np.cumsum(gw * gh)])
-        bu = cu[:, None] - x0[reg][:, None] + np.repeat(np.arange(wx - 1), wy - 1)[None]
-        bv = cv[:, None] - y0[reg][:, None] + np.tile(np.arange(wy - 1), wx - 1)[None]
-        place = (off[reg][:, None] + bv * gw[reg][:, None] + bu).ravel()
-        used = np.zeros(int(off[-1]), dtype=bool)
-        used[place] = True
-        ids = np.flatnonzero(used)
-        index = np.empty(len(used), dtype=np.int64)
-        index[ids] = np.arange(len(ids))
-        binv = index[place]
-        breg = np.searchsorted(off, ids, side="right") - 1
-        cuts = np.searchsorted(breg, np.arange(nreg + 1))
-        local = ids - off[breg]
-        blocks = np.empty((len(ids), BLOCK_LEN), dtype=np.float32)
+        blocks = np.empty((len(local), BLOCK_LEN), dtype=np.float32)
         # each block's top-left px in its region (1 px more on each side of a region so that
         # its border gradients see their real neighbours)
         if self.opencv_blocks:
-            locs = np.empty((len(ids), 2), dtype=np.int32)
-            locs[:, 0] = 1 + CELL * (local % gw[breg])
-            locs[:, 1] = 1 + CELL * (local // gw[breg])
+            bgw = np.repeat(gw, np.diff(cuts))
+            locs = np.empty((len(local), 2), dtype=np.int32)
+            locs[:, 0] = 1 + CELL * (local % bgw)
+            locs[:, 1] = 1 + CELL * (local // bgw)
         else:   # the kernel's (row of blocks, place on the region's block grid)
-            locs = np.stack([np.arange(len(ids)), local], axis=1)
+            locs = np.stack([np.arange(len(local)), local], axis=1)
         # level px (a, b) samples frame px ((a + 0.5)/s - 0.5, ...)
         inv_s = self.scale_step ** -rlev.astype(np.float64)
         tx = ((x0 * CELL - 1) + 0.5) * inv_s - 0.5
@@ -276,7 +282,7 @@ class HOGWindowClassifier:
             drain.start(grey, jobs, blocks)
             drain.run(self._block_hog(0))
             drain.wait()
-        return blocks[binv.reshape(n, nb)].reshape(n, -1), inv
+        return blocks, binv, inv
 
     def _run_regions(self, grey: np.ndarray, jobs: list, blocks: np.ndarray) -> None:
         """Resample each region and compute its blocks into ``blocks[sel]``; with ``threads``
@@ -373,9 +379,11 @@ class HOGWindowClassifier:
         """SVM margins (N,) float64 of ``windows`` (N, 4) on the grey frame (the windows of
         :meth:`snap` in ``"pyramid"`` mode; ``exact``: the windows as given, each resampled to
         64×128 on its own, whatever the mode)."""
-        d, inv = self._descriptors(grey, windows, exact)
-        m = self.decision(d)
-        return m if inv is None else m[inv]
+        w = np.asarray(windows, dtype=np.float64).reshape(-1, 4)
+        if self.mode == "pyramid" and not exact:
+            m, inv = self._pyramid_margins(grey, w)
+            return m[inv]
+        return self.decision(self._window_descriptors(grey, w))
 
     def score_with_exact(self, grey: np.ndarray, windows: np.ndarray,
                          exact_windows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -405,11 +413,11 @@ class HOGWindowClassifier:
 
         head = pool.submit(worker)
         try:
-            d, inv = self._pyramid_descriptors(grey, w, drain)
+            m, inv = self._pyramid_margins(grey, w, drain)
         finally:
             drain.ready.set()                   # never leave the worker waiting
         vd = head.result()
-        return self.decision(d)[inv], self.decision(vd)
+        return m[inv], self.decision(vd)
 
     def describe(self) -> str:
         return "opencv-default-people-svm"
@@ -492,15 +500,18 @@ def _regions_blocks(grey: np.ndarray, jobs: list, blocks: np.ndarray,
     """For each job ``(sel, M, size, locs, gw, gh)``: the level region ``warpAffine(grey, M,
     size)`` (inverse map, bilinear, replicated border) and its blocks into ``blocks[sel]``:
     with ``hog`` OpenCV's blocks at px ``locs``; without, the kernel's
-    (:func:`._hog_kernels.region_blocks`: ``locs`` = (row of ``blocks``, place on the
-    region's ``gw`` x ``gh`` block grid))."""
+    (:func:`._hog_kernels.warp_region`: warpAffine's bytes by numba, then
+    :func:`._hog_kernels.region_blocks`; ``locs`` = (row of ``blocks``, place on the region's
+    ``gw`` x ``gh`` block grid))."""
     for sel, M, size, locs, gw, gh in jobs:
+        if hog is None:     # numba resamples the region (OpenCV's bytes, no OpenCV call)
+            region = np.empty((size[1], size[0]), dtype=np.uint8)
+            hk.warp_region(grey, M[0, 0], M[0, 2], M[1, 2], region)
+            hk.region_blocks(region, gw, gh, 1, 1, locs, _WEIGHTS, _L2HYS, blocks)
+            continue
         region = cv2.warpAffine(grey, M, size, flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
                                 borderMode=cv2.BORDER_REPLICATE)
-        if hog is not None:
-            blocks[sel] = hog.compute(region, (CELL, CELL), (0, 0), locs).reshape(-1, BLOCK_LEN)
-        else:
-            hk.region_blocks(region, gw, gh, 1, 1, locs, _WEIGHTS, _L2HYS, blocks)
+        blocks[sel] = hog.compute(region, (CELL, CELL), (0, 0), locs).reshape(-1, BLOCK_LEN)
 
 
 def _regions(k: np.ndarray, cu: np.ndarray, cv: np.ndarray, wx: int, wy: int
@@ -508,25 +519,14 @@ def _regions(k: np.ndarray, cu: np.ndarray, cv: np.ndarray, wx: int, wy: int
     """Connected groups of windows (``wx`` x ``wy`` cells at ``(cu, cv)`` on level ``k``): two
     windows of one level are in a group when their cell rectangles overlap or share an edge
     (the 4-connected components of the union of their cells).  Returns (groups, label per
-    window, 0..groups-1 in order of each group's first window): a pairwise test over the few
-    hundred distinct windows of a frame, then each window takes the smallest index among its
-    neighbours until nothing changes (as many rounds as the longest chain of windows)."""
-    n = len(k)
-    if n == 0:
+    window, 0..groups-1 in order of each group's first window); from
+    :func:`._hog_kernels.region_layout` (a pairwise test over the few hundred distinct windows
+    of a frame, union-find)."""
+    if len(k) == 0:
         return 0, np.zeros(0, dtype=np.int64)
-    du = np.abs(cu[:, None] - cu[None])
-    dv = np.abs(cv[:, None] - cv[None])
-    touch = (k[:, None] == k[None]) & (du <= wx) & (dv <= wy) & ~((du == wx) & (dv == wy))
-    lab = np.arange(n)
-    big = np.full((n, n), n)
-    while True:
-        new = np.where(touch, lab[None], big).min(axis=1)
-        new = new[new]                                   # jump along the chain too
-        if np.array_equal(new, lab):
-            break
-        lab = new
-    roots, labels = np.unique(lab, return_inverse=True)
-    return len(roots), labels.reshape(-1).astype(np.int64)
+    reg, x0 = hk.region_layout(*(np.asarray(a, dtype=np.int64) for a in (k, cu, cv)),
+                               wx, wy)[:2]
+    return len(x0), reg
 
 
 def sliding_window_count(width: int, height: int, *, win_stride=(8, 8), padding=(8, 8),
