@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import cached_property
-from typing import Optional
+from typing import Callable, Optional
 
 import numpy as np
 
@@ -190,3 +190,38 @@ class ParticleSet:
         return ParticleSet(self.states[index], self.log_weights[index],
                            None if self.labels is None else self.labels[index],
                            None if self.extra is None else self.extra[index])
+
+
+class LazyParticleSet(ParticleSet):
+    """A :class:`ParticleSet` whose log-weights are made by ``make()`` on their first read.
+
+    The PHD update's kernel sums the new weights in linear space (their mass and normalised
+    weights: :meth:`~ParticleSet.known_log_mass`, :meth:`~ParticleSet.known_normalised`), and
+    in a run nothing else reads the updated set's log-weights (particle-level stage data
+    does): a log a particle saved.  Otherwise a :class:`ParticleSet` (``make`` must give the
+    (N,) float64 log-weights of ``states``' N rows, the same every call)."""
+
+    def __init__(self, states: np.ndarray, make: Callable[[], np.ndarray],
+                 labels: Optional[np.ndarray] = None, extra: Optional[np.ndarray] = None):
+        s = np.asarray(states, dtype=np.float64)
+        if s.ndim != 2:
+            raise ValueError(f"ParticleSet.states: expected shape (N, D), got {s.shape}")
+        if labels is not None or extra is not None:     # checked as a ParticleSet checks them
+            checked = ParticleSet(s, np.zeros(len(s)), labels, extra)
+            labels, extra = checked.labels, checked.extra
+        d = self.__dict__
+        d["states"], d["labels"], d["extra"], d["_make"] = s, labels, extra, make
+
+    @property
+    def log_weights(self) -> np.ndarray:               # type: ignore[override]
+        lw = self.__dict__.get("_log_weights")
+        if lw is None:
+            lw = np.asarray(self._make(), dtype=np.float64).reshape(-1)
+            if len(lw) != len(self.states):
+                raise ValueError(f"ParticleSet: {len(self.states)} states but {len(lw)} "
+                                 f"log-weights")
+            self.__dict__["_log_weights"] = lw
+        return lw
+
+    def __len__(self) -> int:
+        return int(self.states.shape[0])
