@@ -228,6 +228,33 @@ def test_lazy_particle_set_makes_its_log_weights_once_and_only_when_read():
         _ = LazyParticleSet(x, lambda: lw[:7]).log_weights
 
 
+def test_weights_of_equal_log_weights_are_numpys_exps():
+    """The equal-weight shortcut of ParticleSet.weights (one exp) gives np.exp's floats;
+    resampling and a PHD prediction of its output record the equality, a set with one weight
+    off takes the full pass."""
+    rng = np.random.default_rng(5)
+    for t in range(2000):
+        n = int(rng.integers(1, 5000))
+        v = float(rng.choice([rng.normal(-9, 5), rng.uniform(-745, 700), -np.inf]))
+        lw = np.full(n, v)
+        if t % 3 == 0:
+            lw[rng.integers(0, n)] = rng.choice([np.nextafter(v, np.inf), np.nan, v - 1])
+        ps = ParticleSet(np.zeros((n, 2)), lw)
+        w = ps.weights
+        np.testing.assert_array_equal(w, np.exp(lw))
+        assert not w.flags.writeable
+        assert ps.__dict__["_equal"] == bool(np.all(lw == lw[0]))
+    out = resample(ParticleSet(rng.normal(size=(300, 6)), rng.normal(size=300)), 200, rng)
+    assert out.__dict__["_equal"]
+    np.testing.assert_array_equal(out.weights, np.exp(out.log_weights))
+    from pfscope.trackers.phd.filter import MotionParams, predict
+    pred = predict(out, MotionParams(), rng)
+    assert pred.__dict__["_equal"] and pred.log_weights.min() == pred.log_weights.max()
+    np.testing.assert_array_equal(pred.weights, np.exp(pred.log_weights))
+    assert not predict(ParticleSet(out.states, rng.normal(size=200)), MotionParams(),
+                       rng).__dict__.get("_equal")
+
+
 def test_log_mass_of_equal_weights_is_logsumexps_float():
     """The equal-weight shortcut of ParticleSet.log_mass (resampled sets and their prediction)
     gives logsumexp's very float; a set with one weight off, -inf or NaN takes the full pass."""

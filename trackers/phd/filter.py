@@ -807,7 +807,10 @@ def predict(ps: ParticleSet, mp: MotionParams, rng: np.random.Generator,
                               out=S)
     log_e = math.log(mp.p_survival) if mp.p_survival > 0 else -np.inf
     lw = np.add(ps.log_weights, log_e, out=L[:n])
-    return ParticleSet(states, lw, ps.labels, ps.extra)
+    out = ParticleSet(states, lw, ps.labels, ps.extra)
+    if ps.__dict__.get("_equal"):       # equal weights times e: equal (ParticleSet.weights)
+        out.known_equal()
+    return out
 
 
 @dataclass(frozen=True)

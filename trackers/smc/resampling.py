@@ -151,7 +151,9 @@ def resample(ps: ParticleSet, n: int, rng: np.random.Generator,
         w, scale = known or (_NO_WEIGHTS, 0.0)
         idx, states = _systematic_take(ps.states, _NO_WEIGHTS if known else ps.log_weights,
                                        ps.log_mass, float(rng.random()), n, w, scale)
-        return ParticleSet(states, lw, None if ps.labels is None else ps.labels[idx],
-                           None if ps.extra is None else ps.extra[idx])
+        out = ParticleSet(states, lw, None if ps.labels is None else ps.labels[idx],
+                          None if ps.extra is None else ps.extra[idx])
+        out.known_equal()                                   # (np.full)
+        return out
     idx = resample_indices(ps.log_weights, n, rng, scheme)
     return ps.take(idx).with_log_weights(lw)

@@ -122,9 +122,21 @@ class ParticleSet:
         resampling made, and its prediction) take a shortcut with logsumexp's very floats:
         ``exp(a − max) = 1`` each, their sum ``n`` exactly, so the value is ``log n + a``."""
         lw = self.log_weights
-        if len(lw) and np.isfinite(lw[0]) and lw.min() == lw.max():
+        if self._equal and np.isfinite(lw[0]):
             return float((np.log(np.array([float(len(lw))])) + lw[:1])[0])
         return float(logsumexp(lw))
+
+    @cached_property
+    def _equal(self) -> bool:
+        """Every log-weight the same (not NaN), and at least one."""
+        lw = self.log_weights
+        return bool(len(lw) and lw[0] == lw[-1] and lw.min() == lw.max())
+
+    def known_equal(self) -> None:
+        """Record that every log-weight is the same finite-or-inf value, when the maker
+        knows it (systematic resampling's ``np.full``, and a prediction of such a set):
+        :attr:`weights` and :attr:`log_mass` then skip their min / max pass."""
+        self.__dict__["_equal"] = bool(len(self))
 
     def known_log_mass(self, log_mass: float) -> None:
         """Record ``log_mass`` when the code that made the weights already summed them (the
@@ -151,8 +163,15 @@ class ParticleSet:
     @cached_property
     def weights(self) -> np.ndarray:
         """Linear (unnormalised) weights, (N,), computed once (read-only: callers share it;
-        the PHD filter's M(z) and its clutter model both read the predicted set's)."""
-        w = np.exp(self.log_weights)
+        the PHD filter's M(z) and its clutter model both read the predicted set's).  Equal
+        log-weights (a resampled set and its prediction) take one exp: numpy's exp gives an
+        element the same float alone or in an array."""
+        lw = self.log_weights
+        if self._equal:
+            w = np.full(len(lw), np.exp(lw[:1])[0])
+            w.setflags(write=False)
+            return w
+        w = np.exp(lw)
         w.setflags(write=False)
         return w
 
