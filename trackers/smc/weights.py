@@ -61,7 +61,7 @@ def ess(log_w: np.ndarray) -> float:
     return float(np.exp(-logsumexp(2.0 * lw)))
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, init=False)
 class ParticleSet:
     """Weighted particles, structure-of-arrays, of any state dimension D.
 
@@ -81,15 +81,29 @@ class ParticleSet:
     labels: Optional[np.ndarray] = None
     extra: Optional[np.ndarray] = None
 
+    def __init__(self, states: np.ndarray, log_weights: np.ndarray,
+                 labels: Optional[np.ndarray] = None, extra: Optional[np.ndarray] = None):
+        # the dataclass's frozen __init__ (object.__setattr__ a field) written into the
+        # instance dict directly: a filter makes several sets a frame, and the generated
+        # one cost ~5x a plain class's
+        d = self.__dict__
+        d["states"], d["log_weights"], d["labels"], d["extra"] = (states, log_weights, labels,
+                                                                  extra)
+        self.__post_init__()
+
     def __post_init__(self):
-        s = np.asarray(self.states, dtype=np.float64)
-        lw = np.asarray(self.log_weights, dtype=np.float64).reshape(-1)
-        if s.ndim != 2:
-            raise ValueError(f"ParticleSet.states: expected shape (N, D), got {s.shape}")
+        s, lw = self.states, self.log_weights
+        if not (type(s) is np.ndarray and s.dtype == np.float64 and s.ndim == 2
+                and type(lw) is np.ndarray and lw.dtype == np.float64 and lw.ndim == 1):
+            # (the filters hand float64 arrays of the right rank: nothing to convert)
+            s = np.asarray(s, dtype=np.float64)
+            lw = np.asarray(lw, dtype=np.float64).reshape(-1)
+            if s.ndim != 2:
+                raise ValueError(f"ParticleSet.states: expected shape (N, D), got {s.shape}")
+            object.__setattr__(self, "states", s)
+            object.__setattr__(self, "log_weights", lw)
         if len(lw) != len(s):
             raise ValueError(f"ParticleSet: {len(s)} states but {len(lw)} log-weights")
-        object.__setattr__(self, "states", s)
-        object.__setattr__(self, "log_weights", lw)
         if self.labels is not None:
             lab = np.asarray(self.labels, dtype=np.int64).reshape(-1)
             if len(lab) != len(s):
