@@ -408,16 +408,27 @@ def gauss_update_linear(states, lw, Z, std, log_norm, log_kappa, log_pd, log_pm,
                     continue
                 p0 = b_end[z]
                 p1 = b_end[z + 1]
-            for p in range(p0, p1):
-                i = order[p] if seg < n_col else p
-                d2 = _gate_d2_inv(states, i, Z, j, inv, j, r2)
-                if not d2 <= r2:
-                    continue
-                buf_i[nb] = i
-                g = math.exp(-0.5 * d2)
-                buf_v[nb] = g
-                s += g * e[i]
-                nb += 1
+            # the gate test alone first (its d² kept), then the exps and C(z)'s sum over
+            # the kept pairs in the same order: the same floats, and tight loops (-20 %)
+            if seg < n_col:
+                for p in range(p0, p1):
+                    i = order[p]
+                    d2 = _gate_d2_inv(states, i, Z, j, inv, j, r2)
+                    if d2 <= r2:
+                        buf_i[nb] = i
+                        buf_v[nb] = d2
+                        nb += 1
+            else:
+                for p in range(p0, p1):
+                    d2 = _gate_d2_inv(states, p, Z, j, inv, j, r2)
+                    if d2 <= r2:
+                        buf_i[nb] = p
+                        buf_v[nb] = d2
+                        nb += 1
+        for q in range(nb):
+            g = math.exp(-0.5 * buf_v[q])
+            buf_v[q] = g
+            s += g * e[buf_i[q]]
         if not (s > 0.0 and log_pd > -np.inf):
             continue                      # C = 0: ψ = 0 on every pair of z
         log_scale = log_pd - log_norm[j] - _HALF_LOG_2PI_4    # log ψ = log_scale − d²/2
