@@ -9,6 +9,7 @@ from pfscope.trackers.phd import _kmeans_kernels as KM
 from pfscope.trackers.phd.filter import (
     GatedGaussian,
     LikelihoodParams,
+    PHDFilter,
     PHDParams,
     log_likelihood,
     mass_near,
@@ -209,6 +210,42 @@ def test_gauss_update_equals_the_dense_eq5_on_the_gate(source, p_miss, kappa, sp
                                    rtol=1e-10, atol=1e-300)
     if p_miss < 1:
         assert np.count_nonzero(got.c_z > 0) >= 20     # the detections did win mass
+
+
+@pytest.mark.parametrize("p_miss", [0.0, 0.05, 1.0])
+def test_updated_log_weights_made_on_read_are_the_kernels(p_miss):
+    """The update's log-weights are made from the linear kernel's bracket only when read
+    (numpy, :func:`K.bracket_log_weights`): bit for bit those of the kernel route
+    (:func:`K.gauss_update`, which makes them inside numba), and not made by a filter step."""
+    rng = np.random.default_rng(int(p_miss * 100))
+    x = _states(rng, 1500, far=15)
+    Z = _dets_near(rng, x, 25)
+    lw = rng.normal(-7, 2, 1500)
+    lw[:20] = -np.inf
+    lw[300:900] = lw[300]
+    log_kappa = rng.normal(-14, 1, 25)
+    log_kappa[::4] = -np.inf
+    r2 = tail_radius2(1e-12)
+    lk = LikelihoodParams()
+    got = update(ParticleSet(x, lw), GatedGaussian(Z, lk, r2), log_kappa, p_miss)
+    assert "_log_weights" not in got.particles.__dict__ and len(got.particles) == 1500
+    std = obs_std(Z[:, 2:4], lk)
+    log_pm = np.log(p_miss) if p_miss > 0 else -np.inf
+    log_pd = np.log1p(-p_miss) if p_miss < 1 else -np.inf
+    cell = 2 * np.sqrt(r2) * np.median(std[:, :2], axis=0)
+    ok, want, *_ = K.gauss_update(x, lw, Z, std, np.log(std).sum(-1), True, log_kappa, log_pd,
+                                  log_pm, r2, cell[0], cell[1])
+    assert ok
+    np.testing.assert_array_equal(got.particles.log_weights, want)
+    if p_miss > 0:      # every kind of particle: dead, missed by every gate, reached
+        assert np.isneginf(want).sum() == 20 and np.sum(want == lw + np.log(p_miss)) > 100
+        assert np.sum(want > lw + np.log(p_miss)) > (100 if p_miss < 1 else -1)
+    f = PHDFilter(rng=np.random.default_rng(0))
+    for _ in range(3):
+        r = f.step(Z)
+    assert "_log_weights" not in r.updated.particles.__dict__       # a step reads none
+    np.testing.assert_array_equal(np.exp(r.updated.particles.log_weights),
+                                  r.updated.particles.weights)
 
 
 @pytest.mark.parametrize("seed", [0, 1])

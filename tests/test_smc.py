@@ -7,6 +7,7 @@ import pytest
 from pfscope.trackers.phd.motion import propagate
 from pfscope.trackers.smc import (SCHEMES, ParticleSet, ess, logsumexp, normalise, resample,
                                   resample_indices)
+from pfscope.trackers.smc.weights import LazyParticleSet
 
 # ----------------------------------------------------------------------------- weights
 
@@ -196,6 +197,62 @@ def test_systematic_resampling_walks_the_known_normalised_weights():
     skewed.known_normalised(one, 0.2)                  # every ancestor is particle 17
     out = resample(skewed, 40, np.random.default_rng(9))
     np.testing.assert_array_equal(out.states, np.repeat(ps.states[17:18], 40, 0))
+
+
+def test_lazy_particle_set_makes_its_log_weights_once_and_only_when_read():
+    rng = np.random.default_rng(2)
+    x, lw = rng.normal(size=(500, 6)), rng.normal(-5, 1, 500)
+    calls = []
+
+    def make():
+        calls.append(1)
+        return lw.copy()
+
+    lazy = LazyParticleSet(x, make, labels=np.arange(500))
+    assert len(lazy) == 500 and lazy.dim == 6 and not calls
+    w = np.exp(lw - lw.max())
+    lazy.known_normalised(w, 1.0 / w.sum())
+    lazy.known_log_mass(float(logsumexp(lw)))
+    out = resample(lazy, 400, np.random.default_rng(9))  # walks the recorded weights
+    assert not calls
+    plain = resample(ParticleSet(x, lw, np.arange(500)), 400, np.random.default_rng(9))
+    np.testing.assert_array_equal(out.states, plain.states)
+    np.testing.assert_array_equal(out.labels, plain.labels)
+    np.testing.assert_array_equal(lazy.log_weights, lw)
+    np.testing.assert_array_equal(lazy.weights, np.exp(lw))
+    np.testing.assert_array_equal(lazy.take(np.arange(3)).log_weights, lw[:3])
+    assert len(calls) == 1
+    with pytest.raises(ValueError, match="labels"):
+        LazyParticleSet(x, make, labels=np.arange(3))
+    with pytest.raises(ValueError, match="log-weights"):
+        _ = LazyParticleSet(x, lambda: lw[:7]).log_weights
+
+
+def test_weights_of_equal_log_weights_are_numpys_exps():
+    """The equal-weight shortcut of ParticleSet.weights (one exp) gives np.exp's floats;
+    resampling and a PHD prediction of its output record the equality, a set with one weight
+    off takes the full pass."""
+    rng = np.random.default_rng(5)
+    for t in range(2000):
+        n = int(rng.integers(1, 5000))
+        v = float(rng.choice([rng.normal(-9, 5), rng.uniform(-745, 700), -np.inf]))
+        lw = np.full(n, v)
+        if t % 3 == 0:
+            lw[rng.integers(0, n)] = rng.choice([np.nextafter(v, np.inf), np.nan, v - 1])
+        ps = ParticleSet(np.zeros((n, 2)), lw)
+        w = ps.weights
+        np.testing.assert_array_equal(w, np.exp(lw))
+        assert not w.flags.writeable
+        assert ps.__dict__["_equal"] == bool(np.all(lw == lw[0]))
+    out = resample(ParticleSet(rng.normal(size=(300, 6)), rng.normal(size=300)), 200, rng)
+    assert out.__dict__["_equal"]
+    np.testing.assert_array_equal(out.weights, np.exp(out.log_weights))
+    from pfscope.trackers.phd.filter import MotionParams, predict
+    pred = predict(out, MotionParams(), rng)
+    assert pred.__dict__["_equal"] and pred.log_weights.min() == pred.log_weights.max()
+    np.testing.assert_array_equal(pred.weights, np.exp(pred.log_weights))
+    assert not predict(ParticleSet(out.states, rng.normal(size=200)), MotionParams(),
+                       rng).__dict__.get("_equal")
 
 
 def test_log_mass_of_equal_weights_is_logsumexps_float():

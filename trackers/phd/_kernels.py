@@ -304,10 +304,12 @@ _LIN_RANGE = 600.0
 def gauss_update_linear(states, lw, Z, std, log_norm, log_kappa, log_pd, log_pm, r2,
                         cell_x, cell_y, n_grid, grid, j_born):
     """:func:`gauss_update`'s linear route alone (per-detection stds), the same floats:
-    ``(ok, done, new_lw, log_c, log_mass, log_pred, lin, scale)``, ``lin · scale`` (N,) the
-    normalised weights ``e^{new_lw − log_mass}`` as the update's sums made them (for the
-    resampling walk: no exp a particle there); ``done`` False when the weights span
-    more than e^600 (nothing computed: call :func:`gauss_update`).  A run whose weights never
+    ``(ok, done, bracket, log_c, log_mass, log_pred, lin, scale)``, ``bracket`` (N,) each
+    particle's ``p_M + Σ_z ψ_z/(κ_z + C_z)`` (:func:`bracket_log_weights` makes the new
+    log-weights of it, only when someone reads them: a run reads the mass and ``lin``),
+    ``lin · scale`` (N,) the normalised weights ``e^{new_lw − log_mass}`` as the update's sums
+    made them (for the resampling walk: no exp a particle there); ``done`` False when the
+    weights span more than e^600 (nothing computed: call :func:`gauss_update`).  A run whose weights never
     spread that wide compiles this kernel only, not the log-space route (first-run compile).
 
     A detection's gated pairs come from two kinds of rows: the first ``n_grid`` through
@@ -332,14 +334,13 @@ def gauss_update_linear(states, lw, Z, std, log_norm, log_kappa, log_pd, log_pm,
             low = v if v < low else low
     if not (top > -np.inf and top - low <= _LIN_RANGE and top < np.inf):
         return True, False, lw, log_c, -np.inf, -np.inf, lw, 0.0
-    new_lw = np.empty(n, np.float64)     # every entry written below
     x0, y0, cx, cy, ni, nj, order, starts = grid
     if order.shape[0] != n_grid:
         ok, x0, y0, cx, cy, ni, nj, order, starts = grid_build(states[:n_grid, 0],
                                                                states[:n_grid, 1],
                                                                cell_x, cell_y)
         if not ok:
-            return False, True, new_lw, log_c, -np.inf, -np.inf, lw, 0.0
+            return False, True, lw, log_c, -np.inf, -np.inf, lw, 0.0
     # the blocks' bounding boxes (y1 lo, hi, y2 lo, hi): an empty block's never meets a gate
     n_blk = j_born.shape[0]
     b_end = np.empty(n_blk + 1, np.int64)
@@ -355,7 +356,7 @@ def gauss_update_linear(states, lw, Z, std, log_norm, log_kappa, log_pd, log_pm,
             a = states[i, 0]
             c = states[i, 1]
             if not (math.isfinite(a) and math.isfinite(c)):
-                return False, True, new_lw, log_c, -np.inf, -np.inf, lw, 0.0
+                return False, True, lw, log_c, -np.inf, -np.inf, lw, 0.0
             lo0 = a if a < lo0 else lo0
             hi0 = a if a > hi0 else hi0
             lo1 = c if c < lo1 else lo1
@@ -365,7 +366,7 @@ def gauss_update_linear(states, lw, Z, std, log_norm, log_kappa, log_pd, log_pm,
         box[z, 2] = lo1
         box[z, 3] = hi1
     if b_end[n_blk] != n:
-        return False, True, new_lw, log_c, -np.inf, -np.inf, lw, 0.0
+        return False, True, lw, log_c, -np.inf, -np.inf, lw, 0.0
     inv = np.empty((std.shape[0], 4), np.float64)
     for k in range(std.shape[0]):
         for d in range(4):
@@ -407,16 +408,27 @@ def gauss_update_linear(states, lw, Z, std, log_norm, log_kappa, log_pd, log_pm,
                     continue
                 p0 = b_end[z]
                 p1 = b_end[z + 1]
-            for p in range(p0, p1):
-                i = order[p] if seg < n_col else p
-                d2 = _gate_d2_inv(states, i, Z, j, inv, j, r2)
-                if not d2 <= r2:
-                    continue
-                buf_i[nb] = i
-                g = math.exp(-0.5 * d2)
-                buf_v[nb] = g
-                s += g * e[i]
-                nb += 1
+            # the gate test alone first (its d² kept), then the exps and C(z)'s sum over
+            # the kept pairs in the same order: the same floats, and tight loops (-20 %)
+            if seg < n_col:
+                for p in range(p0, p1):
+                    i = order[p]
+                    d2 = _gate_d2_inv(states, i, Z, j, inv, j, r2)
+                    if d2 <= r2:
+                        buf_i[nb] = i
+                        buf_v[nb] = d2
+                        nb += 1
+            else:
+                for p in range(p0, p1):
+                    d2 = _gate_d2_inv(states, p, Z, j, inv, j, r2)
+                    if d2 <= r2:
+                        buf_i[nb] = p
+                        buf_v[nb] = d2
+                        nb += 1
+        for q in range(nb):
+            g = math.exp(-0.5 * buf_v[q])
+            buf_v[q] = g
+            s += g * e[buf_i[q]]
         if not (s > 0.0 and log_pd > -np.inf):
             continue                      # C = 0: ψ = 0 on every pair of z
         log_scale = log_pd - log_norm[j] - _HALF_LOG_2PI_4    # log ψ = log_scale − d²/2
@@ -435,7 +447,24 @@ def gauss_update_linear(states, lw, Z, std, log_norm, log_kappa, log_pd, log_pm,
             for q in range(nb):
                 b[buf_i[q]] += math.exp(math.log(buf_v[q]) + log_f)
     tot = 0.0
-    log_pm_b = math.log(pm) if pm > 0.0 else -np.inf   # the bracket of a particle no z reached
+    for i in range(n):
+        v = e[i] * b[i]
+        tot += v
+        e[i] = v                          # the linear weight, e^{new_lw − top}
+    return (True, True, b, log_c, (top + math.log(tot)) if tot > 0.0 else -np.inf,
+            log_pred, e, 1.0 / tot if tot > 0.0 else 0.0)
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
+def _bracket_logs(lw, b, log_pm):
+    """The new log-weights ``lw + log b`` of :func:`gauss_update_linear`'s bracket ``b``
+    (``lw + log p_M`` where no detection reached the particle, -inf where ``b`` is 0): the
+    kernel route of :func:`bracket_log_weights`, for :func:`gauss_update`."""
+    n = lw.shape[0]
+    new_lw = np.empty(n, np.float64)
+    pm = math.exp(log_pm)
+    log_pm_b = math.log(pm) if pm > 0.0 else -np.inf
     for i in range(n):
         if b[i] == pm:
             new_lw[i] = lw[i] + log_pm_b
@@ -443,11 +472,16 @@ def gauss_update_linear(states, lw, Z, std, log_norm, log_kappa, log_pd, log_pm,
             new_lw[i] = lw[i] + math.log(b[i])
         else:
             new_lw[i] = -np.inf
-        v = e[i] * b[i]
-        tot += v
-        e[i] = v                          # the linear weight, e^{new_lw − top}
-    return (True, True, new_lw, log_c, (top + math.log(tot)) if tot > 0.0 else -np.inf,
-            log_pred, e, 1.0 / tot if tot > 0.0 else 0.0)
+    return new_lw
+
+
+def bracket_log_weights(lw: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """:func:`_bracket_logs` in numpy, ``lw + log b`` (the kernel's floats: its p_M branch
+    only skips a log of the same value, ``log`` is the C library's on both sides, log 0 =
+    -inf), for a reader of the updated set's log-weights (particle-level stage data): a
+    normal run never reads them, and this compiles nothing on a first run."""
+    with np.errstate(divide="ignore"):
+        return lw + np.log(b)
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
@@ -471,12 +505,12 @@ def gauss_update(states, lw, Z, std, log_norm, by_det, log_kappa, log_pd, log_pm
     :func:`gauss_update_linear` (called first here; :func:`..filter.update` calls it alone
     when it can, so a first run compiles the log route only if a frame needs it)."""
     if by_det:
-        ok, done, new_lw, log_c, log_mass, log_pred, _, _ = gauss_update_linear(
+        ok, done, b, log_c, log_mass, log_pred, _, _ = gauss_update_linear(
             states, lw, Z, std, log_norm, log_kappa, log_pd, log_pm, r2, cell_x, cell_y,
             states.shape[0], (0.0, 0.0, cell_x, cell_y, 0, 0, np.empty(0, np.int64),
                               _zero_start()), np.empty(0, np.int64))
         if done:
-            return ok, new_lw, log_c, log_mass, log_pred
+            return ok, _bracket_logs(lw, b, log_pm) if ok else b, log_c, log_mass, log_pred
     n = states.shape[0]
     nz = Z.shape[0]
     log_c = np.empty(nz, np.float64)

@@ -80,7 +80,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
-from functools import lru_cache
+from functools import lru_cache, partial
 from typing import Iterable, Iterator, Optional, Protocol, Union
 
 import numpy as np
@@ -94,7 +94,7 @@ from .gating import DEFAULT_BUDGET, LogGPairs, gate_pairs, tail_radius2
 from ..smc.resampling import SCHEMES
 from ..smc.resampling import resample as _resample_set
 from ..smc.random import key_from, stream
-from ..smc.weights import ParticleSet, logsumexp
+from ..smc.weights import LazyParticleSet, ParticleSet, logsumexp
 from ..types import Frame
 
 #: Columns of the state that the detector observes: (y1, y2, w, h).
@@ -807,7 +807,10 @@ def predict(ps: ParticleSet, mp: MotionParams, rng: np.random.Generator,
                               out=S)
     log_e = math.log(mp.p_survival) if mp.p_survival > 0 else -np.inf
     lw = np.add(ps.log_weights, log_e, out=L[:n])
-    return ParticleSet(states, lw, ps.labels, ps.extra)
+    out = ParticleSet(states, lw, ps.labels, ps.extra)
+    if ps.__dict__.get("_equal"):       # equal weights times e: equal (ParticleSet.weights)
+        out.known_equal()
+    return out
 
 
 @dataclass(frozen=True)
@@ -1109,9 +1112,10 @@ def _update_gaussian(particles: ParticleSet, g: GatedGaussian, log_kappa: np.nda
             (n_grid, grid, j_born), cell = g.persistent, (1.0, 1.0)
         else:
             n_grid, grid, j_born, cell = n, _NO_GRID, _NO_BLOCKS, _grid_cell(std, g.r2)
-        ok, done, new_lw, log_c, log_mass, log_pred, lin, scale = _kernels.gauss_update_linear(
-            particles.states, lw, Z, std, log_norm, log_kappa, log_pd, log_pm,
-            float(g.r2), cell[0], cell[1], n_grid, grid, j_born)
+        ok, done, bracket, log_c, log_mass, log_pred, lin, scale = (
+            _kernels.gauss_update_linear(particles.states, lw, Z, std, log_norm, log_kappa,
+                                         log_pd, log_pm, float(g.r2), cell[0], cell[1],
+                                         n_grid, grid, j_born))
     if not done:
         cell = _grid_cell(std if by_det else np.max(std[:, :2], axis=0, keepdims=True), g.r2)
         ok, new_lw, log_c, log_mass, log_pred = _kernels.gauss_update(
@@ -1121,10 +1125,15 @@ def _update_gaussian(particles: ParticleSet, g: GatedGaussian, log_kappa: np.nda
         raise ValueError("update: non-finite particle positions")
     log_den = np.logaddexp(log_kappa, log_c)
     log_den = np.where(np.isfinite(log_den), log_den, 0.0)              # κ = C = 0: term is 0
-    out = ParticleSet(particles.states, new_lw, particles.labels, particles.extra)
+    if done:        # the logs of the bracket made only if read (a run reads lin and the mass)
+        out: ParticleSet = LazyParticleSet(
+            particles.states, partial(_kernels.bracket_log_weights, lw, bracket),
+            particles.labels, particles.extra)
+        if scale > 0.0:
+            out.known_normalised(lin, scale)                            # (the resampling walk)
+    else:
+        out = ParticleSet(particles.states, new_lw, particles.labels, particles.extra)
     out.known_log_mass(log_mass)                                        # the kernel summed it
-    if done and scale > 0.0:
-        out.known_normalised(lin, scale)                                # (the resampling walk)
     particles.known_log_mass(log_pred)
     return UpdateResult(out, np.exp(log_c), kappa, np.exp(log_c - log_den),
                         p_miss * math.exp(log_pred))

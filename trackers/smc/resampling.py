@@ -41,8 +41,9 @@ def _systematic_take(states, lw, log_mass, u0, n, w, scale):
     """:func:`_systematic_index` and the ancestors' rows of ``states`` (N, D) in the same walk:
     returns ``(idx (n,), states[idx] (n, D))`` with no exp or gather pass of its own.  With
     ``w`` (N,) given (else empty), the normalised weights are ``w · scale`` instead of
-    ``exp(lw − log_mass)`` (:meth:`~.weights.ParticleSet.known_normalised`): no exp at all."""
-    N = lw.shape[0]
+    ``exp(lw − log_mass)`` (:meth:`~.weights.ParticleSet.known_normalised`): no exp at all,
+    and ``lw`` is not read (may be empty)."""
+    N = states.shape[0]
     D = states.shape[1]
     idx = np.empty(n, np.int64)
     out = np.empty((n, D), np.float64)
@@ -146,10 +147,13 @@ def resample(ps: ParticleSet, n: int, rng: np.random.Generator,
         return ps.take(np.zeros(0, dtype=np.int64))
     lw = np.full(n, ps.log_mass - np.log(n))
     if scheme == "systematic":      # the log-mass is known: one walk that also copies the rows
-        w, scale = ps.normalised or (_NO_WEIGHTS, 0.0)
-        idx, states = _systematic_take(ps.states, ps.log_weights, ps.log_mass,
-                                       float(rng.random()), n, w, scale)
-        return ParticleSet(states, lw, None if ps.labels is None else ps.labels[idx],
-                           None if ps.extra is None else ps.extra[idx])
+        known = ps.normalised        # the walk reads these or the log-weights, not both
+        w, scale = known or (_NO_WEIGHTS, 0.0)
+        idx, states = _systematic_take(ps.states, _NO_WEIGHTS if known else ps.log_weights,
+                                       ps.log_mass, float(rng.random()), n, w, scale)
+        out = ParticleSet(states, lw, None if ps.labels is None else ps.labels[idx],
+                          None if ps.extra is None else ps.extra[idx])
+        out.known_equal()                                   # (np.full)
+        return out
     idx = resample_indices(ps.log_weights, n, rng, scheme)
     return ps.take(idx).with_log_weights(lw)

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import cached_property
-from typing import Optional
+from typing import Callable, Optional
 
 import numpy as np
 
@@ -61,7 +61,7 @@ def ess(log_w: np.ndarray) -> float:
     return float(np.exp(-logsumexp(2.0 * lw)))
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, init=False)
 class ParticleSet:
     """Weighted particles, structure-of-arrays, of any state dimension D.
 
@@ -81,15 +81,29 @@ class ParticleSet:
     labels: Optional[np.ndarray] = None
     extra: Optional[np.ndarray] = None
 
+    def __init__(self, states: np.ndarray, log_weights: np.ndarray,
+                 labels: Optional[np.ndarray] = None, extra: Optional[np.ndarray] = None):
+        # the dataclass's frozen __init__ (object.__setattr__ a field) written into the
+        # instance dict directly: a filter makes several sets a frame, and the generated
+        # one cost ~5x a plain class's
+        d = self.__dict__
+        d["states"], d["log_weights"], d["labels"], d["extra"] = (states, log_weights, labels,
+                                                                  extra)
+        self.__post_init__()
+
     def __post_init__(self):
-        s = np.asarray(self.states, dtype=np.float64)
-        lw = np.asarray(self.log_weights, dtype=np.float64).reshape(-1)
-        if s.ndim != 2:
-            raise ValueError(f"ParticleSet.states: expected shape (N, D), got {s.shape}")
+        s, lw = self.states, self.log_weights
+        if not (type(s) is np.ndarray and s.dtype == np.float64 and s.ndim == 2
+                and type(lw) is np.ndarray and lw.dtype == np.float64 and lw.ndim == 1):
+            # (the filters hand float64 arrays of the right rank: nothing to convert)
+            s = np.asarray(s, dtype=np.float64)
+            lw = np.asarray(lw, dtype=np.float64).reshape(-1)
+            if s.ndim != 2:
+                raise ValueError(f"ParticleSet.states: expected shape (N, D), got {s.shape}")
+            object.__setattr__(self, "states", s)
+            object.__setattr__(self, "log_weights", lw)
         if len(lw) != len(s):
             raise ValueError(f"ParticleSet: {len(s)} states but {len(lw)} log-weights")
-        object.__setattr__(self, "states", s)
-        object.__setattr__(self, "log_weights", lw)
         if self.labels is not None:
             lab = np.asarray(self.labels, dtype=np.int64).reshape(-1)
             if len(lab) != len(s):
@@ -122,9 +136,21 @@ class ParticleSet:
         resampling made, and its prediction) take a shortcut with logsumexp's very floats:
         ``exp(a − max) = 1`` each, their sum ``n`` exactly, so the value is ``log n + a``."""
         lw = self.log_weights
-        if len(lw) and np.isfinite(lw[0]) and lw.min() == lw.max():
+        if self._equal and np.isfinite(lw[0]):
             return float((np.log(np.array([float(len(lw))])) + lw[:1])[0])
         return float(logsumexp(lw))
+
+    @cached_property
+    def _equal(self) -> bool:
+        """Every log-weight the same (not NaN), and at least one."""
+        lw = self.log_weights
+        return bool(len(lw) and lw[0] == lw[-1] and lw.min() == lw.max())
+
+    def known_equal(self) -> None:
+        """Record that every log-weight is the same finite-or-inf value, when the maker
+        knows it (systematic resampling's ``np.full``, and a prediction of such a set):
+        :attr:`weights` and :attr:`log_mass` then skip their min / max pass."""
+        self.__dict__["_equal"] = bool(len(self))
 
     def known_log_mass(self, log_mass: float) -> None:
         """Record ``log_mass`` when the code that made the weights already summed them (the
@@ -151,8 +177,15 @@ class ParticleSet:
     @cached_property
     def weights(self) -> np.ndarray:
         """Linear (unnormalised) weights, (N,), computed once (read-only: callers share it;
-        the PHD filter's M(z) and its clutter model both read the predicted set's)."""
-        w = np.exp(self.log_weights)
+        the PHD filter's M(z) and its clutter model both read the predicted set's).  Equal
+        log-weights (a resampled set and its prediction) take one exp: numpy's exp gives an
+        element the same float alone or in an array."""
+        lw = self.log_weights
+        if self._equal:
+            w = np.full(len(lw), np.exp(lw[:1])[0])
+            w.setflags(write=False)
+            return w
+        w = np.exp(lw)
         w.setflags(write=False)
         return w
 
@@ -190,3 +223,38 @@ class ParticleSet:
         return ParticleSet(self.states[index], self.log_weights[index],
                            None if self.labels is None else self.labels[index],
                            None if self.extra is None else self.extra[index])
+
+
+class LazyParticleSet(ParticleSet):
+    """A :class:`ParticleSet` whose log-weights are made by ``make()`` on their first read.
+
+    The PHD update's kernel sums the new weights in linear space (their mass and normalised
+    weights: :meth:`~ParticleSet.known_log_mass`, :meth:`~ParticleSet.known_normalised`), and
+    in a run nothing else reads the updated set's log-weights (particle-level stage data
+    does): a log a particle saved.  Otherwise a :class:`ParticleSet` (``make`` must give the
+    (N,) float64 log-weights of ``states``' N rows, the same every call)."""
+
+    def __init__(self, states: np.ndarray, make: Callable[[], np.ndarray],
+                 labels: Optional[np.ndarray] = None, extra: Optional[np.ndarray] = None):
+        s = np.asarray(states, dtype=np.float64)
+        if s.ndim != 2:
+            raise ValueError(f"ParticleSet.states: expected shape (N, D), got {s.shape}")
+        if labels is not None or extra is not None:     # checked as a ParticleSet checks them
+            checked = ParticleSet(s, np.zeros(len(s)), labels, extra)
+            labels, extra = checked.labels, checked.extra
+        d = self.__dict__
+        d["states"], d["labels"], d["extra"], d["_make"] = s, labels, extra, make
+
+    @property
+    def log_weights(self) -> np.ndarray:               # type: ignore[override]
+        lw = self.__dict__.get("_log_weights")
+        if lw is None:
+            lw = np.asarray(self._make(), dtype=np.float64).reshape(-1)
+            if len(lw) != len(self.states):
+                raise ValueError(f"ParticleSet: {len(self.states)} states but {len(lw)} "
+                                 f"log-weights")
+            self.__dict__["_log_weights"] = lw
+        return lw
+
+    def __len__(self) -> int:
+        return int(self.states.shape[0])
