@@ -191,11 +191,17 @@ def predict_tracks(states: list[np.ndarray], shifts: list[Optional[np.ndarray]],
 
 
 def boxes_of(states: np.ndarray, aspect: float | np.ndarray) -> np.ndarray:
-    """Child states → boxes ``(x, y, w, h)``."""
-    s = np.asarray(states, dtype=np.float64).reshape(-1, 6)
+    """Child states (N, 6), or their first three columns ``(cx, cy, h)`` (N, 3) or (3,), →
+    boxes ``(x, y, w, h)`` (N, 4)."""
+    s = np.asarray(states, dtype=np.float64)
+    s = s.reshape(-1, 6 if s.shape[-1] == 6 else 3)
     h = s[:, 2]
-    w = np.asarray(aspect) * h
-    return np.stack([s[:, 0] - w / 2, s[:, 1] - h / 2, np.broadcast_to(w, h.shape), h], axis=1)
+    out = np.empty((len(s), 4))
+    out[:, 2] = np.multiply(aspect, h)
+    out[:, 0] = s[:, 0] - out[:, 2] / 2
+    out[:, 1] = s[:, 1] - h / 2
+    out[:, 3] = h
+    return out
 
 
 def map_index(log_w: np.ndarray) -> int:

@@ -847,10 +847,9 @@ class DLPFTracker:
             else:
                 w = np.exp(lw - lw.max())
                 est = (w[:, None] * preds[k][:, :3]).sum(0) / w.sum()
-            box = ch.boxes_of(np.concatenate([est, est])[None], t.aspect)[0]
+            box = ch.boxes_of(est, t.aspect)[0]
             if t.support is not None and C.snap > 0:  # pull the estimate onto the hit (ours)
-                sup = ch.boxes_of(np.concatenate([t.support[:2] + t.support[2:] / 2,
-                                                  t.support[3:4], np.zeros(3)])[None],
+                sup = ch.boxes_of(np.r_[t.support[:2] + t.support[2:] / 2, t.support[3]],
                                   t.aspect)[0]
                 box = (1.0 - C.snap) * box + C.snap * sup
             return lw, overlapping, j, box
