@@ -47,6 +47,26 @@ def test_histograms_are_distributions_and_bhattacharyya_is_a_distance():
     assert np.allclose(np.exp(lw), [1.0, np.exp(-5.0), np.exp(-20.0)])
 
 
+@pytest.mark.parametrize("bins", [(10, 10, 10), (12, 12, 8)])   # small and large bin table
+def test_histograms_count_the_grid_samples_of_each_box(bins):
+    """Eq. (12) by its definition: box k's histogram counts the bins of its grid samples (each
+    at ``x + w (u + 1/2)`` rounded half to even, clamped to the image) over their number; the
+    kernels' gather and count give exactly these floats (half-pixel positions: the ties)."""
+    rng = np.random.default_rng(4)
+    img = rng.integers(0, 256, (70, 90, 3), dtype=np.uint8)
+    boxes = np.c_[rng.uniform(-30, 100, 200), rng.uniform(-30, 80, 200),
+                  rng.uniform(1, 50, 200), rng.uniform(1, 90, 200)]
+    boxes[::2] = np.round(boxes[::2] * 2) / 2
+    u, v = ch.sample_grid(8, 16)
+    xs = np.clip(np.rint(boxes[:, :1] + boxes[:, 2:3] * (u + 0.5)), 0, 89).astype(int)
+    ys = np.clip(np.rint(boxes[:, 1:2] + boxes[:, 3:4] * (v + 0.5)), 0, 69).astype(int)
+    b = ch.hsv_bins(img[ys, xs], *bins, 0.1, 0.2)
+    M = bins[0] * bins[1] + bins[2]
+    want = np.array([np.bincount(r, minlength=M) for r in b]) / float(len(u))
+    assert np.array_equal(ch.histograms(img, boxes, (8, 16), *bins, 0.1, 0.2), want)
+    assert ch.histograms(img, boxes[:0], (8, 16), *bins, 0.1, 0.2).shape == (0, M)
+
+
 def test_hsv_bins_follow_the_binning_rule_for_every_colour():
     """The lookup-table binning equals eq. (12)'s rule computed directly from OpenCV's HSV."""
     import cv2

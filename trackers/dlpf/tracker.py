@@ -849,8 +849,8 @@ class DLPFTracker:
                 est = (w[:, None] * preds[k][:, :3]).sum(0) / w.sum()
             box = ch.boxes_of(est, t.aspect)[0]
             if t.support is not None and C.snap > 0:  # pull the estimate onto the hit (ours)
-                sup = ch.boxes_of(np.r_[t.support[:2] + t.support[2:] / 2, t.support[3]],
-                                  t.aspect)[0]
+                c = t.support[:2] + t.support[2:] / 2
+                sup = ch.boxes_of((c[0], c[1], t.support[3]), t.aspect)[0]
                 box = (1.0 - C.snap) * box + C.snap * sup
             return lw, overlapping, j, box
 
