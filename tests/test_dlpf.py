@@ -67,6 +67,23 @@ def test_histograms_count_the_grid_samples_of_each_box(bins):
     assert ch.histograms(img, boxes[:0], (8, 16), *bins, 0.1, 0.2).shape == (0, M)
 
 
+def test_tracker_compiles_the_histogram_kernels_before_any_frame():
+    """The children's histograms are first needed at a track's confirmation (mid-run, and maybe
+    never in the install's short warm-up run): building the tracker compiles them, with the
+    signatures the tracker's own calls use (no second compile later)."""
+    from pfscope.trackers.dlpf import _child_kernels as K
+
+    tr = make_tracker("dlpf", seed=0)
+    before = (list(K.sample_pixels.signatures), list(K.bin_counts.signatures))
+    assert before[0] and before[1]
+    frames = list(_scene(2).frames())
+    tr.step(frames[0], None, None)
+    track = tr._spawn(frames[0].image, np.array([100.0, 60.0, 30.0, 90.0]), parent=5)
+    tr.tracks.append(track)
+    tr.step(frames[1], None, None)                            # children: the batched call
+    assert (list(K.sample_pixels.signatures), list(K.bin_counts.signatures)) == before
+
+
 def test_hsv_bins_follow_the_binning_rule_for_every_colour():
     """The lookup-table binning equals eq. (12)'s rule computed directly from OpenCV's HSV."""
     import cv2

@@ -8,8 +8,10 @@ OpenCV's (``cvtColor``, ``LUT``).  :func:`bin_counts` turns the table's bytes in
 and counts them per box in one pass (the counts are whole numbers, then divided by the sample
 count: the same floats as ``np.bincount(...) / S``).
 
-Compile: ~1-2 CPU s on the first call after an install (one signature each; numba's cache
-after that), made by the install's warm-up (it runs DLPF's real steps).
+Compile: ~1.1 CPU s (one signature each), then numba's cache.  The histograms are first needed
+when a track is confirmed, which the install's short warm-up run may not reach, so
+:class:`~.tracker.DLPFTracker` calls :func:`compile_kernels` when it is built (before any frame;
+a load from the cache once compiled, so ``pip install -e .`` compiles them).
 """
 
 from __future__ import annotations
@@ -71,4 +73,12 @@ def bin_counts(q, n, S, mh, ms, mv):  # pragma: no cover - compiled
     return out
 
 
-__all__ = ["sample_pixels", "bin_counts"]
+def compile_kernels() -> None:
+    """Compile (or load from numba's cache) both kernels with the signatures
+    :func:`.children.histograms` calls them with (any image, boxes and grid give the same)."""
+    from .children import histograms
+
+    histograms(np.zeros((2, 2, 3), dtype=np.uint8), np.ones((1, 4)), (1, 1), 1, 1, 1, 0.5, 0.5)
+
+
+__all__ = ["sample_pixels", "bin_counts", "compile_kernels"]
