@@ -47,6 +47,43 @@ def test_histograms_are_distributions_and_bhattacharyya_is_a_distance():
     assert np.allclose(np.exp(lw), [1.0, np.exp(-5.0), np.exp(-20.0)])
 
 
+@pytest.mark.parametrize("bins", [(10, 10, 10), (12, 12, 8)])   # small and large bin table
+def test_histograms_count_the_grid_samples_of_each_box(bins):
+    """Eq. (12) by its definition: box k's histogram counts the bins of its grid samples (each
+    at ``x + w (u + 1/2)`` rounded half to even, clamped to the image) over their number; the
+    kernels' gather and count give exactly these floats (half-pixel positions: the ties)."""
+    rng = np.random.default_rng(4)
+    img = rng.integers(0, 256, (70, 90, 3), dtype=np.uint8)
+    boxes = np.c_[rng.uniform(-30, 100, 200), rng.uniform(-30, 80, 200),
+                  rng.uniform(1, 50, 200), rng.uniform(1, 90, 200)]
+    boxes[::2] = np.round(boxes[::2] * 2) / 2
+    u, v = ch.sample_grid(8, 16)
+    xs = np.clip(np.rint(boxes[:, :1] + boxes[:, 2:3] * (u + 0.5)), 0, 89).astype(int)
+    ys = np.clip(np.rint(boxes[:, 1:2] + boxes[:, 3:4] * (v + 0.5)), 0, 69).astype(int)
+    b = ch.hsv_bins(img[ys, xs], *bins, 0.1, 0.2)
+    M = bins[0] * bins[1] + bins[2]
+    want = np.array([np.bincount(r, minlength=M) for r in b]) / float(len(u))
+    assert np.array_equal(ch.histograms(img, boxes, (8, 16), *bins, 0.1, 0.2), want)
+    assert ch.histograms(img, boxes[:0], (8, 16), *bins, 0.1, 0.2).shape == (0, M)
+
+
+def test_tracker_compiles_the_histogram_kernels_before_any_frame():
+    """The children's histograms are first needed at a track's confirmation (mid-run, and maybe
+    never in the install's short warm-up run): building the tracker compiles them, with the
+    signatures the tracker's own calls use (no second compile later)."""
+    from pfscope.trackers.dlpf import _child_kernels as K
+
+    tr = make_tracker("dlpf", seed=0)
+    before = (list(K.sample_pixels.signatures), list(K.bin_counts.signatures))
+    assert before[0] and before[1]
+    frames = list(_scene(2).frames())
+    tr.step(frames[0], None, None)
+    track = tr._spawn(frames[0].image, np.array([100.0, 60.0, 30.0, 90.0]), parent=5)
+    tr.tracks.append(track)
+    tr.step(frames[1], None, None)                            # children: the batched call
+    assert (list(K.sample_pixels.signatures), list(K.bin_counts.signatures)) == before
+
+
 def test_hsv_bins_follow_the_binning_rule_for_every_colour():
     """The lookup-table binning equals eq. (12)'s rule computed directly from OpenCV's HSV."""
     import cv2

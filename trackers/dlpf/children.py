@@ -28,6 +28,8 @@ from typing import Optional
 import cv2
 import numpy as np
 
+from ._child_kernels import bin_counts, sample_pixels
+
 
 @lru_cache(maxsize=8)
 def sample_grid(gx: int, gy: int) -> tuple[np.ndarray, np.ndarray]:
@@ -66,22 +68,30 @@ def _bin_table_small(mh: int, ms: int, mv: int, s_min: float, v_min: float) -> n
     return lut
 
 
+def _table_bytes(bgr_pixels: np.ndarray, mh: int, ms: int, mv: int, s_min: float,
+                 v_min: float) -> np.ndarray:
+    """(1, N, 3) uint8: the bin table's bytes (:func:`_bin_table_small` when ``mh·ms + mv`` ≤
+    128, else :func:`_bin_table`) of the BGR pixels' OpenCV 8-bit HSV (one ``cvtColor``, one
+    ``cv2.LUT``)."""
+    if max(mh, ms, mv) > 127:
+        raise ValueError(f"at most 127 bins per channel, got {mh}, {ms}, {mv}")
+    px = np.asarray(bgr_pixels, dtype=np.uint8)
+    hsv = cv2.cvtColor(px.reshape(1, -1, 3), cv2.COLOR_BGR2HSV)
+    table = _bin_table_small if mh * ms + mv <= 128 else _bin_table
+    return cv2.LUT(hsv, table(mh, ms, mv, float(s_min), float(v_min)))
+
+
 def hsv_bins(bgr_pixels: np.ndarray, mh: int, ms: int, mv: int, s_min: float,
              v_min: float) -> np.ndarray:
     """Bin index (0..M−1) of each BGR pixel, (...,) int, ``M = mh·ms + mv`` (eq. (12)'s h(z)).
     OpenCV 8-bit HSV: H in [0, 180), S, V in [0, 256); a pixel whose S and V are at least
     ``s_min``, ``v_min`` of 255 goes to hue-saturation bin ``hb·ms + sb``, any other to value
     bin ``mh·ms + vb`` (one ``cv2.LUT``, no float maths per pixel)."""
-    if max(mh, ms, mv) > 127:
-        raise ValueError(f"at most 127 bins per channel, got {mh}, {ms}, {mv}")
-    px = np.asarray(bgr_pixels, dtype=np.uint8)
-    shape = px.shape[:-1]
-    hsv = cv2.cvtColor(px.reshape(1, -1, 3), cv2.COLOR_BGR2HSV)
+    shape = np.shape(bgr_pixels)[:-1]
+    q = _table_bytes(bgr_pixels, mh, ms, mv, s_min, v_min).reshape(-1, 3)
     if mh * ms + mv <= 128:
-        q = cv2.LUT(hsv, _bin_table_small(mh, ms, mv, float(s_min), float(v_min))).reshape(-1, 3)
         low = (q[:, 1] | q[:, 2]) >= 128
         return np.where(low, q[:, 2] & 127, q[:, 0] + q[:, 1]).reshape(shape)
-    q = cv2.LUT(hsv, _bin_table(mh, ms, mv, float(s_min), float(v_min))).reshape(-1, 3)
     hb, sb, vb = q[:, 0], q[:, 1], q[:, 2]
     dt = np.uint8 if mh * ms + mv <= 255 else np.int32
     low = (sb | vb) >= 128
@@ -89,32 +99,20 @@ def hsv_bins(bgr_pixels: np.ndarray, mh: int, ms: int, mv: int, s_min: float,
     return out.reshape(shape)
 
 
-def _gather(image: np.ndarray, xs: np.ndarray, ys: np.ndarray) -> np.ndarray:
-    """``image[ys, xs]`` for in-image whole-number coordinates (N, S) (any dtype: float ones are
-    used as they are, no integer copy first) → (N, S, C)."""
-    if xs.shape[0] < 32000:   # cv2.remap (nearest, exact at integer points) gathers fastest
-        return cv2.remap(image, xs.astype(np.float32), ys.astype(np.float32), cv2.INTER_NEAREST)
-    return image[ys.astype(np.intp), xs.astype(np.intp)]
-
-
 def histograms(image: np.ndarray, boxes: np.ndarray, grid: tuple[int, int], mh: int, ms: int,
                mv: int, s_min: float, v_min: float) -> np.ndarray:
     """Eq. (12): normalised HSV histograms (N, M) of ``boxes`` (N, 4) ``(x, y, w, h)``, each from
     the ``grid`` samples of its box (points outside the image are clamped to the border).  All
-    boxes in one gather, one colour conversion and one ``bincount``."""
-    b = np.asarray(boxes, dtype=np.float64).reshape(-1, 4)
+    boxes in one gather, one colour conversion and one count (:mod:`._child_kernels`)."""
+    b = np.ascontiguousarray(boxes, dtype=np.float64).reshape(-1, 4)
     M = mh * ms + mv
     n = len(b)
     if n == 0:
         return np.zeros((0, M))
     u, v = sample_grid(*grid)
-    H, W = image.shape[:2]
-    xs = np.clip(np.rint(b[:, :1] + b[:, 2:3] * (u[None] + 0.5)), 0, W - 1)
-    ys = np.clip(np.rint(b[:, 1:2] + b[:, 3:4] * (v[None] + 0.5)), 0, H - 1)
-    bins = hsv_bins(_gather(image, xs, ys), mh, ms, mv, s_min, v_min)   # (N, S)
-    flat = (np.arange(n, dtype=np.intp)[:, None] * M + bins).ravel()
-    counts = np.bincount(flat, minlength=n * M).reshape(n, M).astype(np.float64)
-    return counts / float(len(u))     # K of eq. (12): every sample is in one bin
+    px = sample_pixels(np.ascontiguousarray(image, dtype=np.uint8), b, u, v)
+    q = _table_bytes(px, mh, ms, mv, s_min, v_min)
+    return bin_counts(q, n, len(u), mh, ms, mv)     # K of eq. (12): every sample is in one bin
 
 
 def bhattacharyya(q_ref: np.ndarray, q: np.ndarray) -> np.ndarray:
@@ -191,11 +189,17 @@ def predict_tracks(states: list[np.ndarray], shifts: list[Optional[np.ndarray]],
 
 
 def boxes_of(states: np.ndarray, aspect: float | np.ndarray) -> np.ndarray:
-    """Child states → boxes ``(x, y, w, h)``."""
-    s = np.asarray(states, dtype=np.float64).reshape(-1, 6)
+    """Child states (N, 6), or their first three columns ``(cx, cy, h)`` (N, 3) or (3,), →
+    boxes ``(x, y, w, h)`` (N, 4)."""
+    s = np.asarray(states, dtype=np.float64)
+    s = s.reshape(-1, 6 if s.shape[-1] == 6 else 3)
     h = s[:, 2]
-    w = np.asarray(aspect) * h
-    return np.stack([s[:, 0] - w / 2, s[:, 1] - h / 2, np.broadcast_to(w, h.shape), h], axis=1)
+    out = np.empty((len(s), 4))
+    out[:, 2] = np.multiply(aspect, h)
+    out[:, 0] = s[:, 0] - out[:, 2] / 2
+    out[:, 1] = s[:, 1] - h / 2
+    out[:, 3] = h
+    return out
 
 
 def map_index(log_w: np.ndarray) -> int:

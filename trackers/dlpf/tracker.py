@@ -89,6 +89,7 @@ from ..report import Boxes, Field, Points, StageLog
 from ..smc import ParticleSet, logsumexp, resample_indices
 from ..types import Detections, Frame, TrackSet
 from . import children as ch
+from ._child_kernels import compile_kernels as compile_child_kernels
 from . import motion as mo
 from . import parents as pa
 from .classifier import (HOGWindowClassifier, load_classifier, opencv_threads, person_boxes,
@@ -402,7 +403,8 @@ class DLPFTracker:
         self.classifier = classifier or load_classifier(cp.model, mode=cp.mode,
                                                         scale_step=cp.scale_step,
                                                         threads=cp.threads)
-        c = self.params.confirm
+        compile_child_kernels()     # the children's histograms: before any frame, not at the
+        c = self.params.confirm       # first confirmation (a load from numba's cache once built)
         self.confirmer = Confirmer(c.count, c.max_gap, c.match_iou)
         self.parents: Optional[ParticleSet] = None
         self.tracks: list[_Track] = []
@@ -847,11 +849,10 @@ class DLPFTracker:
             else:
                 w = np.exp(lw - lw.max())
                 est = (w[:, None] * preds[k][:, :3]).sum(0) / w.sum()
-            box = ch.boxes_of(np.concatenate([est, est])[None], t.aspect)[0]
+            box = ch.boxes_of(est, t.aspect)[0]
             if t.support is not None and C.snap > 0:  # pull the estimate onto the hit (ours)
-                sup = ch.boxes_of(np.concatenate([t.support[:2] + t.support[2:] / 2,
-                                                  t.support[3:4], np.zeros(3)])[None],
-                                  t.aspect)[0]
+                c = t.support[:2] + t.support[2:] / 2
+                sup = ch.boxes_of((c[0], c[1], t.support[3]), t.aspect)[0]
                 box = (1.0 - C.snap) * box + C.snap * sup
             return lw, overlapping, j, box
 
