@@ -331,7 +331,8 @@ def test_first_run_compiles_each_kernel_once_in_one_process(tmp_path):
     # memory's grid (the helper's one filter step reaches none of them)
     assert sorted(top) == ["_fit_kernel", "_gate_sums_grid", "_link", "advance", "check_states",
                            "confirmed", "edge_scores", "frame_edges", "gap_rows", "head_pick",
-                           "lloyd", "mass_near_kernel", "prepare", "revive_hits",
+                           "lloyd", "mass_near_few", "mass_near_kernel", "prepare",
+                           "revive_hits",
                            "split_clusters", "uncovered"], top
 
 

@@ -850,7 +850,12 @@ def mass_near(predicted: ParticleSet, Z: np.ndarray, bp: BirthParams = BirthPara
     full = np.zeros(len(Z))
     need = np.flatnonzero(~skip)
     if len(need):
-        full[need] = mass_near_at(predicted, Z[need], std_z[need], r2, cell)[0]
+        # the very floats of mass_near_at's kernel on the same grid, without bucketing every
+        # particle for a few detections (_kernels.mass_near_few)
+        ok, full[need] = _kernels.mass_near_few(predicted.states, predicted.weights, Z[need],
+                                                std_z[need], r2, cell[0], cell[1])
+        if not ok:
+            raise ValueError("mass_near: non-finite particle positions")
     return full
 
 
