@@ -278,26 +278,38 @@ def mass_near_few(states, w, Z, std_z, r2, cell_x, cell_y):
             sel[m] = i
             key[m] = k
             m += 1
-    # grid_build's stable counting sort, on the kept particles only
-    starts = np.empty(ni * nj + 1, np.int64)
-    for k in range(ni * nj + 1):
-        starts[k] = 0
-    for q in range(m):
-        starts[key[q] + 1] += 1
+    # grid_build's stable counting sort, on the kept particles and the touched cells only:
+    # those numbered c = 0, 1, ... in key order (cid, read at touched cells only), their
+    # runs in order[] from first[c]
+    cid = np.empty(ni * nj, np.int64)
+    nc = np.int64(0)
     for k in range(ni * nj):
-        starts[k + 1] += starts[k]
+        if mark[k]:
+            cid[k] = nc
+            nc += 1
+    first = np.empty(nc + 1, np.int64)
+    for c in range(nc + 1):
+        first[c] = 0
+    for q in range(m):
+        first[cid[key[q]] + 1] += 1
+    for c in range(nc):
+        first[c + 1] += first[c]
+    fill = np.empty(nc, np.int64)
+    for c in range(nc):
+        fill[c] = first[c]
     order = np.empty(m, np.int64)
     for q in range(m):
-        k = key[q]
-        order[starts[k]] = sel[q]
-        starts[k] += 1
-    for k in range(ni * nj, 0, -1):             # back to each cell's first position
-        starts[k] = starts[k - 1]
-    starts[0] = 0
+        c = cid[key[q]]
+        order[fill[c]] = sel[q]
+        fill[c] += 1
     for j in range(nz):
         s = 0.0
+        if box[j, 3] < box[j, 2]:               # the gate misses the grid's columns
+            continue
         for ci in range(box[j, 0], box[j, 1] + 1):
-            for p in range(starts[ci * nj + box[j, 2]], starts[ci * nj + box[j, 3] + 1]):
+            # the row's touched cells j0..j1 are consecutive in cid (all marked)
+            for p in range(first[cid[ci * nj + box[j, 2]]],
+                           first[cid[ci * nj + box[j, 3]] + 1]):
                 i = order[p]
                 if _gate_d2(states, i, Z, j, std_z, j, r2) <= r2:
                     s += w[i]
