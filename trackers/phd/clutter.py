@@ -63,6 +63,7 @@ from dataclasses import replace
 from typing import TYPE_CHECKING, Optional
 
 import numpy as np
+from numba import njit
 
 from .gating import gate_sums
 
@@ -156,9 +157,8 @@ class PlaceClutter:
         """``log κ_r(z)`` (N_z,) of this frame's detections (``-inf`` where no clutter fell).
         ``log_v``, ``std``: the clutter gates' ``log V(z)`` and the detections' observation
         stds (:func:`.filter.obs_std`) when the caller has them."""
-        rate = self.place_rate(Z, std)
-        with np.errstate(divide="ignore"):
-            return np.log(rate) + _unit_density(Z, self.cl, self.lk, log_v)
+        S, E = self._weight_in_gates(Z, watched=True, std=std)
+        return kappa_terms(_log_v(Z, self.cl, self.lk, log_v), place=(S, E, self.beta))[0]
 
     def log_gate(self, Z: np.ndarray, share: float,
                  log_v: Optional[np.ndarray] = None) -> np.ndarray:
@@ -239,22 +239,34 @@ class NearClutter:
 
         return obs_std(Z[:, 2:4], self._wide()[0])
 
+    def wide_std_of(self, std: np.ndarray) -> np.ndarray:
+        """:meth:`wide_std` from the detections' observation stds ``std``: the same floats
+        (:data:`NEAR_SCALE` is a power of two: σ scaled by it is exact, and so is every
+        product and max of :func:`.filter.obs_std` after it), one multiply instead of obs_std."""
+        return std * NEAR_SCALE
+
     def log_kappa(self, Z: np.ndarray, predicted, log_v: Optional[np.ndarray] = None,
                   chained: Optional[np.ndarray] = None,
                   std: Optional[np.ndarray] = None) -> np.ndarray:
         """``log κ_n(z)`` (N_z,); ``-inf`` where ``chained`` (those continue a chain: no κ_n,
         module docstring), whose predicted mass is then not summed.  ``std``: :meth:`wide_std`
         of ``Z`` when the caller has it."""
+        m = self.mass(Z, predicted, chained, std)
+        if m is None:
+            return np.full(len(Z), -np.inf)
+        return kappa_terms(_log_v(Z, self.cl, self.lk, log_v), near=(m, self.nu, chained))[1]
+
+    def mass(self, Z: np.ndarray, predicted, chained: Optional[np.ndarray] = None,
+             std: Optional[np.ndarray] = None) -> Optional[np.ndarray]:
+        """``M'(z)`` (N_z,) of :meth:`log_kappa` (0 where ``chained``), None without
+        predicted particles or detections; records the predicted mass for :meth:`learn`."""
         from .filter import mass_near
 
         self._exposure = float(predicted.mass) if predicted is not None else 0.0
         if predicted is None or not len(Z):
-            return np.full(len(Z), -np.inf)
+            return None
         wide, bp = self._wide()
-        m = mass_near(predicted, Z, bp, wide, std_z=std, skip=chained)
-        with np.errstate(divide="ignore"):
-            return np.log(self.nu * np.minimum(m, 1.0)) + _unit_density(Z, self.cl, self.lk,
-                                                                         log_v)
+        return mass_near(predicted, Z, bp, wide, std_z=std, skip=chained)
 
     def learn(self, near_share: np.ndarray, a: float) -> None:
         """After the update: ``near_share`` (N_z,) the clutter share the EM gives to κ_n (none
@@ -307,14 +319,21 @@ class DuplicateBoxes:
         """``log κ_d(z)`` (N_z,; ``-inf`` where z has no neighbour); ``log_v`` as
         :meth:`PlaceClutter.log_kappa`'s; ``std``: the detections' observation stds times
         :data:`NEAR_SCALE` (:meth:`NearClutter.wide_std`) when the caller has them."""
+        n = self.counts(Z, std)
+        if n is None:
+            return np.full(len(Z), -np.inf)
+        return kappa_terms(_log_v(Z, self.cl, self.lk, log_v), dup=(n, self.q))[2]
+
+    def counts(self, Z: np.ndarray, std: Optional[np.ndarray] = None) -> Optional[np.ndarray]:
+        """``n(z)`` (N_z,) int of :meth:`log_kappa`: the other detections in each widened
+        gate; None where the term is off or there is no pair (and kept for :meth:`learn`)."""
         self._pairs = None
         if self.cl.duplicate_prior <= 0 or len(Z) < 2:
-            return np.full(len(Z), -np.inf)
+            return None
         std, r2 = _wide_gate(Z, self.cl, self.lk, NEAR_SCALE, std)
         n = gate_sums(Z, Z, r2, std, np.ones(len(Z)), ordered=False)[2] - 1   # not z itself
         self._pairs = (Z, std, r2, n)
-        with np.errstate(divide="ignore"):
-            return np.log(self.q * n) + _unit_density(Z, self.cl, self.lk, log_v)
+        return n
 
     def learn(self, won: np.ndarray, a: float) -> None:
         """After the update: ``won`` (N_z,) the detections' target shares."""
@@ -334,13 +353,74 @@ class DuplicateBoxes:
         self.q = em_rate(self.num, self.den, self.cl.duplicate_prior, a)
 
 
-def _unit_density(Z: np.ndarray, cl: "ClutterParams", lk: "LikelihoodParams",
-                  log_v: Optional[np.ndarray]) -> np.ndarray:
-    """``log`` of one clutter point spread as the ``gate`` model around each detection,
-    ``−log V(z)`` (:func:`.filter.log_clutter_density` at rate 1: the same floats)."""
+def _log_v(Z: np.ndarray, cl: "ClutterParams", lk: "LikelihoodParams",
+           log_v: Optional[np.ndarray]) -> np.ndarray:
+    """``log V(z)`` of the clutter gates (``log_v`` when the caller has it): ``−log`` of one
+    clutter point spread as the ``gate`` model around each detection
+    (:func:`.filter.log_clutter_density` at rate 1 is ``−log V``: the same floats)."""
     from .filter import log_gate_volume
 
-    return -(log_gate_volume(Z, cl, lk) if log_v is None else log_v)
+    return log_gate_volume(Z, cl, lk) if log_v is None else log_v
+
+
+_NO_F = np.zeros(0)
+_NO_I = np.zeros(0, dtype=np.int64)
+_NO_B = np.zeros(0, dtype=np.bool_)
+
+
+def kappa_terms(log_v: np.ndarray, place: Optional[tuple] = None, near: Optional[tuple] = None,
+                dup: Optional[tuple] = None, log_u: Optional[np.ndarray] = None,
+                near_rate: float = 0.0) -> np.ndarray:
+    """(5, N_z): ``log κ_r``, ``log κ_n``, ``log κ_d`` of the detections whose clutter gates
+    have ``log V`` = ``log_v`` (-inf for a part not given), then, with ``log_u`` (the
+    ``scene`` density κ_u without its near-people points), ``log(κ_u + κ_r + κ_n + κ_d)`` (the
+    shadow mixture) and ``log(κ_u + κ_n + κ_d)`` (the newborn's), κ_u with ``near_rate`` points
+    spread as the ``gate`` model when > 0.  ``place`` = (S, E, β) (:meth:`PlaceClutter.
+    place_rate`'s sums and prior), ``near`` = (M'(z), ν, chained or None), ``dup`` = (n(z),
+    q).  One numba pass (:func:`_kappa_terms`) for what was ~30 numpy calls a frame: the same
+    expressions elementwise (log, exp, log1p as numpy's, np.logaddexp's formula), so the
+    same floats."""
+    n_z = len(log_v)
+    S, E, beta = place if place is not None else (_NO_F, _NO_F, 0.0)
+    m, nu, chained = near if near is not None else (_NO_F, 0.0, None)
+    n, q = dup if dup is not None else (_NO_I, 0.0)
+    out = np.empty((5, n_z))
+    _kappa_terms(log_v, S, E, PRIOR_FRAMES * beta, m, float(nu),
+                 _NO_B if chained is None else chained, n, float(q),
+                 _NO_F if log_u is None else log_u,
+                 math.log(near_rate) if near_rate > 0 else 0.0, near_rate > 0, out)
+    return out
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def _kappa_terms(log_v, S, E, n0_beta, m, nu, chained, n, q, log_u, log_near_rate, near_on,
+                 out):
+    """:func:`kappa_terms` into ``out`` (5, N_z); empty ``S`` / ``m`` / ``n`` / ``log_u``:
+    that part not given; empty ``chained``: none chained."""
+    for j in range(log_v.shape[0]):
+        unit = -log_v[j]
+        lr = -np.inf
+        if S.shape[0]:
+            # (S + n0 β) / (E + n0), min(., 1) where S > 0 (np.minimum: NaN stays NaN)
+            r = (S[j] + n0_beta) / (E[j] + PRIOR_FRAMES)
+            rate = (1.0 if r > 1.0 else r) if S[j] > 0 else 0.0
+            lr = np.log(rate) + unit
+        ln = -np.inf
+        if m.shape[0] and not (chained.shape[0] and chained[j]):
+            mm = 1.0 if m[j] > 1.0 else m[j]
+            ln = np.log(nu * mm) + unit
+        ld = -np.inf
+        if n.shape[0]:
+            ld = np.log(q * n[j]) + unit
+        out[0, j], out[1, j], out[2, j] = lr, ln, ld
+        if log_u.shape[0]:
+            u = log_u[j]
+            if near_on:
+                u = np.logaddexp(u, log_near_rate - log_v[j])
+            out[3, j] = np.logaddexp(np.logaddexp(np.logaddexp(u, lr), ln), ld)
+            out[4, j] = np.logaddexp(np.logaddexp(u, ln), ld)
+        else:
+            out[3, j] = out[4, j] = -np.inf
 
 
 def _widened(lk: "LikelihoodParams", scale: float) -> "LikelihoodParams":

@@ -88,7 +88,7 @@ import numpy as np
 from ..params import param, part, with_options
 from . import _kernels, motion
 from .clutter import PlaceClutter
-from .clutter import DuplicateBoxes, NearClutter, clutter_share, neighbours
+from .clutter import DuplicateBoxes, NearClutter, clutter_share, kappa_terms, neighbours
 from .scene_motion import Chains
 from .gating import DEFAULT_BUDGET, LogGPairs, gate_pairs, tail_radius2
 from ..smc.resampling import SCHEMES
@@ -637,38 +637,40 @@ class SceneModel:
             # log V(z) of the clutter gate, once for every part spread as the 'gate' model
             # (log_clutter_density at rate λ is log λ − log V: the same floats)
             log_v = log_gate_volume(Z, self.cl, self.lk, std)
-            if self.near > 0:
-                log_kappa = np.logaddexp(log_kappa, math.log(self.near) - log_v)
-            if self.place is not None:
-                self.place.cl = self.people.cl = self.cl
-                log_rep = self.place.log_kappa(Z, log_v, std)
+            if self.place is None:
+                if self.near > 0:
+                    log_kappa = np.logaddexp(log_kappa, math.log(self.near) - log_v)
+            else:
+                self.place.cl = self.people.cl = self.dups.cl = self.cl
+                model = self.cl.learn_update == "model"
+                S, E = self.place._weight_in_gates(Z, watched=True, std=std)
                 # ... and times NEAR_SCALE, for the near-people and the duplicate terms
-                std_wide = self.people.wide_std(Z)
+                std_wide = self.people.wide_std_of(std)
                 # a detection that continues a chain of mutually nearest detections is a
                 # person's or a spot's, not a box beside a person (those do not chain): κ_n
                 # is 0 there, so it takes no share of it in the EM (the update alike with
                 # learn_update 'model')
                 self._chained = self.chains.length >= 1
-                log_near = np.where(self._chained, -np.inf,
-                                    self.people.log_kappa(Z, predicted, log_v, self._chained,
-                                                          std_wide))
-                shadow = np.logaddexp(np.logaddexp(log_kappa, log_rep), log_near)
-                log_dup = np.full(len(Z), -np.inf)
-                if self.cl.learn_update == "model":
-                    # a second box on a person already boxed, which a Poisson κ cannot
-                    # express: the duplicate term (.clutter.DuplicateBoxes) joins the mixture
-                    self.dups.cl = self.cl
-                    log_dup = self.dups.log_kappa(Z, log_v, std_wide)
-                    shadow = np.logaddexp(shadow, log_dup)
+                m = self.people.mass(Z, predicted, self._chained, std_wide)
+                # a second box on a person already boxed, which a Poisson κ cannot express:
+                # the duplicate term (.clutter.DuplicateBoxes) joins the mixture ('model')
+                n = self.dups.counts(Z, std_wide) if model else None
+                log_rep, log_near, log_dup, shadow, no_place = kappa_terms(
+                    log_v, place=(S, E, self.place.beta),
+                    near=None if m is None else (m, self.people.nu, self._chained),
+                    dup=None if n is None else (n, self.dups.q), log_u=log_kappa,
+                    near_rate=self.near)
+                if model:
                     log_used = shadow
                 else:
-                    log_used = np.logaddexp(log_kappa,
-                                            self.place.log_gate(Z, self.structured(), log_v))
+                    u = log_kappa if not self.near > 0 else np.logaddexp(
+                        log_kappa, math.log(self.near) - log_v)
+                    log_used = np.logaddexp(u, self.place.log_gate(Z, self.structured(), log_v))
                 self._parts = (Z, log_rep, log_near, log_dup, shadow, log_used)
-                if self.cl.spot_places and self.cl.learn_update == "model":
+                if self.cl.spot_places and model:
                     # a person appears no more often where clutter repeats: the newborn
                     # weigh against κ without the place memory (birth_odds, log_birth_weight)
-                    log_birth = np.logaddexp(np.logaddexp(log_kappa, log_near), log_dup)
+                    log_birth = no_place
                 log_kappa = log_used
         else:
             log_kappa = log_clutter_density(Z, self.cl, self.lk)
