@@ -65,6 +65,7 @@ from typing import TYPE_CHECKING, Optional
 import numpy as np
 from numba import njit
 
+from .camera_motion import _pairwise
 from .gating import gate_sums
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -472,8 +473,71 @@ def neighbours(Z: np.ndarray, cl: "ClutterParams", lk: "LikelihoodParams",
 def clutter_share(won: np.ndarray, log_used: np.ndarray, log_shadow: np.ndarray) -> np.ndarray:
     """Each detection's clutter share under the shadow model, ``κ_s / (κ_s + C)``, from ``won =
     C / (κ_used + C)`` of the update (which ran with κ_used)."""
-    won = np.clip(np.asarray(won, dtype=np.float64), 0.0, 1.0)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        log_c = np.log(won) - np.log1p(-won) + log_used        # log C(z)
-        out = 1.0 / (1.0 + np.exp(log_c - log_shadow))
-    return np.where(np.isfinite(out), out, np.where(won >= 1.0, 0.0, 1.0))
+    return learn_shares(won, log_used, log_shadow)[0][0]
+
+
+def learn_shares(won: np.ndarray, log_used: np.ndarray, log_shadow: np.ndarray,
+                 parts: Optional[tuple] = None, prev_link: Optional[np.ndarray] = None,
+                 chain_clutter: Optional[np.ndarray] = None) -> tuple[np.ndarray, float]:
+    """The EM's split of this frame's clutter (:meth:`.filter.SceneModel.learn`), in one numba
+    pass (:func:`_learn_shares`; ~25 numpy calls a frame before, the same expressions
+    elementwise and the same pairwise sum, so the same floats).  Returns ``out`` (5, N_z) and
+    ``Σ share · κ_u / κ_s``: out[0] the clutter share ``κ_s / (κ_s + C)`` from ``won = C /
+    (κ_used + C)`` (``won`` clipped to [0, 1]); with ``parts`` = (log κ_r, log κ_n, log κ_d)
+    of :func:`kappa_terms` (``log_shadow`` their mixture), out[1] the place memory's weights
+    ``share · (1 − r_n − r_d) · chain``, out[2] κ_r's shares ``share · r_r · chain``, out[3]
+    κ_n's ``share · r_n`` (``r_x = κ_x / κ_s``, NaN -> 0) and out[4] ``chain · (1 − won)``,
+    ``chain`` the last learnt frame's ``chain_clutter`` at ``prev_link`` (1 where a link is
+    -1 or past its end, or without them)."""
+    won = np.ascontiguousarray(won, dtype=np.float64)
+    log_used = np.ascontiguousarray(log_used, dtype=np.float64)
+    log_shadow = np.ascontiguousarray(log_shadow, dtype=np.float64)
+    n_z = len(won)
+    log_rep, log_near, log_dup = parts if parts is not None else (_NO_F, _NO_F, _NO_F)
+    use_chain = (prev_link is not None and chain_clutter is not None
+                 and len(prev_link) == n_z and len(chain_clutter) > 0)
+    out = np.empty((5, n_z))
+    total = _learn_shares(won, log_used, log_shadow, log_rep, log_near, log_dup,
+                          prev_link if use_chain else _NO_I,
+                          chain_clutter if use_chain else _NO_F, out)
+    return out, total
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def _learn_shares(won, log_used, log_shadow, log_rep, log_near, log_dup, prev_link,
+                  chain_clutter, out):
+    """:func:`learn_shares` into ``out`` (5, N_z); returns the random share's sum (0 without
+    the parts)."""
+    n_z = won.shape[0]
+    random = np.empty(n_z)
+    n_c = chain_clutter.shape[0]
+    for j in range(n_z):
+        w = won[j]
+        w = 0.0 if w < 0.0 else (1.0 if w > 1.0 else w)      # np.clip: NaN stays NaN
+        log_c = np.log(w) - np.log1p(-w) + log_used[j]      # log C(z)
+        sh = 1.0 / (1.0 + np.exp(log_c - log_shadow[j]))
+        if not math.isfinite(sh):
+            sh = 0.0 if w >= 1.0 else 1.0
+        out[0, j] = sh
+        if log_rep.shape[0]:
+            # the parts' shares of κ_s in [0, 1], NaN (-inf - -inf) -> 0
+            rep = np.exp(log_rep[j] - log_shadow[j])
+            near = np.exp(log_near[j] - log_shadow[j])
+            dup = np.exp(log_dup[j] - log_shadow[j])
+            rep = 0.0 if math.isnan(rep) else rep
+            near = 0.0 if math.isnan(near) else near
+            dup = 0.0 if math.isnan(dup) else dup
+            chain = 1.0
+            if prev_link.shape[0]:
+                k = prev_link[j]
+                if k >= 0 and k < n_c:
+                    chain = chain_clutter[k]
+            random[j] = sh * (1.0 - rep - near - dup)
+            out[1, j] = sh * (1.0 - near - dup) * chain
+            out[2, j] = sh * rep * chain
+            out[3, j] = sh * near
+            out[4, j] = chain * (1.0 - won[j])
+        else:
+            random[j] = 0.0
+            out[1, j] = out[2, j] = out[3, j] = out[4, j] = 0.0
+    return _pairwise(random, n_z)

@@ -88,7 +88,7 @@ import numpy as np
 from ..params import param, part, with_options
 from . import _kernels, motion
 from .clutter import PlaceClutter
-from .clutter import DuplicateBoxes, NearClutter, clutter_share, kappa_terms, neighbours
+from .clutter import DuplicateBoxes, NearClutter, kappa_terms, learn_shares, neighbours
 from .scene_motion import Chains
 from .gating import DEFAULT_BUDGET, LogGPairs, gate_pairs, tail_radius2
 from ..smc.resampling import SCHEMES
@@ -727,41 +727,27 @@ class SceneModel:
         gap = mean[0] - mean[1]
         return gap * gap / var, gap / var, 0.5 * (mean[0] + mean[1])
 
-    def _chain_prior(self, n: int) -> np.ndarray:
-        """(n,) P(the chain a detection of this frame continues is clutter): the last learnt
-        frame's value at its link (:attr:`Chains.prev_link`), 1 where it continues no chain
-        (or the links do not refer to that frame)."""
-        out = np.ones(n)
-        j, c = self.chains.prev_link, self._chain_clutter
-        if j is None or c is None or len(j) != n or len(c) == 0:
-            return out
-        ok = (j >= 0) & (j < len(c))
-        out[ok] = c[j[ok]]
-        return out
-
     def learn(self, scores: Optional[np.ndarray], won: np.ndarray) -> None:
         """After the update: ``won`` (N_z,) = C/(κ + C), each detection's target share."""
         a = 1.0 / min(self.frames + 5, self.cl.clutter_memory)
         if self.place is not None and self._parts is not None:
             Z, log_rep, log_near, log_dup, total, log_used = self._parts
-            share = clutter_share(won, log_used, total)
-            with np.errstate(invalid="ignore"):
-                # shares in [0, 1] (each part <= the total), NaN (-inf - -inf) -> 0: what
-                # np.nan_to_num does to them, without its generic machinery
-                rep, near, dup = (_nan_to_0(np.exp(x - total))
-                                  for x in (log_rep, log_near, log_dup))
-            self.rate = (1 - a) * self.rate + a * float(np.sum(share * (1.0 - rep - near - dup)))
-            # a duplicate box is the person's, not a place's: it leaves no place memory
-            chain = 1.0
-            if self.cl.spot_places and self.cl.learn_update == "model":
-                # a place's memory counts a detection that continues a chain by the
-                # probability that the chain so far is clutter: a spot's firings win no mass
-                # and its chain stays clutter, a newcomer's chain stops being clutter as soon
-                # as its detections win mass (spot_places)
-                chain = self._chain_prior(len(won))
-                self._chain_clutter = chain * (1.0 - np.asarray(won, dtype=np.float64))
-            self.place.learn(Z, share * (1.0 - near - dup) * chain, share * rep * chain, a)
-            self.people.learn(share * near, a)
+            spot = self.cl.spot_places and self.cl.learn_update == "model"
+            # the clutter shares and their split between the parts (in one pass)
+            out, random = learn_shares(won, log_used, total, (log_rep, log_near, log_dup),
+                                       self.chains.prev_link if spot else None,
+                                       self._chain_clutter if spot else None)
+            self.rate = (1 - a) * self.rate + a * random
+            # a duplicate box is the person's, not a place's: it leaves no place memory;
+            # with spot_places a place's memory counts a detection that continues a chain by
+            # the probability that the chain so far is clutter: a spot's firings win no mass
+            # and its chain stays clutter, a newcomer's chain stops being clutter as soon as
+            # its detections win mass (the chain prior: P(the chain a detection continues is
+            # clutter), the last learnt frame's value at its link, 1 where it continues none)
+            if spot:
+                self._chain_clutter = out[4]
+            self.place.learn(Z, out[1], out[2], a)
+            self.people.learn(out[3], a)
             if self.cl.learn_update == "model":
                 self.dups.learn(won, a)
             self._parts = None
@@ -779,12 +765,6 @@ class SceneModel:
                     and len(self._persist) == len(s):
                 q = np.stack([self._persist, ~self._persist]).astype(np.float64)
                 self.persist_sums = d * self.persist_sums + _class_sums(q, s)
-
-
-def _nan_to_0(x: np.ndarray) -> np.ndarray:
-    """``x`` with its NaNs set to 0, in place (``x`` finite or NaN)."""
-    x[np.isnan(x)] = 0.0
-    return x
 
 
 def _class_sums(r: np.ndarray, s: np.ndarray) -> np.ndarray:
