@@ -57,6 +57,7 @@ import numpy as np
 from numba import njit
 
 from . import camera_motion
+from .camera_motion import _pairwise
 
 #: detections of two frames are linked within this many box sizes (Δx / w, Δy / h)
 LINK_DIST = 1.0
@@ -131,22 +132,84 @@ def robust_std(x: np.ndarray) -> float:
 
 
 def robust_stds(x: np.ndarray) -> np.ndarray:
-    """:func:`robust_std` of each row of ``x`` (k, n), in one pass of numpy calls (the same
-    floats: the quantile per row, each row's mean summed along its own contiguous row)."""
-    a = np.abs(np.asarray(x, dtype=np.float64))
-    n = a.shape[1]
+    """:func:`robust_std` of each row of ``x`` (k, n): one numba pass (:func:`_robust_stds`,
+    the same floats as the numpy form below, which non-finite input takes: NaN's place in
+    np.partition's order)."""
+    x = np.asarray(x, dtype=np.float64)
+    n = x.shape[1]
     if not n:
-        return np.zeros(len(a))
-    # np.quantile(a, TRIM) (its 'linear' rule) by a partial sort: a tenth of its time
+        return np.zeros(len(x))
     pos = TRIM * (n - 1)
     lo = int(math.floor(pos))
     hi = min(lo + 1, n - 1)
+    out = np.empty(len(x))
+    if _robust_stds(np.ascontiguousarray(x), lo, hi, pos - lo, out):
+        return out
+    a = np.abs(x)
+    # np.quantile(a, TRIM) (its 'linear' rule) by a partial sort: a tenth of its time
     part = np.partition(a, (lo, hi), axis=1)
     t, d = pos - lo, part[:, hi] - part[:, lo]
     q = part[:, hi] - d * (1.0 - t) if t >= 0.5 else part[:, lo] + d * t   # numpy's own lerp
     np.minimum(a, q[:, None], out=a)
     # np.mean's own steps (a sum along each row, then / n) without its wrapper
     return MEAN_ABS_TO_STD * (np.add.reduce(a, axis=1) / n)
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def _robust_stds(x, lo, hi, t, out):
+    """:func:`robust_stds` into ``out`` (k,): per row, |x|'s ``lo``-th and ``hi``-th smallest
+    (by selection: the same values as np.partition's), numpy's lerp at ``t``, |x| winsorised
+    there and summed as numpy's add.reduce (:func:`.camera_motion._pairwise`).  False (``out``
+    partly written) on a non-finite value."""
+    n = x.shape[1]
+    a = np.empty(n)
+    tmp = np.empty(n)
+    for r in range(x.shape[0]):
+        for i in range(n):
+            v = abs(x[r, i])
+            if not math.isfinite(v):
+                return False
+            a[i] = v
+            tmp[i] = v
+        v_lo = _kth(tmp, lo)
+        v_hi = v_lo
+        if hi > lo:
+            # _kth left every later element >= a[lo]: the next one is their minimum
+            v_hi = tmp[lo + 1]
+            for i in range(lo + 2, n):
+                v_hi = tmp[i] if tmp[i] < v_hi else v_hi
+        d = v_hi - v_lo
+        q = v_hi - d * (1.0 - t) if t >= 0.5 else v_lo + d * t
+        for i in range(n):
+            a[i] = a[i] if a[i] <= q else q            # np.minimum (no NaN here)
+        out[r] = MEAN_ABS_TO_STD * (_pairwise(a, np.int64(n)) / n)
+    return True
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def _kth(a, k):
+    """The ``k``-th smallest of ``a`` (no NaN; Hoare's selection, middle pivot), ``a``
+    reordered so that ``a[:k] <= a[k] <= a[k + 1:]``."""
+    lo, hi = np.int64(0), np.int64(a.shape[0] - 1)
+    while lo < hi:
+        p = a[(lo + hi) >> 1]
+        i, j = lo, hi
+        while i <= j:
+            while a[i] < p:
+                i += 1
+            while a[j] > p:
+                j -= 1
+            if i <= j:
+                a[i], a[j] = a[j], a[i]
+                i += 1
+                j -= 1
+        if k <= j:
+            hi = j
+        elif k >= i:
+            lo = i
+        else:
+            break
+    return a[k]
 
 
 class _Ring:
