@@ -189,12 +189,42 @@ class PlaceClutter:
         self.beta = em_rate(self.num, self.den, self.cl.repeat_prior, a)
         self._a = a
         self.frames += 1
-        # fade the memory, add this frame's clutter, drop what has faded away
-        w = np.concatenate([self.mem_w * self.fade, np.asarray(clutter_share, dtype=float)])
-        e = np.concatenate([self.mem_e * self.fade + 1.0, np.ones(len(w) - len(self.mem_w))])
-        z = np.vstack([self.mem_z, np.asarray(Z, dtype=float).reshape(-1, 4)])
-        keep = w >= MIN_WEIGHT
-        self.mem_z, self.mem_w, self.mem_e = z[keep], w[keep], e[keep]
+        # fade the memory, add this frame's clutter, drop what has faded away (one pass)
+        self.mem_z, self.mem_w, self.mem_e = _memory_step(
+            self.mem_z, self.mem_w, self.mem_e,
+            np.ascontiguousarray(np.asarray(Z, dtype=np.float64).reshape(-1, 4)),
+            np.ascontiguousarray(clutter_share, dtype=np.float64), self.fade, MIN_WEIGHT)
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def _memory_step(mem_z, mem_w, mem_e, Z, share, fade, min_w):
+    """The place memory after a frame: the old entries' weights and exposures faded (``w δ``,
+    ``e δ + 1``), this frame's detections appended (weight ``share``, exposure 1), those
+    below ``min_w`` dropped -- the same floats as the numpy concatenation and mask."""
+    n_old, n_new = mem_w.shape[0], share.shape[0]
+    keep = 0
+    for i in range(n_old):
+        keep += mem_w[i] * fade >= min_w
+    for i in range(n_new):
+        keep += share[i] >= min_w
+    z = np.empty((keep, 4))
+    w = np.empty(keep)
+    e = np.empty(keep)
+    k = 0
+    for i in range(n_old):
+        wi = mem_w[i] * fade
+        if wi >= min_w:
+            z[k, 0], z[k, 1], z[k, 2], z[k, 3] = mem_z[i, 0], mem_z[i, 1], mem_z[i, 2], mem_z[i, 3]
+            w[k] = wi
+            e[k] = mem_e[i] * fade + 1.0
+            k += 1
+    for i in range(n_new):
+        if share[i] >= min_w:
+            z[k, 0], z[k, 1], z[k, 2], z[k, 3] = Z[i, 0], Z[i, 1], Z[i, 2], Z[i, 3]
+            w[k] = share[i]
+            e[k] = 1.0
+            k += 1
+    return z, w, e
 
 
 #: the "near people" neighbourhood: this many times the observation stds of the clutter gate
@@ -340,18 +370,46 @@ class DuplicateBoxes:
         """After the update: ``won`` (N_z,) the detections' target shares."""
         if self.cl.duplicate_prior <= 0:
             return
-        won = np.clip(np.asarray(won, dtype=np.float64), 0.0, 1.0)
-        extra = paired = np.zeros(len(won))
+        won = np.ascontiguousarray(won, dtype=np.float64)
+        num = den = 0.0
         if self._pairs is not None and len(won):
             Z, std, r2, n = self._pairs
             # a neighbour is unexplained where the update found clutter the likelier (won < ½);
             # the sums count 0s and 1s (exact), z's own term taken off again
-            lost = (won < 0.5).astype(float)
-            extra = gate_sums(Z, Z, r2, std, lost, ordered=False)[0] - lost > 0
-            paired = n > 0
-        self.num = (1 - a) * self.num + a * float(np.sum(won * extra))
-        self.den = (1 - a) * self.den + a * float(np.sum(won * paired))
+            lost = np.empty(len(won))
+            tmp = np.empty((2, len(won)))
+            _lost(won, lost)
+            num, den = _dup_sums(won, lost, gate_sums(Z, Z, r2, std, lost, ordered=False)[0], n,
+                                 tmp)
+        self.num = (1 - a) * self.num + a * num
+        self.den = (1 - a) * self.den + a * den
         self.q = em_rate(self.num, self.den, self.cl.duplicate_prior, a)
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def _lost(won, lost):
+    """``lost`` = 1.0 where ``won`` (clipped to [0, 1]) < ½, else 0.0."""
+    for j in range(won.shape[0]):
+        lost[j] = 1.0 if _clip01(won[j]) < 0.5 else 0.0
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def _clip01(w):
+    """np.clip(w, 0, 1) of a float (NaN stays NaN)."""
+    return 0.0 if w < 0.0 else (1.0 if w > 1.0 else w)
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def _dup_sums(won, lost, near_lost, n, tmp):
+    """:meth:`DuplicateBoxes.learn`'s ``Σ won · [a neighbour lost]`` and ``Σ won · [a
+    neighbour]`` (``won`` clipped to [0, 1]; ``near_lost`` the lost count in each gate, z's own
+    included), each summed as numpy's add.reduce; ``tmp`` (2, N_z) scratch."""
+    m = np.int64(won.shape[0])
+    for j in range(m):
+        w = _clip01(won[j])
+        tmp[0, j] = w * (1.0 if near_lost[j] - lost[j] > 0 else 0.0)
+        tmp[1, j] = w * (1.0 if n[j] > 0 else 0.0)
+    return _pairwise(tmp[0], m), _pairwise(tmp[1], m)
 
 
 def _log_v(Z: np.ndarray, cl: "ClutterParams", lk: "LikelihoodParams",
@@ -512,8 +570,7 @@ def _learn_shares(won, log_used, log_shadow, log_rep, log_near, log_dup, prev_li
     random = np.empty(n_z)
     n_c = chain_clutter.shape[0]
     for j in range(n_z):
-        w = won[j]
-        w = 0.0 if w < 0.0 else (1.0 if w > 1.0 else w)      # np.clip: NaN stays NaN
+        w = _clip01(won[j])
         log_c = np.log(w) - np.log1p(-w) + log_used[j]      # log C(z)
         sh = 1.0 / (1.0 + np.exp(log_c - log_shadow[j]))
         if not math.isfinite(sh):
