@@ -58,6 +58,7 @@ from numba import njit
 
 from . import camera_motion
 from .camera_motion import _pairwise
+from .gating import kth
 
 #: detections of two frames are linked within this many box sizes (Δx / w, Δy / h)
 LINK_DIST = 1.0
@@ -171,10 +172,10 @@ def _robust_stds(x, lo, hi, t, out):
                 return False
             a[i] = v
             tmp[i] = v
-        v_lo = _kth(tmp, lo)
+        v_lo = kth(tmp, lo)
         v_hi = v_lo
         if hi > lo:
-            # _kth left every later element >= a[lo]: the next one is their minimum
+            # kth left every later element >= a[lo]: the next one is their minimum
             v_hi = tmp[lo + 1]
             for i in range(lo + 2, n):
                 v_hi = tmp[i] if tmp[i] < v_hi else v_hi
@@ -184,32 +185,6 @@ def _robust_stds(x, lo, hi, t, out):
             a[i] = a[i] if a[i] <= q else q            # np.minimum (no NaN here)
         out[r] = MEAN_ABS_TO_STD * (_pairwise(a, np.int64(n)) / n)
     return True
-
-
-@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
-def _kth(a, k):
-    """The ``k``-th smallest of ``a`` (no NaN; Hoare's selection, middle pivot), ``a``
-    reordered so that ``a[:k] <= a[k] <= a[k + 1:]``."""
-    lo, hi = np.int64(0), np.int64(a.shape[0] - 1)
-    while lo < hi:
-        p = a[(lo + hi) >> 1]
-        i, j = lo, hi
-        while i <= j:
-            while a[i] < p:
-                i += 1
-            while a[j] > p:
-                j -= 1
-            if i <= j:
-                a[i], a[j] = a[j], a[i]
-                i += 1
-                j -= 1
-        if k <= j:
-            hi = j
-        elif k >= i:
-            lo = i
-        else:
-            break
-    return a[k]
 
 
 class _Ring:
