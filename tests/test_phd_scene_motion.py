@@ -258,3 +258,26 @@ def test_link_kernel_is_the_numpy_form(seed):
         np.testing.assert_array_equal(link(prev, cur), want)
         found += int((want >= 0).sum())
     assert found > 100
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_robust_stds_kernel_is_the_numpy_form_bit_for_bit(seed):
+    """robust_stds' numba pass (order statistics by selection, numpy's lerp, its pairwise
+    sum) gives the floats of the numpy form kept here, ties and runs of zeros included."""
+    from pfscope.trackers.phd.scene_motion import MEAN_ABS_TO_STD, TRIM, robust_stds
+
+    def numpy_form(x):
+        a = np.abs(x)
+        n = a.shape[1]
+        q = np.quantile(a, TRIM, axis=1)
+        return MEAN_ABS_TO_STD * (np.add.reduce(np.minimum(a, q[:, None]), axis=1) / n)
+
+    rng = np.random.default_rng(seed)
+    for _ in range(300):
+        x = rng.standard_normal((int(rng.integers(1, 5)), int(rng.integers(1, 700))))
+        x *= rng.choice([1e-3, 1.0, 50.0])
+        if rng.random() < 0.4:
+            x = np.round(x, 1)
+        if rng.random() < 0.2:
+            x[:, : x.shape[1] // 2] = 0.0
+        assert np.array_equal(robust_stds(x), numpy_form(x))
