@@ -187,6 +187,48 @@ def _robust_stds(x, lo, hi, t, out):
     return True
 
 
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def _triplets(Z, prev, pp, j, prev_link, a_buf, a_n, s_buf, s_n):
+    """The triplets of :meth:`SceneMotion.observe` (detection ``a`` of ``Z`` linked to ``b =
+    j[a]`` of ``prev``, itself linked to ``prev_link[b]`` of ``pp``), in detection order, into
+    the rings' buffers as :meth:`_Ring.extend` writes them (the last :data:`WINDOW` samples of
+    the frame, each at ``i`` and ``i + WINDOW``): per triplet the acceleration ``(z − 2q + r) /
+    q_size`` over (x, y) into ``a_buf``, and the log size changes ``log(z/q)`` (row 0) and
+    ``log(z/r)`` (row 1) over (w, h) into ``s_buf``.  Returns the samples each ring keeps."""
+    t = 0
+    for a in range(j.shape[0]):
+        if j[a] >= 0 and prev_link[j[a]] >= 0:
+            t += 1
+    skip_a = t - WINDOW if t > WINDOW else 0
+    skip_s = 2 * t - WINDOW if 2 * t > WINDOW else 0
+    k = 0
+    for a in range(j.shape[0]):
+        b = j[a]
+        if b < 0:
+            continue
+        c = prev_link[b]
+        if c < 0:
+            continue
+        if k >= skip_a:
+            at = (a_n + k - skip_a) % WINDOW
+            for x in range(2):
+                v = (Z[a, x] - 2.0 * prev[b, x] + pp[c, x]) / prev[b, 2 + x]
+                a_buf[x, at] = v
+                a_buf[x, at + WINDOW] = v
+        for x in range(2):
+            col = 2 * k + x
+            if col >= skip_s:
+                at = (s_n + col - skip_s) % WINDOW
+                one = np.log(Z[a, 2 + x] / prev[b, 2 + x])
+                two = np.log(Z[a, 2 + x] / pp[c, 2 + x])
+                s_buf[0, at] = one
+                s_buf[0, at + WINDOW] = one
+                s_buf[1, at] = two
+                s_buf[1, at + WINDOW] = two
+        k += 1
+    return t - skip_a, 2 * t - skip_s
+
+
 class _Ring:
     """The most recent :data:`WINDOW` samples of ``width`` statistics, one row per statistic
     (a numpy ring: no per-frame conversion of Python lists; each statistic contiguous).  Every
@@ -298,23 +340,14 @@ class SceneMotion:
             jl = np.where(ch.length >= 2, j, -1)
             self.camera = self._camera.step(prev, Z, jl, self.pos_std, self.size_std,
                                             self.speed_var, self.camera_memory)
-        has = np.flatnonzero(j >= 0)
-        if len(has):
-            jh = j[has]
-            # triplets: the link k−1 → k continues a link k−2 → k−1
-            jj = prev_link[jh] if len(prev_link) else np.full(len(has), -1)
-            tri = jj >= 0
-            if tri.any():
-                z, q, r = Z[has[tri]], prev[jh[tri]], self._prev_prev[jj[tri]]
-                qs = q[:, 2:4]
-                d = (z[:, :2] - 2.0 * q[:, :2] + r[:, :2]) / qs
-                self.accel.extend(d.T)
-                zs = z[:, 2:4]
-                # rows (1-frame, 2-frame) of (w, h) pairs per triplet, written in place
-                two = np.empty((2, len(z), 2))
-                np.divide(zs, qs, out=two[0])
-                np.divide(zs, r[:, 2:4], out=two[1])
-                self.size.extend(np.log(two, out=two).reshape(2, -1))
+        if len(prev_link) and len(j):
+            # triplets: the links k−1 → k that continue a link k−2 → k−1, their second
+            # differences and log size changes straight into the rings (one pass)
+            c = np.ascontiguousarray
+            na, ns = _triplets(c(Z), c(prev), c(self._prev_prev), j, prev_link,
+                               self.accel.buf, self.accel.n, self.size.buf, self.size.n)
+            self.accel.n += na
+            self.size.n += ns
         self._prev_prev = prev
 
     def _spreads(self, name: str) -> np.ndarray:
