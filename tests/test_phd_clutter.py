@@ -439,3 +439,29 @@ def test_kappa_terms_and_learn_shares_are_the_numpy_form_bit_for_bit(seed):
         keep = w2 >= 1e-3
         assert np.array_equal(wv, w2[keep]) and np.array_equal(z, np.vstack([mz, Z])[keep])
         assert np.array_equal(e, np.concatenate([me * 0.97 + 1.0, np.ones(n)])[keep])
+
+
+def test_neighbour_counts_at_two_widths_are_the_gate_sums_counts():
+    """neighbour_counts (one pass for both widths below BRUTE_PAIRS pairs, two grid-indexed
+    gate_sums above) counts what neighbours counts at scale 1 and NEAR_SCALE, people close
+    together, apart and on one another."""
+    from pfscope.trackers.phd.clutter import NEAR_SCALE, neighbour_counts, neighbours
+    from pfscope.trackers.phd.filter import OBS_DIM, gate_threshold, obs_std
+
+    cl, lk = ClutterParams(clutter_model="learn"), LikelihoodParams()
+    rng = np.random.default_rng(0)
+    wider = 0
+    for n in (2, 3, 9, 40, 63, 64, 90):
+        for _ in range(20):
+            xy = rng.uniform(0, rng.choice([60.0, 300.0]), (n, 2))
+            wh = rng.uniform(20, 40, (n, 1)) * [1.0, 2.5]
+            Z = np.column_stack([xy, wh])
+            Z[n // 2:] = Z[: n - n // 2] + rng.normal(0, 2, (n - n // 2, 4))  # second boxes
+            std = obs_std(Z[:, 2:4], lk)
+            a, b = neighbour_counts(Z, gate_threshold(cl.clutter_gate, OBS_DIM), std,
+                                    std * NEAR_SCALE)
+            assert np.array_equal(a, neighbours(Z, cl, lk))
+            assert np.array_equal(b, neighbours(Z, cl, lk, NEAR_SCALE))
+            assert b.sum() >= a.sum() > 0
+            wider += b.sum() > a.sum()
+    assert wider > 70             # of the 140 sets, most have more pairs at the wider gate

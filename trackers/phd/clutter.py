@@ -355,14 +355,21 @@ class DuplicateBoxes:
             return np.full(len(Z), -np.inf)
         return kappa_terms(_log_v(Z, self.cl, self.lk, log_v), dup=(n, self.q))[2]
 
-    def counts(self, Z: np.ndarray, std: Optional[np.ndarray] = None) -> Optional[np.ndarray]:
+    def on(self, Z: np.ndarray) -> bool:
+        """Whether the term is on for the detections ``Z`` (a prior, and a pair)."""
+        return self.cl.duplicate_prior > 0 and len(Z) >= 2
+
+    def counts(self, Z: np.ndarray, std: Optional[np.ndarray] = None,
+               n: Optional[np.ndarray] = None) -> Optional[np.ndarray]:
         """``n(z)`` (N_z,) int of :meth:`log_kappa`: the other detections in each widened
-        gate; None where the term is off or there is no pair (and kept for :meth:`learn`)."""
+        gate (``n`` when the caller counted them: :func:`neighbour_counts`); None where the
+        term is off (:meth:`on`).  Kept for :meth:`learn`."""
         self._pairs = None
-        if self.cl.duplicate_prior <= 0 or len(Z) < 2:
+        if not self.on(Z):
             return None
         std, r2 = _wide_gate(Z, self.cl, self.lk, NEAR_SCALE, std)
-        n = gate_sums(Z, Z, r2, std, np.ones(len(Z)), ordered=False)[2] - 1   # not z itself
+        if n is None:
+            n = gate_sums(Z, Z, r2, std, np.ones(len(Z)), ordered=False)[2] - 1   # not z
         self._pairs = (Z, std, r2, n)
         return n
 
@@ -526,6 +533,52 @@ def neighbours(Z: np.ndarray, cl: "ClutterParams", lk: "LikelihoodParams",
         return np.zeros(len(Z), dtype=np.int64)
     std, r2 = _wide_gate(Z, cl, lk, scale, std)
     return gate_sums(Z, Z, r2, std, np.ones(len(Z)), ordered=False)[2] - 1
+
+
+def neighbour_counts(Z: np.ndarray, r2: float, std: np.ndarray,
+                     wide: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`neighbours` of the detections ``Z`` (N_z >= 2) at two widths at once: the
+    other detections inside each one's gate ``d² <= r2`` with the stds ``std`` and ``wide``
+    (N_z, 4).  Below :data:`.gating.BRUTE_PAIRS` pairs one pass tests every pair for both
+    (:func:`_count_two`: gate_sums' own test, so the same counts); above, two grid-indexed
+    gate_sums."""
+    from .gating import BRUTE_PAIRS
+
+    n = len(Z)
+    if n * n >= BRUTE_PAIRS:
+        ones = np.ones(n)
+        return (gate_sums(Z, Z, r2, std, ones, ordered=False)[2] - 1,
+                gate_sums(Z, Z, r2, wide, ones, ordered=False)[2] - 1)
+    c = np.empty((2, n), dtype=np.int64)
+    f = np.ascontiguousarray
+    _count_two(f(Z, dtype=np.float64), f(std, dtype=np.float64), f(wide, dtype=np.float64),
+               float(r2), c)
+    return c[0], c[1]
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def _count_two(Z, std, wide, r2, c):
+    """:func:`neighbour_counts`' pass: ``c[0, j]`` / ``c[1, j]`` the other detections inside
+    detection j's gate with ``std`` / ``wide`` (gating._gate_sums' distance, term by term)."""
+    n = Z.shape[0]
+    for j in range(n):
+        k0 = np.int64(-1)           # z itself is inside both
+        k1 = np.int64(-1)
+        for q in range(n):
+            d0 = (Z[q, 0] - Z[j, 0]) / std[j, 0]
+            d1 = (Z[q, 1] - Z[j, 1]) / std[j, 1]
+            d2 = (Z[q, 2] - Z[j, 2]) / std[j, 2]
+            d3 = (Z[q, 3] - Z[j, 3]) / std[j, 3]
+            if d0 * d0 + d1 * d1 + d2 * d2 + d3 * d3 <= r2:
+                k0 += 1
+            d0 = (Z[q, 0] - Z[j, 0]) / wide[j, 0]
+            d1 = (Z[q, 1] - Z[j, 1]) / wide[j, 1]
+            d2 = (Z[q, 2] - Z[j, 2]) / wide[j, 2]
+            d3 = (Z[q, 3] - Z[j, 3]) / wide[j, 3]
+            if d0 * d0 + d1 * d1 + d2 * d2 + d3 * d3 <= r2:
+                k1 += 1
+        c[0, j] = k0
+        c[1, j] = k1
 
 
 def clutter_share(won: np.ndarray, log_used: np.ndarray, log_shadow: np.ndarray) -> np.ndarray:

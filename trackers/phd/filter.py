@@ -88,7 +88,8 @@ import numpy as np
 from ..params import param, part, with_options
 from . import _kernels, motion
 from .clutter import PlaceClutter
-from .clutter import DuplicateBoxes, NearClutter, kappa_terms, learn_shares, neighbours
+from .clutter import (DuplicateBoxes, NearClutter, kappa_terms, learn_shares, neighbour_counts,
+                      neighbours)
 from .scene_motion import Chains
 from .gating import DEFAULT_BUDGET, LogGPairs, gate_pairs, tail_radius2
 from ..smc.resampling import SCHEMES
@@ -632,9 +633,18 @@ class SceneModel:
                 log_kappa = math.log(self.rate) - math.log(self._area(frame)) + log_size
             # the detections' observation stds, once a frame for every part that reads them
             std = obs_std(Z[:, 2:4], self.lk)
+            n_near = n_dup = None
             if self.cl.near_learn and len(Z):
+                if self.place is not None and self.cl.learn_update == "model" \
+                        and self.dups.on(Z):
+                    # the neighbour count and the duplicate term's (its gates times
+                    # NEAR_SCALE) in one pass
+                    n_near, n_dup = neighbour_counts(
+                        Z, gate_threshold(self.cl.clutter_gate, OBS_DIM), std,
+                        self.people.wide_std_of(std))
                 a = 1.0 / min(self.frames + 5, self.cl.clutter_memory)
-                self.near = (1 - a) * self.near + a * self._neighbours(Z, std)
+                self.near = (1 - a) * self.near + a * (
+                    self._neighbours(Z, std) if n_near is None else float(n_near.mean()))
             # log V(z) of the clutter gate, once for every part spread as the 'gate' model
             # (log_clutter_density at rate λ is log λ − log V: the same floats)
             log_v = log_gate_volume(Z, self.cl, self.lk, std)
@@ -655,7 +665,7 @@ class SceneModel:
                 m = self.people.mass(Z, predicted, self._chained, std_wide)
                 # a second box on a person already boxed, which a Poisson κ cannot express:
                 # the duplicate term (.clutter.DuplicateBoxes) joins the mixture ('model')
-                n = self.dups.counts(Z, std_wide) if model else None
+                n = self.dups.counts(Z, std_wide, n_dup) if model else None
                 log_rep, log_near, log_dup, shadow, no_place = kappa_terms(
                     log_v, place=(S, E, self.place.beta),
                     near=None if m is None else (m, self.people.nu, self._chained),
