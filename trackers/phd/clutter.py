@@ -559,26 +559,27 @@ def neighbour_counts(Z: np.ndarray, r2: float, std: np.ndarray,
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
 def _count_two(Z, std, wide, r2, c):
     """:func:`neighbour_counts`' pass: ``c[0, j]`` / ``c[1, j]`` the other detections inside
-    detection j's gate with ``std`` / ``wide`` (gating._gate_sums' distance, term by term)."""
+    detection j's gate with ``std`` / ``wide``."""
     n = Z.shape[0]
     for j in range(n):
         k0 = np.int64(-1)           # z itself is inside both
         k1 = np.int64(-1)
         for q in range(n):
-            d0 = (Z[q, 0] - Z[j, 0]) / std[j, 0]
-            d1 = (Z[q, 1] - Z[j, 1]) / std[j, 1]
-            d2 = (Z[q, 2] - Z[j, 2]) / std[j, 2]
-            d3 = (Z[q, 3] - Z[j, 3]) / std[j, 3]
-            if d0 * d0 + d1 * d1 + d2 * d2 + d3 * d3 <= r2:
-                k0 += 1
-            d0 = (Z[q, 0] - Z[j, 0]) / wide[j, 0]
-            d1 = (Z[q, 1] - Z[j, 1]) / wide[j, 1]
-            d2 = (Z[q, 2] - Z[j, 2]) / wide[j, 2]
-            d3 = (Z[q, 3] - Z[j, 3]) / wide[j, 3]
-            if d0 * d0 + d1 * d1 + d2 * d2 + d3 * d3 <= r2:
-                k1 += 1
+            k0 += _in_gate(Z, q, j, std, r2)
+            k1 += _in_gate(Z, q, j, wide, r2)
         c[0, j] = k0
         c[1, j] = k1
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def _in_gate(Z, q, j, std, r2):
+    """Whether detection q is inside detection j's gate ``d² <= r2`` of the stds ``std[j]``:
+    gating._gate_sums' distance, term by term."""
+    d0 = (Z[q, 0] - Z[j, 0]) / std[j, 0]
+    d1 = (Z[q, 1] - Z[j, 1]) / std[j, 1]
+    d2 = (Z[q, 2] - Z[j, 2]) / std[j, 2]
+    d3 = (Z[q, 3] - Z[j, 3]) / std[j, 3]
+    return d0 * d0 + d1 * d1 + d2 * d2 + d3 * d3 <= r2
 
 
 def clutter_share(won: np.ndarray, log_used: np.ndarray, log_shadow: np.ndarray) -> np.ndarray:
