@@ -371,3 +371,97 @@ def test_a_spot_that_fires_on_and_off_does_not_become_a_track():
         assert a["FP"] <= b["FP"], (a["FP"], b["FP"])
     assert sum(a["FP"] for a in on) <= 0.6 * sum(b["FP"] for b in off)
     assert np.mean([a["MOTA"] for a in on]) >= np.mean([b["MOTA"] for b in off]) + 0.05
+
+
+def _random_parts(rng, n):
+    """Random inputs of the learnt clutter's terms: -inf, 0, 1, ties and NaN among them."""
+    log_v = rng.normal(8.0, 2.0, n)
+    S = np.where(rng.random(n) < 0.4, 0.0, rng.exponential(0.5, n))
+    E = rng.uniform(0.0, 30.0, n)
+    m = np.where(rng.random(n) < 0.3, 0.0, rng.exponential(0.8, n))
+    chained = rng.random(n) < 0.4
+    cnt = rng.integers(0, 3, n)
+    log_u = np.where(rng.random(n) < 0.1, -np.inf, rng.normal(-12.0, 2.0, n))
+    won = np.clip(rng.uniform(-0.1, 1.1, n), -0.05, 1.05)
+    won[rng.random(n) < 0.1] = 1.0
+    won[rng.random(n) < 0.1] = 0.0
+    return log_v, S, E, m, chained, cnt, log_u, won
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_kappa_terms_and_learn_shares_are_the_numpy_form_bit_for_bit(seed):
+    """The learnt clutter's terms and the EM's split (one numba pass each) give the floats of
+    their numpy form (kept here: the mixture before the kernels), NaN and -inf included."""
+    from pfscope.trackers.phd.clutter import (PRIOR_FRAMES, _memory_step, kappa_terms,
+                                              learn_shares)
+
+    rng = np.random.default_rng(seed)
+    for _ in range(200):
+        n = int(rng.integers(0, 25))
+        log_v, S, E, m, chained, cnt, log_u, won = _random_parts(rng, n)
+        beta, nu, q = rng.uniform(0.01, 1, 3)
+        near = float(rng.choice([0.0, rng.uniform(0.01, 2)]))
+        with np.errstate(all="ignore"):
+            r = (S + PRIOR_FRAMES * beta) / (E + PRIOR_FRAMES)
+            rep = np.log(np.where(S > 0, np.minimum(r, 1.0), 0.0)) + -log_v
+            nr = np.where(chained, -np.inf, np.log(nu * np.minimum(m, 1.0)) + -log_v)
+            dup = np.log(q * cnt) + -log_v
+            u = np.logaddexp(log_u, np.log(near) - log_v) if near > 0 else log_u
+            shadow = np.logaddexp(np.logaddexp(np.logaddexp(u, rep), nr), dup)
+            birth = np.logaddexp(np.logaddexp(u, nr), dup)
+        out = kappa_terms(log_v, (S, E, beta), (m, nu, chained), (cnt, q), log_u, near)
+        for a, b in zip(out, (rep, nr, dup, shadow, birth)):
+            assert np.array_equal(a, b, equal_nan=True)
+        # the EM's split of the clutter shares (SceneModel.learn's numpy form)
+        link = rng.integers(-1, 6, n)
+        prior = rng.uniform(0, 1, int(rng.integers(1, 6)))
+        with np.errstate(all="ignore"):
+            w = np.clip(won, 0.0, 1.0)
+            sh = 1.0 / (1.0 + np.exp(np.log(w) - np.log1p(-w) + shadow - shadow))
+            sh = np.where(np.isfinite(sh), sh, np.where(w >= 1.0, 0.0, 1.0))
+            fr = [np.exp(x - shadow) for x in (rep, nr, dup)]
+        fr = [np.where(np.isnan(x), 0.0, x) for x in fr]
+        chain = np.ones(n)
+        ok = (link >= 0) & (link < len(prior))
+        chain[ok] = prior[link[ok]]
+        got, random = learn_shares(won, shadow, shadow, (rep, nr, dup), link, prior)
+        want = (sh, sh * (1.0 - fr[1] - fr[2]) * chain, sh * fr[0] * chain, sh * fr[1],
+                chain * (1.0 - won))
+        for a, b in zip(got, want):
+            assert np.array_equal(a, b, equal_nan=True)
+        assert random == float(np.sum(sh * (1.0 - fr[0] - fr[1] - fr[2])))
+        # the place memory's update
+        k = int(rng.integers(0, 40))
+        mz, mw, me = rng.normal(size=(k, 4)), rng.exponential(0.01, k), rng.uniform(1, 9, k)
+        Z = rng.normal(size=(n, 4))
+        z, wv, e = _memory_step(mz, mw, me, Z, sh, 0.97, 1e-3)
+        w2 = np.concatenate([mw * 0.97, sh])
+        keep = w2 >= 1e-3
+        assert np.array_equal(wv, w2[keep]) and np.array_equal(z, np.vstack([mz, Z])[keep])
+        assert np.array_equal(e, np.concatenate([me * 0.97 + 1.0, np.ones(n)])[keep])
+
+
+def test_neighbour_counts_at_two_widths_are_the_gate_sums_counts():
+    """neighbour_counts (one pass for both widths below BRUTE_PAIRS pairs, two grid-indexed
+    gate_sums above) counts what neighbours counts at scale 1 and NEAR_SCALE, people close
+    together, apart and on one another."""
+    from pfscope.trackers.phd.clutter import NEAR_SCALE, neighbour_counts, neighbours
+    from pfscope.trackers.phd.filter import OBS_DIM, gate_threshold, obs_std
+
+    cl, lk = ClutterParams(clutter_model="learn"), LikelihoodParams()
+    rng = np.random.default_rng(0)
+    wider = 0
+    for n in (2, 3, 9, 40, 63, 64, 90):
+        for _ in range(20):
+            xy = rng.uniform(0, rng.choice([60.0, 300.0]), (n, 2))
+            wh = rng.uniform(20, 40, (n, 1)) * [1.0, 2.5]
+            Z = np.column_stack([xy, wh])
+            Z[n // 2:] = Z[: n - n // 2] + rng.normal(0, 2, (n - n // 2, 4))  # second boxes
+            std = obs_std(Z[:, 2:4], lk)
+            a, b = neighbour_counts(Z, gate_threshold(cl.clutter_gate, OBS_DIM), std,
+                                    std * NEAR_SCALE)
+            assert np.array_equal(a, neighbours(Z, cl, lk))
+            assert np.array_equal(b, neighbours(Z, cl, lk, NEAR_SCALE))
+            assert b.sum() >= a.sum() > 0
+            wider += b.sum() > a.sum()
+    assert wider > 70             # of the 140 sets, most have more pairs at the wider gate

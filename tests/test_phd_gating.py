@@ -463,3 +463,20 @@ def test_gate_sums_one_pass_grid_is_grid_index_bit_for_bit(seed):
         taken.append(_gate_sums_grid(pts, w, e, Z, std, float(r2), float(cell[0]),
                                      float(cell[1]), S1, E1, C1))
     assert taken == [True, False, True, False]
+
+
+def test_gate_cells_are_the_median_of_the_query_boxes_bit_for_bit():
+    """gate_sums' grid cells found by selection in the kernel are 2 × np.median of
+    gate_pairs' query boxes (odd and even counts, ties)."""
+    from pfscope.trackers.phd.gating import gate_cells_of
+
+    rng = np.random.default_rng(0)
+    for _ in range(3000):
+        std = rng.uniform(0.5, 30, (int(rng.integers(1, 60)), 4))
+        if rng.random() < 0.5:
+            std = np.round(std)
+        r2 = float(rng.uniform(1, 20))
+        cell = np.empty(2)
+        assert gate_cells_of(std, r2, cell)
+        want = 2.0 * np.median(np.sqrt(r2) * std[:, :2] * (1 + 1e-6) + 1e-9, axis=0)
+        assert np.array_equal(cell, want)

@@ -258,3 +258,57 @@ def test_link_kernel_is_the_numpy_form(seed):
         np.testing.assert_array_equal(link(prev, cur), want)
         found += int((want >= 0).sum())
     assert found > 100
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_robust_stds_kernel_is_the_numpy_form_bit_for_bit(seed):
+    """robust_stds' numba pass (order statistics by selection, numpy's lerp, its pairwise
+    sum) gives the floats of the numpy form kept here, ties and runs of zeros included."""
+    from pfscope.trackers.phd.scene_motion import MEAN_ABS_TO_STD, TRIM, robust_stds
+
+    def numpy_form(x):
+        a = np.abs(x)
+        n = a.shape[1]
+        q = np.quantile(a, TRIM, axis=1)
+        return MEAN_ABS_TO_STD * (np.add.reduce(np.minimum(a, q[:, None]), axis=1) / n)
+
+    rng = np.random.default_rng(seed)
+    for _ in range(300):
+        x = rng.standard_normal((int(rng.integers(1, 5)), int(rng.integers(1, 700))))
+        x *= rng.choice([1e-3, 1.0, 50.0])
+        if rng.random() < 0.4:
+            x = np.round(x, 1)
+        if rng.random() < 0.2:
+            x[:, : x.shape[1] // 2] = 0.0
+        assert np.array_equal(robust_stds(x), numpy_form(x))
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_triplets_kernel_fills_the_rings_as_the_numpy_form(seed):
+    """SceneMotion.observe's triplets (one numba pass into the rings) leave the rings as the
+    numpy form kept here (the triplets' columns through _Ring.extend), frames of more than
+    WINDOW triplets included."""
+    from pfscope.trackers.phd import scene_motion as S
+
+    rng = np.random.default_rng(seed)
+    new_a, new_s, old_a, old_s = S._Ring(2), S._Ring(2), S._Ring(2), S._Ring(2)
+    for _ in range(30):
+        n_pp, n_p, n = (int(rng.integers(1, 400)) for _ in range(3))
+        pp, prev, Z = (np.column_stack([rng.uniform(0, 600, (k, 2)),
+                                        rng.uniform(5, 80, (k, 2))]) for k in (n_pp, n_p, n))
+        prev_link = np.where(rng.random(n_p) < 0.7, rng.integers(0, n_pp, n_p), -1)
+        j = np.where(rng.random(n) < 0.8, rng.integers(0, n_p, n), -1)
+        na, ns = S._triplets(Z, prev, pp, j, prev_link, new_a.buf, new_a.n, new_s.buf, new_s.n)
+        new_a.n += na
+        new_s.n += ns
+        has = np.flatnonzero(j >= 0)
+        jh = j[has]
+        tri = prev_link[jh] >= 0
+        z, q, r = Z[has[tri]], prev[jh[tri]], pp[prev_link[jh][tri]]
+        if len(z):
+            old_a.extend(((z[:, :2] - 2.0 * q[:, :2] + r[:, :2]) / q[:, 2:4]).T)
+            old_s.extend(np.log(np.stack([z[:, 2:4] / q[:, 2:4],
+                                          z[:, 2:4] / r[:, 2:4]])).reshape(2, -1))
+        assert new_a.n == old_a.n and new_s.n == old_s.n
+        assert np.array_equal(new_a.rows(), old_a.rows())
+        assert np.array_equal(new_s.rows(), old_s.rows())

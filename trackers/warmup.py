@@ -281,6 +281,10 @@ def _compile_core(presets=("practical", "paper"), phd: bool = True,
         tr = PHDTracker(make_params("phd", preset, {}), rng=np.random.default_rng(0))
         for k in range(4):
             tr.step(Frame(k + 1, k / 25.0, image), _walkers(k, rng))
+    # the scene motion's robust spreads, which four frames do not reach (their rings fill
+    # after scene_motion.MIN_SAMPLES triplets)
+    from .phd.scene_motion import robust_stds
+    robust_stds(np.ones((4, 8)))
     _compile_association()
     _ready = _ready | {key}
     return time.perf_counter() - t0

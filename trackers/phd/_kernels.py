@@ -78,15 +78,13 @@ def _zero_start():
     return a
 
 
-@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
-def grid_build(px, py, cell_x, cell_y):
-    """Bucket the points ``(px, py)`` (N,) on a uniform grid of ``cell_x × cell_y``.
-
-    Returns ``(ok, x0, y0, cell_x, cell_y, ni, nj, order, starts)``: ``order`` (N,) the point
-    indices sorted by cell key ``i·nj + j`` (stable), ``starts`` (ni·nj + 1,) the first position
-    in ``order`` of each cell.  The cells grow (×2) until there are at most ``4 N + 64`` of them,
-    so memory stays O(N) however far apart the points are.  ``ok`` is False when a coordinate
-    is not finite (nothing else is valid then)."""
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
+def grid_shape(px, py, cell_x, cell_y):
+    """:func:`grid_build`'s grid without the bucketing: ``(ok, x0, y0, cell_x, cell_y, ni,
+    nj)``, the origin at the points' minima, the cells grown (×2) until there are at most
+    ``4 N + 64`` of them; ``ok`` False when a coordinate is not finite (``ni = nj = 0`` also
+    when there is no point)."""
     n = px.shape[0]
     x0 = np.inf
     y0 = np.inf
@@ -96,13 +94,13 @@ def grid_build(px, py, cell_x, cell_y):
         a = px[i]
         b = py[i]
         if not (math.isfinite(a) and math.isfinite(b)):
-            return False, 0.0, 0.0, cell_x, cell_y, 0, 0, np.empty(0, np.int64), _zero_start()
+            return False, 0.0, 0.0, cell_x, cell_y, 0, 0
         x0 = a if a < x0 else x0           # min(x0, a), max(x1, a), ... spelt out as numba's
         x1 = a if a > x1 else x1           # own rule (v if v < acc else acc): the same floats,
         y0 = b if b < y0 else y0           # and no builtin min/max overload to compile on a
         y1 = b if b > y1 else y1           # first run
     if n == 0:
-        return True, 0.0, 0.0, cell_x, cell_y, 0, 0, np.empty(0, np.int64), _zero_start()
+        return True, 0.0, 0.0, cell_x, cell_y, 0, 0
     max_cells = 4.0 * n + 64.0
     while True:
         fi = math.floor((x1 - x0) / cell_x) + 1.0
@@ -111,8 +109,24 @@ def grid_build(px, py, cell_x, cell_y):
             break
         cell_x *= 2.0
         cell_y *= 2.0
-    ni = int(fi)
-    nj = int(fj)
+    return True, x0, y0, cell_x, cell_y, int(fi), int(fj)
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def grid_build(px, py, cell_x, cell_y):
+    """Bucket the points ``(px, py)`` (N,) on a uniform grid of ``cell_x × cell_y``.
+
+    Returns ``(ok, x0, y0, cell_x, cell_y, ni, nj, order, starts)``: ``order`` (N,) the point
+    indices sorted by cell key ``i·nj + j`` (stable), ``starts`` (ni·nj + 1,) the first position
+    in ``order`` of each cell.  The cells grow (×2) until there are at most ``4 N + 64`` of them,
+    so memory stays O(N) however far apart the points are.  ``ok`` is False when a coordinate
+    is not finite (nothing else is valid then)."""
+    ok, x0, y0, cell_x, cell_y, ni, nj = grid_shape(px, py, cell_x, cell_y)
+    if not ok:
+        return False, 0.0, 0.0, cell_x, cell_y, 0, 0, np.empty(0, np.int64), _zero_start()
+    n = px.shape[0]
+    if n == 0:
+        return True, 0.0, 0.0, cell_x, cell_y, 0, 0, np.empty(0, np.int64), _zero_start()
     starts = np.empty(ni * nj + 1, np.int64)
     for k in range(ni * nj + 1):
         starts[k] = 0
@@ -216,6 +230,91 @@ def mass_near_kernel(states, w, Z, std_z, r2, cell_x, cell_y):
                     s += w[i]
         out[j] = s
     return True, out, grid
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def mass_near_few(states, w, Z, std_z, r2, cell_x, cell_y):
+    """:func:`mass_near_kernel`'s M(z) bit for bit -- on its grid of ``cell_x × cell_y`` over
+    every particle, each detection's sum in the same order (cell key ``i·nj + j``, then
+    particle index) -- without bucketing every particle: only those in a cell some gate box
+    touches are kept (one pass), then bucketed as grid_build does (stable counting sort).
+    For a few detections among many particles (κ_n's M'(z) of the unchained detections).
+    Returns ``(ok, out)``."""
+    nz = Z.shape[0]
+    out = np.empty(nz, np.float64)       # np.empty and fills: no np.zeros overload to compile
+    for j in range(nz):
+        out[j] = 0.0
+    n = states.shape[0]
+    if n == 0 or nz == 0:
+        return True, out
+    ok, x0, y0, cx, cy, ni, nj = grid_shape(states[:, 0], states[:, 1], cell_x, cell_y)
+    if not ok:
+        return False, out
+    r = math.sqrt(r2)
+    box = np.empty((nz, 4), np.int64)
+    mark = np.empty(ni * nj, np.bool_)
+    for k in range(ni * nj):
+        mark[k] = False
+    for j in range(nz):
+        i0, i1, j0, j1 = gate_cells(Z[j, 0], Z[j, 1], std_z[j, 0], std_z[j, 1], r,
+                                    x0, cx, ni, y0, cy, nj)
+        box[j, 0] = i0
+        box[j, 1] = i1
+        box[j, 2] = j0
+        box[j, 3] = j1
+        for ci in range(i0, i1 + 1):
+            for cj in range(j0, j1 + 1):
+                mark[ci * nj + cj] = True
+    sel = np.empty(n, np.int64)
+    key = np.empty(n, np.int64)
+    m = np.int64(0)
+    for i in range(n):
+        ci = int((states[i, 0] - x0) / cx)       # grid_build's cell of the particle
+        ci = ni - 1 if ni - 1 < ci else ci
+        cj = int((states[i, 1] - y0) / cy)
+        cj = nj - 1 if nj - 1 < cj else cj
+        k = ci * nj + cj
+        if mark[k]:
+            sel[m] = i
+            key[m] = k
+            m += 1
+    # grid_build's stable counting sort, on the kept particles and the touched cells only:
+    # those numbered c = 0, 1, ... in key order (cid, read at touched cells only), their
+    # runs in order[] from first[c]
+    cid = np.empty(ni * nj, np.int64)
+    nc = np.int64(0)
+    for k in range(ni * nj):
+        if mark[k]:
+            cid[k] = nc
+            nc += 1
+    first = np.empty(nc + 1, np.int64)
+    for c in range(nc + 1):
+        first[c] = 0
+    for q in range(m):
+        first[cid[key[q]] + 1] += 1
+    for c in range(nc):
+        first[c + 1] += first[c]
+    fill = np.empty(nc, np.int64)
+    for c in range(nc):
+        fill[c] = first[c]
+    order = np.empty(m, np.int64)
+    for q in range(m):
+        c = cid[key[q]]
+        order[fill[c]] = sel[q]
+        fill[c] += 1
+    for j in range(nz):
+        s = 0.0
+        if box[j, 3] < box[j, 2]:               # the gate misses the grid's columns
+            continue
+        for ci in range(box[j, 0], box[j, 1] + 1):
+            # the row's touched cells j0..j1 are consecutive in cid (all marked)
+            for p in range(first[cid[ci * nj + box[j, 2]]],
+                           first[cid[ci * nj + box[j, 3]] + 1]):
+                i = order[p]
+                if _gate_d2(states, i, Z, j, std_z, j, r2) <= r2:
+                    s += w[i]
+        out[j] = s
+    return True, out
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)

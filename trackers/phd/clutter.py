@@ -63,7 +63,9 @@ from dataclasses import replace
 from typing import TYPE_CHECKING, Optional
 
 import numpy as np
+from numba import njit
 
+from .camera_motion import _pairwise
 from .gating import gate_sums
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -156,9 +158,8 @@ class PlaceClutter:
         """``log κ_r(z)`` (N_z,) of this frame's detections (``-inf`` where no clutter fell).
         ``log_v``, ``std``: the clutter gates' ``log V(z)`` and the detections' observation
         stds (:func:`.filter.obs_std`) when the caller has them."""
-        rate = self.place_rate(Z, std)
-        with np.errstate(divide="ignore"):
-            return np.log(rate) + _unit_density(Z, self.cl, self.lk, log_v)
+        S, E = self._weight_in_gates(Z, watched=True, std=std)
+        return kappa_terms(_log_v(Z, self.cl, self.lk, log_v), place=(S, E, self.beta))[0]
 
     def log_gate(self, Z: np.ndarray, share: float,
                  log_v: Optional[np.ndarray] = None) -> np.ndarray:
@@ -188,12 +189,42 @@ class PlaceClutter:
         self.beta = em_rate(self.num, self.den, self.cl.repeat_prior, a)
         self._a = a
         self.frames += 1
-        # fade the memory, add this frame's clutter, drop what has faded away
-        w = np.concatenate([self.mem_w * self.fade, np.asarray(clutter_share, dtype=float)])
-        e = np.concatenate([self.mem_e * self.fade + 1.0, np.ones(len(w) - len(self.mem_w))])
-        z = np.vstack([self.mem_z, np.asarray(Z, dtype=float).reshape(-1, 4)])
-        keep = w >= MIN_WEIGHT
-        self.mem_z, self.mem_w, self.mem_e = z[keep], w[keep], e[keep]
+        # fade the memory, add this frame's clutter, drop what has faded away (one pass)
+        self.mem_z, self.mem_w, self.mem_e = _memory_step(
+            self.mem_z, self.mem_w, self.mem_e,
+            np.ascontiguousarray(np.asarray(Z, dtype=np.float64).reshape(-1, 4)),
+            np.ascontiguousarray(clutter_share, dtype=np.float64), self.fade, MIN_WEIGHT)
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def _memory_step(mem_z, mem_w, mem_e, Z, share, fade, min_w):
+    """The place memory after a frame: the old entries' weights and exposures faded (``w δ``,
+    ``e δ + 1``), this frame's detections appended (weight ``share``, exposure 1), those
+    below ``min_w`` dropped -- the same floats as the numpy concatenation and mask."""
+    n_old, n_new = mem_w.shape[0], share.shape[0]
+    keep = 0
+    for i in range(n_old):
+        keep += mem_w[i] * fade >= min_w
+    for i in range(n_new):
+        keep += share[i] >= min_w
+    z = np.empty((keep, 4))
+    w = np.empty(keep)
+    e = np.empty(keep)
+    k = 0
+    for i in range(n_old):
+        wi = mem_w[i] * fade
+        if wi >= min_w:
+            z[k, 0], z[k, 1], z[k, 2], z[k, 3] = mem_z[i, 0], mem_z[i, 1], mem_z[i, 2], mem_z[i, 3]
+            w[k] = wi
+            e[k] = mem_e[i] * fade + 1.0
+            k += 1
+    for i in range(n_new):
+        if share[i] >= min_w:
+            z[k, 0], z[k, 1], z[k, 2], z[k, 3] = Z[i, 0], Z[i, 1], Z[i, 2], Z[i, 3]
+            w[k] = share[i]
+            e[k] = 1.0
+            k += 1
+    return z, w, e
 
 
 #: the "near people" neighbourhood: this many times the observation stds of the clutter gate
@@ -239,22 +270,34 @@ class NearClutter:
 
         return obs_std(Z[:, 2:4], self._wide()[0])
 
+    def wide_std_of(self, std: np.ndarray) -> np.ndarray:
+        """:meth:`wide_std` from the detections' observation stds ``std``: the same floats
+        (:data:`NEAR_SCALE` is a power of two: σ scaled by it is exact, and so is every
+        product and max of :func:`.filter.obs_std` after it), one multiply instead of obs_std."""
+        return std * NEAR_SCALE
+
     def log_kappa(self, Z: np.ndarray, predicted, log_v: Optional[np.ndarray] = None,
                   chained: Optional[np.ndarray] = None,
                   std: Optional[np.ndarray] = None) -> np.ndarray:
         """``log κ_n(z)`` (N_z,); ``-inf`` where ``chained`` (those continue a chain: no κ_n,
         module docstring), whose predicted mass is then not summed.  ``std``: :meth:`wide_std`
         of ``Z`` when the caller has it."""
+        m = self.mass(Z, predicted, chained, std)
+        if m is None:
+            return np.full(len(Z), -np.inf)
+        return kappa_terms(_log_v(Z, self.cl, self.lk, log_v), near=(m, self.nu, chained))[1]
+
+    def mass(self, Z: np.ndarray, predicted, chained: Optional[np.ndarray] = None,
+             std: Optional[np.ndarray] = None) -> Optional[np.ndarray]:
+        """``M'(z)`` (N_z,) of :meth:`log_kappa` (0 where ``chained``), None without
+        predicted particles or detections; records the predicted mass for :meth:`learn`."""
         from .filter import mass_near
 
         self._exposure = float(predicted.mass) if predicted is not None else 0.0
         if predicted is None or not len(Z):
-            return np.full(len(Z), -np.inf)
+            return None
         wide, bp = self._wide()
-        m = mass_near(predicted, Z, bp, wide, std_z=std, skip=chained)
-        with np.errstate(divide="ignore"):
-            return np.log(self.nu * np.minimum(m, 1.0)) + _unit_density(Z, self.cl, self.lk,
-                                                                         log_v)
+        return mass_near(predicted, Z, bp, wide, std_z=std, skip=chained)
 
     def learn(self, near_share: np.ndarray, a: float) -> None:
         """After the update: ``near_share`` (N_z,) the clutter share the EM gives to κ_n (none
@@ -307,40 +350,143 @@ class DuplicateBoxes:
         """``log κ_d(z)`` (N_z,; ``-inf`` where z has no neighbour); ``log_v`` as
         :meth:`PlaceClutter.log_kappa`'s; ``std``: the detections' observation stds times
         :data:`NEAR_SCALE` (:meth:`NearClutter.wide_std`) when the caller has them."""
-        self._pairs = None
-        if self.cl.duplicate_prior <= 0 or len(Z) < 2:
+        n = self.counts(Z, std)
+        if n is None:
             return np.full(len(Z), -np.inf)
+        return kappa_terms(_log_v(Z, self.cl, self.lk, log_v), dup=(n, self.q))[2]
+
+    def on(self, Z: np.ndarray) -> bool:
+        """Whether the term is on for the detections ``Z`` (a prior, and a pair)."""
+        return self.cl.duplicate_prior > 0 and len(Z) >= 2
+
+    def counts(self, Z: np.ndarray, std: Optional[np.ndarray] = None,
+               n: Optional[np.ndarray] = None) -> Optional[np.ndarray]:
+        """``n(z)`` (N_z,) int of :meth:`log_kappa`: the other detections in each widened
+        gate (``n`` when the caller counted them: :func:`neighbour_counts`); None where the
+        term is off (:meth:`on`).  Kept for :meth:`learn`."""
+        self._pairs = None
+        if not self.on(Z):
+            return None
         std, r2 = _wide_gate(Z, self.cl, self.lk, NEAR_SCALE, std)
-        n = gate_sums(Z, Z, r2, std, np.ones(len(Z)), ordered=False)[2] - 1   # not z itself
+        if n is None:
+            n = gate_sums(Z, Z, r2, std, np.ones(len(Z)), ordered=False)[2] - 1   # not z
         self._pairs = (Z, std, r2, n)
-        with np.errstate(divide="ignore"):
-            return np.log(self.q * n) + _unit_density(Z, self.cl, self.lk, log_v)
+        return n
 
     def learn(self, won: np.ndarray, a: float) -> None:
         """After the update: ``won`` (N_z,) the detections' target shares."""
         if self.cl.duplicate_prior <= 0:
             return
-        won = np.clip(np.asarray(won, dtype=np.float64), 0.0, 1.0)
-        extra = paired = np.zeros(len(won))
+        won = np.ascontiguousarray(won, dtype=np.float64)
+        num = den = 0.0
         if self._pairs is not None and len(won):
             Z, std, r2, n = self._pairs
             # a neighbour is unexplained where the update found clutter the likelier (won < ½);
             # the sums count 0s and 1s (exact), z's own term taken off again
-            lost = (won < 0.5).astype(float)
-            extra = gate_sums(Z, Z, r2, std, lost, ordered=False)[0] - lost > 0
-            paired = n > 0
-        self.num = (1 - a) * self.num + a * float(np.sum(won * extra))
-        self.den = (1 - a) * self.den + a * float(np.sum(won * paired))
+            lost = np.empty(len(won))
+            tmp = np.empty((2, len(won)))
+            _lost(won, lost)
+            num, den = _dup_sums(won, lost, gate_sums(Z, Z, r2, std, lost, ordered=False)[0], n,
+                                 tmp)
+        self.num = (1 - a) * self.num + a * num
+        self.den = (1 - a) * self.den + a * den
         self.q = em_rate(self.num, self.den, self.cl.duplicate_prior, a)
 
 
-def _unit_density(Z: np.ndarray, cl: "ClutterParams", lk: "LikelihoodParams",
-                  log_v: Optional[np.ndarray]) -> np.ndarray:
-    """``log`` of one clutter point spread as the ``gate`` model around each detection,
-    ``−log V(z)`` (:func:`.filter.log_clutter_density` at rate 1: the same floats)."""
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def _lost(won, lost):
+    """``lost`` = 1.0 where ``won`` (clipped to [0, 1]) < ½, else 0.0."""
+    for j in range(won.shape[0]):
+        lost[j] = 1.0 if _clip01(won[j]) < 0.5 else 0.0
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def _clip01(w):
+    """np.clip(w, 0, 1) of a float (NaN stays NaN)."""
+    return 0.0 if w < 0.0 else (1.0 if w > 1.0 else w)
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def _dup_sums(won, lost, near_lost, n, tmp):
+    """:meth:`DuplicateBoxes.learn`'s ``Σ won · [a neighbour lost]`` and ``Σ won · [a
+    neighbour]`` (``won`` clipped to [0, 1]; ``near_lost`` the lost count in each gate, z's own
+    included), each summed as numpy's add.reduce; ``tmp`` (2, N_z) scratch."""
+    m = np.int64(won.shape[0])
+    for j in range(m):
+        w = _clip01(won[j])
+        tmp[0, j] = w * (1.0 if near_lost[j] - lost[j] > 0 else 0.0)
+        tmp[1, j] = w * (1.0 if n[j] > 0 else 0.0)
+    return _pairwise(tmp[0], m), _pairwise(tmp[1], m)
+
+
+def _log_v(Z: np.ndarray, cl: "ClutterParams", lk: "LikelihoodParams",
+           log_v: Optional[np.ndarray]) -> np.ndarray:
+    """``log V(z)`` of the clutter gates (``log_v`` when the caller has it): ``−log`` of one
+    clutter point spread as the ``gate`` model around each detection
+    (:func:`.filter.log_clutter_density` at rate 1 is ``−log V``: the same floats)."""
     from .filter import log_gate_volume
 
-    return -(log_gate_volume(Z, cl, lk) if log_v is None else log_v)
+    return log_gate_volume(Z, cl, lk) if log_v is None else log_v
+
+
+_NO_F = np.zeros(0)
+_NO_I = np.zeros(0, dtype=np.int64)
+_NO_B = np.zeros(0, dtype=np.bool_)
+
+
+def kappa_terms(log_v: np.ndarray, place: Optional[tuple] = None, near: Optional[tuple] = None,
+                dup: Optional[tuple] = None, log_u: Optional[np.ndarray] = None,
+                near_rate: float = 0.0) -> np.ndarray:
+    """(5, N_z): ``log κ_r``, ``log κ_n``, ``log κ_d`` of the detections whose clutter gates
+    have ``log V`` = ``log_v`` (-inf for a part not given), then, with ``log_u`` (the
+    ``scene`` density κ_u without its near-people points), ``log(κ_u + κ_r + κ_n + κ_d)`` (the
+    shadow mixture) and ``log(κ_u + κ_n + κ_d)`` (the newborn's), κ_u with ``near_rate`` points
+    spread as the ``gate`` model when > 0.  ``place`` = (S, E, β) (:meth:`PlaceClutter.
+    place_rate`'s sums and prior), ``near`` = (M'(z), ν, chained or None), ``dup`` = (n(z),
+    q).  One numba pass (:func:`_kappa_terms`) for what was ~30 numpy calls a frame: the same
+    expressions elementwise (log, exp, log1p as numpy's, np.logaddexp's formula), so the
+    same floats."""
+    n_z = len(log_v)
+    S, E, beta = place if place is not None else (_NO_F, _NO_F, 0.0)
+    m, nu, chained = near if near is not None else (_NO_F, 0.0, None)
+    n, q = dup if dup is not None else (_NO_I, 0.0)
+    out = np.empty((5, n_z))
+    _kappa_terms(log_v, S, E, PRIOR_FRAMES * beta, m, float(nu),
+                 _NO_B if chained is None else chained, n, float(q),
+                 _NO_F if log_u is None else log_u,
+                 math.log(near_rate) if near_rate > 0 else 0.0, near_rate > 0, out)
+    return out
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def _kappa_terms(log_v, S, E, n0_beta, m, nu, chained, n, q, log_u, log_near_rate, near_on,
+                 out):
+    """:func:`kappa_terms` into ``out`` (5, N_z); empty ``S`` / ``m`` / ``n`` / ``log_u``:
+    that part not given; empty ``chained``: none chained."""
+    for j in range(log_v.shape[0]):
+        unit = -log_v[j]
+        lr = -np.inf
+        if S.shape[0]:
+            # (S + n0 β) / (E + n0), min(., 1) where S > 0 (np.minimum: NaN stays NaN)
+            r = (S[j] + n0_beta) / (E[j] + PRIOR_FRAMES)
+            rate = (1.0 if r > 1.0 else r) if S[j] > 0 else 0.0
+            lr = np.log(rate) + unit
+        ln = -np.inf
+        if m.shape[0] and not (chained.shape[0] and chained[j]):
+            mm = 1.0 if m[j] > 1.0 else m[j]
+            ln = np.log(nu * mm) + unit
+        ld = -np.inf
+        if n.shape[0]:
+            ld = np.log(q * n[j]) + unit
+        out[0, j], out[1, j], out[2, j] = lr, ln, ld
+        if log_u.shape[0]:
+            u = log_u[j]
+            if near_on:
+                u = np.logaddexp(u, log_near_rate - log_v[j])
+            out[3, j] = np.logaddexp(np.logaddexp(np.logaddexp(u, lr), ln), ld)
+            out[4, j] = np.logaddexp(np.logaddexp(u, ln), ld)
+        else:
+            out[3, j] = out[4, j] = -np.inf
 
 
 def _widened(lk: "LikelihoodParams", scale: float) -> "LikelihoodParams":
@@ -389,11 +535,120 @@ def neighbours(Z: np.ndarray, cl: "ClutterParams", lk: "LikelihoodParams",
     return gate_sums(Z, Z, r2, std, np.ones(len(Z)), ordered=False)[2] - 1
 
 
+def neighbour_counts(Z: np.ndarray, r2: float, std: np.ndarray,
+                     wide: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`neighbours` of the detections ``Z`` (N_z >= 2) at two widths at once: the
+    other detections inside each one's gate ``d² <= r2`` with the stds ``std`` and ``wide``
+    (N_z, 4).  Below :data:`.gating.BRUTE_PAIRS` pairs one pass tests every pair for both
+    (:func:`_count_two`: gate_sums' own test, so the same counts); above, two grid-indexed
+    gate_sums."""
+    from .gating import BRUTE_PAIRS
+
+    n = len(Z)
+    if n * n >= BRUTE_PAIRS:
+        ones = np.ones(n)
+        return (gate_sums(Z, Z, r2, std, ones, ordered=False)[2] - 1,
+                gate_sums(Z, Z, r2, wide, ones, ordered=False)[2] - 1)
+    c = np.empty((2, n), dtype=np.int64)
+    f = np.ascontiguousarray
+    _count_two(f(Z, dtype=np.float64), f(std, dtype=np.float64), f(wide, dtype=np.float64),
+               float(r2), c)
+    return c[0], c[1]
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def _count_two(Z, std, wide, r2, c):
+    """:func:`neighbour_counts`' pass: ``c[0, j]`` / ``c[1, j]`` the other detections inside
+    detection j's gate with ``std`` / ``wide``."""
+    n = Z.shape[0]
+    for j in range(n):
+        k0 = np.int64(-1)           # z itself is inside both
+        k1 = np.int64(-1)
+        for q in range(n):
+            k0 += _in_gate(Z, q, j, std, r2)
+            k1 += _in_gate(Z, q, j, wide, r2)
+        c[0, j] = k0
+        c[1, j] = k1
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def _in_gate(Z, q, j, std, r2):
+    """Whether detection q is inside detection j's gate ``d² <= r2`` of the stds ``std[j]``:
+    gating._gate_sums' distance, term by term."""
+    d0 = (Z[q, 0] - Z[j, 0]) / std[j, 0]
+    d1 = (Z[q, 1] - Z[j, 1]) / std[j, 1]
+    d2 = (Z[q, 2] - Z[j, 2]) / std[j, 2]
+    d3 = (Z[q, 3] - Z[j, 3]) / std[j, 3]
+    return d0 * d0 + d1 * d1 + d2 * d2 + d3 * d3 <= r2
+
+
 def clutter_share(won: np.ndarray, log_used: np.ndarray, log_shadow: np.ndarray) -> np.ndarray:
     """Each detection's clutter share under the shadow model, ``κ_s / (κ_s + C)``, from ``won =
     C / (κ_used + C)`` of the update (which ran with κ_used)."""
-    won = np.clip(np.asarray(won, dtype=np.float64), 0.0, 1.0)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        log_c = np.log(won) - np.log1p(-won) + log_used        # log C(z)
-        out = 1.0 / (1.0 + np.exp(log_c - log_shadow))
-    return np.where(np.isfinite(out), out, np.where(won >= 1.0, 0.0, 1.0))
+    return learn_shares(won, log_used, log_shadow)[0][0]
+
+
+def learn_shares(won: np.ndarray, log_used: np.ndarray, log_shadow: np.ndarray,
+                 parts: Optional[tuple] = None, prev_link: Optional[np.ndarray] = None,
+                 chain_clutter: Optional[np.ndarray] = None) -> tuple[np.ndarray, float]:
+    """The EM's split of this frame's clutter (:meth:`.filter.SceneModel.learn`), in one numba
+    pass (:func:`_learn_shares`; ~25 numpy calls a frame before, the same expressions
+    elementwise and the same pairwise sum, so the same floats).  Returns ``out`` (5, N_z) and
+    ``Σ share · κ_u / κ_s``: out[0] the clutter share ``κ_s / (κ_s + C)`` from ``won = C /
+    (κ_used + C)`` (``won`` clipped to [0, 1]); with ``parts`` = (log κ_r, log κ_n, log κ_d)
+    of :func:`kappa_terms` (``log_shadow`` their mixture), out[1] the place memory's weights
+    ``share · (1 − r_n − r_d) · chain``, out[2] κ_r's shares ``share · r_r · chain``, out[3]
+    κ_n's ``share · r_n`` (``r_x = κ_x / κ_s``, NaN -> 0) and out[4] ``chain · (1 − won)``,
+    ``chain`` the last learnt frame's ``chain_clutter`` at ``prev_link`` (1 where a link is
+    -1 or past its end, or without them)."""
+    won = np.ascontiguousarray(won, dtype=np.float64)
+    log_used = np.ascontiguousarray(log_used, dtype=np.float64)
+    log_shadow = np.ascontiguousarray(log_shadow, dtype=np.float64)
+    n_z = len(won)
+    log_rep, log_near, log_dup = parts if parts is not None else (_NO_F, _NO_F, _NO_F)
+    use_chain = (prev_link is not None and chain_clutter is not None
+                 and len(prev_link) == n_z and len(chain_clutter) > 0)
+    out = np.empty((5, n_z))
+    total = _learn_shares(won, log_used, log_shadow, log_rep, log_near, log_dup,
+                          prev_link if use_chain else _NO_I,
+                          chain_clutter if use_chain else _NO_F, out)
+    return out, total
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def _learn_shares(won, log_used, log_shadow, log_rep, log_near, log_dup, prev_link,
+                  chain_clutter, out):
+    """:func:`learn_shares` into ``out`` (5, N_z); returns the random share's sum (0 without
+    the parts)."""
+    n_z = won.shape[0]
+    random = np.empty(n_z)
+    n_c = chain_clutter.shape[0]
+    for j in range(n_z):
+        w = _clip01(won[j])
+        log_c = np.log(w) - np.log1p(-w) + log_used[j]      # log C(z)
+        sh = 1.0 / (1.0 + np.exp(log_c - log_shadow[j]))
+        if not math.isfinite(sh):
+            sh = 0.0 if w >= 1.0 else 1.0
+        out[0, j] = sh
+        if log_rep.shape[0]:
+            # the parts' shares of κ_s in [0, 1], NaN (-inf - -inf) -> 0
+            rep = np.exp(log_rep[j] - log_shadow[j])
+            near = np.exp(log_near[j] - log_shadow[j])
+            dup = np.exp(log_dup[j] - log_shadow[j])
+            rep = 0.0 if math.isnan(rep) else rep
+            near = 0.0 if math.isnan(near) else near
+            dup = 0.0 if math.isnan(dup) else dup
+            chain = 1.0
+            if prev_link.shape[0]:
+                k = prev_link[j]
+                if k >= 0 and k < n_c:
+                    chain = chain_clutter[k]
+            random[j] = sh * (1.0 - rep - near - dup)
+            out[1, j] = sh * (1.0 - near - dup) * chain
+            out[2, j] = sh * rep * chain
+            out[3, j] = sh * near
+            out[4, j] = chain * (1.0 - won[j])
+        else:
+            random[j] = 0.0
+            out[1, j] = out[2, j] = out[3, j] = out[4, j] = 0.0
+    return _pairwise(random, n_z)

@@ -88,7 +88,8 @@ import numpy as np
 from ..params import param, part, with_options
 from . import _kernels, motion
 from .clutter import PlaceClutter
-from .clutter import DuplicateBoxes, NearClutter, clutter_share, neighbours
+from .clutter import (DuplicateBoxes, NearClutter, kappa_terms, learn_shares, neighbour_counts,
+                      neighbours)
 from .scene_motion import Chains
 from .gating import DEFAULT_BUDGET, LogGPairs, gate_pairs, tail_radius2
 from ..smc.resampling import SCHEMES
@@ -601,7 +602,8 @@ class SceneModel:
         self.extent = box if self.extent is None else np.concatenate(
             [np.minimum(self.extent[:2], lo), np.maximum(self.extent[2:], hi)])
         a = 1.0 / min(self.size_frames + 1, self.cl.clutter_memory)
-        self.size_m1 = (1 - a) * self.size_m1 + a * ls.mean(0)
+        # ls.mean(0) is its sum over axis 0, then / n (np.mean's steps without its wrapper)
+        self.size_m1 = (1 - a) * self.size_m1 + a * (ls.sum(0) / len(ls))
         self.size_m2 = (1 - a) * self.size_m2 + a * (ls.T @ ls) / len(ls)
         self.size_frames += 1
 
@@ -631,44 +633,55 @@ class SceneModel:
                 log_kappa = math.log(self.rate) - math.log(self._area(frame)) + log_size
             # the detections' observation stds, once a frame for every part that reads them
             std = obs_std(Z[:, 2:4], self.lk)
+            n_near = n_dup = None
             if self.cl.near_learn and len(Z):
+                if self.place is not None and self.cl.learn_update == "model" \
+                        and self.dups.on(Z):
+                    # the neighbour count and the duplicate term's (its gates times
+                    # NEAR_SCALE) in one pass
+                    n_near, n_dup = neighbour_counts(
+                        Z, gate_threshold(self.cl.clutter_gate, OBS_DIM), std,
+                        self.people.wide_std_of(std))
                 a = 1.0 / min(self.frames + 5, self.cl.clutter_memory)
-                self.near = (1 - a) * self.near + a * self._neighbours(Z, std)
+                self.near = (1 - a) * self.near + a * (
+                    self._neighbours(Z, std) if n_near is None else float(n_near.mean()))
             # log V(z) of the clutter gate, once for every part spread as the 'gate' model
             # (log_clutter_density at rate λ is log λ − log V: the same floats)
             log_v = log_gate_volume(Z, self.cl, self.lk, std)
-            if self.near > 0:
-                log_kappa = np.logaddexp(log_kappa, math.log(self.near) - log_v)
-            if self.place is not None:
-                self.place.cl = self.people.cl = self.cl
-                log_rep = self.place.log_kappa(Z, log_v, std)
+            if self.place is None:
+                if self.near > 0:
+                    log_kappa = np.logaddexp(log_kappa, math.log(self.near) - log_v)
+            else:
+                self.place.cl = self.people.cl = self.dups.cl = self.cl
+                model = self.cl.learn_update == "model"
+                S, E = self.place._weight_in_gates(Z, watched=True, std=std)
                 # ... and times NEAR_SCALE, for the near-people and the duplicate terms
-                std_wide = self.people.wide_std(Z)
+                std_wide = self.people.wide_std_of(std)
                 # a detection that continues a chain of mutually nearest detections is a
                 # person's or a spot's, not a box beside a person (those do not chain): κ_n
                 # is 0 there, so it takes no share of it in the EM (the update alike with
                 # learn_update 'model')
                 self._chained = self.chains.length >= 1
-                log_near = np.where(self._chained, -np.inf,
-                                    self.people.log_kappa(Z, predicted, log_v, self._chained,
-                                                          std_wide))
-                shadow = np.logaddexp(np.logaddexp(log_kappa, log_rep), log_near)
-                log_dup = np.full(len(Z), -np.inf)
-                if self.cl.learn_update == "model":
-                    # a second box on a person already boxed, which a Poisson κ cannot
-                    # express: the duplicate term (.clutter.DuplicateBoxes) joins the mixture
-                    self.dups.cl = self.cl
-                    log_dup = self.dups.log_kappa(Z, log_v, std_wide)
-                    shadow = np.logaddexp(shadow, log_dup)
+                m = self.people.mass(Z, predicted, self._chained, std_wide)
+                # a second box on a person already boxed, which a Poisson κ cannot express:
+                # the duplicate term (.clutter.DuplicateBoxes) joins the mixture ('model')
+                n = self.dups.counts(Z, std_wide, n_dup) if model else None
+                log_rep, log_near, log_dup, shadow, no_place = kappa_terms(
+                    log_v, place=(S, E, self.place.beta),
+                    near=None if m is None else (m, self.people.nu, self._chained),
+                    dup=None if n is None else (n, self.dups.q), log_u=log_kappa,
+                    near_rate=self.near)
+                if model:
                     log_used = shadow
                 else:
-                    log_used = np.logaddexp(log_kappa,
-                                            self.place.log_gate(Z, self.structured(), log_v))
+                    u = log_kappa if not self.near > 0 else np.logaddexp(
+                        log_kappa, math.log(self.near) - log_v)
+                    log_used = np.logaddexp(u, self.place.log_gate(Z, self.structured(), log_v))
                 self._parts = (Z, log_rep, log_near, log_dup, shadow, log_used)
-                if self.cl.spot_places and self.cl.learn_update == "model":
+                if self.cl.spot_places and model:
                     # a person appears no more often where clutter repeats: the newborn
                     # weigh against κ without the place memory (birth_odds, log_birth_weight)
-                    log_birth = np.logaddexp(np.logaddexp(log_kappa, log_near), log_dup)
+                    log_birth = no_place
                 log_kappa = log_used
         else:
             log_kappa = log_clutter_density(Z, self.cl, self.lk)
@@ -717,49 +730,37 @@ class SceneModel:
         S0..S2): ``(d'², slope, midpoint)`` of the log-ratio ``slope · (s − midpoint)`` (linear
         in s), d' = the separation of the means in within-class stds; None unless the target
         mean is the higher."""
-        mean = S[:, 1] / S[:, 0]
-        if not mean[0] > mean[1]:
+        # on the six float64 scalars: the (2, 3) array's ~10 numpy calls were most of the cost
+        # (the same floats: x ** 2 is x * x there, and a sum of two terms is a + b)
+        a0, a1, a2, b0, b1, b2 = S.reshape(-1)
+        m0, m1 = a1 / a0, b1 / b0
+        if not m0 > m1:
             return None
-        var = max(float((S[:, 2] - S[:, 1] ** 2 / S[:, 0]).sum() / S[:, 0].sum()),
-                  self.score_floor)
-        gap = mean[0] - mean[1]
-        return gap * gap / var, gap / var, 0.5 * (mean[0] + mean[1])
-
-    def _chain_prior(self, n: int) -> np.ndarray:
-        """(n,) P(the chain a detection of this frame continues is clutter): the last learnt
-        frame's value at its link (:attr:`Chains.prev_link`), 1 where it continues no chain
-        (or the links do not refer to that frame)."""
-        out = np.ones(n)
-        j, c = self.chains.prev_link, self._chain_clutter
-        if j is None or c is None or len(j) != n or len(c) == 0:
-            return out
-        ok = (j >= 0) & (j < len(c))
-        out[ok] = c[j[ok]]
-        return out
+        var = max(((a2 - a1 * a1 / a0) + (b2 - b1 * b1 / b0)) / (a0 + b0), self.score_floor)
+        gap = m0 - m1
+        return gap * gap / var, gap / var, 0.5 * (m0 + m1)
 
     def learn(self, scores: Optional[np.ndarray], won: np.ndarray) -> None:
         """After the update: ``won`` (N_z,) = C/(κ + C), each detection's target share."""
         a = 1.0 / min(self.frames + 5, self.cl.clutter_memory)
         if self.place is not None and self._parts is not None:
             Z, log_rep, log_near, log_dup, total, log_used = self._parts
-            share = clutter_share(won, log_used, total)
-            with np.errstate(invalid="ignore"):
-                # shares in [0, 1] (each part <= the total), NaN (-inf - -inf) -> 0: what
-                # np.nan_to_num does to them, without its generic machinery
-                rep, near, dup = (_nan_to_0(np.exp(x - total))
-                                  for x in (log_rep, log_near, log_dup))
-            self.rate = (1 - a) * self.rate + a * float(np.sum(share * (1.0 - rep - near - dup)))
-            # a duplicate box is the person's, not a place's: it leaves no place memory
-            chain = 1.0
-            if self.cl.spot_places and self.cl.learn_update == "model":
-                # a place's memory counts a detection that continues a chain by the
-                # probability that the chain so far is clutter: a spot's firings win no mass
-                # and its chain stays clutter, a newcomer's chain stops being clutter as soon
-                # as its detections win mass (spot_places)
-                chain = self._chain_prior(len(won))
-                self._chain_clutter = chain * (1.0 - np.asarray(won, dtype=np.float64))
-            self.place.learn(Z, share * (1.0 - near - dup) * chain, share * rep * chain, a)
-            self.people.learn(share * near, a)
+            spot = self.cl.spot_places and self.cl.learn_update == "model"
+            # the clutter shares and their split between the parts (in one pass)
+            out, random = learn_shares(won, log_used, total, (log_rep, log_near, log_dup),
+                                       self.chains.prev_link if spot else None,
+                                       self._chain_clutter if spot else None)
+            self.rate = (1 - a) * self.rate + a * random
+            # a duplicate box is the person's, not a place's: it leaves no place memory;
+            # with spot_places a place's memory counts a detection that continues a chain by
+            # the probability that the chain so far is clutter: a spot's firings win no mass
+            # and its chain stays clutter, a newcomer's chain stops being clutter as soon as
+            # its detections win mass (the chain prior: P(the chain a detection continues is
+            # clutter), the last learnt frame's value at its link, 1 where it continues none)
+            if spot:
+                self._chain_clutter = out[4]
+            self.place.learn(Z, out[1], out[2], a)
+            self.people.learn(out[3], a)
             if self.cl.learn_update == "model":
                 self.dups.learn(won, a)
             self._parts = None
@@ -777,12 +778,6 @@ class SceneModel:
                     and len(self._persist) == len(s):
                 q = np.stack([self._persist, ~self._persist]).astype(np.float64)
                 self.persist_sums = d * self.persist_sums + _class_sums(q, s)
-
-
-def _nan_to_0(x: np.ndarray) -> np.ndarray:
-    """``x`` with its NaNs set to 0, in place (``x`` finite or NaN)."""
-    x[np.isnan(x)] = 0.0
-    return x
 
 
 def _class_sums(r: np.ndarray, s: np.ndarray) -> np.ndarray:
@@ -853,7 +848,12 @@ def mass_near(predicted: ParticleSet, Z: np.ndarray, bp: BirthParams = BirthPara
     full = np.zeros(len(Z))
     need = np.flatnonzero(~skip)
     if len(need):
-        full[need] = mass_near_at(predicted, Z[need], std_z[need], r2, cell)[0]
+        # the very floats of mass_near_at's kernel on the same grid, without bucketing every
+        # particle for a few detections (_kernels.mass_near_few)
+        ok, full[need] = _kernels.mass_near_few(predicted.states, predicted.weights, Z[need],
+                                                std_z[need], r2, cell[0], cell[1])
+        if not ok:
+            raise ValueError("mass_near: non-finite particle positions")
     return full
 
 

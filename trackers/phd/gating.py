@@ -308,12 +308,12 @@ def gate_sums(obs: np.ndarray, Z: np.ndarray, r2: float, std_z: np.ndarray, w: n
         _gate_sums(obs, w, e, Z, std, float(r2), _NO_GRID, _NO_GRID, 0.0, 0.0, 1.0, 1.0, 0, 0,
                    S, E, C)
         return S, E, C
-    half = math.sqrt(r2) * std[:, :2] * (1 + 1e-6) + 1e-9      # gate_pairs' query boxes
-    cell = 2.0 * _median0(half)
-    if _gate_sums_grid(obs, w, e, Z, std, float(r2), float(cell[0]), float(cell[1]), S, E, C):
+    if _gate_sums_cells(obs, w, e, Z, std, float(r2), S, E, C):
         return S, E, C
     # a grid the one-pass build does not take (non-finite values, a sparse key space):
     # GridIndex, then the same pass
+    half = math.sqrt(r2) * std[:, :2] * (1 + 1e-6) + 1e-9      # gate_pairs' query boxes
+    cell = 2.0 * _median0(half)
     index = GridIndex(obs[:, :2], cell)
     _gate_sums(obs, w, e, Z, std, float(r2), index.order.astype(np.int64, copy=False),
                index.keys, float(index.origin[0]), float(index.origin[1]),
@@ -326,6 +326,69 @@ _NO_GRID = np.zeros(0, dtype=np.int64)
 #: the one-pass grid of :func:`_gate_sums_grid` sorts its points by counting when the grid has
 #: at most this many cells per point (plus a constant); sparser grids go through GridIndex
 COUNT_SORT_CELLS = 8
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def _gate_sums_cells(obs, w, e, Z, std, r2, S, E, C):
+    """:func:`_gate_sums_grid` on :func:`gate_sums`' cells (:func:`gate_cells_of`).  False
+    (nothing written) on a non-finite std or where the grid kernel declines."""
+    cell = np.empty(2)
+    if not gate_cells_of(std, r2, cell):
+        return False
+    return _gate_sums_grid(obs, w, e, Z, std, r2, cell[0], cell[1], S, E, C)
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def gate_cells_of(std, r2, cell):
+    """``cell`` (2,) = ``2 median(r σ (1 + 1e-6) + 1e-9)`` per axis over the rows of ``std``
+    (N >= 1, 4): gate_sums' grid cells, ``2 ×`` :func:`_median0` of gate_pairs' query boxes,
+    the middle values found by selection and then mapped (the map is monotone: the same
+    floats).  False on a non-finite std (the caller's numpy form decides)."""
+    n = std.shape[0]
+    r = math.sqrt(r2)
+    tmp = np.empty(n)
+    h = n // 2
+    for c in range(2):
+        for j in range(n):
+            if not math.isfinite(std[j, c]):
+                return False
+            tmp[j] = std[j, c]
+        hi = r * kth(tmp, h) * (1 + 1e-6) + 1e-9
+        if n % 2:
+            med = hi
+        else:
+            lo = tmp[0]                         # kth left a[:h] <= a[h]: the next is their max
+            for j in range(1, h):
+                lo = tmp[j] if tmp[j] > lo else lo
+            med = ((r * lo * (1 + 1e-6) + 1e-9) + hi) / 2.0
+        cell[c] = 2.0 * med
+    return True
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def kth(a, k):
+    """The ``k``-th smallest of ``a`` (no NaN; Hoare's selection, middle pivot: the value
+    np.sort / np.partition put at ``k``), ``a`` reordered so that ``a[:k] <= a[k] <= a[k + 1:]``."""
+    lo, hi = np.int64(0), np.int64(a.shape[0] - 1)
+    while lo < hi:
+        p = a[(lo + hi) >> 1]
+        i, j = lo, hi
+        while i <= j:
+            while a[i] < p:
+                i += 1
+            while a[j] > p:
+                j -= 1
+            if i <= j:
+                a[i], a[j] = a[j], a[i]
+                i += 1
+                j -= 1
+        if k <= j:
+            hi = j
+        elif k >= i:
+            lo = i
+        else:
+            break
+    return a[k]
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)

@@ -57,6 +57,8 @@ import numpy as np
 from numba import njit
 
 from . import camera_motion
+from .camera_motion import _pairwise
+from .gating import kth
 
 #: detections of two frames are linked within this many box sizes (Δx / w, Δy / h)
 LINK_DIST = 1.0
@@ -131,22 +133,100 @@ def robust_std(x: np.ndarray) -> float:
 
 
 def robust_stds(x: np.ndarray) -> np.ndarray:
-    """:func:`robust_std` of each row of ``x`` (k, n), in one pass of numpy calls (the same
-    floats: the quantile per row, each row's mean summed along its own contiguous row)."""
-    a = np.abs(np.asarray(x, dtype=np.float64))
-    n = a.shape[1]
+    """:func:`robust_std` of each row of ``x`` (k, n): one numba pass (:func:`_robust_stds`,
+    the same floats as the numpy form below, which non-finite input takes: NaN's place in
+    np.partition's order)."""
+    x = np.asarray(x, dtype=np.float64)
+    n = x.shape[1]
     if not n:
-        return np.zeros(len(a))
-    # np.quantile(a, TRIM) (its 'linear' rule) by a partial sort: a tenth of its time
+        return np.zeros(len(x))
     pos = TRIM * (n - 1)
     lo = int(math.floor(pos))
     hi = min(lo + 1, n - 1)
+    out = np.empty(len(x))
+    if _robust_stds(np.ascontiguousarray(x), lo, hi, pos - lo, out):
+        return out
+    a = np.abs(x)
+    # np.quantile(a, TRIM) (its 'linear' rule) by a partial sort: a tenth of its time
     part = np.partition(a, (lo, hi), axis=1)
     t, d = pos - lo, part[:, hi] - part[:, lo]
     q = part[:, hi] - d * (1.0 - t) if t >= 0.5 else part[:, lo] + d * t   # numpy's own lerp
     np.minimum(a, q[:, None], out=a)
     # np.mean's own steps (a sum along each row, then / n) without its wrapper
     return MEAN_ABS_TO_STD * (np.add.reduce(a, axis=1) / n)
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def _robust_stds(x, lo, hi, t, out):
+    """:func:`robust_stds` into ``out`` (k,): per row, |x|'s ``lo``-th and ``hi``-th smallest
+    (by selection: the same values as np.partition's), numpy's lerp at ``t``, |x| winsorised
+    there and summed as numpy's add.reduce (:func:`.camera_motion._pairwise`).  False (``out``
+    partly written) on a non-finite value."""
+    n = x.shape[1]
+    a = np.empty(n)
+    tmp = np.empty(n)
+    for r in range(x.shape[0]):
+        for i in range(n):
+            v = abs(x[r, i])
+            if not math.isfinite(v):
+                return False
+            a[i] = v
+            tmp[i] = v
+        v_lo = kth(tmp, lo)
+        v_hi = v_lo
+        if hi > lo:
+            # kth left every later element >= a[lo]: the next one is their minimum
+            v_hi = tmp[lo + 1]
+            for i in range(lo + 2, n):
+                v_hi = tmp[i] if tmp[i] < v_hi else v_hi
+        d = v_hi - v_lo
+        q = v_hi - d * (1.0 - t) if t >= 0.5 else v_lo + d * t
+        for i in range(n):
+            a[i] = a[i] if a[i] <= q else q            # np.minimum (no NaN here)
+        out[r] = MEAN_ABS_TO_STD * (_pairwise(a, np.int64(n)) / n)
+    return True
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def _triplets(Z, prev, pp, j, prev_link, a_buf, a_n, s_buf, s_n):
+    """The triplets of :meth:`SceneMotion.observe` (detection ``a`` of ``Z`` linked to ``b =
+    j[a]`` of ``prev``, itself linked to ``prev_link[b]`` of ``pp``), in detection order, into
+    the rings' buffers as :meth:`_Ring.extend` writes them (the last :data:`WINDOW` samples of
+    the frame, each at ``i`` and ``i + WINDOW``): per triplet the acceleration ``(z − 2q + r) /
+    q_size`` over (x, y) into ``a_buf``, and the log size changes ``log(z/q)`` (row 0) and
+    ``log(z/r)`` (row 1) over (w, h) into ``s_buf``.  Returns the samples each ring keeps."""
+    t = 0
+    for a in range(j.shape[0]):
+        if j[a] >= 0 and prev_link[j[a]] >= 0:
+            t += 1
+    skip_a = t - WINDOW if t > WINDOW else 0
+    skip_s = 2 * t - WINDOW if 2 * t > WINDOW else 0
+    k = 0
+    for a in range(j.shape[0]):
+        b = j[a]
+        if b < 0:
+            continue
+        c = prev_link[b]
+        if c < 0:
+            continue
+        if k >= skip_a:
+            at = (a_n + k - skip_a) % WINDOW
+            for x in range(2):
+                v = (Z[a, x] - 2.0 * prev[b, x] + pp[c, x]) / prev[b, 2 + x]
+                a_buf[x, at] = v
+                a_buf[x, at + WINDOW] = v
+        for x in range(2):
+            col = 2 * k + x
+            if col >= skip_s:
+                at = (s_n + col - skip_s) % WINDOW
+                one = np.log(Z[a, 2 + x] / prev[b, 2 + x])
+                two = np.log(Z[a, 2 + x] / pp[c, 2 + x])
+                s_buf[0, at] = one
+                s_buf[0, at + WINDOW] = one
+                s_buf[1, at] = two
+                s_buf[1, at + WINDOW] = two
+        k += 1
+    return t - skip_a, 2 * t - skip_s
 
 
 class _Ring:
@@ -260,23 +340,14 @@ class SceneMotion:
             jl = np.where(ch.length >= 2, j, -1)
             self.camera = self._camera.step(prev, Z, jl, self.pos_std, self.size_std,
                                             self.speed_var, self.camera_memory)
-        has = np.flatnonzero(j >= 0)
-        if len(has):
-            jh = j[has]
-            # triplets: the link k−1 → k continues a link k−2 → k−1
-            jj = prev_link[jh] if len(prev_link) else np.full(len(has), -1)
-            tri = jj >= 0
-            if tri.any():
-                z, q, r = Z[has[tri]], prev[jh[tri]], self._prev_prev[jj[tri]]
-                qs = q[:, 2:4]
-                d = (z[:, :2] - 2.0 * q[:, :2] + r[:, :2]) / qs
-                self.accel.extend(d.T)
-                zs = z[:, 2:4]
-                # rows (1-frame, 2-frame) of (w, h) pairs per triplet, written in place
-                two = np.empty((2, len(z), 2))
-                np.divide(zs, qs, out=two[0])
-                np.divide(zs, r[:, 2:4], out=two[1])
-                self.size.extend(np.log(two, out=two).reshape(2, -1))
+        if len(prev_link) and len(j):
+            # triplets: the links k−1 → k that continue a link k−2 → k−1, their second
+            # differences and log size changes straight into the rings (one pass)
+            c = np.ascontiguousarray
+            na, ns = _triplets(c(Z), c(prev), c(self._prev_prev), j, prev_link,
+                               self.accel.buf, self.accel.n, self.size.buf, self.size.n)
+            self.accel.n += na
+            self.size.n += ns
         self._prev_prev = prev
 
     def _spreads(self, name: str) -> np.ndarray:
