@@ -115,19 +115,55 @@ def _assign_dense(X, centers, inv, labels, dmin):
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
       no_cpython_wrapper=True)
-def _assign_first(X, centers, inv, labels, dmin, m, reach):
-    """The first assignment of the grid search (:func:`_assign` with no previous labels) by
-    looking at every centre (:func:`_assign_dense`'s vector loop: the same labels and d²),
-    with each particle's ``reach`` (``e + sqrt(d²)``, e its distance to its centre in the space
-    scaled by sqrt(m)) for the later iterations.  Cheaper than the grid's first search while
-    the centres are few (:data:`_FIRST_DENSE_MAX`)."""
+def _assign_moved(X, centers, inv, prev, labels, dmin, moved):
+    """:func:`_assign_dense`'s labels and d² when only the ``moved`` (K,) centres changed
+    since ``prev`` (N,) -- each particle's nearest centre, the lowest index among equal d² --
+    and ``dmin`` (its d², overwritten) were taken: a particle whose centre did not move looks
+    at the moved centres only (an unmoved centre other than its own was no nearer then, nor
+    of a lower index at the same d², and is the same now), the others at every centre.
+    A NaN d² (argmin's centre 0 rule) gets the full look too.  When most centres moved, the
+    vector loop over every centre."""
     K = centers.shape[0]
-    _assign_dense(X, centers, inv, labels, dmin)
-    rm, cs = _metric(centers, m)
+    nm = 0
+    for c in range(K):
+        if moved[c]:
+            nm += 1
+    if 2 * nm > K:
+        _assign_dense(X, centers, inv, labels, dmin)
+        return
+    idx = np.empty(nm, np.int64)
+    nm = 0
+    for c in range(K):
+        if moved[c]:
+            idx[nm] = c
+            nm += 1
     for i in range(X.shape[0]):
-        r = _scaled(X, i, rm, cs, labels[i]) + math.sqrt(dmin[i])
-        reach[i] = r if r <= np.inf else np.inf          # NaN: no bound
-    return K
+        lab = prev[i]
+        best = dmin[i]
+        full = moved[lab] or best != best
+        if not full:
+            for k in range(nm):
+                c = idx[k]
+                d = _d2(X, i, centers, inv, c)
+                if d < best or (d == best and c < lab):
+                    best = d
+                    lab = c
+                elif d != d and c == 0:
+                    full = True
+                    break
+        if full:
+            lab, best = _nearest_dense(X, i, centers, inv)
+        labels[i] = lab
+        dmin[i] = best
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
+def _same_row(X, i):
+    """Whether particle i's (y1, y2, w, h) equal particle i − 1's (a resampled copy: every
+    distance of the two is the same float; False for a NaN)."""
+    return (X[i, 0] == X[i - 1, 0] and X[i, 1] == X[i - 1, 1] and X[i, 2] == X[i - 1, 2]
+            and X[i, 3] == X[i - 1, 3])
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
@@ -197,10 +233,6 @@ def _slack(pu, pv, x0, y0, g, r):
     """Float slack of a ring bound: the cell edges and the point are O(|coordinates|)."""
     return 1e-9 * (1.0 + abs(pu) + abs(pv) + abs(x0) + abs(y0) + g * r)
 
-
-#: Up to this many centres the first Lloyd assignment looks at every centre (a vector loop)
-#: rather than searching the grid (same labels and d²; cheaper for a few tens of centres).
-_FIRST_DENSE_MAX = 48
 
 #: A centre with more centres than this in its 3 × 3 block of cells gets no neighbour list
 #: (its particles use the ring search), so the lists stay O(K) in memory however crowded.
@@ -411,6 +443,10 @@ def _assign(X, centers, inv, prev, labels, dmin, grid_min, m, stable, reach):
         if lab >= 0 and lab < K and stable[lab]:
             labels[i] = lab
             continue
+        if not (lab >= 0 and lab < K) and i > 0 and labels[i - 1] >= 0 and labels[i - 1] < K:
+            # no previous label (the first iteration): start from particle i − 1's answer --
+            # resampling keeps an ancestor's copies, and a target's particles, side by side
+            lab = labels[i - 1]
         if not (lab >= 0 and lab < K):
             if rep.shape[0] == 0:
                 rep = _cell_guess(cs, x0, y0, g, ni, nj, order, starts)
@@ -464,8 +500,8 @@ def assign(X, centers, inv, prev, labels, dmin, grid_min):
     per coordinate), so in the (y1, y2, w, h) space scaled by ``sqrt(m)`` a centre at
     Euclidean distance e has ``d² >= e²``, and at least its (y1, y2) distance.
 
-    A particle starts from its previous centre (else a first guess per grid cell,
-    :func:`_cell_guess`) at scaled distance e₀, and looks at that centre's neighbours
+    A particle starts from its previous centre (else particle i − 1's answer, else a first
+    guess per grid cell, :func:`_cell_guess`) at scaled distance e₀, and looks at that centre's neighbours
     (:func:`_neighbours`, by increasing distance D) until ``D − e₀ > sqrt(best d²)``; only when
     the list ends before that does it search the grid's rings (:func:`_ring_search`).  Time and
     memory are O(N + K) for K centres spread at about one per cell (no K × K table)."""
@@ -666,7 +702,10 @@ def lloyd(X, S, w, centers, max_iter, tol, sigma_obs, sigma_min, pos_ratio, grid
     for it in range(1, max_iter + 1):
         inv = _inv_var(centers, sigma_obs, sigma_min, pos_ratio)
         if grid_min is None:
-            _assign_dense(X, centers, inv, new, dmin)
+            if it == 1:
+                _assign_dense(X, centers, inv, new, dmin)
+            else:
+                _assign_moved(X, centers, inv, labels, new, dmin, moved)
         else:
             if K >= grid_min:
                 # the scaled space: a little below the smallest inverse variances, kept while
@@ -684,10 +723,7 @@ def lloyd(X, S, w, centers, max_iter, tol, sigma_obs, sigma_min, pos_ratio, grid
                     stable[c] = same_space and not moved[c]
                 if same_space:
                     _unstable_near_moved(centers, space, moved, stable, reach_c)
-            if it == 1 and K <= _FIRST_DENSE_MAX:
-                _assign_first(X, centers, inv, new, dmin, space, reach)
-            else:
-                _assign(X, centers, inv, labels, new, dmin, grid_min, space, stable, reach)
+            _assign(X, centers, inv, labels, new, dmin, grid_min, space, stable, reach)
         if it > 1:
             for c in range(K):
                 touched[c] = False
@@ -739,7 +775,10 @@ def lloyd(X, S, w, centers, max_iter, tol, sigma_obs, sigma_min, pos_ratio, grid
     if not done:
         inv = _inv_var(centers, sigma_obs, sigma_min, pos_ratio)
         if grid_min is None:
-            _assign_dense(X, centers, inv, new, dmin)
+            if it == 0:
+                _assign_dense(X, centers, inv, new, dmin)
+            else:
+                _assign_moved(X, centers, inv, labels, new, dmin, moved)
         else:
             for c in range(K):
                 stable[c] = False
