@@ -434,10 +434,10 @@ def test_lloyd_equals_the_brute_force_iteration(seed, k, tol):
 @pytest.mark.parametrize("tol", [0.0, 0.01])
 def test_lloyd_on_resampled_copies_equals_the_brute_force_iteration(seed, k, tol):
     """After resampling, an ancestor's copies lie side by side (a target's particles too): a
-    copy takes the answer of the particle before it, a late dense iteration looks only at the
-    centres that moved (a particle of an unmoved centre), the grid search's first iteration
-    starts from the particle before's answer -- the same labels and centres as plain Lloyd,
-    in that order and shuffled, and a copy's d² is its original's float."""
+    late dense iteration looks only at the centres that moved (for a particle of an unmoved
+    centre), the grid search's first iteration starts from the particle before's answer --
+    the same labels and centres as plain Lloyd, in that order and shuffled, and a copy's d²
+    is its original's float."""
     rng = np.random.default_rng(seed)
     lk = PHDParams().likelihood
     truth = _centers(rng, k)
@@ -446,7 +446,7 @@ def test_lloyd_on_resampled_copies_equals_the_brute_force_iteration(seed, k, tol
     S[:, 4:6] = np.abs(S[:, 4:6]) + 2
     S = np.repeat(S, rng.integers(1, 4, 2500), axis=0)  # copies side by side
     S[rng.integers(0, len(S), 40), 0] *= -1.0           # a few rows differ in one coordinate
-    S[rng.integers(0, len(S), 40), 5] += 1e-9
+    S[rng.integers(0, len(S), 40), 5] += 0.5
     n = len(S)
     w = np.full(n, 0.25)
     init = truth + rng.normal(0, 8, truth.shape)        # centres off the peaks: they must move

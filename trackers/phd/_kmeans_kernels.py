@@ -157,15 +157,6 @@ def _assign_moved(X, centers, inv, prev, labels, dmin, moved):
         dmin[i] = best
 
 
-@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
-      no_cpython_wrapper=True)
-def _same_row(X, i):
-    """Whether particle i's (y1, y2, w, h) equal particle i − 1's (a resampled copy: every
-    distance of the two is the same float; False for a NaN)."""
-    return (X[i, 0] == X[i - 1, 0] and X[i, 1] == X[i - 1, 1] and X[i, 2] == X[i - 1, 2]
-            and X[i, 3] == X[i - 1, 3])
-
-
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
 def _scaled(X, i, rm, cs, c):
     """Euclidean distance of particle i to centre c in the space scaled by ``rm`` (4,)."""
@@ -598,8 +589,8 @@ def farthest(labels, dmin, K):
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
 def prepare(states, log_w):
-    """The inputs of :func:`lloyd` from the particles, in one pass (numpy's spelling took five
-    passes and as many temporaries): ``lmax`` the largest log-weight (when it is not finite,
+    """The inputs of :func:`lloyd` from the particles, in two passes (numpy's spelling took
+    five passes and as many temporaries): ``lmax`` the largest log-weight (when it is not finite,
     nothing else is computed), ``w`` (N,) the weights relative to it ``exp(log_w − lmax)``, ``shift`` (6,) the mean
     position ``(y1, y2)`` (zeros elsewhere), ``S`` (N, 6) the states minus it and ``X`` (N, 4)
     its ``(y1, y2, w, h)``.  The same floats as ``np.max``, ``np.exp`` (taken once per run of
@@ -607,12 +598,16 @@ def prepare(states, log_w):
     ``states[:, :2].mean(axis=0)`` (an axis-0 sum, row by row) and the subtraction."""
     n = states.shape[0]
     lmax = -np.inf
+    a0 = 0.0                                       # (the position sums in the same pass)
+    a1 = 0.0
     for i in range(n):
         if log_w[i] > lmax:
             lmax = log_w[i]
         elif log_w[i] != log_w[i]:                 # NaN: np.max's answer
             lmax = np.nan
             break
+        a0 += states[i, 0]
+        a1 += states[i, 1]
     shift = np.empty(6, np.float64)
     for d in range(6):
         shift[d] = 0.0
@@ -621,8 +616,8 @@ def prepare(states, log_w):
     X = np.empty((n, 4), np.float64)
     if n == 0 or not lmax - lmax == 0.0:          # (not finite; no np.isfinite to compile)
         return lmax, w, shift, S, X
-    a0 = 0.0
-    a1 = 0.0
+    shift[0] = a0 / n
+    shift[1] = a1 / n
     # a run of equal log-weights (after resampling every particle has the same one) takes
     # the exp once: the same float for the same argument
     lp = np.nan
@@ -632,11 +627,6 @@ def prepare(states, log_w):
             lp = log_w[i]
             wp = math.exp(lp - lmax)
         w[i] = wp
-        a0 += states[i, 0]
-        a1 += states[i, 1]
-    shift[0] = a0 / n
-    shift[1] = a1 / n
-    for i in range(n):
         for d in range(6):
             S[i, d] = states[i, d] - shift[d]
         X[i, 0] = S[i, 0]
@@ -887,6 +877,7 @@ def split_clusters(X, S, w, centers, masses, labels, dmin, scale, split_above, n
     far_of = farthest(lab, dm, K)
     near = np.empty(n_near, np.int64)
     is_local = np.empty(cap, np.bool_)
+    pick = np.empty(n, np.int64)
     n_splits = 0
     n_iter = 0
     budget = max_splits
@@ -914,24 +905,22 @@ def split_clusters(X, S, w, centers, masses, labels, dmin, scale, split_above, n
             is_local[c] = False
         for q in range(nn):
             is_local[near[q]] = True
-        m = 0
+        m = 0                              # the neighbourhood's particles, in order
         for i in range(n):
             if is_local[lab[i]]:
+                pick[m] = i
                 m += 1
-        sel = np.empty(m, np.int64)
+        sel = pick[:m]
         Xs = np.empty((m, 4), np.float64)
         Ss = np.empty((m, 6), np.float64)
         ws = np.empty(m, np.float64)
-        k = 0
-        for i in range(n):
-            if is_local[lab[i]]:
-                sel[k] = i
-                for d in range(4):
-                    Xs[k, d] = X[i, d]
-                for d in range(6):
-                    Ss[k, d] = S[i, d]
-                ws[k] = w[i]
-                k += 1
+        for k in range(m):
+            i = sel[k]
+            for d in range(4):
+                Xs[k, d] = X[i, d]
+            for d in range(6):
+                Ss[k, d] = S[i, d]
+            ws[k] = w[i]
         init = np.empty((nn + 1, 6), np.float64)
         for q in range(nn):
             for d in range(6):
