@@ -115,6 +115,19 @@ def _assign_dense(X, centers, inv, labels, dmin):
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
       no_cpython_wrapper=True)
+def _moved_list(moved):
+    """The indices of the ``moved`` (K,) centres, ascending."""
+    idx = np.empty(moved.shape[0], np.int64)
+    nm = 0
+    for c in range(moved.shape[0]):
+        if moved[c]:
+            idx[nm] = c
+            nm += 1
+    return idx[:nm]
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
 def _assign_moved(X, centers, inv, prev, labels, dmin, moved):
     """:func:`_assign_dense`'s labels and d² when only the ``moved`` (K,) centres changed
     since ``prev`` (N,) -- each particle's nearest centre, the lowest index among equal d² --
@@ -124,19 +137,11 @@ def _assign_moved(X, centers, inv, prev, labels, dmin, moved):
     A NaN d² (argmin's centre 0 rule) gets the full look too.  When most centres moved, the
     vector loop over every centre."""
     K = centers.shape[0]
-    nm = 0
-    for c in range(K):
-        if moved[c]:
-            nm += 1
+    idx = _moved_list(moved)
+    nm = idx.shape[0]
     if 2 * nm > K:
         _assign_dense(X, centers, inv, labels, dmin)
         return
-    idx = np.empty(nm, np.int64)
-    nm = 0
-    for c in range(K):
-        if moved[c]:
-            idx[nm] = c
-            nm += 1
     for i in range(X.shape[0]):
         lab = prev[i]
         best = dmin[i]
@@ -520,15 +525,10 @@ def _unstable_near_moved(centers, space, moved, stable, reach_c):
     the moved list, when that is shorter): O(K + moved) for reaches of a cell or so."""
     K = centers.shape[0]
     rm = np.sqrt(space)
-    idx = np.empty(K, np.int64)
-    nm = 0
-    for e in range(K):
-        if moved[e]:
-            idx[nm] = e
-            nm += 1
+    idx = _moved_list(moved)
+    nm = idx.shape[0]
     if nm == 0:
         return
-    idx = idx[:nm]
     mu = np.empty(nm, np.float64)
     mv = np.empty(nm, np.float64)
     for k in range(nm):
