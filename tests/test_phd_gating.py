@@ -319,13 +319,10 @@ def _many_targets(seed, n_single=34, n_pairs=4, n=150):
 @pytest.mark.parametrize("rule", ["guarded", "literal"])
 @pytest.mark.parametrize("n_single", [34, 60])
 def test_kmeans_with_the_index_equals_brute_force(monkeypatch, seed, rule, n_single):
-    from pfscope.trackers.phd import _kmeans_kernels
-
     ps, Z = _many_targets(seed, n_single=n_single)
     assert len(Z) >= clustering.INDEX_MIN_CENTERS
-    # the first assignment looks at every centre up to _FIRST_DENSE_MAX centres, searches the
-    # grid beyond: both are compared with the brute force
-    assert (len(Z) <= _kmeans_kernels._FIRST_DENSE_MAX) == (n_single == 34)
+    # (38 and 64 centres: the grid search, its first iteration from no labels included, is
+    # compared with the brute force)
     indexed = kmeans_peaks(ps, Z, split_rule=rule)
     monkeypatch.setattr(clustering, "INDEX_MIN_CENTERS", 10**9)
     brute = kmeans_peaks(ps, Z, split_rule=rule)

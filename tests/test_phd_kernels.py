@@ -489,6 +489,45 @@ def test_lloyd_equals_the_brute_force_iteration(seed, k, tol):
                                        rtol=1e-12)
 
 
+@pytest.mark.parametrize("seed", [0, 1, 2])
+@pytest.mark.parametrize("k", [6, 24])
+@pytest.mark.parametrize("tol", [0.0, 0.01])
+def test_lloyd_on_resampled_copies_equals_the_brute_force_iteration(seed, k, tol):
+    """After resampling, an ancestor's copies lie side by side (a target's particles too): a
+    late dense iteration looks only at the centres that moved (for a particle of an unmoved
+    centre), the grid search's first iteration starts from the particle before's answer --
+    the same labels and centres as plain Lloyd, in that order and shuffled, and a copy's d²
+    is its original's float."""
+    rng = np.random.default_rng(seed)
+    lk = PHDParams().likelihood
+    truth = _centers(rng, k)
+    src = np.sort(rng.integers(0, k, 2500))            # a target's particles side by side
+    S = truth[src] + rng.normal(0, 4, (2500, 6))
+    S[:, 4:6] = np.abs(S[:, 4:6]) + 2
+    S = np.repeat(S, rng.integers(1, 4, 2500), axis=0)  # copies side by side
+    S[rng.integers(0, len(S), 40), 0] *= -1.0           # a few rows differ in one coordinate
+    S[rng.integers(0, len(S), 40), 5] += 0.5
+    n = len(S)
+    w = np.full(n, 0.25)
+    init = truth + rng.normal(0, 8, truth.shape)        # centres off the peaks: they must move
+    init[:, 2:4] = 0
+    for order in (np.arange(n), rng.permutation(n)):
+        So = np.ascontiguousarray(S[order])
+        X = np.ascontiguousarray(So[:, OBS])
+        wc, wlab, wit = _brute_lloyd(X, So, w, init, lk, 50, tol)
+        copy = np.all(X[1:] == X[:-1], axis=1)
+        for grid_min in (1, None):                      # None: the dense specialisation
+            c, lab, m, dmin, it = KM.lloyd(X, So, w, init, 50, tol, lk.sigma_obs,
+                                          lk.sigma_obs_min, lk.sigma_obs_pos_ratio, grid_min)
+            assert it == wit >= 3
+            np.testing.assert_array_equal(lab, wlab)
+            np.testing.assert_allclose(c, wc, rtol=1e-12, atol=1e-9)
+            if tol == 0:                               # stopped on stable labels
+                np.testing.assert_allclose(dmin, _brute_d2(X, c, lk)[np.arange(n), lab],
+                                           rtol=1e-12)
+            assert np.array_equal(dmin[1:][copy], dmin[:-1][copy])
+
+
 def test_dense_lloyd_compiles_none_of_the_grid_search(tmp_path):
     """A run whose frames never have INDEX_MIN_CENTERS centres compiles only the dense K-means
     (the first run after an install compiles less): numba prunes the grid branches of the

@@ -115,19 +115,51 @@ def _assign_dense(X, centers, inv, labels, dmin):
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
       no_cpython_wrapper=True)
-def _assign_first(X, centers, inv, labels, dmin, m, reach):
-    """The first assignment of the grid search (:func:`_assign` with no previous labels) by
-    looking at every centre (:func:`_assign_dense`'s vector loop: the same labels and d²),
-    with each particle's ``reach`` (``e + sqrt(d²)``, e its distance to its centre in the space
-    scaled by sqrt(m)) for the later iterations.  Cheaper than the grid's first search while
-    the centres are few (:data:`_FIRST_DENSE_MAX`)."""
+def _moved_list(moved):
+    """The indices of the ``moved`` (K,) centres, ascending."""
+    idx = np.empty(moved.shape[0], np.int64)
+    nm = 0
+    for c in range(moved.shape[0]):
+        if moved[c]:
+            idx[nm] = c
+            nm += 1
+    return idx[:nm]
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
+def _assign_moved(X, centers, inv, prev, labels, dmin, moved):
+    """:func:`_assign_dense`'s labels and d² when only the ``moved`` (K,) centres changed
+    since ``prev`` (N,) -- each particle's nearest centre, the lowest index among equal d² --
+    and ``dmin`` (its d², overwritten) were taken: a particle whose centre did not move looks
+    at the moved centres only (an unmoved centre other than its own was no nearer then, nor
+    of a lower index at the same d², and is the same now), the others at every centre.
+    A NaN d² (argmin's centre 0 rule) gets the full look too.  When most centres moved, the
+    vector loop over every centre."""
     K = centers.shape[0]
-    _assign_dense(X, centers, inv, labels, dmin)
-    rm, cs = _metric(centers, m)
+    idx = _moved_list(moved)
+    nm = idx.shape[0]
+    if 2 * nm > K:
+        _assign_dense(X, centers, inv, labels, dmin)
+        return
     for i in range(X.shape[0]):
-        r = _scaled(X, i, rm, cs, labels[i]) + math.sqrt(dmin[i])
-        reach[i] = r if r <= np.inf else np.inf          # NaN: no bound
-    return K
+        lab = prev[i]
+        best = dmin[i]
+        full = moved[lab] or best != best
+        if not full:
+            for k in range(nm):
+                c = idx[k]
+                d = _d2(X, i, centers, inv, c)
+                if d < best or (d == best and c < lab):
+                    best = d
+                    lab = c
+                elif d != d and c == 0:
+                    full = True
+                    break
+        if full:
+            lab, best = _nearest_dense(X, i, centers, inv)
+        labels[i] = lab
+        dmin[i] = best
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
@@ -197,10 +229,6 @@ def _slack(pu, pv, x0, y0, g, r):
     """Float slack of a ring bound: the cell edges and the point are O(|coordinates|)."""
     return 1e-9 * (1.0 + abs(pu) + abs(pv) + abs(x0) + abs(y0) + g * r)
 
-
-#: Up to this many centres the first Lloyd assignment looks at every centre (a vector loop)
-#: rather than searching the grid (same labels and d²; cheaper for a few tens of centres).
-_FIRST_DENSE_MAX = 48
 
 #: A centre with more centres than this in its 3 × 3 block of cells gets no neighbour list
 #: (its particles use the ring search), so the lists stay O(K) in memory however crowded.
@@ -411,6 +439,10 @@ def _assign(X, centers, inv, prev, labels, dmin, grid_min, m, stable, reach):
         if lab >= 0 and lab < K and stable[lab]:
             labels[i] = lab
             continue
+        if not (lab >= 0 and lab < K) and i > 0 and labels[i - 1] >= 0 and labels[i - 1] < K:
+            # no previous label (the first iteration): start from particle i − 1's answer --
+            # resampling keeps an ancestor's copies, and a target's particles, side by side
+            lab = labels[i - 1]
         if not (lab >= 0 and lab < K):
             if rep.shape[0] == 0:
                 rep = _cell_guess(cs, x0, y0, g, ni, nj, order, starts)
@@ -464,8 +496,8 @@ def assign(X, centers, inv, prev, labels, dmin, grid_min):
     per coordinate), so in the (y1, y2, w, h) space scaled by ``sqrt(m)`` a centre at
     Euclidean distance e has ``d² >= e²``, and at least its (y1, y2) distance.
 
-    A particle starts from its previous centre (else a first guess per grid cell,
-    :func:`_cell_guess`) at scaled distance e₀, and looks at that centre's neighbours
+    A particle starts from its previous centre (else particle i − 1's answer, else a first
+    guess per grid cell, :func:`_cell_guess`) at scaled distance e₀, and looks at that centre's neighbours
     (:func:`_neighbours`, by increasing distance D) until ``D − e₀ > sqrt(best d²)``; only when
     the list ends before that does it search the grid's rings (:func:`_ring_search`).  Time and
     memory are O(N + K) for K centres spread at about one per cell (no K × K table)."""
@@ -493,15 +525,10 @@ def _unstable_near_moved(centers, space, moved, stable, reach_c):
     the moved list, when that is shorter): O(K + moved) for reaches of a cell or so."""
     K = centers.shape[0]
     rm = np.sqrt(space)
-    idx = np.empty(K, np.int64)
-    nm = 0
-    for e in range(K):
-        if moved[e]:
-            idx[nm] = e
-            nm += 1
+    idx = _moved_list(moved)
+    nm = idx.shape[0]
     if nm == 0:
         return
-    idx = idx[:nm]
     mu = np.empty(nm, np.float64)
     mv = np.empty(nm, np.float64)
     for k in range(nm):
@@ -562,8 +589,8 @@ def farthest(labels, dmin, K):
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
 def prepare(states, log_w):
-    """The inputs of :func:`lloyd` from the particles, in one pass (numpy's spelling took five
-    passes and as many temporaries): ``lmax`` the largest log-weight (when it is not finite,
+    """The inputs of :func:`lloyd` from the particles, in two passes (numpy's spelling took
+    five passes and as many temporaries): ``lmax`` the largest log-weight (when it is not finite,
     nothing else is computed), ``w`` (N,) the weights relative to it ``exp(log_w − lmax)``, ``shift`` (6,) the mean
     position ``(y1, y2)`` (zeros elsewhere), ``S`` (N, 6) the states minus it and ``X`` (N, 4)
     its ``(y1, y2, w, h)``.  The same floats as ``np.max``, ``np.exp`` (taken once per run of
@@ -571,12 +598,16 @@ def prepare(states, log_w):
     ``states[:, :2].mean(axis=0)`` (an axis-0 sum, row by row) and the subtraction."""
     n = states.shape[0]
     lmax = -np.inf
+    a0 = 0.0                                       # (the position sums in the same pass)
+    a1 = 0.0
     for i in range(n):
         if log_w[i] > lmax:
             lmax = log_w[i]
         elif log_w[i] != log_w[i]:                 # NaN: np.max's answer
             lmax = np.nan
             break
+        a0 += states[i, 0]
+        a1 += states[i, 1]
     shift = np.empty(6, np.float64)
     for d in range(6):
         shift[d] = 0.0
@@ -585,8 +616,8 @@ def prepare(states, log_w):
     X = np.empty((n, 4), np.float64)
     if n == 0 or not lmax - lmax == 0.0:          # (not finite; no np.isfinite to compile)
         return lmax, w, shift, S, X
-    a0 = 0.0
-    a1 = 0.0
+    shift[0] = a0 / n
+    shift[1] = a1 / n
     # a run of equal log-weights (after resampling every particle has the same one) takes
     # the exp once: the same float for the same argument
     lp = np.nan
@@ -596,11 +627,6 @@ def prepare(states, log_w):
             lp = log_w[i]
             wp = math.exp(lp - lmax)
         w[i] = wp
-        a0 += states[i, 0]
-        a1 += states[i, 1]
-    shift[0] = a0 / n
-    shift[1] = a1 / n
-    for i in range(n):
         for d in range(6):
             S[i, d] = states[i, d] - shift[d]
         X[i, 0] = S[i, 0]
@@ -666,7 +692,10 @@ def lloyd(X, S, w, centers, max_iter, tol, sigma_obs, sigma_min, pos_ratio, grid
     for it in range(1, max_iter + 1):
         inv = _inv_var(centers, sigma_obs, sigma_min, pos_ratio)
         if grid_min is None:
-            _assign_dense(X, centers, inv, new, dmin)
+            if it == 1:
+                _assign_dense(X, centers, inv, new, dmin)
+            else:
+                _assign_moved(X, centers, inv, labels, new, dmin, moved)
         else:
             if K >= grid_min:
                 # the scaled space: a little below the smallest inverse variances, kept while
@@ -684,10 +713,7 @@ def lloyd(X, S, w, centers, max_iter, tol, sigma_obs, sigma_min, pos_ratio, grid
                     stable[c] = same_space and not moved[c]
                 if same_space:
                     _unstable_near_moved(centers, space, moved, stable, reach_c)
-            if it == 1 and K <= _FIRST_DENSE_MAX:
-                _assign_first(X, centers, inv, new, dmin, space, reach)
-            else:
-                _assign(X, centers, inv, labels, new, dmin, grid_min, space, stable, reach)
+            _assign(X, centers, inv, labels, new, dmin, grid_min, space, stable, reach)
         if it > 1:
             for c in range(K):
                 touched[c] = False
@@ -739,7 +765,10 @@ def lloyd(X, S, w, centers, max_iter, tol, sigma_obs, sigma_min, pos_ratio, grid
     if not done:
         inv = _inv_var(centers, sigma_obs, sigma_min, pos_ratio)
         if grid_min is None:
-            _assign_dense(X, centers, inv, new, dmin)
+            if it == 0:
+                _assign_dense(X, centers, inv, new, dmin)
+            else:
+                _assign_moved(X, centers, inv, labels, new, dmin, moved)
         else:
             for c in range(K):
                 stable[c] = False
@@ -848,6 +877,7 @@ def split_clusters(X, S, w, centers, masses, labels, dmin, scale, split_above, n
     far_of = farthest(lab, dm, K)
     near = np.empty(n_near, np.int64)
     is_local = np.empty(cap, np.bool_)
+    pick = np.empty(n, np.int64)
     n_splits = 0
     n_iter = 0
     budget = max_splits
@@ -875,24 +905,22 @@ def split_clusters(X, S, w, centers, masses, labels, dmin, scale, split_above, n
             is_local[c] = False
         for q in range(nn):
             is_local[near[q]] = True
-        m = 0
+        m = 0                              # the neighbourhood's particles, in order
         for i in range(n):
             if is_local[lab[i]]:
+                pick[m] = i
                 m += 1
-        sel = np.empty(m, np.int64)
+        sel = pick[:m]
         Xs = np.empty((m, 4), np.float64)
         Ss = np.empty((m, 6), np.float64)
         ws = np.empty(m, np.float64)
-        k = 0
-        for i in range(n):
-            if is_local[lab[i]]:
-                sel[k] = i
-                for d in range(4):
-                    Xs[k, d] = X[i, d]
-                for d in range(6):
-                    Ss[k, d] = S[i, d]
-                ws[k] = w[i]
-                k += 1
+        for k in range(m):
+            i = sel[k]
+            for d in range(4):
+                Xs[k, d] = X[i, d]
+            for d in range(6):
+                Ss[k, d] = S[i, d]
+            ws[k] = w[i]
         init = np.empty((nn + 1, 6), np.float64)
         for q in range(nn):
             for d in range(6):
