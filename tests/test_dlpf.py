@@ -511,6 +511,40 @@ def test_scale_prior_learns_height_vs_row_online():
         ScalePrior(H, forget=0.0)
 
 
+def test_a_static_false_track_cannot_make_the_scale_prior_ready():
+    """One big static object (a HOG false positive on a building, confirmed as several tracks
+    over the clip and held by its own verification hits) must not define the prior: on its
+    own it made the prior ready as a constant height at its size and the parents stopped
+    looking for the real, smaller people.  Walkers' samples are used once they moved."""
+    from pfscope.trackers.dlpf.scale import ScalePrior
+
+    rng = np.random.default_rng(0)
+    H = 576
+    prior = ScalePrior(H, min_samples=8)
+    for tid in (1, 2, 3):                        # re-confirmed at the same place, jittering
+        n = 80
+        jit = rng.normal(0, 6, (n, 2))
+        h = 540 * np.exp(rng.normal(0, 0.04, n))
+        prior.add(np.c_[500 + jit[:, 0], 20 + jit[:, 1], h / 3, h], [tid] * n)
+    assert not prior.ready()
+    lo, hi = prior.bounds(35.0, 518.0)
+    assert (lo, hi) == (35.0, 518.0)             # the flat draw still spans every size
+    # two people walking across at different depths: their held samples count once they moved
+    for tid, (y0, h0) in ((10, (150.0, 80.0)), (11, (330.0, 130.0))):
+        x = np.linspace(100, 300, 40)
+        h = h0 * np.exp(rng.normal(0, 0.03, 40))
+        boxes = np.c_[x, np.full(40, y0), h / 3, h]
+        prior.add(boxes[:3], [tid] * 3)          # a few frames: not yet moved
+        assert prior.ready() == (tid == 11)      # (the first walker's samples made it ready)
+        prior.add(boxes[3:], [tid] * 37)
+    assert prior.ready()
+    # the fit is the walkers' law, not the static object's size
+    assert prior.mean_height(np.array([190.0]))[0] == pytest.approx(80, rel=0.25)
+    assert prior.mean_height(np.array([395.0]))[0] == pytest.approx(130, rel=0.25)
+    with pytest.raises(ValueError):
+        ScalePrior(H, min_travel=-1.0)
+
+
 def test_tracker_parents_use_the_scale_prior_once_ready():
     from pfscope.trackers.dlpf.scale import ScalePrior
 

@@ -657,9 +657,9 @@ class DLPFTracker:
         margins[cls] = scores
         self.parents.extra[free, 1] = margins
         self._support(vwin, vscores, vtrack)
-        sup = [t.support for t in self.tracks if t.support is not None]
-        if sup:
-            prior.add(np.array(sup))
+        sup = [t for t in self.tracks if t.support is not None]
+        if sup:  # (only tracks that moved teach it: dlpf.scale)
+            prior.add(np.array([t.support for t in sup]), [t.tid for t in sup])
         self.windows_evaluated += len(all_scores)
         self.frames_seen += 1
         hit = np.flatnonzero(scores > P.classifier.hit_threshold)
@@ -690,7 +690,7 @@ class DLPFTracker:
         born = []
         for cand in self.confirmer.step(frame.index, hboxes, hscores, hparents):
             tr = self._spawn(img, cand.box, cand.parent)
-            prior.add(np.array([b for _, b in cand.history]))
+            prior.add(np.array([b for _, b in cand.history]), [tr.tid] * len(cand.history))
             born.append(tr)
             log.event("dlpf", f"frame {frame.index}: track {tr.tid} confirmed after "
                               f"{cand.count} detections (parent {cand.parent})")
