@@ -408,13 +408,16 @@ def region_layout(k, cu, cv, wx, wy):
     for p in range(off[nreg]):
         index[p] = -1
     binv = np.empty((n, bx * by), dtype=np.int64)
+    # each window's first block's place and its region's grid width (used twice below)
+    base = np.empty(n, dtype=np.int64)
+    gws = np.empty(n, dtype=np.int64)
     for i in range(n):
         r = reg[i]
-        gw = x1[r] - x0[r] - 1
-        base = off[r] + (cv[i] - y0[r]) * gw + (cu[i] - x0[r])
+        gws[i] = x1[r] - x0[r] - 1
+        base[i] = off[r] + (cv[i] - y0[r]) * gws[i] + (cu[i] - x0[r])
         for a in range(bx):
             for b in range(by):
-                index[base + b * gw + a] = 0
+                index[base[i] + b * gws[i] + a] = 0
     m = 0
     for p in range(off[nreg]):
         if index[p] == 0:
@@ -431,10 +434,7 @@ def region_layout(k, cu, cv, wx, wy):
                 m += 1
     cuts[nreg] = m
     for i in range(n):
-        r = reg[i]
-        gw = x1[r] - x0[r] - 1
-        base = off[r] + (cv[i] - y0[r]) * gw + (cu[i] - x0[r])
         for a in range(bx):
             for b in range(by):
-                binv[i, a * by + b] = index[base + b * gw + a]
+                binv[i, a * by + b] = index[base[i] + b * gws[i] + a]
     return reg, x0, y0, x1, y1, rlev, binv, local, cuts
