@@ -262,26 +262,19 @@ class NearClutter:
                           BirthParams(gate=self.cl.clutter_gate))
         return self._gate[2:]
 
-    def wide_std(self, Z: np.ndarray) -> np.ndarray:
-        """The detections' observation stds times :data:`NEAR_SCALE` (N_z, 4): the gates of
-        κ_n's mass and of :class:`DuplicateBoxes` (:func:`.filter.obs_std` of the widened
-        likelihood, the same floats)."""
-        from .filter import obs_std
-
-        return obs_std(Z[:, 2:4], self._wide()[0])
-
     def wide_std_of(self, std: np.ndarray) -> np.ndarray:
-        """:meth:`wide_std` from the detections' observation stds ``std``: the same floats
-        (:data:`NEAR_SCALE` is a power of two: σ scaled by it is exact, and so is every
-        product and max of :func:`.filter.obs_std` after it), one multiply instead of obs_std."""
+        """The detections' observation stds ``std`` times :data:`NEAR_SCALE` (N_z, 4): the gates
+        of κ_n's mass and of :class:`DuplicateBoxes`.  The same floats as :func:`.filter.obs_std`
+        of the likelihood widened by NEAR_SCALE (a power of two: σ scaled by it is exact, and
+        so is every product and max of obs_std after it), one multiply instead of obs_std."""
         return std * NEAR_SCALE
 
     def log_kappa(self, Z: np.ndarray, predicted, log_v: Optional[np.ndarray] = None,
                   chained: Optional[np.ndarray] = None,
                   std: Optional[np.ndarray] = None) -> np.ndarray:
         """``log κ_n(z)`` (N_z,); ``-inf`` where ``chained`` (those continue a chain: no κ_n,
-        module docstring), whose predicted mass is then not summed.  ``std``: :meth:`wide_std`
-        of ``Z`` when the caller has it."""
+        module docstring), whose predicted mass is then not summed.  ``std``: :meth:`wide_std_of`
+        of ``Z``'s stds when the caller has it."""
         m = self.mass(Z, predicted, chained, std)
         if m is None:
             return np.full(len(Z), -np.inf)
@@ -349,7 +342,7 @@ class DuplicateBoxes:
                   std: Optional[np.ndarray] = None) -> np.ndarray:
         """``log κ_d(z)`` (N_z,; ``-inf`` where z has no neighbour); ``log_v`` as
         :meth:`PlaceClutter.log_kappa`'s; ``std``: the detections' observation stds times
-        :data:`NEAR_SCALE` (:meth:`NearClutter.wide_std`) when the caller has them."""
+        :data:`NEAR_SCALE` (:meth:`NearClutter.wide_std_of`) when the caller has them."""
         n = self.counts(Z, std)
         if n is None:
             return np.full(len(Z), -np.inf)

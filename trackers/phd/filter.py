@@ -608,11 +608,12 @@ class SceneModel:
         self.size_frames += 1
 
     def log_kappa(self, Z: np.ndarray, scores: Optional[np.ndarray],
-                  frame: Optional[Frame], predicted: Optional[ParticleSet] = None
-                  ) -> tuple[np.ndarray, np.ndarray]:
+                  frame: Optional[Frame], predicted: Optional[ParticleSet] = None,
+                  std: Optional[np.ndarray] = None) -> tuple[np.ndarray, np.ndarray]:
         """``log κ(z)`` (N_z,) of this frame's detections: the one the newborn weigh against
         (without the scores; with ``spot_places``, also without the place memory), then the
-        update's (with the scores)."""
+        update's (with the scores).  ``std``: the detections' :func:`obs_std` under this
+        model's likelihood when the caller has them (:func:`detection_noise`)."""
         log_birth = None
         persist = self.uses_scores and self.sp.persist_frames > 0
         if persist or self.place is not None:
@@ -632,16 +633,21 @@ class SceneModel:
             with np.errstate(divide="ignore"):
                 log_kappa = math.log(self.rate) - math.log(self._area(frame)) + log_size
             # the detections' observation stds, once a frame for every part that reads them
-            std = obs_std(Z[:, 2:4], self.lk)
-            n_near = n_dup = None
+            if std is None:
+                std = obs_std(Z[:, 2:4], self.lk)
+            n_near = n_dup = std_wide = None
+            if self.place is not None:
+                # the parts read this frame's settings (dups.on below among them)
+                self.place.cl = self.people.cl = self.dups.cl = self.cl
+                # ... and the stds times NEAR_SCALE, for the near-people and duplicate terms
+                std_wide = self.people.wide_std_of(std)
             if self.cl.near_learn and len(Z):
                 if self.place is not None and self.cl.learn_update == "model" \
                         and self.dups.on(Z):
                     # the neighbour count and the duplicate term's (its gates times
                     # NEAR_SCALE) in one pass
                     n_near, n_dup = neighbour_counts(
-                        Z, gate_threshold(self.cl.clutter_gate, OBS_DIM), std,
-                        self.people.wide_std_of(std))
+                        Z, gate_threshold(self.cl.clutter_gate, OBS_DIM), std, std_wide)
                 a = 1.0 / min(self.frames + 5, self.cl.clutter_memory)
                 self.near = (1 - a) * self.near + a * (
                     self._neighbours(Z, std) if n_near is None else float(n_near.mean()))
@@ -652,11 +658,8 @@ class SceneModel:
                 if self.near > 0:
                     log_kappa = np.logaddexp(log_kappa, math.log(self.near) - log_v)
             else:
-                self.place.cl = self.people.cl = self.dups.cl = self.cl
                 model = self.cl.learn_update == "model"
                 S, E = self.place._weight_in_gates(Z, watched=True, std=std)
-                # ... and times NEAR_SCALE, for the near-people and the duplicate terms
-                std_wide = self.people.wide_std_of(std)
                 # a detection that continues a chain of mutually nearest detections is a
                 # person's or a spot's, not a box beside a person (those do not chain): κ_n
                 # is 0 there, so it takes no share of it in the EM (the update alike with
@@ -803,7 +806,7 @@ def predict(ps: ParticleSet, mp: MotionParams, rng: np.random.Generator,
     log_e = math.log(mp.p_survival) if mp.p_survival > 0 else -np.inf
     lw = np.add(ps.log_weights, log_e, out=L[:n])
     out = ParticleSet(states, lw, ps.labels, ps.extra)
-    if ps.__dict__.get("_equal"):       # equal weights times e: equal (ParticleSet.weights)
+    if ps.is_known_equal():       # equal weights times e: equal (ParticleSet.weights)
         out.known_equal()
     return out
 
@@ -1356,8 +1359,10 @@ class PHDFilter:
             cap = n + max_births(len(Z), p.birth)
             buf = (np.empty((cap, STATE_DIM)), np.empty(cap))
         predicted = predict(prev, p.motion, self.rng, buf)
-        log_kappa_geo, log_kappa = self.scene.log_kappa(Z, scores, frame, predicted)
         noise = detection_noise(Z, p.likelihood)
+        # the scene model's stds are these when it has the filter's likelihood (set_params)
+        log_kappa_geo, log_kappa = self.scene.log_kappa(
+            Z, scores, frame, predicted, noise[0] if self.scene.lk == p.likelihood else None)
         born = birth(predicted, Z, p, self.rng, log_kappa_geo, revive,
                      None if buf is None else (buf[0][n:], buf[1][n:]), noise)
         m = n + len(born.particles)

@@ -123,7 +123,7 @@ class ParticleSet:
                    np.zeros((0, n_extra)) if n_extra else None)
 
     def __len__(self) -> int:
-        return len(self.log_weights)
+        return int(self.states.shape[0])     # as many log-weights (checked when made)
 
     @property
     def dim(self) -> int:
@@ -151,6 +151,11 @@ class ParticleSet:
         knows it (systematic resampling's ``np.full``, and a prediction of such a set):
         :attr:`weights` and :attr:`log_mass` then skip their min / max pass."""
         self.__dict__["_equal"] = bool(len(self))
+
+    def is_known_equal(self) -> bool:
+        """True when :meth:`known_equal` was recorded, or the equal-weights test already ran
+        and found them equal (no pass over the weights here)."""
+        return bool(self.__dict__.get("_equal"))
 
     def known_log_mass(self, log_mass: float) -> None:
         """Record ``log_mass`` when the code that made the weights already summed them (the
@@ -255,6 +260,3 @@ class LazyParticleSet(ParticleSet):
                                  f"log-weights")
             self.__dict__["_log_weights"] = lw
         return lw
-
-    def __len__(self) -> int:
-        return int(self.states.shape[0])
