@@ -110,6 +110,61 @@ def test_birth_fill_draws_the_newborn_distribution():
     assert s[:, 4:6].min() == 4.0
 
 
+def _numpy_births(m_near, j_max, complement, cap, lw_base, revive, log_revive):
+    """J_z and the newborn log-weights as the birth computed them in numpy."""
+    if complement:
+        j = np.rint(j_max * np.maximum(0.0, 1.0 - m_near)).astype(np.int64)
+    else:
+        j = np.full(len(m_near), int(j_max), dtype=np.int64)
+    total = int(j.sum())
+    if total > cap:
+        j = np.floor(j * (cap / total)).astype(np.int64)
+    lw_det = lw_base - np.log(np.maximum(j, 1))
+    if revive is not None:
+        lw_det = lw_det + np.where(revive, log_revive, 0.0)
+    return j, lw_det
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_birth_alloc_fill_is_numpys_allocation_and_birth_fill(seed):
+    """The one-call birth (J_z, the newborn log-weights, the fill) gives numpy's J_z and
+    log-weights bit for bit (rint ties, the per-frame cap's floor, revive odds, M(z) above 1,
+    NaN) and birth_fill's newborn for them, into the first J rows of larger buffers."""
+    rng = np.random.default_rng(seed)
+    lk = LikelihoodParams()
+    nz = int(rng.integers(1, 30))
+    Z = np.c_[rng.uniform(0, 600, nz), rng.uniform(0, 400, nz), rng.uniform(5, 60, nz),
+              rng.uniform(10, 150, nz)]
+    m_near = rng.choice([0.0, 0.25, 0.5, 0.9995, 1.0, 1.7, 0.0005, 0.0015],
+                        nz) + (rng.random(nz) if seed % 2 else 0.0)
+    lw_base = rng.normal(-4, 2, nz)
+    for complement, j_max, cap, rev in ((True, 1000, 50_000, False), (True, 1000, 1234, True),
+                                        (False, 300, 50_000, True), (False, 300, 777, False),
+                                        (True, 7, 50_000, True)):
+        revive = rng.random(nz) < 0.4 if rev else None
+        j_np, lw_np = _numpy_births(m_near, j_max, complement, cap, lw_base, revive, 0.7)
+        n_max = min(nz * j_max, cap)
+        states, log_w = np.full((n_max + 5, 6), np.nan), np.full(n_max + 5, np.nan)
+        det = np.full(n_max + 5, -1, np.int64)
+        j, n = K.birth_alloc_fill(m_near, j_max, complement, cap, lw_base,
+                                  revive if rev else np.zeros(0, np.bool_), 0.7, Z,
+                                  R.stream(11), lk.sigma_obs, lk.sigma_obs_min,
+                                  lk.sigma_obs_pos_ratio, 1.3, 0.05, 0.1, 4.0, states, log_w,
+                                  det)
+        np.testing.assert_array_equal(j, j_np)
+        assert n == j_np.sum() <= n_max
+        want, want_lw, want_det = _birth(Z, j_np, lw_np, 11)
+        np.testing.assert_array_equal(states[:n], want)
+        np.testing.assert_array_equal(log_w[:n].view(np.int64), want_lw.view(np.int64))
+        np.testing.assert_array_equal(det[:n], want_det)
+        assert np.isnan(states[n:]).all() and (det[n:] == -1).all()     # nothing past J
+    m_nan = m_near.copy()
+    m_nan[0] = np.nan                     # rint(NaN) as int64: whatever numpy makes of it
+    with np.errstate(invalid="ignore"):
+        j_np, _ = _numpy_births(m_nan, 1000, False, 50_000, lw_base, None, 0.0)
+    np.testing.assert_array_equal(K.birth_counts(m_nan, 1000, False, 50_000), j_np)
+
+
 # ----------------------------------------------------------------------------- grid, M(z)
 
 @pytest.mark.parametrize("cell", [0.01, 5.0, 40.0, 1e4])

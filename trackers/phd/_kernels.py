@@ -318,6 +318,52 @@ def mass_near_few(states, w, Z, std_z, r2, cell_x, cell_y):
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def birth_counts(m_near, j_max, complement, max_per_frame):
+    """J_z (N_z,) int64 of :func:`~.filter.allocate_births`, numpy's floats spelt out:
+    ``rint(J_max max(0, 1 − M(z)))`` (``complement``) or ``J_max``, then, when the total
+    exceeds ``max_per_frame``, ``floor(J_z · (max_per_frame / ΣJ))``."""
+    nz = m_near.shape[0]
+    j = np.empty(nz, np.int64)
+    total = 0
+    for z in range(nz):
+        if complement:
+            v = 1.0 - m_near[z]
+            v = 0.0 if 0.0 >= v else v          # np.maximum(0.0, v): NaN stays NaN
+            j[z] = np.int64(np.rint(j_max * v))
+        else:
+            j[z] = j_max
+        total += j[z]
+    if total > max_per_frame:
+        f = max_per_frame / total
+        for z in range(nz):
+            j[z] = np.int64(math.floor(j[z] * f))
+    return j
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def birth_alloc_fill(m_near, j_max, complement, max_per_frame, lw_base, revive, log_revive,
+                     Z, st, sigma_obs, sigma_min, pos_ratio, spread, speed_mean, speed_std,
+                     min_size, states, log_w, det):
+    """:func:`birth_counts`, each detection's newborn log-weight ``lw_base − log max(J_z, 1)``
+    (``+ log_revive`` where ``revive``, else ``+ 0``; ``revive`` empty: none) and
+    :func:`birth_fill` into the first J = ΣJ_z rows of ``states``, ``log_w``, ``det`` (which
+    must hold them: ``max_births`` rows), in one call: ``(j, J)``."""
+    j = birth_counts(m_near, j_max, complement, max_per_frame)
+    nz = j.shape[0]
+    lw_det = np.empty(nz, np.float64)
+    n = 0
+    for z in range(nz):
+        jz = j[z]
+        lw_det[z] = lw_base[z] - math.log(float(jz if jz > 1 else 1))
+        if revive.shape[0] == nz:
+            lw_det[z] = lw_det[z] + (log_revive if revive[z] else 0.0)
+        n += jz
+    birth_fill(Z, j, lw_det, st, sigma_obs, sigma_min, pos_ratio, spread, speed_mean,
+               speed_std, min_size, states[:n], log_w[:n], det[:n])
+    return j, n
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
 def birth_fill(Z, j, lw_det, st, sigma_obs, sigma_min, pos_ratio, spread, speed_mean,
                speed_std, min_size, states, log_w, det):
     """The J = Σ j newborn into ``states[:J]`` (J, 6), ``log_w[:J]``, ``det[:J]``: detection

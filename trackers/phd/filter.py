@@ -899,14 +899,10 @@ def allocate_births(m_near: np.ndarray, bp: BirthParams = BirthParams()) -> np.n
     """J_z (N_z,) int64: ``J_max max(0, 1 − M(z))`` (``"complement"``) or J_max
     (``"constant"``), then, when the total exceeds ``max_births_per_frame``, every J_z scaled
     by ``max_births_per_frame / ΣJ`` and rounded down (so the total never exceeds the cap)."""
-    if bp.birth_allocation == "complement":
-        j = np.rint(bp.j_max * np.maximum(0.0, 1.0 - m_near)).astype(np.int64)
-    else:
-        j = np.full(len(m_near), int(bp.j_max), dtype=np.int64)
-    total = int(j.sum())
-    if total > bp.max_births_per_frame:
-        j = np.floor(j * (bp.max_births_per_frame / total)).astype(np.int64)
-    return j
+    # (numpy's floats, one kernel call: :func:`._kernels.birth_counts`)
+    return _kernels.birth_counts(np.asarray(m_near, dtype=np.float64).reshape(-1),
+                                 int(bp.j_max), bp.birth_allocation == "complement",
+                                 int(bp.max_births_per_frame))
 
 
 def log_birth_weight(Z: np.ndarray, params: PHDParams,
@@ -953,24 +949,35 @@ def birth(predicted: ParticleSet, Z, params: PHDParams, rng: np.random.Generator
         noise = detection_noise(Z, params.likelihood)
     bp, lk = params.birth, params.likelihood
     m_near, grid = _mass_near(predicted, Z, bp, lk, noise[0])
-    j = allocate_births(m_near, bp)
-    n = int(j.sum())
     st = stream(key_from(rng))
-    # eq. (4), newborn branch, with γ_z ∝ p_z: every newborn of z weighs birth_intensity / J_z.
-    lw_det = log_birth_weight(Z, params, log_kappa, noise[1]) - np.log(np.maximum(j, 1))
+    # eq. (4), newborn branch, with γ_z ∝ p_z: every newborn of z weighs birth_intensity / J_z
+    # (the division and the revive odds in the kernel: numpy's floats)
+    lw_base = log_birth_weight(Z, params, log_kappa, noise[1])
     if revive is not None and bp.revive_odds > bp.birth_odds > 0 and log_kappa is not None:
-        lw_det = lw_det + np.where(revive, math.log(bp.revive_odds / bp.birth_odds), 0.0)
-    if out is not None and len(out[0]) >= n and len(out[1]) >= n:
-        states, log_w = out[0][:n], out[1][:n]
+        revive = np.asarray(revive, dtype=np.bool_).reshape(-1)
+        if len(revive) != len(Z):
+            raise ValueError(f"birth: revive has {len(revive)} flags for {len(Z)} detections")
+        log_revive = math.log(bp.revive_odds / bp.birth_odds)
     else:
-        states, log_w = np.empty((n, STATE_DIM)), np.empty(n)
-    det = np.empty(n, np.int64)
-    # one fused pass (numba) drawing its own numbers: (y, w, h) = z + spread σ(z) ε, speed
-    # (mean + std n) sqrt(w h) in a uniform direction, sizes clipped to min_size
-    _kernels.birth_fill(Z, j, lw_det, st, lk.sigma_obs, lk.sigma_obs_min,
-                        lk.sigma_obs_pos_ratio, bp.birth_spread, bp.birth_speed_mean,
-                        bp.birth_speed_std, params.motion.min_size, states, log_w, det)
-    return BirthResult(ParticleSet(states, log_w), j, m_near, det, grid)
+        revive, log_revive = _NO_REVIVE, 0.0
+    cap = max_births(len(Z), bp)
+    if out is not None and len(out[0]) >= cap and len(out[1]) >= cap:
+        states, log_w = out
+    else:
+        states, log_w = np.empty((cap, STATE_DIM)), np.empty(cap)
+    det = np.empty(cap, np.int64)
+    # one call (numba): J_z (allocate_births), then one fused pass drawing its own numbers:
+    # (y, w, h) = z + spread σ(z) ε, speed (mean + std n) sqrt(w h) in a uniform direction,
+    # sizes clipped to min_size
+    j, n = _kernels.birth_alloc_fill(
+        m_near, int(bp.j_max), bp.birth_allocation == "complement",
+        int(bp.max_births_per_frame), lw_base, revive, log_revive, Z, st, lk.sigma_obs,
+        lk.sigma_obs_min, lk.sigma_obs_pos_ratio, bp.birth_spread, bp.birth_speed_mean,
+        bp.birth_speed_std, params.motion.min_size, states, log_w, det)
+    return BirthResult(ParticleSet(states[:n], log_w[:n]), j, m_near, det[:n], grid)
+
+
+_NO_REVIVE = np.zeros(0, np.bool_)
 
 
 @dataclass(frozen=True)
