@@ -125,6 +125,31 @@ def _numpy_births(m_near, j_max, complement, cap, lw_base, revive, log_revive):
     return j, lw_det
 
 
+def test_grid_cell_kernel_is_numpys_median_cell():
+    """The grid cells' kernel gives the floats of the numpy spelling (np.sort of the first two
+    std columns, the middle value or the mean of the two middle ones: np.median's without
+    NaN) on odd and even counts, ties, zeros (-> 1), inf, NaN (sorted last), bit for bit."""
+    rng = np.random.default_rng(3)
+    for t in range(3000):
+        n = int(rng.integers(1, 40))
+        std = rng.random((n, 4)) * 10.0 ** rng.uniform(-3, 3)
+        if t % 5 == 0:
+            std[:, :2] = np.round(std[:, :2], 1)                    # ties
+        if t % 7 == 0:
+            std[rng.integers(0, n)] = 0.0
+        if t % 11 == 0:
+            std[rng.integers(0, n), 0] = np.inf
+        if t % 13 == 0:
+            std[rng.integers(0, n), 1] = np.nan
+        r2 = float(rng.uniform(1, 70))
+        srt, h = np.sort(std[:, :2], axis=0), n // 2
+        cell = 2.0 * np.sqrt(r2) * (srt[h] if n % 2 else (srt[h - 1] + srt[h]) / 2.0)
+        want = np.where(cell > 0, cell, 1.0)
+        if not np.isnan(std[:, :2]).any():
+            np.testing.assert_array_equal(cell, 2.0 * np.sqrt(r2) * np.median(std[:, :2], 0))
+        np.testing.assert_array_equal(K.grid_cell(std, r2).view(np.int64), want.view(np.int64))
+
+
 @pytest.mark.parametrize("seed", range(6))
 def test_birth_alloc_fill_is_numpys_allocation_and_birth_fill(seed):
     """The one-call birth (J_z, the newborn log-weights, the fill) gives numpy's J_z and

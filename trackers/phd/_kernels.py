@@ -179,6 +179,23 @@ def gate_cells(zx, zy, sx, sy, r, x0, cx, ni, y0, cy, nj):
     return i0, i1, j0, j1
 
 
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def grid_cell(std, r2):
+    """:func:`~.filter._grid_cell`'s cells (2,) of numpy's floats: ``2 sqrt(r2)`` times the
+    median of each of the first two columns of ``std`` (N >= 1, 4) (``np.sort``'s order, NaN
+    last; the middle value or the mean of the two middle ones), 1 where that is not > 0."""
+    n = std.shape[0]
+    h = n // 2
+    r = 2.0 * math.sqrt(r2)
+    out = np.empty(2, np.float64)
+    for d in range(2):
+        s = np.sort(std[:, d])
+        med = s[h] if n % 2 else (s[h - 1] + s[h]) / 2.0
+        c = r * med
+        out[d] = c if c > 0 else 1.0
+    return out
+
+
 # ----------------------------------------------------------------------------- birth
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
