@@ -11,6 +11,7 @@ from pfscope.trackers.phd.filter import (
     LikelihoodParams,
     PHDFilter,
     PHDParams,
+    _grid_cell,
     log_likelihood,
     mass_near,
     obs_std,
@@ -131,7 +132,7 @@ def test_grid_cell_kernel_is_numpys_median_cell():
     NaN) on odd and even counts, ties, zeros (-> 1), inf, NaN (sorted last), bit for bit."""
     rng = np.random.default_rng(3)
     for t in range(3000):
-        n = int(rng.integers(1, 40))
+        n = int(rng.integers(1, K.GRID_CELL_MAX + 1))
         std = rng.random((n, 4)) * 10.0 ** rng.uniform(-3, 3)
         if t % 5 == 0:
             std[:, :2] = np.round(std[:, :2], 1)                    # ties
@@ -140,7 +141,7 @@ def test_grid_cell_kernel_is_numpys_median_cell():
         if t % 11 == 0:
             std[rng.integers(0, n), 0] = np.inf
         if t % 13 == 0:
-            std[rng.integers(0, n), 1] = np.nan
+            std[rng.integers(0, n, 1 + t % 3), 1] = np.nan
         r2 = float(rng.uniform(1, 70))
         srt, h = np.sort(std[:, :2], axis=0), n // 2
         cell = 2.0 * np.sqrt(r2) * (srt[h] if n % 2 else (srt[h - 1] + srt[h]) / 2.0)
@@ -148,6 +149,12 @@ def test_grid_cell_kernel_is_numpys_median_cell():
         if not np.isnan(std[:, :2]).any():
             np.testing.assert_array_equal(cell, 2.0 * np.sqrt(r2) * np.median(std[:, :2], 0))
         np.testing.assert_array_equal(K.grid_cell(std, r2).view(np.int64), want.view(np.int64))
+    for n in (K.GRID_CELL_MAX + 1, 300):              # more detections: numpy's own sort
+        std = rng.random((n, 4))
+        srt = np.sort(std[:, :2], axis=0)
+        np.testing.assert_array_equal(_grid_cell(std, 9.0),
+                                      6.0 * (srt[n // 2] if n % 2 else
+                                             (srt[n // 2 - 1] + srt[n // 2]) / 2.0))
 
 
 @pytest.mark.parametrize("seed", range(6))

@@ -179,17 +179,31 @@ def gate_cells(zx, zy, sx, sy, r, x0, cx, ni, y0, cy, nj):
     return i0, i1, j0, j1
 
 
+#: the most detections :func:`grid_cell` takes (its insertion sort is quadratic)
+GRID_CELL_MAX = 64
+
+
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
 def grid_cell(std, r2):
-    """:func:`~.filter._grid_cell`'s cells (2,) of numpy's floats: ``2 sqrt(r2)`` times the
-    median of each of the first two columns of ``std`` (N >= 1, 4) (``np.sort``'s order, NaN
-    last; the middle value or the mean of the two middle ones), 1 where that is not > 0."""
+    """:func:`~.filter._grid_cell`'s cells (2,) of numpy's floats for 1 <= N <=
+    :data:`GRID_CELL_MAX` detections: ``2 sqrt(r2)`` times the median of each of the first two
+    columns of ``std`` (N, 4) in ``np.sort``'s order (NaN last; an insertion sort: np.sort's
+    compile costs ~2 s), the middle value or the mean of the two middle ones; 1 where that is
+    not > 0."""
     n = std.shape[0]
     h = n // 2
     r = 2.0 * math.sqrt(r2)
     out = np.empty(2, np.float64)
+    s = np.empty(n, np.float64)
     for d in range(2):
-        s = np.sort(std[:, d])
+        for i in range(n):
+            v = std[i, d]
+            k = i
+            # shift the larger ones (NaN is larger than any number, as np.sort orders it)
+            while k > 0 and (s[k - 1] > v or (s[k - 1] != s[k - 1] and v == v)):
+                s[k] = s[k - 1]
+                k -= 1
+            s[k] = v
         med = s[h] if n % 2 else (s[h - 1] + s[h]) / 2.0
         c = r * med
         out[d] = c if c > 0 else 1.0
@@ -376,7 +390,7 @@ def birth_alloc_fill(m_near, j_max, complement, max_per_frame, lw_base, revive, 
             lw_det[z] = lw_det[z] + (log_revive if revive[z] else 0.0)
         n += jz
     birth_fill(Z, j, lw_det, st, sigma_obs, sigma_min, pos_ratio, spread, speed_mean,
-               speed_std, min_size, states[:n], log_w[:n], det[:n])
+               speed_std, min_size, states, log_w, det)        # (writes their first n rows)
     return j, n
 
 

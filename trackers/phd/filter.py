@@ -889,7 +889,7 @@ def _grid_cell(std: np.ndarray, r2: float) -> np.ndarray:
     # np.median(std[:, :2], axis=0) without its generic machinery (same floats: the middle
     # value, or the mean (a + b) / 2 of the two middle ones), in one kernel call (numpy's
     # sort and where on a few values cost ~8 us a frame)
-    if len(std):
+    if 0 < len(std) <= _kernels.GRID_CELL_MAX:
         return _kernels.grid_cell(std, float(r2))
     s = np.sort(std[:, :2], axis=0)
     h = len(s) // 2
