@@ -9,7 +9,9 @@ or two passes over the particles with no temporary larger than O(N + N_z + grid)
 - :func:`grid_build` / :func:`grid_span` — a uniform grid on the particles' positions (counting
   sort by cell), so a detection visits only the particles in the cells its gate box touches.
 - :func:`mass_near_kernel` — M(z) of the birth allocation, the predicted mass in z's gate.
-- :func:`birth_fill` — the newborn states, their random numbers drawn inside.
+- :func:`birth_fill` — the newborn states, their random numbers drawn inside;
+  :func:`birth_alloc_fill` — J_z (:func:`birth_counts`), the newborn log-weights and the
+  fill in one call (the filter's birth); :func:`grid_cell` — the grids' cell size.
 - :func:`gauss_update` — eq. (5) with the Gaussian g(z|x) evaluated on the fly inside each
   detection's gate: C(z) by an online log-sum-exp per detection, then each particle's bracket
   ``p_M + Σ_z ψ/(κ + C)`` by an online log-sum-exp per particle; no pair arrays.
