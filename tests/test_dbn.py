@@ -588,6 +588,65 @@ def test_crop_route_equals_per_box_crops_float_for_float():
     np.testing.assert_array_equal(ff.describe_union(near), by_crop(near, True))
 
 
+def test_describe_many_gives_each_requests_own_floats_in_its_own_route():
+    """describe_many (a frame's blobs and the windows of the blobs it splits, described
+    together) gives exactly what one describe / describe_union call per request, in order,
+    gives: on a pyramid (boxes on several levels), with empty requests, and when a request of
+    many boxes builds a level's whole-frame integrals, which a later union request then uses
+    (as it would alone)."""
+    rng = np.random.default_rng(5)
+    img = np.clip(_image(6) + rng.normal(0, 15, (120, 160, 3)), 0, 255).astype(np.uint8)
+    near = np.array([[40, 30, 20, 50], [48, 34, 22, 48], [55, 28, 18, 55.5]])
+    many = np.c_[rng.uniform(0, 140, (40, 2)), rng.uniform(8, 30, (40, 1)),
+                 rng.uniform(20, 60, (40, 1))]
+    for cfg, scale in ((FeatureConfig(), 1.0), (FeatureConfig(), 0.5),
+                       (FeatureConfig(box_height=25.0), 1.0)):
+        for reqs in ([(BOXES, False), (near, True), (near + 30, True), (np.zeros((0, 4)), True)],
+                     [(near, True), (many, False), (near, True), (BOXES[:3], False)]):
+            one = FrameFeatures(img, cfg, scale)
+            want = [one.describe_union(b) if u else one.describe(b) for b, u in reqs]
+            got = FrameFeatures(img, cfg, scale).describe_many(reqs)
+            assert len(got) == len(want)
+            for g, w in zip(got, want):
+                np.testing.assert_array_equal(g, w)
+
+
+def test_dbn_reads_the_features_described_ahead_once():
+    """DBNLikelihood.describe_ahead: the blobs and split windows of a frame are described in
+    one describe_many call; the logits / logits_union calls on those boxes read them (the
+    same logits as without), other boxes or another frame are described as before."""
+    from pfscope.trackers.dbn.likelihood import DBNLikelihood
+    from pfscope.trackers.types import Frame
+
+    img = _image(6)
+    calls = []
+    orig = FrameFeatures.describe_many
+
+    def counted(self, requests):
+        calls.append(len(requests))
+        return orig(self, requests)
+
+    near = np.array([[40, 30, 20, 50], [48, 34, 22, 48]])
+    model = dbn_weights.default_weights()
+    plain = DBNLikelihood(model)
+    frame = Frame(1, 0.0, img)
+    ref_b, ref_w = plain.logits(BOXES, frame), plain.logits_union(near, frame)
+    lk = DBNLikelihood(model)
+    FrameFeatures.describe_many = counted
+    try:
+        lk.describe_ahead(frame, [(BOXES, False), (near, True)])
+        assert calls == [2]
+        np.testing.assert_array_equal(lk.logits(BOXES, frame), ref_b)
+        np.testing.assert_array_equal(lk.logits_union(near, frame), ref_w)
+        assert calls == [2]                                 # read, not described again
+        lk.logits(near, frame)                              # not announced as a plain request
+        lk.describe_ahead(frame, [(BOXES, False)])
+        lk.logits(BOXES, Frame(2, 0.1, img))                # another frame
+        assert calls == [2, 1, 1, 1]
+    finally:
+        FrameFeatures.describe_many = orig
+
+
 def test_features_use_a_given_resize_instead_of_resizing_again():
     """A pyramid level whose scale is in ``scaled`` (the background model's copy of the frame)
     is described on that image: the same features as resizing again when it is the same
