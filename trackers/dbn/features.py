@@ -43,6 +43,7 @@ colour band with no pixel inside the image is all zeros (the only non-normalised
 
 from __future__ import annotations
 
+import functools
 from dataclasses import asdict, dataclass, replace
 
 import cv2
@@ -100,11 +101,22 @@ def _bins(gx: np.ndarray, gy: np.ndarray, hsv: np.ndarray, cfg: FeatureConfig
     mag = np.sqrt(gx * gx + gy * gy)
     ang = np.mod(np.arctan2(gy, gx), np.pi)            # unsigned orientation
     ob = np.minimum((ang * (cfg.orientations / np.pi)).astype(np.int64), cfg.orientations - 1)
-    h, s, v = hsv[..., 0].astype(np.int64), hsv[..., 1], hsv[..., 2]
+    h, s, v = hsv[..., 0], hsv[..., 1], hsv[..., 2]
     chrom = (s >= cfg.sat_min * 255) & (v >= cfg.val_min * 255)
-    hb = np.minimum(h * cfg.hue_bins // 180, cfg.hue_bins - 1)
+    if hsv.dtype == np.uint8:       # (OpenCV's HSV) the same ints from 256-entry tables
+        hue, grey = _colour_tables(cfg.hue_bins, cfg.grey_bins)
+        return ob, mag, np.where(chrom, hue[h], grey[v])
+    hb = np.minimum(h.astype(np.int64) * cfg.hue_bins // 180, cfg.hue_bins - 1)
     gb = cfg.hue_bins + np.minimum(v.astype(np.int64) * cfg.grey_bins // 256, cfg.grey_bins - 1)
     return ob, mag, np.where(chrom, hb, gb)
+
+
+@functools.lru_cache(maxsize=8)
+def _colour_tables(hue_bins: int, grey_bins: int) -> tuple[np.ndarray, np.ndarray]:
+    """(256,) int64 tables of :func:`_bins`' colour bins by uint8 hue and by value."""
+    x = np.arange(256, dtype=np.int64)
+    return (np.minimum(x * hue_bins // 180, hue_bins - 1),
+            hue_bins + np.minimum(x * grey_bins // 256, grey_bins - 1))
 
 
 def bin_indices(image: np.ndarray, cfg: FeatureConfig
@@ -154,7 +166,7 @@ def cell_edges(lo: np.ndarray, size: np.ndarray, n: int, limit: int) -> np.ndarr
     j = np.arange(n + 1)
     e = np.floor(lo[:, None] + size[:, None] * (j / n)[None, :]).astype(np.int64)
     e = np.maximum(e, e[:, :1] + j[None, :])
-    return np.clip(e, 0, limit)
+    return np.minimum(np.maximum(e, 0), limit)    # np.clip's ints, without its overhead
 
 
 def _cell_sums(ii: np.ndarray, ye: np.ndarray, xe: np.ndarray) -> np.ndarray:
@@ -211,7 +223,7 @@ class FrameFeatures:
         nearest ``cfg.box_height`` in ratio, never enlarged (k >= 0)."""
         h = np.maximum(np.asarray(boxes_xywh, dtype=np.float64).reshape(-1, 4)[:, 3], 1e-6)
         k = np.round(np.log2(h / self.cfg.box_height))
-        return np.clip(k, 0, self.max_level).astype(np.int64)
+        return np.minimum(np.maximum(k, 0), self.max_level).astype(np.int64)
 
     def _level(self, k: int) -> "FrameFeatures":
         if k not in self._levels:
