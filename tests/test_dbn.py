@@ -588,6 +588,39 @@ def test_crop_route_equals_per_box_crops_float_for_float():
     np.testing.assert_array_equal(ff.describe_union(near), by_crop(near, True))
 
 
+def test_blobs_from_the_foregrounds_box_are_the_whole_masks():
+    """blobs_from_mask labels only the box around the foreground: the same boxes and fills in
+    the same order as labelling the whole mask (OpenCV), also with blobs of equal area, whose
+    order is OpenCV's label order over the whole image (its parallel stripes)."""
+    def whole(mask, scale, min_area):
+        n, _l, stats, _c = cv2.connectedComponentsWithStats(mask, connectivity=8,
+                                                             ltype=cv2.CV_32S)
+        st = stats[1:n].astype(np.float64)
+        area = st[:, cv2.CC_STAT_AREA]
+        keep = area >= min_area * scale * scale
+        boxes = st[keep][:, :4]
+        order = np.argsort(-area[keep], kind="stable")
+        return boxes[order] / scale, (area[keep] / (boxes[:, 2] * boxes[:, 3]))[order]
+
+    rng = np.random.default_rng(0)
+    masks = [np.zeros((288, 384), np.uint8), np.ones((60, 80), np.uint8)]
+    for k in range(40):
+        m = np.zeros((288, 384), np.uint8)
+        for _ in range(rng.integers(1, 12)):               # equal squares and random boxes
+            y, x = rng.integers(0, 270), rng.integers(0, 360)
+            if rng.random() < 0.5:
+                m[y:y + 12, x:x + 12] = 1
+            else:
+                m[y:y + rng.integers(1, 40), x:x + rng.integers(1, 30)] = 1
+        m |= (rng.random(m.shape) < 0.002).astype(np.uint8)     # specks
+        masks.append(m)
+    for m in masks:
+        for min_area in (150, 4):
+            got, want = blobs_from_mask(m, 0.5, min_area), whole(m, 0.5, min_area)
+            np.testing.assert_array_equal(got[0], want[0])
+            np.testing.assert_array_equal(got[1], want[1])
+
+
 def test_describe_many_gives_each_requests_own_floats_in_its_own_route():
     """describe_many (a frame's blobs and the windows of the blobs it splits, described
     together) gives exactly what one describe / describe_union call per request, in order,
