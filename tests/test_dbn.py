@@ -621,6 +621,49 @@ def test_blobs_from_the_foregrounds_box_are_the_whole_masks():
             np.testing.assert_array_equal(got[1], want[1])
 
 
+def test_split_windows_are_each_foot_rows_linspace_float_for_float():
+    """split_candidates builds every foot row's windows at once: the same windows, in the same
+    order, as np.linspace per row (blobs narrower than a person included: one window a row)."""
+    from pfscope.trackers.dbn.scale import PersonScale, SplitParams, split_candidates
+
+    def per_row(blob, scale, params, ii, mask_scale):
+        x0, y0, bw, bh = (float(v) for v in blob)
+        _, h_top = scale.size_at(y0 + bh)
+        hmax = float(min(h_top, bh))
+        n_rows = max(1, int(np.ceil(max(bh - 0.5 * hmax, 0.0) / (0.25 * hmax))) + 1)
+        foot = np.linspace(y0 + min(hmax, bh), y0 + bh, n_rows)
+        w_f, h_f = scale.size_at(foot)
+        h_f, w_f = np.minimum(h_f, bh), np.minimum(w_f, bw)
+        out = []
+        for fy, ww, hh in zip(foot, w_f, h_f):
+            n_cols = max(1, int(np.ceil(max(bw - ww, 0.0) / (ww / 3.0))) + 1)
+            xs = np.linspace(x0, x0 + bw - ww, n_cols)
+            out.append(np.stack([xs, np.full(n_cols, fy - hh), np.full(n_cols, ww),
+                                 np.full(n_cols, hh)], axis=1))
+        cand = np.concatenate(out)
+        if len(cand) > params.max_windows:
+            cand = cand[np.linspace(0, len(cand) - 1, params.max_windows).round().astype(int)]
+        return cand
+
+    rng = np.random.default_rng(0)
+    sp = SplitParams(min_samples=5, min_fill=0.0, max_windows=10_000)
+    ps = PersonScale(sp)
+    hs = rng.uniform(30, 150, 30)
+    ps.add(np.c_[rng.uniform(0, 700, 30), rng.uniform(0, 400, 30),
+                 hs * rng.uniform(0.3, 0.6, 30), hs])
+    ii = cv2.integral(np.ones((288, 384), np.uint8))
+    narrow = 0
+    for t in range(300):
+        blob = np.array([rng.uniform(-20, 700), rng.uniform(-20, 500), rng.uniform(1, 400),
+                         rng.uniform(1, 300)])
+        if t % 3 == 0:
+            blob = np.round(blob)
+        got, want = split_candidates(blob, ps, sp, ii, 0.5), per_row(blob, ps, sp, ii, 0.5)
+        np.testing.assert_array_equal(got, want)
+        narrow += blob[2] < ps.size_at(blob[1] + blob[3])[0]
+    assert narrow > 10                                  # one-window rows were exercised
+
+
 def test_describe_many_gives_each_requests_own_floats_in_its_own_route():
     """describe_many (a frame's blobs and the windows of the blobs it splits, described
     together) gives exactly what one describe / describe_union call per request, in order,

@@ -182,13 +182,23 @@ def split_candidates(blob: np.ndarray, scale: PersonScale, params: SplitParams,
     w_f, h_f = scale.size_at(foot)
     h_f = np.minimum(h_f, bh)
     w_f = np.minimum(w_f, bw)
-    out = []
-    for fy, ww, hh in zip(foot, w_f, h_f):
-        n_cols = max(1, int(np.ceil(max(bw - ww, 0.0) / (ww / 3.0))) + 1)
-        xs = np.linspace(x0, x0 + bw - ww, n_cols)
-        out.append(np.stack([xs, np.full(n_cols, fy - hh), np.full(n_cols, ww),
-                             np.full(n_cols, hh)], axis=1))
-    cand = np.concatenate(out)
+    # per foot row, n_cols windows from x0 to the blob's right edge: every row's
+    # np.linspace(x0, x0 + bw - w, n_cols) at once, in linspace's own float operations
+    n_cols = np.maximum(np.ceil(np.maximum(bw - w_f, 0.0) / (w_f / 3.0)).astype(np.int64) + 1,
+                        1)
+    stop = x0 + bw - w_f
+    div = (n_cols - 1).astype(np.float64)
+    one = div == 0                                  # linspace(.., 1): start + 0 * delta
+    delta = stop - x0
+    step = delta / np.where(one, 1.0, div)
+    row = np.repeat(np.arange(len(foot)), n_cols)
+    j = (np.arange(len(row)) - np.repeat(np.cumsum(n_cols) - n_cols, n_cols)).astype(np.float64)
+    xs = np.where(one[row], j * delta[row],
+                  np.where(step[row] == 0, j / np.where(one, 1.0, div)[row] * delta[row],
+                           j * step[row])) + x0
+    last = np.cumsum(n_cols) - 1
+    xs[last[~one]] = stop[~one]
+    cand = np.stack([xs, (foot - h_f)[row], w_f[row], h_f[row]], axis=1)
     if len(cand) > params.max_windows:               # coarser: an even subset
         cand = cand[np.linspace(0, len(cand) - 1, params.max_windows).round().astype(int)]
     fill = box_fill(fg_integral, cand, mask_scale)
