@@ -150,6 +150,8 @@ def make_lane(name: str, seed: int, options: dict):
         tr.dbn.model = _TimedModel(tr.dbn.model, tr.parts)
         tr.dbn.logits = _timed_call(tr.dbn.logits, tr.parts, "scored")
         tr.dbn.logits_union = _timed_call(tr.dbn.logits_union, tr.parts, "scored")
+        # the blobs stage describes its blobs and windows together before scoring them
+        tr.dbn.describe_ahead = _timed_call(tr.dbn.describe_ahead, tr.parts, "scored")
     return tr
 
 

@@ -588,6 +588,141 @@ def test_crop_route_equals_per_box_crops_float_for_float():
     np.testing.assert_array_equal(ff.describe_union(near), by_crop(near, True))
 
 
+def test_blobs_from_the_foregrounds_box_are_the_whole_masks():
+    """blobs_from_mask labels only the box around the foreground: the same boxes and fills in
+    the same order as labelling the whole mask (OpenCV), also with blobs of equal area, whose
+    order is OpenCV's label order over the whole image (its parallel stripes)."""
+    def whole(mask, scale, min_area):
+        n, _l, stats, _c = cv2.connectedComponentsWithStats(mask, connectivity=8,
+                                                             ltype=cv2.CV_32S)
+        st = stats[1:n].astype(np.float64)
+        area = st[:, cv2.CC_STAT_AREA]
+        keep = area >= min_area * scale * scale
+        boxes = st[keep][:, :4]
+        order = np.argsort(-area[keep], kind="stable")
+        return boxes[order] / scale, (area[keep] / (boxes[:, 2] * boxes[:, 3]))[order]
+
+    rng = np.random.default_rng(0)
+    masks = [np.zeros((288, 384), np.uint8), np.ones((60, 80), np.uint8)]
+    for k in range(40):
+        m = np.zeros((288, 384), np.uint8)
+        for _ in range(rng.integers(1, 12)):               # equal squares and random boxes
+            y, x = rng.integers(0, 270), rng.integers(0, 360)
+            if rng.random() < 0.5:
+                m[y:y + 12, x:x + 12] = 1
+            else:
+                m[y:y + rng.integers(1, 40), x:x + rng.integers(1, 30)] = 1
+        m |= (rng.random(m.shape) < 0.002).astype(np.uint8)     # specks
+        masks.append(m)
+    for m in masks:
+        for min_area in (150, 4):
+            got, want = blobs_from_mask(m, 0.5, min_area), whole(m, 0.5, min_area)
+            np.testing.assert_array_equal(got[0], want[0])
+            np.testing.assert_array_equal(got[1], want[1])
+
+
+def test_split_windows_are_each_foot_rows_linspace_float_for_float():
+    """split_candidates builds every foot row's windows at once: the same windows, in the same
+    order, as np.linspace per row (blobs narrower than a person included: one window a row)."""
+    from pfscope.trackers.dbn.scale import PersonScale, SplitParams, split_candidates
+
+    def per_row(blob, scale, params, ii, mask_scale):
+        x0, y0, bw, bh = (float(v) for v in blob)
+        _, h_top = scale.size_at(y0 + bh)
+        hmax = float(min(h_top, bh))
+        n_rows = max(1, int(np.ceil(max(bh - 0.5 * hmax, 0.0) / (0.25 * hmax))) + 1)
+        foot = np.linspace(y0 + min(hmax, bh), y0 + bh, n_rows)
+        w_f, h_f = scale.size_at(foot)
+        h_f, w_f = np.minimum(h_f, bh), np.minimum(w_f, bw)
+        out = []
+        for fy, ww, hh in zip(foot, w_f, h_f):
+            n_cols = max(1, int(np.ceil(max(bw - ww, 0.0) / (ww / 3.0))) + 1)
+            xs = np.linspace(x0, x0 + bw - ww, n_cols)
+            out.append(np.stack([xs, np.full(n_cols, fy - hh), np.full(n_cols, ww),
+                                 np.full(n_cols, hh)], axis=1))
+        cand = np.concatenate(out)
+        if len(cand) > params.max_windows:
+            cand = cand[np.linspace(0, len(cand) - 1, params.max_windows).round().astype(int)]
+        return cand
+
+    rng = np.random.default_rng(0)
+    sp = SplitParams(min_samples=5, min_fill=0.0, max_windows=10_000)
+    ps = PersonScale(sp)
+    hs = rng.uniform(30, 150, 30)
+    ps.add(np.c_[rng.uniform(0, 700, 30), rng.uniform(0, 400, 30),
+                 hs * rng.uniform(0.3, 0.6, 30), hs])
+    ii = cv2.integral(np.ones((288, 384), np.uint8))
+    narrow = 0
+    for t in range(300):
+        blob = np.array([rng.uniform(-20, 700), rng.uniform(-20, 500), rng.uniform(1, 400),
+                         rng.uniform(1, 300)])
+        if t % 3 == 0:
+            blob = np.round(blob)
+        got, want = split_candidates(blob, ps, sp, ii, 0.5), per_row(blob, ps, sp, ii, 0.5)
+        np.testing.assert_array_equal(got, want)
+        narrow += blob[2] < ps.size_at(blob[1] + blob[3])[0]
+    assert narrow > 10                                  # one-window rows were exercised
+
+
+def test_describe_many_gives_each_requests_own_floats_in_its_own_route():
+    """describe_many (a frame's blobs and the windows of the blobs it splits, described
+    together) gives exactly what one describe / describe_union call per request, in order,
+    gives: on a pyramid (boxes on several levels), with empty requests, and when a request of
+    many boxes builds a level's whole-frame integrals, which a later union request then uses
+    (as it would alone)."""
+    rng = np.random.default_rng(5)
+    img = np.clip(_image(6) + rng.normal(0, 15, (120, 160, 3)), 0, 255).astype(np.uint8)
+    near = np.array([[40, 30, 20, 50], [48, 34, 22, 48], [55, 28, 18, 55.5]])
+    many = np.c_[rng.uniform(0, 140, (40, 2)), rng.uniform(8, 30, (40, 1)),
+                 rng.uniform(20, 60, (40, 1))]
+    for cfg, scale in ((FeatureConfig(), 1.0), (FeatureConfig(), 0.5),
+                       (FeatureConfig(box_height=25.0), 1.0)):
+        for reqs in ([(BOXES, False), (near, True), (near + 30, True), (np.zeros((0, 4)), True)],
+                     [(near, True), (many, False), (near, True), (BOXES[:3], False)]):
+            one = FrameFeatures(img, cfg, scale)
+            want = [one.describe_union(b) if u else one.describe(b) for b, u in reqs]
+            got = FrameFeatures(img, cfg, scale).describe_many(reqs)
+            assert len(got) == len(want)
+            for g, w in zip(got, want):
+                np.testing.assert_array_equal(g, w)
+
+
+def test_dbn_reads_the_features_described_ahead_once():
+    """DBNLikelihood.describe_ahead: the blobs and split windows of a frame are described in
+    one describe_many call; the logits / logits_union calls on those boxes read them (the
+    same logits as without), other boxes or another frame are described as before."""
+    from pfscope.trackers.dbn.likelihood import DBNLikelihood
+    from pfscope.trackers.types import Frame
+
+    img = _image(6)
+    calls = []
+    orig = FrameFeatures.describe_many
+
+    def counted(self, requests):
+        calls.append(len(requests))
+        return orig(self, requests)
+
+    near = np.array([[40, 30, 20, 50], [48, 34, 22, 48]])
+    model = dbn_weights.default_weights()
+    plain = DBNLikelihood(model)
+    frame = Frame(1, 0.0, img)
+    ref_b, ref_w = plain.logits(BOXES, frame), plain.logits_union(near, frame)
+    lk = DBNLikelihood(model)
+    FrameFeatures.describe_many = counted
+    try:
+        lk.describe_ahead(frame, [(BOXES, False), (near, True)])
+        assert calls == [2]
+        np.testing.assert_array_equal(lk.logits(BOXES, frame), ref_b)
+        np.testing.assert_array_equal(lk.logits_union(near, frame), ref_w)
+        assert calls == [2]                                 # read, not described again
+        lk.logits(near, frame)                              # not announced as a plain request
+        lk.describe_ahead(frame, [(BOXES, False)])
+        lk.logits(BOXES, Frame(2, 0.1, img))                # another frame
+        assert calls == [2, 1, 1, 1]
+    finally:
+        FrameFeatures.describe_many = orig
+
+
 def test_features_use_a_given_resize_instead_of_resizing_again():
     """A pyramid level whose scale is in ``scaled`` (the background model's copy of the frame)
     is described on that image: the same features as resizing again when it is the same

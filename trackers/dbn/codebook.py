@@ -468,15 +468,31 @@ def blobs_from_mask(mask: np.ndarray, scale: float, min_area: int,
     if mask.size == 0 or np.count_nonzero(mask) > max_foreground * mask.size:
         return np.zeros((0, 4)), np.zeros(0)
     m8 = mask if mask.dtype == np.uint8 else mask.astype(np.uint8)
-    n, _lab, stats, _c = cv2.connectedComponentsWithStats(m8, connectivity=8, ltype=cv2.CV_32S)
-    st = stats[1:n].astype(np.float64)
-    area = st[:, cv2.CC_STAT_AREA]
-    keep = area >= min_area * scale * scale
+    # the components of the box around all the foreground are the image's (~0.4x the time)
+    x, y, w, h = cv2.boundingRect(m8)
+    if w == 0 or h == 0:                                  # no foreground
+        return np.zeros((0, 4)), np.zeros(0)
+    st, area, keep = _components(m8[y:y + h, x:x + w], min_area * scale * scale)
+    st[:, cv2.CC_STAT_LEFT] += x
+    st[:, cv2.CC_STAT_TOP] += y
+    if len(np.unique(area[keep])) < np.count_nonzero(keep):
+        # equal areas: the order below keeps OpenCV's label order for them, which depends on
+        # the image's size (its parallel labelling's stripes), so label the whole image
+        st, area, keep = _components(m8, min_area * scale * scale)
     boxes = st[keep][:, [cv2.CC_STAT_LEFT, cv2.CC_STAT_TOP, cv2.CC_STAT_WIDTH,
                          cv2.CC_STAT_HEIGHT]]
     fill = area[keep] / (boxes[:, 2] * boxes[:, 3])
     order = np.argsort(-area[keep], kind="stable")
     return boxes[order] / scale, fill[order]
+
+
+def _components(m8: np.ndarray, min_area: float):
+    """8-connected components of a 0/1 uint8 mask: ``(stats (N, 5) float64, area (N,), keep
+    (N,) area >= min_area)`` without the background label."""
+    n, _lab, stats, _c = cv2.connectedComponentsWithStats(m8, connectivity=8, ltype=cv2.CV_32S)
+    st = stats[1:n].astype(np.float64)
+    area = st[:, cv2.CC_STAT_AREA]
+    return st, area, area >= min_area
 
 
 __all__ = ["BackgroundParams", "Codebook", "ForegroundModel", "blobs_from_mask", "METHODS",

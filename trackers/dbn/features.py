@@ -43,6 +43,7 @@ colour band with no pixel inside the image is all zeros (the only non-normalised
 
 from __future__ import annotations
 
+import functools
 from dataclasses import asdict, dataclass, replace
 
 import cv2
@@ -100,11 +101,22 @@ def _bins(gx: np.ndarray, gy: np.ndarray, hsv: np.ndarray, cfg: FeatureConfig
     mag = np.sqrt(gx * gx + gy * gy)
     ang = np.mod(np.arctan2(gy, gx), np.pi)            # unsigned orientation
     ob = np.minimum((ang * (cfg.orientations / np.pi)).astype(np.int64), cfg.orientations - 1)
-    h, s, v = hsv[..., 0].astype(np.int64), hsv[..., 1], hsv[..., 2]
+    h, s, v = hsv[..., 0], hsv[..., 1], hsv[..., 2]
     chrom = (s >= cfg.sat_min * 255) & (v >= cfg.val_min * 255)
-    hb = np.minimum(h * cfg.hue_bins // 180, cfg.hue_bins - 1)
+    if hsv.dtype == np.uint8:       # (OpenCV's HSV) the same ints from 256-entry tables
+        hue, grey = _colour_tables(cfg.hue_bins, cfg.grey_bins)
+        return ob, mag, np.where(chrom, hue[h], grey[v])
+    hb = np.minimum(h.astype(np.int64) * cfg.hue_bins // 180, cfg.hue_bins - 1)
     gb = cfg.hue_bins + np.minimum(v.astype(np.int64) * cfg.grey_bins // 256, cfg.grey_bins - 1)
     return ob, mag, np.where(chrom, hb, gb)
+
+
+@functools.lru_cache(maxsize=8)
+def _colour_tables(hue_bins: int, grey_bins: int) -> tuple[np.ndarray, np.ndarray]:
+    """(256,) int64 tables of :func:`_bins`' colour bins by uint8 hue and by value."""
+    x = np.arange(256, dtype=np.int64)
+    return (np.minimum(x * hue_bins // 180, hue_bins - 1),
+            hue_bins + np.minimum(x * grey_bins // 256, grey_bins - 1))
 
 
 def bin_indices(image: np.ndarray, cfg: FeatureConfig
@@ -154,7 +166,7 @@ def cell_edges(lo: np.ndarray, size: np.ndarray, n: int, limit: int) -> np.ndarr
     j = np.arange(n + 1)
     e = np.floor(lo[:, None] + size[:, None] * (j / n)[None, :]).astype(np.int64)
     e = np.maximum(e, e[:, :1] + j[None, :])
-    return np.clip(e, 0, limit)
+    return np.minimum(np.maximum(e, 0), limit)    # np.clip's ints, without its overhead
 
 
 def _cell_sums(ii: np.ndarray, ye: np.ndarray, xe: np.ndarray) -> np.ndarray:
@@ -211,22 +223,13 @@ class FrameFeatures:
         nearest ``cfg.box_height`` in ratio, never enlarged (k >= 0)."""
         h = np.maximum(np.asarray(boxes_xywh, dtype=np.float64).reshape(-1, 4)[:, 3], 1e-6)
         k = np.round(np.log2(h / self.cfg.box_height))
-        return np.clip(k, 0, self.max_level).astype(np.int64)
+        return np.minimum(np.maximum(k, 0), self.max_level).astype(np.int64)
 
     def _level(self, k: int) -> "FrameFeatures":
         if k not in self._levels:
             self._levels[k] = FrameFeatures(self._full, replace(self.cfg, box_height=0.0),
                                             2.0 ** -k, self._scaled)
         return self._levels[k]
-
-    def _by_level(self, boxes_xywh: np.ndarray, method: str) -> np.ndarray:
-        b = np.asarray(boxes_xywh, dtype=np.float64).reshape(-1, 4)
-        out = np.zeros((len(b), self.cfg.dim))
-        lv = self.levels(b)
-        for k in np.unique(lv):
-            sel = lv == k
-            out[sel] = getattr(self._level(int(k)), method)(b[sel])
-        return out
 
     @property
     def ii_hog(self) -> np.ndarray:
@@ -252,88 +255,146 @@ class FrameFeatures:
         one blob): one crop over the union of their cells, its bin maps and integral
         histograms, then 4 look-ups per cell — the same numbers as the whole-frame route,
         without a pass over the whole frame."""
-        c = self.cfg
-        n = len(np.asarray(boxes_xywh).reshape(-1, 4))
-        if n == 0:
-            return np.zeros((0, c.dim))
-        if c.box_height > 0:
-            return self._by_level(boxes_xywh, "describe_union")
-        if self._ii is not None:
-            return self.describe(boxes_xywh)
-        yh, xh = self.edges(boxes_xywh, c.hog_rows, c.hog_cols)
-        yc, xc = self.edges(boxes_xywh, c.colour_rows, 1)
-        y0 = int(min(yh[:, 0].min(), yc[:, 0].min()))
-        y1 = int(max(yh[:, -1].max(), yc[:, -1].max()))
-        x0 = int(min(xh[:, 0].min(), xc[:, 0].min()))
-        x1 = int(max(xh[:, -1].max(), xc[:, -1].max()))
-        if y1 <= y0 or x1 <= x0:
-            return _normalise(np.zeros((n, c.hog_dim)), np.zeros((n, c.colour_rows,
-                                                                   c.colour_bins)), c)
-        hog, col = self._crop_cells([(y0, y1, x0, x1)], np.zeros(n, np.int64),
-                                    yh - y0, xh - x0, yc - y0, xc - x0)
-        return _normalise(hog.reshape(n, -1), col[:, :, 0, :], c)
-
-    def _crop_cells(self, regions, region_of, yh, xh, yc, xc):
-        """Cell sums ``(hog (N, R, C, O), col (N, Rc, 1, bins))`` of boxes described from
-        crops: ``regions`` ``(y0, y1, x0, x1)`` at the feature scale, box ``i`` inside region
-        ``region_of[i]`` with its cell edges relative to it.  Each region's gradients come from
-        its crop plus a one-pixel margin (so they equal the whole image's); the pixels' bins
-        are computed for all regions at once and the integral histograms and cell sums in one
-        numba call (:func:`._feature_kernels.region_cell_sums`): the same floats as
-        :func:`bin_integrals` and :func:`_cell_sums` per crop, with a few numpy calls per
-        frame instead of ~30 per box."""
-        from ._feature_kernels import region_cell_sums
-
-        c = self.cfg
-        gxs, gys, hsvs, shape = [], [], [], np.zeros((len(regions), 3), np.int64)
-        n = 0
-        for r, (y0, y1, x0, x1) in enumerate(regions):
-            cy0, cx0 = max(y0 - 1, 0), max(x0 - 1, 0)
-            gx, gy, hsv = _gradients_hsv(self.image[cy0:min(y1 + 1, self.height),
-                                                    cx0:min(x1 + 1, self.width)])
-            reg = (slice(y0 - cy0, y1 - cy0), slice(x0 - cx0, x1 - cx0))
-            gxs.append(gx[reg].reshape(-1))
-            gys.append(gy[reg].reshape(-1))
-            hsvs.append(hsv[reg].reshape(-1, 3))
-            shape[r] = n, y1 - y0, x1 - x0
-            n += (y1 - y0) * (x1 - x0)
-        ob, mag, cb = _bins(np.concatenate(gxs), np.concatenate(gys), np.concatenate(hsvs), c)
-        # (rows of the transposed copy: always C-contiguous, so numba compiles one
-        # specialisation; a column of `shape` is contiguous only when there is one region)
-        starts, heights, widths = np.ascontiguousarray(shape.T)
-        return region_cell_sums(ob, mag, cb, starts, heights, widths,
-                                np.asarray(region_of, np.int64), yh, xh, yc, xc,
-                                c.orientations, c.colour_bins)
+        return self.describe_many([(boxes_xywh, True)])[0]
 
     def describe(self, boxes_xywh: np.ndarray) -> np.ndarray:
         """(N, D) float64 features of boxes ``(x, y, w, h)`` top-left, full-resolution px."""
+        return self.describe_many([(boxes_xywh, False)])[0]
+
+    def describe_many(self, requests) -> list[np.ndarray]:
+        """``[describe_union(b) if union else describe(b) for b, union in requests]``, the same
+        floats in the same route, with the crop-route parts of all requests (a frame's blobs
+        and the windows of every blob it splits) computed together: one set of numpy calls
+        for the pixels' bins, one kernel call for the cell sums and one normalisation, instead
+        of one each per request and pyramid level (:meth:`_plan`, :func:`_run_crops`)."""
+        jobs: list[_CropJob] = []
+        outs = []
+        for boxes, union in requests:
+            b = np.asarray(boxes, dtype=np.float64).reshape(-1, 4)
+            out = np.zeros((len(b), self.cfg.dim))
+            self._plan(b, union, jobs, out, np.arange(len(b)))
+            outs.append(out)
+        _run_crops(jobs, self.cfg)
+        return outs
+
+    def _plan(self, b: np.ndarray, union: bool, jobs: list, out: np.ndarray,
+              rows: np.ndarray) -> None:
+        """Features of boxes ``b`` into ``out[rows]``: now (the whole-frame integral route,
+        which builds this level's integrals, so later requests see them as before), or as a
+        crop job run later by :func:`_run_crops`.
+
+        Routes: a pyramid splits the boxes by level; a union request is one crop over the
+        union of the boxes' cells (the whole-frame route once this level's integrals exist);
+        a plain request takes the per-box crop route for a few boxes (at most ``crop_max``
+        covering less than half the image: the blobs) and the whole-frame integrals
+        otherwise (the particles)."""
         c = self.cfg
-        n = len(np.asarray(boxes_xywh).reshape(-1, 4))
+        n = len(b)
         if n == 0:
-            return np.zeros((0, c.dim))
+            return
         if c.box_height > 0:
-            return self._by_level(boxes_xywh, "describe")
-        yh, xh = self.edges(boxes_xywh, c.hog_rows, c.hog_cols)
-        yc, xc = self.edges(boxes_xywh, c.colour_rows, 1)
+            lv = self.levels(b)
+            for k in np.unique(lv):
+                sel = np.flatnonzero(lv == k)
+                self._level(int(k))._plan(b[sel], union, jobs, out, rows[sel])
+            return
+        yh, xh = self.edges(b, c.hog_rows, c.hog_cols)
+        yc, xc = self.edges(b, c.colour_rows, 1)
+        if union and self._ii is None:
+            y0 = int(min(yh[:, 0].min(), yc[:, 0].min()))
+            y1 = int(max(yh[:, -1].max(), yc[:, -1].max()))
+            x0 = int(min(xh[:, 0].min(), xc[:, 0].min()))
+            x1 = int(max(xh[:, -1].max(), xc[:, -1].max()))
+            if y1 <= y0 or x1 <= x0:
+                out[rows] = _normalise(np.zeros((n, c.hog_dim)),
+                                       np.zeros((n, c.colour_rows, c.colour_bins)), c)
+                return
+            jobs.append(_CropJob(self, [(y0, y1, x0, x1)], np.zeros(n, np.int64), yh - y0,
+                                 xh - x0, yc - y0, xc - x0, np.arange(n), out, rows))
+            return
         y0 = np.minimum(yh[:, 0], yc[:, 0])
         y1 = np.maximum(yh[:, -1], yc[:, -1])
         x0 = np.minimum(xh[:, 0], xc[:, 0])
         x1 = np.maximum(xh[:, -1], xc[:, -1])
         area = np.maximum(y1 - y0, 0) * np.maximum(x1 - x0, 0)
         if self._ii is None and n <= self.crop_max and area.sum() < self.height * self.width / 2:
-            hog = np.zeros((n, c.hog_rows, c.hog_cols, c.orientations))
-            col = np.zeros((n, c.colour_rows, 1, c.colour_bins))
             i = np.flatnonzero(area > 0)                # a few boxes (the blobs), not particles
-            if len(i):
-                oy, ox = y0[i, None], x0[i, None]
-                hog[i], col[i] = self._crop_cells(
-                    [(int(y0[k]), int(y1[k]), int(x0[k]), int(x1[k])) for k in i],
-                    np.arange(len(i)), yh[i] - oy, xh[i] - ox, yc[i] - oy, xc[i] - ox)
-        else:
-            ii_hog, ii_colour = self._integrals()
-            hog = _cell_sums(ii_hog, yh, xh)
-            col = _cell_sums(ii_colour, yc, xc)
-        return _normalise(hog.reshape(n, -1), col[:, :, 0, :], c)
+            oy, ox = y0[i, None], x0[i, None]
+            jobs.append(_CropJob(self, [(int(y0[k]), int(y1[k]), int(x0[k]), int(x1[k]))
+                                        for k in i], np.arange(len(i)), yh[i] - oy,
+                                 xh[i] - ox, yc[i] - oy, xc[i] - ox, i, out, rows))
+            return
+        ii_hog, ii_colour = self._integrals()
+        hog = _cell_sums(ii_hog, yh, xh)
+        col = _cell_sums(ii_colour, yc, xc)
+        out[rows] = _normalise(hog.reshape(n, -1), col[:, :, 0, :], c)
+
+
+@dataclass
+class _CropJob:
+    """Boxes of one request (and pyramid level) described from crops of ``ff``'s image:
+    ``regions`` ``(y0, y1, x0, x1)`` at the feature scale; box ``crop[j]`` of the job's
+    ``len(rows)`` boxes lies in region ``region_of[j]``, its cell edges relative to it (the
+    job's other boxes have no pixel: all-zero cells); the features go to ``out[rows]``."""
+
+    ff: FrameFeatures
+    regions: list
+    region_of: np.ndarray
+    yh: np.ndarray
+    xh: np.ndarray
+    yc: np.ndarray
+    xc: np.ndarray
+    crop: np.ndarray
+    out: np.ndarray
+    rows: np.ndarray
+
+
+def _run_crops(jobs: list[_CropJob], c: FeatureConfig) -> None:
+    """Run crop jobs together.  Each region's gradients come from its crop plus a one-pixel
+    margin (so they equal the whole image's); the pixels' bins are computed for all regions
+    at once, the integral histograms and cell sums in one numba call
+    (:func:`._feature_kernels.region_cell_sums`): the same floats as :func:`bin_integrals`
+    and :func:`_cell_sums` per crop.  The feature rows are normalised together (row by row:
+    the same floats as per request)."""
+    from ._feature_kernels import region_cell_sums
+
+    if not jobs:
+        return
+    gxs, gys, hsvs, shape = [], [], [], []
+    n = 0
+    for job in jobs:
+        ff = job.ff
+        for y0, y1, x0, x1 in job.regions:
+            cy0, cx0 = max(y0 - 1, 0), max(x0 - 1, 0)
+            gx, gy, hsv = _gradients_hsv(ff.image[cy0:min(y1 + 1, ff.height),
+                                                  cx0:min(x1 + 1, ff.width)])
+            reg = (slice(y0 - cy0, y1 - cy0), slice(x0 - cx0, x1 - cx0))
+            gxs.append(gx[reg].reshape(-1))
+            gys.append(gy[reg].reshape(-1))
+            hsvs.append(hsv[reg].reshape(-1, 3))
+            shape.append((n, y1 - y0, x1 - x0))
+            n += (y1 - y0) * (x1 - x0)
+    total = sum(len(job.rows) for job in jobs)
+    hog = np.zeros((total, c.hog_rows, c.hog_cols, c.orientations))
+    col = np.zeros((total, c.colour_rows, 1, c.colour_bins))
+    first = np.cumsum([0] + [len(job.rows) for job in jobs])
+    if shape:
+        ob, mag, cb = _bins(np.concatenate(gxs), np.concatenate(gys), np.concatenate(hsvs), c)
+        # (rows of the transposed copy: always C-contiguous, so numba compiles one
+        # specialisation; a column of `shape` is contiguous only when there is one region)
+        starts, heights, widths = np.ascontiguousarray(np.array(shape, np.int64).T)
+        n_reg = np.cumsum([0] + [len(job.regions) for job in jobs])
+        h, k = region_cell_sums(
+            ob, mag, cb, starts, heights, widths,
+            np.concatenate([job.region_of + n_reg[j] for j, job in enumerate(jobs)]),
+            *(np.concatenate([getattr(job, e) for job in jobs]) for e in ("yh", "xh", "yc",
+                                                                            "xc")),
+            c.orientations, c.colour_bins)
+        at = np.concatenate([job.crop + first[j] for j, job in enumerate(jobs)])
+        hog[at], col[at] = h, k
+    feats = _normalise(hog.reshape(total, -1), col[:, :, 0, :], c)
+    for j, job in enumerate(jobs):
+        job.out[job.rows] = feats[first[j]:first[j + 1]]
 
 
 def _normalise(hog: np.ndarray, col: np.ndarray, c: FeatureConfig) -> np.ndarray:

@@ -138,6 +138,9 @@ class DBNLikelihood:
         self.lk = lk
         self._key: Optional[tuple] = None
         self._ff: Optional[FrameFeatures] = None
+        #: :meth:`describe_ahead`'s features, by (union, boxes' bytes), for frame _ahead_key
+        self._ahead: dict = {}
+        self._ahead_key: Optional[tuple] = None
 
     @property
     def box_height(self) -> float:
@@ -159,16 +162,34 @@ class DBNLikelihood:
             self._key = key
         return self._ff
 
+    def describe_ahead(self, frame: Frame, requests) -> None:
+        """The features of the boxes about to be scored in this frame, computed together
+        (``requests``: ``(boxes, union)`` pairs, :meth:`FrameFeatures.describe_many`: the same
+        floats as one call each): the next :meth:`logits` (``union`` false) or
+        :meth:`logits_union` (true) call on the same boxes of this frame reads them."""
+        ff = self.frame_features(frame)
+        feats = ff.describe_many(requests)
+        self._ahead = {(bool(u), np.asarray(b, dtype=np.float64).tobytes()): f
+                       for (b, u), f in zip(requests, feats)}
+        self._ahead_key = self._key
+
+    def _features(self, boxes_xywh: np.ndarray, frame: Frame, union: bool) -> np.ndarray:
+        ff = self.frame_features(frame)
+        if self._ahead and self._ahead_key == self._key:
+            f = self._ahead.pop((union, np.asarray(boxes_xywh, dtype=np.float64).tobytes()),
+                                None)
+            if f is not None:
+                return f
+        return ff.describe_union(boxes_xywh) if union else ff.describe(boxes_xywh)
+
     def logits(self, boxes_xywh: np.ndarray, frame: Frame) -> np.ndarray:
         """DBN output activations ``a`` (N,) of boxes (top-left, full-resolution px)."""
-        feats = self.frame_features(frame).describe(boxes_xywh)
-        return self.model.logits(feats)
+        return self.model.logits(self._features(boxes_xywh, frame, False))
 
     def logits_union(self, boxes_xywh: np.ndarray, frame: Frame) -> np.ndarray:
         """:meth:`logits` of boxes close together (one crop over their union,
         :meth:`FrameFeatures.describe_union`)."""
-        feats = self.frame_features(frame).describe_union(boxes_xywh)
-        return self.model.logits(feats)
+        return self.model.logits(self._features(boxes_xywh, frame, True))
 
     def log_score(self, logits: np.ndarray) -> np.ndarray:
         """``s(x)`` from the DBN activations (module docstring)."""

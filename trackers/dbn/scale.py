@@ -113,7 +113,7 @@ class PersonScale:
         a, b, aspect = self._line()
         h = np.maximum(a + b * np.asarray(foot_y, dtype=np.float64), 4.0)
         # never beyond the heights seen (a line fitted on a narrow band of rows extrapolates)
-        h = np.clip(h, 0.5 * self._h.min(), 2.0 * self._h.max())
+        h = np.minimum(np.maximum(h, 0.5 * self._h.min()), 2.0 * self._h.max())
         return np.maximum(aspect * h, 4.0), h
 
 
@@ -182,13 +182,23 @@ def split_candidates(blob: np.ndarray, scale: PersonScale, params: SplitParams,
     w_f, h_f = scale.size_at(foot)
     h_f = np.minimum(h_f, bh)
     w_f = np.minimum(w_f, bw)
-    out = []
-    for fy, ww, hh in zip(foot, w_f, h_f):
-        n_cols = max(1, int(np.ceil(max(bw - ww, 0.0) / (ww / 3.0))) + 1)
-        xs = np.linspace(x0, x0 + bw - ww, n_cols)
-        out.append(np.stack([xs, np.full(n_cols, fy - hh), np.full(n_cols, ww),
-                             np.full(n_cols, hh)], axis=1))
-    cand = np.concatenate(out)
+    # per foot row, n_cols windows from x0 to the blob's right edge: every row's
+    # np.linspace(x0, x0 + bw - w, n_cols) at once, in linspace's own float operations
+    n_cols = np.maximum(np.ceil(np.maximum(bw - w_f, 0.0) / (w_f / 3.0)).astype(np.int64) + 1,
+                        1)
+    stop = x0 + bw - w_f
+    div = (n_cols - 1).astype(np.float64)
+    one = div == 0                                  # linspace(.., 1): start + 0 * delta
+    delta = stop - x0
+    step = delta / np.where(one, 1.0, div)
+    row = np.repeat(np.arange(len(foot)), n_cols)
+    j = (np.arange(len(row)) - np.repeat(np.cumsum(n_cols) - n_cols, n_cols)).astype(np.float64)
+    xs = np.where(one[row], j * delta[row],
+                  np.where(step[row] == 0, j / np.where(one, 1.0, div)[row] * delta[row],
+                           j * step[row])) + x0
+    last = np.cumsum(n_cols) - 1
+    xs[last[~one]] = stop[~one]
+    cand = np.stack([xs, (foot - h_f)[row], w_f[row], h_f[row]], axis=1)
     if len(cand) > params.max_windows:               # coarser: an even subset
         cand = cand[np.linspace(0, len(cand) - 1, params.max_windows).round().astype(int)]
     fill = box_fill(fg_integral, cand, mask_scale)
@@ -199,10 +209,12 @@ def box_fill(fg_integral: np.ndarray, boxes_xywh: np.ndarray, mask_scale: float)
     """(N,) foreground fraction of boxes (full-resolution px) from the mask's integral image."""
     b = np.asarray(boxes_xywh, dtype=np.float64).reshape(-1, 4) * mask_scale
     H, W = fg_integral.shape[0] - 1, fg_integral.shape[1] - 1
-    xa = np.clip(np.floor(b[:, 0]).astype(np.int64), 0, W)
-    ya = np.clip(np.floor(b[:, 1]).astype(np.int64), 0, H)
-    xb = np.clip(np.ceil(b[:, 0] + b[:, 2]).astype(np.int64), 0, W)
-    yb = np.clip(np.ceil(b[:, 1] + b[:, 3]).astype(np.int64), 0, H)
+    # (np.minimum/np.maximum: np.clip's ints without its per-call overhead)
+    lo = np.floor(b[:, :2]).astype(np.int64)
+    hi = np.ceil(b[:, :2] + b[:, 2:]).astype(np.int64)
+    lim = np.array([W, H])
+    xa, ya = np.minimum(np.maximum(lo, 0), lim).T
+    xb, yb = np.minimum(np.maximum(hi, 0), lim).T
     s = (fg_integral[yb, xb] - fg_integral[ya, xb] - fg_integral[yb, xa]
          + fg_integral[ya, xa]).astype(np.float64)
     area = np.maximum((xb - xa) * (yb - ya), 1)
@@ -216,18 +228,20 @@ def select_windows(windows: np.ndarray, prob: np.ndarray, accept: float,
     w = np.asarray(windows, dtype=np.float64).reshape(-1, 4)
     prob = np.asarray(prob)
     order = np.argsort(-prob, kind="stable")
+    # a few dozen windows: Python floats (the same float64 arithmetic as numpy's) cost less
+    # than a numpy call per pair
+    box = w.tolist()
     kept: list[int] = []
     for i in order[prob[order] >= accept].tolist():
-        if kept:
-            k = w[kept]
-            ix = np.maximum(0.0, np.minimum(w[i, 0] + w[i, 2], k[:, 0] + k[:, 2])
-                            - np.maximum(w[i, 0], k[:, 0]))
-            iy = np.maximum(0.0, np.minimum(w[i, 1] + w[i, 3], k[:, 1] + k[:, 3])
-                            - np.maximum(w[i, 1], k[:, 1]))
-            small = np.minimum(w[i, 2] * w[i, 3], k[:, 2] * k[:, 3])
-            if np.any(ix * iy > overlap * np.maximum(small, 1e-9)):
-                continue
-        kept.append(int(i))
+        xi, yi, wi, hi = box[i]
+        for k in kept:
+            xk, yk, wk, hk = box[k]
+            ix = max(0.0, min(xi + wi, xk + wk) - max(xi, xk))
+            iy = max(0.0, min(yi + hi, yk + hk) - max(yi, yk))
+            if ix * iy > overlap * max(min(wi * hi, wk * hk), 1e-9):
+                break
+        else:
+            kept.append(int(i))
     return np.asarray(kept, dtype=np.int64)
 
 

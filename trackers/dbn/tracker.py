@@ -267,33 +267,43 @@ class DBNPHDTracker(_AssociatingTracker):
         """The frame's stage log (a benchmark overrides this to time the stages)."""
         return StageLog(self.stages, level)
 
-    def _split(self, boxes, fill, blob_a, mask, frame):
-        """Blobs bigger than the scene's person searched for people (:mod:`.scale`): returns
-        the measurements (split blobs replaced by the windows the DBN kept), their fill and
-        DBN logits, and the number of blobs split.  The person size learns from the accepted
-        blobs that were not split."""
+    def _windows(self, boxes, mask):
+        """``(big, windows, fg_ii)``: the blobs bigger than the scene's person (:mod:`.scale`),
+        the person-sized windows searched inside each (blob index -> (K, 4)) and the mask's
+        integral image (None when no blob is big)."""
+        sp = self.params.split
+        big = needs_split(boxes, self.person_scale, sp)
+        if not big.any():
+            return big, {}, None
+        fg_ii = cv2.integral(mask)
+        return big, {int(i): split_candidates(boxes[i], self.person_scale, sp, fg_ii,
+                                              self.params.background.scale)
+                     for i in np.flatnonzero(big)}, fg_ii
+
+    def _split(self, boxes, fill, blob_a, windows, frame):
+        """Blobs bigger than the scene's person searched for people (:mod:`.scale`; ``windows``
+        from :meth:`_windows`): returns the measurements (split blobs replaced by the windows
+        the DBN kept), their fill and DBN logits, and the number of blobs split.  The person
+        size learns from the accepted blobs that were not split."""
         sp = self.params.split
         accept = self.params.dbn.accept
         scale = self.params.background.scale
-        big = needs_split(boxes, self.person_scale, sp)
+        big, cands, fg_ii = windows
         out_b, out_f, out_a = [boxes[~big]], [fill[~big]], [blob_a[~big]]
         n_split = 0
-        if big.any():
-            fg_ii = cv2.integral(mask)
-            for i in np.flatnonzero(big):
-                cand = split_candidates(boxes[i], self.person_scale, sp, fg_ii, scale)
-                if len(cand):
-                    a = self.dbn.logits_union(cand, frame)
-                    kept = select_windows(cand, 1.0 / (1.0 + np.exp(-a)), accept, sp.overlap)
-                    if len(kept):
-                        out_b.append(cand[kept])
-                        out_f.append(box_fill(fg_ii, cand[kept], scale))
-                        out_a.append(a[kept])
-                        n_split += 1
-                        continue
-                out_b.append(boxes[i:i + 1])
-                out_f.append(fill[i:i + 1])
-                out_a.append(blob_a[i:i + 1])
+        for i, cand in cands.items():
+            if len(cand):
+                a = self.dbn.logits_union(cand, frame)
+                kept = select_windows(cand, 1.0 / (1.0 + np.exp(-a)), accept, sp.overlap)
+                if len(kept):
+                    out_b.append(cand[kept])
+                    out_f.append(box_fill(fg_ii, cand[kept], scale))
+                    out_a.append(a[kept])
+                    n_split += 1
+                    continue
+            out_b.append(boxes[i:i + 1])
+            out_f.append(fill[i:i + 1])
+            out_a.append(blob_a[i:i + 1])
         self.person_scale.add(boxes[~big][blob_a[~big] >= _logit(accept)])
         return np.concatenate(out_b), np.concatenate(out_f), np.concatenate(out_a), n_split
 
@@ -326,9 +336,13 @@ class DBNPHDTracker(_AssociatingTracker):
         Z = xywh_to_cxcywh(boxes)
         n_split = 0
         if self.dbn is not None and len(boxes):
+            windows = self._windows(boxes, mask) if p.split.enabled else None
+            # every box the DBN scores in this stage, described together (the same features)
+            self.dbn.describe_ahead(frame, [(boxes, False)] + [
+                (c, True) for c in (windows[1].values() if windows else ()) if len(c)])
             blob_a = self.dbn.logits(boxes, frame)
-            if p.split.enabled:
-                boxes, fill, blob_a, n_split = self._split(boxes, fill, blob_a, mask, frame)
+            if windows is not None:
+                boxes, fill, blob_a, n_split = self._split(boxes, fill, blob_a, windows, frame)
                 Z = xywh_to_cxcywh(boxes)
             blob_prob = 1.0 / (1.0 + np.exp(-blob_a))
             accepted = blob_prob >= p.dbn.accept
