@@ -143,7 +143,8 @@ def _split_one_at_a_time(ps, Z, T, rule, max_splits=64, max_iter=50, tol=0.01):
     """kmeans_peaks' split loop spelt out in numpy, one candidate at a time (module docstring
     of trackers.phd.clustering): the heaviest non-final candidate, its farthest member, its
     nearest neighbours within twice its reach (by distance, then index), the guarded
-    pre-check, the local trial and its guarded acceptance."""
+    pre-checks (the candidate's own mass, then its neighbourhood's), the local trial and its
+    guarded acceptance."""
     from pfscope.trackers.phd import _kmeans_kernels
     from pfscope.trackers.phd.clustering import SPLIT_NEIGHBOURS, _lloyd
     from pfscope.trackers.phd.filter import PHDParams
@@ -164,6 +165,9 @@ def _split_one_at_a_time(ps, Z, T, rule, max_splits=64, max_iter=50, tol=0.01):
         if not len(cand):
             break
         j = int(cand[np.argmax(masses[cand])])
+        if guarded and masses[j] < 2.0 * T:         # its own mass cannot give two halves T
+            final[j] = True
+            continue
         members = np.flatnonzero(labels == j)
         far = int(members[np.argmax(dmin[members])]) if len(members) else -1
         if far < 0 or dmin[far] <= 0.0:
