@@ -332,3 +332,29 @@ def test_subsample_runs_on_every_nth_equal_weight_particle():
     a, b = kmeans_peaks(uneq, obs(A, B)), kmeans_peaks(uneq, obs(A, B), subsample=2)
     np.testing.assert_array_equal(a.centers, b.centers)
     np.testing.assert_array_equal(a.labels, b.labels)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_guarded_split_is_tried_only_on_a_cluster_of_twice_min_split_mass(seed):
+    # a single target of mass 1.15 beside another (their masses together pass the
+    # neighbourhood pre-check): its own mass cannot give two halves of
+    # min_split_mass (0.6), so no trial Lloyd runs (n_iter = the first run's) and it stays
+    # whole; at 1.3 (and with min_split_mass 0.5 at 1.15) the trial runs; literal: always
+    from pfscope.trackers.phd.clustering import _lloyd
+    from pfscope.trackers.phd._kmeans_kernels import prepare
+    from pfscope.trackers.phd.filter import PHDParams
+
+    rng = np.random.default_rng(seed)
+    far = [A[0] + 15.0] + A[1:]    # half a box width away: in the split's neighbourhood
+    for mass, msm, tried in ((1.15, None, False), (1.3, None, True), (1.15, 0.5, True)):
+        ps = cloud(rng, A, mass).concat(cloud(rng, far, 1.0))
+        _, w, shift, S, X = prepare(ps.states.copy(), ps.log_weights.copy())
+        init = np.zeros((2, 6))
+        init[:, [0, 1, 4, 5]] = obs(A, far)
+        first = _lloyd(X, S, w, init - shift, PHDParams(), 50, 0.01)[4]
+        c = kmeans_peaks(ps, obs(A, far), min_split_mass=msm)
+        assert (c.n_iter > first) == tried, (mass, msm, c.n_iter, first)
+        if not tried:
+            assert c.n_splits == 0 and c.kept.all()
+        lit = kmeans_peaks(ps, obs(A, far), split_rule="literal")
+        assert lit.n_iter > first
