@@ -143,7 +143,8 @@ def _split_one_at_a_time(ps, Z, T, rule, max_splits=64, max_iter=50, tol=0.01):
     """kmeans_peaks' split loop spelt out in numpy, one candidate at a time (module docstring
     of trackers.phd.clustering): the heaviest non-final candidate, its farthest member, its
     nearest neighbours within twice its reach (by distance, then index), the guarded
-    pre-check, the local trial and its guarded acceptance."""
+    pre-checks (the candidate's own mass, then its neighbourhood's), the local trial and its
+    guarded acceptance."""
     from pfscope.trackers.phd import _kmeans_kernels
     from pfscope.trackers.phd.clustering import SPLIT_NEIGHBOURS, _lloyd
     from pfscope.trackers.phd.filter import PHDParams
@@ -164,6 +165,9 @@ def _split_one_at_a_time(ps, Z, T, rule, max_splits=64, max_iter=50, tol=0.01):
         if not len(cand):
             break
         j = int(cand[np.argmax(masses[cand])])
+        if guarded and masses[j] < 2.0 * T:         # its own mass cannot give two halves T
+            final[j] = True
+            continue
         members = np.flatnonzero(labels == j)
         far = int(members[np.argmax(dmin[members])]) if len(members) else -1
         if far < 0 or dmin[far] <= 0.0:
@@ -328,3 +332,29 @@ def test_subsample_runs_on_every_nth_equal_weight_particle():
     a, b = kmeans_peaks(uneq, obs(A, B)), kmeans_peaks(uneq, obs(A, B), subsample=2)
     np.testing.assert_array_equal(a.centers, b.centers)
     np.testing.assert_array_equal(a.labels, b.labels)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_guarded_split_is_tried_only_on_a_cluster_of_twice_min_split_mass(seed):
+    # a single target of mass 1.15 beside another (their masses together pass the
+    # neighbourhood pre-check): its own mass cannot give two halves of
+    # min_split_mass (0.6), so no trial Lloyd runs (n_iter = the first run's) and it stays
+    # whole; at 1.3 (and with min_split_mass 0.5 at 1.15) the trial runs; literal: always
+    from pfscope.trackers.phd.clustering import _lloyd
+    from pfscope.trackers.phd._kmeans_kernels import prepare
+    from pfscope.trackers.phd.filter import PHDParams
+
+    rng = np.random.default_rng(seed)
+    far = [A[0] + 15.0] + A[1:]    # half a box width away: in the split's neighbourhood
+    for mass, msm, tried in ((1.15, None, False), (1.3, None, True), (1.15, 0.5, True)):
+        ps = cloud(rng, A, mass).concat(cloud(rng, far, 1.0))
+        _, w, shift, S, X = prepare(ps.states.copy(), ps.log_weights.copy())
+        init = np.zeros((2, 6))
+        init[:, [0, 1, 4, 5]] = obs(A, far)
+        first = _lloyd(X, S, w, init - shift, PHDParams(), 50, 0.01)[4]
+        c = kmeans_peaks(ps, obs(A, far), min_split_mass=msm)
+        assert (c.n_iter > first) == tried, (mass, msm, c.n_iter, first)
+        if not tried:
+            assert c.n_splits == 0 and c.kept.all()
+        lit = kmeans_peaks(ps, obs(A, far), split_rule="literal")
+        assert lit.n_iter > first

@@ -853,10 +853,11 @@ def split_clusters(X, S, w, centers, masses, labels, dmin, scale, split_above, n
     (clustering module docstring: the guarded and literal rules, the local trials), in one
     pass: at most ``max_splits`` candidates -- clusters of mass above ``split_above`` not
     final yet, heaviest first (the lowest index among equal masses) -- are looked at, one at
-    a time.  A candidate with no member off its centre, or (``guarded``) whose neighbourhood
-    (:func:`split_neighbours`, at most ``n_near`` clusters) holds less than ``need`` mass, is
-    final; else a new centre on its farthest member and :func:`lloyd` on the neighbourhood's
-    particles; ``guarded``: kept only if j and the new cluster both reach ``min_split_mass``.
+    a time.  A candidate lighter than ``need`` (``guarded``: 2 ``min_split_mass``, else
+    -inf), with no member off its centre, or whose neighbourhood (:func:`split_neighbours`,
+    at most ``n_near`` clusters) holds less than ``need`` mass, is final; else a new centre
+    on its farthest member and :func:`lloyd` on the neighbourhood's particles; ``guarded``:
+    kept only if j and the new cluster both reach ``min_split_mass``.
 
     ``X``, ``S``, ``w`` as for :func:`lloyd`; ``centers`` (K, 6), ``masses`` (K,) (times
     ``scale``), ``labels``, ``dmin`` from the first Lloyd run (not modified).  Returns
@@ -889,6 +890,9 @@ def split_clusters(X, S, w, centers, masses, labels, dmin, scale, split_above, n
         if j < 0:
             break
         budget -= 1
+        if M[j] < need:                    # guarded: j's own mass cannot give both halves
+            final[j] = True                # min_split_mass (a single target, no trial)
+            continue
         far = far_of[j]
         if far < 0 or dm[far] <= 0.0:      # no member / all on the centre
             final[j] = True
