@@ -259,10 +259,7 @@ def _compile_core(presets=("practical", "paper"), phd: bool = True,
     key = (presets if phd else ()) + (("resample",) if index else ())
     if key in _ready or (not phd and any("resample" in k for k in _ready)):
         return 0.0
-    from .api import make_params
-    from .phd.tracker import PHDTracker
     from .smc.resampling import resample_indices
-    from .types import Frame, blank_image
 
     t0 = time.perf_counter()
     rng = np.random.default_rng(0)
@@ -271,6 +268,9 @@ def _compile_core(presets=("practical", "paper"), phd: bool = True,
     if not phd:
         _ready = _ready | {key}
         return time.perf_counter() - t0
+    from .api import make_params        # (after the return: DLPF's run imports no PHD-MT)
+    from .phd.tracker import PHDTracker
+    from .types import Frame, blank_image
     image = blank_image(480, 640)
     helper, _early = (_early, None) if _early is not None else (_start_helper(), None)
     if helper is not None:
