@@ -48,6 +48,19 @@ def phd_kernels_needed(trackers) -> bool:
                for t in trackers)
 
 
+#: the PHD-MT presets whose steps the warm-up runs (:func:`_compile_core`)
+PHD_PRESETS = ("practical", "paper")
+
+
+def phd_presets_needed(trackers) -> tuple:
+    """The PHD-MT presets the warm-up steps for ``trackers``: both when PHD-MT is among them,
+    none for the background trackers alone (DBN-PHD, phd-bgsub): their own twin run
+    (:func:`_compile_background`) reaches the filter kernels they call, and PHD-MT's steps
+    would load ~13 kernels they never call (its learnt clutter, scene and camera motion,
+    the Gaussian update)."""
+    return PHD_PRESETS if any(getattr(t, "name", None) == "phd" for t in trackers) else ()
+
+
 def _walkers(k: int, rng: np.random.Generator):
     """Frame ``k``'s made-up detections: eight walkers and three clutter boxes, fewer than
     INDEX_MIN_CENTERS detections (the dense K-means), enough mass for several clusters
