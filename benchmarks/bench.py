@@ -1100,7 +1100,10 @@ def main(argv=None) -> int:
 
 if __name__ == "__main__":
     if sys.argv[1:2] == ["--record-child"]:     # bench_detector_free's fresh process
-        sys.exit(record_child(sys.argv[2], sys.argv[4:]))
+        status = record_child(sys.argv[2], sys.argv[4:])
+        from pfscope.viewer_app.cli import exit_process
+
+        exit_process(status)                     # as `pfscope record` ends (cli.entry)
     try:
         sys.exit(main())
     except KeyboardInterrupt:

@@ -1154,6 +1154,22 @@ def test_person_scale_median_is_numpys_float_for_float():
             assert _median(x) == np.median(x), n
 
 
+def test_background_start_median_is_numpys_bit_for_bit():
+    """The offline background's temporal median (one sort) is np.median(axis=0)'s array, bit
+    for bit: odd and even counts, ties (uint8 frames as float32), float64, a NaN."""
+    from pfscope.trackers.dbn.codebook import _median0
+
+    rng = np.random.default_rng(6)
+    for k in (1, 2, 3, 30, 31):
+        for x in (rng.integers(0, 256, (k, 5, 7, 3)).astype(np.float32),
+                  rng.normal(0.0, 50.0, (k, 5, 7, 3))):
+            m = _median0(x)
+            assert m.dtype == x.dtype and m.tobytes() == np.median(x, axis=0).tobytes(), k
+    x = rng.normal(0.0, 1.0, (6, 4, 4, 3)).astype(np.float32)
+    x[2, 1, 1, 0] = np.nan
+    assert np.array_equal(_median0(x), np.median(x, axis=0), equal_nan=True)
+
+
 def _moving_square_clip(n=12, h=60, w=80):
     rng = np.random.default_rng(4)
     bg = rng.integers(60, 160, (h, w, 3)).astype(np.uint8)

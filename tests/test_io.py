@@ -54,6 +54,33 @@ def test_bad_det_line_names_file_and_line(tmp_path, line, needle):
     assert f"{p}:2:" in msg and needle in msg and "\n" not in msg
 
 
+@pytest.mark.parametrize("kind, text, plain", [
+    ("gt", "1,1,10,20,30.5,40.25,1,1,-1\n2,3,1e1,2.5E-1,3,4,0,2,0.5\n", True),
+    ("det", "1,-1,0.1,0.2,10,20,0.9,-1,-1,-1,7,8\n1,-1,5,5,10,20,0.2,-1,-1,-1,9,9", True),
+    ("tracks", "1,7,1.5,2.25,10,20\n2,8,3,4,5,6\n", True),
+    ("gt", "1,1,10,20,30,40,1,1,1\n\n2,1,11,21,30,40,1,1,1\n", False),      # blank line
+    ("gt", "1,1,10,20,30,40,1,1,1\r\n2,1,11,21,30,40,1,1,1\r\n", False),  # CRLF
+    ("gt", "1, 1,10,20,30,40,1,1,1\n", False),                              # a space
+    ("tracks", "1,9007199254740993,1,2,3,4\n", False),                      # id > 2**53
+    ("det", "1,-1,0,0,10,20,0.9\n1,-1,0,0,10,20,0.9,-1\n", False),          # ragged
+])
+def test_plain_files_read_vectorised_as_line_by_line(tmp_path, monkeypatch, kind, text, plain):
+    """A plain file (same number of comma-separated numbers on every line) is read in one
+    vectorised pass; it gives the line-by-line reader's table exactly, and anything else
+    goes to that reader."""
+    from pfscope.trackers.data import motio
+
+    p = _write(tmp_path, f"{kind}.txt", text)
+    assert (motio._read_plain(text, kind, str(p)) is not None) == plain
+    fast = read_mot(p, kind)
+    monkeypatch.setattr(motio, "_read_plain", lambda *a: None)
+    slow = read_mot(p, kind)
+    for col in ("frame", "id", "boxes", "score", "cls", "vis"):
+        a, b = getattr(fast, col), getattr(slow, col)
+        assert a.dtype == b.dtype and a.shape == b.shape and a.tobytes() == b.tobytes(), col
+    assert fast.path == slow.path
+
+
 def test_missing_file(tmp_path):
     with pytest.raises(InputError, match="no such gt file"):
         read_mot(tmp_path / "nope.txt", "gt")

@@ -71,6 +71,30 @@ def test_the_registry_describes_every_parameter():
             assert row["doc"], f"{name}: parameter {row['name']} has no documentation"
 
 
+def test_the_built_in_catalogue_is_the_registry_and_a_run_imports_its_tracker_only():
+    """The CLI's choices and help come from BUILTIN_TRACKERS without importing the trackers:
+    the same names, order and summaries as the registered classes; building the parser and
+    looking up dlpf imports neither PHD-MT's nor DBN-PHD's module."""
+    import subprocess
+    import sys
+
+    from pfscope.trackers.api import BUILTIN_TRACKERS, tracker_summaries
+
+    reg = registry()
+    assert list(BUILTIN_TRACKERS) == [n for n in reg if n in BUILTIN_TRACKERS]
+    assert {n: s for n, (_, s) in BUILTIN_TRACKERS.items()} == \
+        {n: reg[n].summary for n in BUILTIN_TRACKERS}
+    assert all(reg[n].cls.__module__ == m for n, (m, _) in BUILTIN_TRACKERS.items())
+    assert list(tracker_summaries()) == list(reg)
+    code = ("import sys; import pfscope.viewer_app.cli as c; c.build_parser(); "
+            "from pfscope.trackers.api import tracker_info; tracker_info('dlpf'); "
+            "print(sorted(m for m in sys.modules if m.startswith('pfscope.trackers.') "
+            "and m.endswith('.tracker')))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True).stdout
+    assert out.strip() == "['pfscope.trackers.dlpf.tracker']"
+
+
 def test_stage_log_enforces_the_declared_order():
     log = StageLog(("a", "b"), "particles")
     log.stage("b")

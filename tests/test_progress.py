@@ -258,6 +258,38 @@ def test_compile_kernels_covers_a_dbn_phd_run():
     assert signatures() == before
 
 
+def test_the_background_trackers_warm_up_without_phd_mt_steps():
+    """DBN-PHD's warm-up as ``record`` asks for it (no PHD-MT preset stepped: its twin run
+    reaches the filter kernels it calls) covers a DBN-PHD run: no kernel signature of the
+    PHD, K-means, association, resampling, codebook or feature kernels is new after 8 frames.
+    PHD-MT still gets both presets."""
+    import numpy as np
+    from numba.core.registry import CPUDispatcher
+
+    import pfscope.trackers.dbn._codebook_kernels as CB
+    import pfscope.trackers.dbn._feature_kernels as FK
+    from pfscope.trackers.api import make_params, tracker_info
+    from pfscope.trackers.data.sources import open_source
+    from pfscope.trackers.pipeline import run
+    from pfscope.trackers.warmup import PHD_PRESETS, compile_kernels, phd_presets_needed
+
+    def signatures():
+        return {**_signatures(),
+                **{f"{m.__name__}.{n}": set(map(str, d.signatures))
+                   for m in (CB, FK) for n, d in vars(m).items()
+                   if isinstance(d, CPUDispatcher)}}
+
+    def tracker(name="dbn-phd"):
+        return tracker_info(name).cls(make_params(name, None, {}), rng=np.random.default_rng(1))
+
+    assert phd_presets_needed([_Lane("dbn-phd"), _Lane("phd-bgsub")]) == ()
+    assert phd_presets_needed([_Lane("dbn-phd"), _Lane("phd")]) == PHD_PRESETS
+    compile_kernels(presets=phd_presets_needed([tracker()]), trackers=[tracker()])
+    before = signatures()
+    run(open_source(None), {"dbn-phd": tracker()}, frames=8, level="tracks")
+    assert signatures() == before
+
+
 def test_a_dlpf_run_warms_only_the_resampling_kernel(monkeypatch):
     """DLPF calls only systematic resampling: its warm-up does not compile (or load) the PHD
     filter's kernels, which would add seconds to its start; PHD-MT's does."""

@@ -99,10 +99,33 @@ class TrackerInfo:
 
 
 _REGISTRY: dict[str, TrackerInfo] = {}
+#: The built-in trackers, in the registry's order: name -> (the module registering it, its
+#: summary line).  The CLI's choices and help come from here, and a run imports only its
+#: tracker's module (:func:`tracker_info`): each module brings its own libraries (DLPF's the
+#: scorer's scipy.optimize, PHD-MT's numba kernels), ~0.5 s a module.  The summaries are the
+#: classes' (``tests/test_api.py`` checks the two agree).
+BUILTIN_TRACKERS = {
+    "phd": ("pfscope.trackers.phd.tracker",
+            "PHD-MT: particle PHD filter + modified K-means peaks + graph-matching association."),
+    "mt": ("pfscope.trackers.phd.tracker",
+           "MT: the graph-matching association run directly on the detections (PHD-MT's "
+           "baseline)."),
+    "passthrough": ("pfscope.trackers.passthrough",
+                    "Reports every detection as a one-frame track (ids 1..N per frame); no "
+                    "tracking."),
+    "dlpf": ("pfscope.trackers.dlpf.tracker",
+             "DLPF (jung2013): parents on LK motion classify one HOG window each; confirmed "
+             "people are"),
+    "dbn-phd": ("pfscope.trackers.dbn.tracker",
+                "DBN-PHD: codebook blobs → particle PHD with a DBN colour+HOG likelihood → "
+                "K-means →"),
+    "phd-bgsub": ("pfscope.trackers.dbn.tracker",
+                  "PHD on background-subtraction blobs without the DBN (DBN-PHD's baseline, "
+                  "feng2015 \"PHD\")."),
+}
 #: Modules holding the built-in trackers; imported on first use of the registry, so that
 #: ``pfscope --help`` does not pay for them and optional dependencies stay optional.
-BUILTIN_MODULES = ("pfscope.trackers.phd.tracker", "pfscope.trackers.passthrough",
-                   "pfscope.trackers.dlpf.tracker", "pfscope.trackers.dbn.tracker")
+BUILTIN_MODULES = tuple(dict.fromkeys(m for m, _ in BUILTIN_TRACKERS.values()))
 DEFAULT_TRACKER = "phd"
 
 T = TypeVar("T", bound=type)
@@ -141,7 +164,21 @@ def registry() -> dict[str, TrackerInfo]:
     return dict(_REGISTRY)
 
 
+def tracker_summaries() -> dict[str, str]:
+    """``{name: summary}`` of every tracker, the built-ins first (:data:`BUILTIN_TRACKERS`),
+    without importing them."""
+    out = {n: summary for n, (_, summary) in BUILTIN_TRACKERS.items()}
+    out.update({n: i.summary for n, i in _REGISTRY.items() if n not in out})
+    return out
+
+
 def tracker_info(name: str) -> TrackerInfo:
+    """The registry entry of tracker ``name``, importing only its module when it is a
+    built-in (all of them otherwise, then ValueError for an unknown name)."""
+    if name not in _REGISTRY and name in BUILTIN_TRACKERS:
+        importlib.import_module(BUILTIN_TRACKERS[name][0])
+    if name in _REGISTRY:
+        return _REGISTRY[name]
     reg = registry()
     if name not in reg:
         raise ValueError(f"unknown tracker {name!r}{did_you_mean(name, reg)}; choose one of "
@@ -209,4 +246,4 @@ def params_config(params: Any) -> dict:
 
 
 __all__ = ["Tracker", "StepResult", "Rows", "TrackerInfo", "register", "registry",
-           "tracker_info", "make_params", "make_tracker", "params_config", "param_origins", "DEFAULT_TRACKER"]
+           "tracker_summaries", "tracker_info", "make_params", "make_tracker", "params_config", "param_origins", "DEFAULT_TRACKER"]

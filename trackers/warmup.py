@@ -48,6 +48,19 @@ def phd_kernels_needed(trackers) -> bool:
                for t in trackers)
 
 
+#: the PHD-MT presets whose steps the warm-up runs (:func:`_compile_core`)
+PHD_PRESETS = ("practical", "paper")
+
+
+def phd_presets_needed(trackers) -> tuple:
+    """The PHD-MT presets the warm-up steps for ``trackers``: both when PHD-MT is among them,
+    none for the background trackers alone (DBN-PHD, phd-bgsub): their own twin run
+    (:func:`_compile_background`) reaches the filter kernels they call, and PHD-MT's steps
+    would load ~13 kernels they never call (its learnt clutter, scene and camera motion,
+    the Gaussian update)."""
+    return PHD_PRESETS if any(getattr(t, "name", None) == "phd" for t in trackers) else ()
+
+
 def _walkers(k: int, rng: np.random.Generator):
     """Frame ``k``'s made-up detections: eight walkers and three clutter boxes, fewer than
     INDEX_MIN_CENTERS detections (the dense K-means), enough mass for several clusters
@@ -259,10 +272,7 @@ def _compile_core(presets=("practical", "paper"), phd: bool = True,
     key = (presets if phd else ()) + (("resample",) if index else ())
     if key in _ready or (not phd and any("resample" in k for k in _ready)):
         return 0.0
-    from .api import make_params
-    from .phd.tracker import PHDTracker
     from .smc.resampling import resample_indices
-    from .types import Frame, blank_image
 
     t0 = time.perf_counter()
     rng = np.random.default_rng(0)
@@ -271,6 +281,9 @@ def _compile_core(presets=("practical", "paper"), phd: bool = True,
     if not phd:
         _ready = _ready | {key}
         return time.perf_counter() - t0
+    from .api import make_params        # (after the return: DLPF's run imports no PHD-MT)
+    from .phd.tracker import PHDTracker
+    from .types import Frame, blank_image
     image = blank_image(480, 640)
     helper, _early = (_early, None) if _early is not None else (_start_helper(), None)
     if helper is not None:

@@ -335,7 +335,7 @@ def prepare_kernels(trackers, *, enabled: bool = True, stream=None, delay: float
     has compiled something (its ``numba:compile`` event: a real compile, not a cache load),
     "loading" until then.  Returns the seconds."""
     from pfscope.trackers.warmup import (compile_kernels, index_kernel_needed,
-                                         phd_kernels_needed, uses_kernels)
+                                         phd_kernels_needed, phd_presets_needed, uses_kernels)
 
     if not any(uses_kernels(t) for t in trackers):
         return 0.0
@@ -360,7 +360,8 @@ def prepare_kernels(trackers, *, enabled: bool = True, stream=None, delay: float
     notice.start()
     try:
         with event.install_listener("numba:compile", Compiling()):
-            compile_kernels(phd=phd_kernels_needed(trackers),
+            compile_kernels(presets=phd_presets_needed(trackers),
+                            phd=phd_kernels_needed(trackers),
                             index=index_kernel_needed(trackers), trackers=list(trackers))
     finally:
         secs = notice.stop()

@@ -241,6 +241,20 @@ class _Book:
         return np.argmax(k, axis=0)
 
 
+def _median0(stack: np.ndarray) -> np.ndarray:
+    """``np.median(stack, axis=0)`` of a float stack, the same numbers (the middle value, or
+    the mean of the two middle ones, of each pixel's sorted values) from one ``np.sort``:
+    ~2.3x faster than numpy's per-pixel partition of a few dozen values (the offline
+    background's start).  A NaN falls back to ``np.median`` (which returns NaN there)."""
+    s = np.sort(stack, axis=0)
+    if np.isnan(s[-1]).any():
+        return np.median(stack, axis=0)
+    k = len(s)
+    if k % 2:
+        return s[k // 2].copy()
+    return np.mean(s[k // 2 - 1:k // 2 + 1], axis=0)
+
+
 class Codebook:
     """The codebook background model of Kim et al. (2005) over a whole image, vectorised.
 
@@ -273,14 +287,15 @@ class Codebook:
         stack = np.asarray(images, dtype=np.float32)
         if stack.ndim != 4 or stack.shape[-1] != 3 or len(stack) < 1:
             raise ValueError(f"codebook.prime: expected (K, H, W, 3) images, got {stack.shape}")
-        med = np.median(stack, axis=0)
+        med = _median0(stack)
         self._init(stack.shape[1:3])
         n = med.shape[0] * med.shape[1]
         x = med.reshape(-1, 3)
         inten = np.sqrt(np.einsum("pc,pc->p", x, x))
         bright = np.sqrt(np.einsum("kpc,kpc->kp", stack.reshape(len(stack), n, 3),
                                    stack.reshape(len(stack), n, 3)))
-        lo, hi = np.percentile(bright, [25.0, 75.0], axis=0).astype(np.float32)
+        # (sorted first: the same quantiles, np.percentile's partition is then ~1/4 faster)
+        lo, hi = np.percentile(np.sort(bright, axis=0), [25.0, 75.0], axis=0).astype(np.float32)
         b = self.book
         self.t = p.train_frames
         pix = np.arange(n)
