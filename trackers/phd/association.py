@@ -112,7 +112,6 @@ from functools import cached_property
 
 import numpy as np
 
-from ..types import cxcywh_to_xywh
 from ..params import param
 from . import _assoc_kernels
 from .appearance import DIM as APP_DIM, AppearanceModel, similarity, similarity_pairs
@@ -497,6 +496,8 @@ def _match_admissible(w0: np.ndarray, n_ok: int) -> tuple[np.ndarray, np.ndarray
         return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
     rows, cols = _lsa()(w0, maximize=True)
     keep = w0[rows, cols] > 0.0
+    if keep.all():      # (every pair the assignment made is an edge: nothing to drop)
+        return rows.astype(np.int64, copy=False), cols.astype(np.int64, copy=False)
     return rows[keep].astype(np.int64, copy=False), cols[keep].astype(np.int64, copy=False)
 
 
@@ -621,8 +622,15 @@ def compile_step_kernels(params: AssocParams | None = None) -> None:
 
 
 def boxes_xywh(states: np.ndarray) -> np.ndarray:
-    """(N, 6) states -> (N, 4) top-left boxes ``(x, y, w, h)`` (MOT convention)."""
-    return cxcywh_to_xywh(np.asarray(states, dtype=np.float64).reshape(-1, STATE_DIM)[:, OBS_INDEX])
+    """(N, 6) states -> (N, 4) top-left boxes ``(x, y, w, h)`` (MOT convention): the floats of
+    ``cxcywh_to_xywh(states[:, OBS_INDEX])`` (``x − w / 2``, ``y − h / 2``, ``w``, ``h``),
+    from slices of the states rather than a gathered copy converted in a second copy."""
+    s = np.asarray(states, dtype=np.float64).reshape(-1, STATE_DIM)
+    out = np.empty((len(s), 4))
+    size = s[:, 4:6]
+    out[:, 2:] = size
+    np.subtract(s[:, :2], size / 2.0, out=out[:, :2])
+    return out
 
 
 # --------------------------------------------------------------------------- results
@@ -1007,8 +1015,15 @@ class GraphAssociator:
 
         # 5b. re-linking: a track confirmed now may continue a recently ended one (renames it
         # in the live arrays, the buffer and ``ids``)
-        relinked = self._relink(frame, ids) if p.relink_depth > 0 else np.zeros((0, 2), np.int64)
+        # (only a track of this frame's vertices whose length is min_length now can be newly
+        # confirmed -- _relink's candidates are exactly those: most frames have none, and its
+        # tests are not run; a re-link renames and re-sorts, so the lengths are read again)
         lengths = self._length[self._ids.searchsorted(ids)]
+        relinked = np.zeros((0, 2), np.int64)
+        if p.relink_depth > 0 and len(self._lost_ids) and (lengths == p.min_length).any():
+            relinked = self._relink(frame, ids)
+            if len(relinked):
+                lengths = self._length[self._ids.searchsorted(ids)]
         confirmed = lengths >= p.min_length
 
         # 6. bounded-lag output: rows of frames <= k − L, judged with the lengths known now
