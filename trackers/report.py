@@ -49,11 +49,14 @@ ID_KINDS = ("track", "cluster", "detection", "class")
 SEVERITIES = ("DEBUG", "INFO", "WARN", "ERROR")
 
 
+_RANK = {name: i for i, name in enumerate(LEVELS)}
+
+
 def level_rank(level: str) -> int:
-    try:
-        return LEVELS.index(level)
-    except ValueError:
-        raise ValueError(f"unknown level {level!r}; choose one of {', '.join(LEVELS)}") from None
+    r = _RANK.get(level) if isinstance(level, str) else None
+    if r is None:
+        raise ValueError(f"unknown level {level!r}; choose one of {', '.join(LEVELS)}")
+    return r
 
 
 def _arr(x, dtype, shape_tail: tuple, what: str) -> np.ndarray:
@@ -247,6 +250,21 @@ class Stage:
         return [i for i in self.items if i.path == path]
 
 
+#: declared stage list -> {stage name: place in it} (StageLog.stage's check, built once a list)
+_WHERE: dict[tuple, dict] = {}
+
+
+def _made(cls, **fields):
+    """An instance of the frozen dataclass ``cls`` with ``fields`` set as its ``__init__``
+    would set them (every field given, already in its final form: :class:`Scalar`'s value a
+    float, :class:`Stage`'s items a tuple), without the generated ``__init__``'s
+    per-field ``object.__setattr__`` calls -- a log makes ~7 scalars and ~6 stages every frame
+    of every tracker, most of them at level None where nothing else is built."""
+    item = object.__new__(cls)
+    item.__dict__.update(fields)
+    return item
+
+
 class StageLog:
     """Builds a frame's :class:`Stage` tuple while a tracker steps, and checks the contract:
     stages must come from ``stages`` (the tracker's declared list) in increasing order, items
@@ -260,17 +278,25 @@ class StageLog:
         self._items: list[Item] = []
         self._name: Optional[str] = None
         self._pos = -1
+        # stage name -> its place in the declared list (a tracker declares one tuple and
+        # makes a log every frame: the map is built once per list)
+        where = _WHERE.get(self.declared)
+        if where is None:
+            where = _WHERE[self.declared] = {n: i for i, n in reversed(list(enumerate(
+                self.declared)))}
+        self._where = where
 
     def wants(self, level: str) -> bool:
         """Should an item of ``level`` be built?"""
-        return level_rank(level) <= self._rank
+        r = _RANK.get(level) if type(level) is str else None
+        return (level_rank(level) if r is None else r) <= self._rank
 
     def stage(self, name: str) -> None:
         """Start stage ``name``; items added next belong to it."""
-        if name not in self.declared:
+        pos = self._where.get(name)
+        if pos is None:
             raise ValueError(f"stage {name!r} is not in the tracker's stage list "
                              f"{self.declared}")
-        pos = self.declared.index(name)
         if pos <= self._pos:
             raise ValueError(f"stage {name!r} after {self.declared[self._pos]!r}: stages must "
                              f"follow the declared order {self.declared}")
@@ -285,14 +311,16 @@ class StageLog:
         self._items.append(item)
 
     def scalar(self, path: str, value: float) -> None:
-        self.add(Scalar(path, value))
+        if self._name is None:
+            raise ValueError("StageLog.add before any stage()")
+        self._items.append(_made(Scalar, path=path, value=float(value)))
 
     def event(self, path: str, message: str, severity: str = "INFO") -> None:
         self.add(Event(path, message, severity))
 
     def _close(self) -> None:
         if self._name is not None:
-            self._stages.append(Stage(self._name, tuple(self._items)))
+            self._stages.append(_made(Stage, name=self._name, items=tuple(self._items)))
         self._items = []
 
     def result(self) -> tuple[Stage, ...]:

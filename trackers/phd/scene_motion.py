@@ -79,20 +79,33 @@ TRIM = 0.9
 def link(prev: np.ndarray, cur: np.ndarray) -> np.ndarray:
     """Mutual nearest neighbours of two frames' detections ``(cx, cy, w, h)`` (N_p, 4), (N_c, 4):
     for each of ``cur`` the index of its link in ``prev``, −1 where none (module docstring)."""
+    return _links(prev, cur, _NO_LENGTHS, _NO_LENGTHS)
+
+
+#: (no chain lengths to carry: :func:`link`; writable, as Chains' arrays are: one kernel
+#: specialisation)
+_NO_LENGTHS = np.zeros(0, dtype=np.int64)
+
+
+def _links(prev: np.ndarray, cur: np.ndarray, prev_length: np.ndarray,
+           length: np.ndarray) -> np.ndarray:
+    """:func:`link`, and when ``length`` has a row per detection of ``cur`` (zeros), each
+    linked one's chain length ``prev_length[link] + 1`` written into it (:class:`Chains`)."""
     out = np.full(len(cur), -1, dtype=np.int64)
     if not len(prev) or not len(cur) or len(prev) * len(cur) > MAX_PAIRS:
         return out
     _link(np.ascontiguousarray(prev, dtype=np.float64),
-          np.ascontiguousarray(cur, dtype=np.float64), out)
+          np.ascontiguousarray(cur, dtype=np.float64), out, prev_length, length)
     return out
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
-def _link(prev, cur, out):
+def _link(prev, cur, out, prev_length, length):
     """:func:`link`'s pass into ``out`` (−1s): the distance of every pair in box sizes of
     ``cur`` (``hypot(Δx / w, Δy / h)``, ∞ where the heights differ by ``LINK_LOG_SIZE`` or
     more), each side's nearest (the first of equals, as ``np.argmin``), kept where mutual and
-    within ``LINK_DIST``."""
+    within ``LINK_DIST``; with ``length`` as long as ``cur``, ``length[a] = prev_length[b] +
+    1`` for each link ``a → b`` (the rest left as they are)."""
     nc, npv = cur.shape[0], prev.shape[0]
     d = np.empty((nc, npv))
     for a in range(nc):
@@ -111,6 +124,10 @@ def _link(prev, cur, out):
             col[k] = d[k, b]
         if _first_min(col) == a and d[a, b] < LINK_DIST:
             out[a] = b
+    if length.shape[0] == nc:
+        for a in range(nc):
+            if out[a] >= 0:
+                length[a] = prev_length[out[a]] + 1
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
@@ -287,10 +304,8 @@ class Chains:
             return self.prev_link
         self.key = key
         Z = np.asarray(Z, dtype=np.float64).reshape(-1, 4)
-        j = link(self.prev, Z)
         length = np.zeros(len(Z), dtype=np.int64)
-        has = j >= 0
-        length[has] = self.length[j[has]] + 1
+        j = _links(self.prev, Z, self.length, length)     # (the lengths in the same pass)
         self.prev, self.prev_link, self.length = Z, j, length
         return j
 

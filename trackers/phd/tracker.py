@@ -314,10 +314,12 @@ class _AssociatingTracker:
                    detections: Optional[np.ndarray] = None) -> StepResult:
         log.stage("associate")
         feats = None
-        if frame.image is not None and getattr(frame.image, "ndim", 0) >= 2:
-            self.associator.area = float(frame.width * frame.height)
+        image = frame.image
+        if image is not None and getattr(image, "ndim", 0) >= 2:
+            shape = image.shape    # (frame.width × frame.height)
+            self.associator.area = float(int(shape[1]) * int(shape[0]))
         if self.associator.params.app_weight > 0 and frame.has_pixels:
-            feats = box_features(frame.image, states)
+            feats = box_features(image, states)
         res = self.associator.step(frame.index, states, feats, detections,
                                    edges=log.wants("clusters"))
         self._report_association(frame, res, log)
@@ -565,7 +567,7 @@ class PHDTracker(_AssociatingTracker):
                            weights=r.resampled.weights))
 
         log.stage("cluster")
-        log.scalar("phd/clusters/kept", int(clusters.kept.sum()))
+        log.scalar("phd/clusters/kept", int(np.count_nonzero(clusters.kept)))
         if want_p:
             log.add(Points("phd/clusters/members", r.resampled.states[:, :2],
                            ids=clusters.labels, id_kind="cluster"))
