@@ -129,13 +129,18 @@ class Foreground:
     OpenCV's MOG2 (Zivkovic 2004/2006; no shadow label) on the grey frame shrunk ``shrink``
     times (``INTER_AREA``: a 768x576 frame becomes 192x144, ~0.5 ms), and the fraction of
     foreground pixels in boxes from its integral image.  Stateful: one per sequence, updated
-    once a frame in frame order (deterministic: per-pixel, no randomness).  Its first frame is
-    all foreground (OpenCV's model has nothing learnt yet), so nothing is gated before the
-    background exists; a moving camera keeps most of the frame foreground, and the gate then
-    passes (almost) every window."""
+    once a frame in frame order (deterministic: per-pixel, no randomness).  For its first
+    ``warmup`` frames every box is all foreground: the model is learning the background
+    behind the people of the first frame (after n frames it knows a pixel that was free for
+    ~0.2 n of them; dlpf's only other frame-1 evidence is motion), so nothing is gated before
+    the background exists; a moving camera keeps most of the frame foreground, and the gate
+    then passes (almost) every window."""
 
-    def __init__(self, shrink: int = 4, history: int = 500, var_threshold: float = 16.0):
+    def __init__(self, shrink: int = 4, history: int = 500, var_threshold: float = 16.0,
+                 warmup: int = 25):
         self.shrink = max(1, int(shrink))
+        self.warmup = int(warmup)
+        self.frames = 0
         self._model = cv2.createBackgroundSubtractorMOG2(history=int(history),
                                                          varThreshold=float(var_threshold),
                                                          detectShadows=False)
@@ -148,14 +153,15 @@ class Foreground:
         w, h = max(1, W // self.shrink), max(1, H // self.shrink)
         small = cv2.resize(grey, (w, h), interpolation=cv2.INTER_AREA)
         fg = self._model.apply(small)
+        self.frames += 1
         self._integral = cv2.integral((fg > 0).view(np.uint8))
         self._scale = w / W
 
     def fraction(self, boxes: np.ndarray) -> np.ndarray:
         """(N,) fraction of each ``(x, y, w, h)`` box (frame px) that is foreground; all 1
-        before the first :meth:`update`."""
+        during the first ``warmup`` frames."""
         b = np.asarray(boxes, dtype=np.float64).reshape(-1, 4)
-        if self._integral is None:
+        if self._integral is None or self.frames <= self.warmup:
             return np.ones(len(b))
         return box_fill(self._integral, b, self._scale)
 
