@@ -1047,3 +1047,49 @@ def test_kernel_resampling_is_opencvs_warpaffine_byte_for_byte():
             out = np.empty((size[1], size[0]), np.uint8)
             hk.warp_region(img, a, tx, ty, out)
             assert np.array_equal(out, ref), (k, tx0, ty0)
+
+
+def test_foreground_is_what_differs_from_the_learnt_background_after_the_warmup():
+    """dlpf.motion.Foreground: every box is all foreground while the background is learnt;
+    after that a box on a moving square is mostly foreground, a box on the static texture
+    none, and a box half on the square less than the first."""
+    rng = np.random.default_rng(0)
+    bg = rng.integers(40, 90, (240, 320), dtype=np.uint8)
+    fg = mo.Foreground(shrink=4, warmup=10)
+    on_square = np.array([[0, 0, 40, 40]], float)
+    for t in range(30):
+        img = bg.copy()
+        x = 20 + 5 * t
+        img[100:160, x:x + 40] = 230
+        fg.update(img)
+        f = fg.fraction(np.r_[on_square + [x, 100, 0, 0], [[20, 10, 60, 60]],
+                              [[x - 20, 100, 40, 40]]])
+        if t < 10:
+            assert (f == 1.0).all()
+    assert f[0] > 0.5 and f[1] == 0.0 and 0.0 < f[2] < f[0]
+
+
+def test_free_parents_classify_only_windows_on_the_foreground():
+    """parents.foreground: after the background model's warm-up a free parent scores its
+    window only if enough of the window's person box is foreground; the others carry the
+    frame's median margin (like parents.explore_classify's).  0: no gate (every window)."""
+    frames = list(_scene(40).frames())
+    counts = {}
+    for thr in (0.0, 0.05):
+        tr = make_tracker("dlpf", seed=1, **{"parents.n": "100", "parents.explore": "0",
+                                             "parents.foreground": str(thr)})
+        for f in frames:
+            out = tr.step(f, None, "particles")
+        win = find(out.stages, "dlpf/classify/windows", Boxes)[0]
+        counts[thr] = len(win)
+        free = tr.parents.labels == 0
+        if thr == 0:
+            assert tr._foreground is None and len(win) == free.sum()
+            continue
+        # every window scored is on the foreground (snapping moves it by <= half a cell)
+        assert (tr._foreground.fraction(person_boxes(win.boxes)) > 0).all()
+        margins = tr.parents.extra[free, 1]
+        assert (margins == float(np.median(win.values["score"]))).sum() >= free.sum() - len(win)
+    assert 0 < counts[0.05] < counts[0.0]
+    with pytest.raises(ValueError):
+        make_tracker("dlpf", **{"parents.foreground": "1.5"})

@@ -140,6 +140,13 @@ class ParentParams:
                                          "random window costs ~100 HOG blocks that no other "
                                          "window shares, all of them two thirds of the HOG at "
                                          "explore 0.2; 1 = every free parent classifies)")
+    foreground: float = param(0.05, "a free parent classifies its window only if at least this "
+                                    "fraction of the window's person box is foreground "
+                                    "(dlpf.motion.Foreground: MOG2 on the frame shrunk 4x); "
+                                    "the others carry the frame's median margin like the "
+                                    "parents that only probe the motion (ours: windows on the "
+                                    "learnt background cost HOG blocks and find nobody; "
+                                    "0 = every window classifies, no background model)")
     scheme: str = param("multinomial", "resampling scheme of eq. (8) (i.i.d. uniforms u_i = "
                                        "multinomial)", paper="jung2013 §2.1")
     score_weight: float = param(1.0, "beta: a parent's resampling log-weight also gets beta x its "
@@ -169,6 +176,8 @@ class ParentParams:
             raise ValueError("need 0 <= explore_classify <= 1")
         if not 0 <= self.prior_mix <= 1:
             raise ValueError("need 0 <= prior_mix <= 1")
+        if not 0 <= self.foreground <= 1:
+            raise ValueError("need 0 <= foreground <= 1")
 
 
 @dataclass(frozen=True)
@@ -315,7 +324,7 @@ class _Track:
 
 #: The settings DLPF landed with (before the scale prior etc.): ``--preset landed`` reproduces
 #: the first measurement (PETS09 401-795: MOTA 0.21, IDF1 0.22).
-LANDED = DLPFParams(parents=ParentParams(prior_mix=0.0),
+LANDED = DLPFParams(parents=ParentParams(prior_mix=0.0, foreground=0.0),
                     classifier=ClassifierParams(hit_threshold=0.0),
                     children=ChildParams(estimate="map", ref_update=0.0, snap=0.0))
 
@@ -331,6 +340,7 @@ PAPER_CHANGES: dict[str, object] = {
     "parents.score_weight": 0.0,           # eq. (8): motion weights only
     "parents.scale_jitter": 0.0,           # §2.1: a fresh random scale every frame
     "parents.prior_mix": 0.0,              # §2.1: no scale prior (flat random scale)
+    "parents.foreground": 0.0,             # §2.1: every free parent classifies its window
     "classifier.hit_threshold": 0.0,       # the SVM's sign
     "classifier.verify_windows": 0,        # §2.2: a confirmed object is tracked by colour only
     "confirm.max_gap": 0,                  # §2.2: 4 *sequential* detections
@@ -393,6 +403,8 @@ class DLPFTracker:
     needs_detections = False
     needs_image = True
     Params = DLPFParams
+    #: the background model of ``parents.foreground`` (built at the first frame)
+    _foreground: Optional[mo.Foreground] = None
 
     def __init__(self, params: Optional[DLPFParams] = None, *,
                  rng: Optional[np.random.Generator] = None,
@@ -566,6 +578,10 @@ class DLPFTracker:
                                       win=P.motion.lk_window, levels=P.motion.lk_levels)
         else:
             flow, ok = np.zeros((len(tpts) + len(free), 2)), np.zeros(len(tpts) + len(free), bool)
+        if P.parents.foreground > 0:    # learn this frame's background (classify's gate)
+            if self._foreground is None:
+                self._foreground = mo.Foreground()
+            self._foreground.update(grey)
         self._set_track_flow(flow[:len(tpts)], ok[:len(tpts)])
         flow, ok = flow[len(tpts):], ok[len(tpts):]
         tboxes = self.predicted_track_boxes()
@@ -639,8 +655,12 @@ class DLPFTracker:
         # the windows the classifier scores ('pyramid' mode: snapped to its level grid); the
         # parents just re-drawn only probe the motion this frame (parents.explore_classify)
         cls = np.flatnonzero(classify)
-        windows = self.classifier.snap(window_boxes(new[cls, :2], heights[cls]),
-                                       rng if P.classifier.spread else None)
+        wins = window_boxes(new[cls, :2], heights[cls])
+        if self._foreground is not None and P.parents.foreground > 0:
+            # no window on the learnt background: nobody there to find (parents.foreground)
+            keep = self._foreground.fraction(person_boxes(wins)) >= P.parents.foreground
+            cls, wins = cls[keep], wins[keep]
+        windows = self.classifier.snap(wins, rng if P.classifier.spread else None)
         vwin, vtrack = self._verify_windows()
         # a track's few verification windows localise it: scored exactly (unsnapped), since
         # the hit box pulls the track's box (children.snap) and feeds the scale prior
