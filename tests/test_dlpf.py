@@ -1077,7 +1077,8 @@ def test_free_parents_classify_only_windows_on_the_foreground():
     counts = {}
     for thr in (0.0, 0.05):
         tr = make_tracker("dlpf", seed=1, **{"parents.n": "100", "parents.explore": "0",
-                                             "parents.foreground": str(thr)})
+                                             "parents.foreground": str(thr),
+                                             "parents.foreground_probe": "0"})
         for f in frames:
             out = tr.step(f, None, "particles")
         win = find(out.stages, "dlpf/classify/windows", Boxes)[0]
@@ -1093,3 +1094,31 @@ def test_free_parents_classify_only_windows_on_the_foreground():
     assert 0 < counts[0.05] < counts[0.0]
     with pytest.raises(ValueError):
         make_tracker("dlpf", **{"parents.foreground": "1.5"})
+
+
+def test_a_share_of_the_gated_windows_still_classify():
+    """parents.foreground_probe: the windows the foreground gate drops classify anyway with
+    that probability (a person standing still since frame 1 is background to the model and
+    only these windows can find them): 1 keeps every window, 0 none of the gated ones, the
+    default a few of them."""
+    frames = list(_scene(40).frames())
+    scored = {}
+    for probe in (0.0, 0.1, 1.0):
+        tr = make_tracker("dlpf", seed=1, **{"parents.n": "100", "parents.explore": "0",
+                                             "parents.foreground": "0.05",
+                                             "parents.foreground_probe": str(probe)})
+        n = []
+        for f in frames:
+            out = tr.step(f, None, "particles")
+            if f.index > tr._foreground.warmup + 1:
+                win = find(out.stages, "dlpf/classify/windows", Boxes)[0]
+                free = int((tr.parents.labels == 0).sum())
+                n.append((len(win), free))
+        scored[probe] = np.array(n).sum(axis=0)
+    # 1: every free parent's window (up to the parents a confirmation took during the step)
+    assert scored[1.0][0] >= 0.99 * scored[1.0][1]
+    # 0.1: more windows than with no probe, but far from all of them
+    assert scored[0.0][0] < scored[0.1][0] < 0.8 * scored[0.1][1]
+    assert scored[0.0][0] < 0.8 * scored[0.0][1]
+    with pytest.raises(ValueError):
+        make_tracker("dlpf", **{"parents.foreground_probe": "-0.1"})

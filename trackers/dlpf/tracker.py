@@ -147,6 +147,11 @@ class ParentParams:
                                     "parents that only probe the motion (ours: windows on the "
                                     "learnt background cost HOG blocks and find nobody; "
                                     "0 = every window classifies, no background model)")
+    foreground_probe: float = param(0.1, "the share of the windows parents.foreground gates out "
+                                         "that classify anyway, drawn at random each frame (ours: "
+                                         "a person who has stood still since the first frame is "
+                                         "background to the model, and only these windows can "
+                                         "still find them; 0 = none)")
     scheme: str = param("multinomial", "resampling scheme of eq. (8) (i.i.d. uniforms u_i = "
                                        "multinomial)", paper="jung2013 §2.1")
     score_weight: float = param(1.0, "beta: a parent's resampling log-weight also gets beta x its "
@@ -178,6 +183,8 @@ class ParentParams:
             raise ValueError("need 0 <= prior_mix <= 1")
         if not 0 <= self.foreground <= 1:
             raise ValueError("need 0 <= foreground <= 1")
+        if not 0 <= self.foreground_probe <= 1:
+            raise ValueError("need 0 <= foreground_probe <= 1")
 
 
 @dataclass(frozen=True)
@@ -341,6 +348,7 @@ PAPER_CHANGES: dict[str, object] = {
     "parents.scale_jitter": 0.0,           # §2.1: a fresh random scale every frame
     "parents.prior_mix": 0.0,              # §2.1: no scale prior (flat random scale)
     "parents.foreground": 0.0,             # §2.1: every free parent classifies its window
+    "parents.foreground_probe": 0.0,       # (no gate: nothing to probe)
     "classifier.hit_threshold": 0.0,       # the SVM's sign
     "classifier.verify_windows": 0,        # §2.2: a confirmed object is tracked by colour only
     "confirm.max_gap": 0,                  # §2.2: 4 *sequential* detections
@@ -659,6 +667,10 @@ class DLPFTracker:
         if self._foreground is not None and P.parents.foreground > 0:
             # no window on the learnt background: nobody there to find (parents.foreground)
             keep = self._foreground.fraction(person_boxes(wins)) >= P.parents.foreground
+            if P.parents.foreground_probe > 0 and not keep.all():
+                # a few gated windows still look: a person standing still since frame 1 is
+                # background to the model, and only these can find them
+                keep |= rng.random(len(keep)) < P.parents.foreground_probe
             cls, wins = cls[keep], wins[keep]
         windows = self.classifier.snap(wins, rng if P.classifier.spread else None)
         vwin, vtrack = self._verify_windows()
