@@ -412,7 +412,7 @@ def test_kappa_terms_and_learn_shares_are_the_numpy_form_bit_for_bit(seed):
             u = np.logaddexp(log_u, np.log(near) - log_v) if near > 0 else log_u
             shadow = np.logaddexp(np.logaddexp(np.logaddexp(u, rep), nr), dup)
             birth = np.logaddexp(np.logaddexp(u, nr), dup)
-        out = kappa_terms(log_v, (S, E, beta), (m, nu, chained), (cnt, q), log_u, near)
+        out = kappa_terms(log_v, (S, E, beta), (m, nu, chained), (cnt, q), u)
         for a, b in zip(out, (rep, nr, dup, shadow, birth)):
             assert np.array_equal(a, b, equal_nan=True)
         # the EM's split of the clutter shares (SceneModel.learn's numpy form)
@@ -527,6 +527,12 @@ def test_scene_density_and_score_sums_are_their_numpy_form(seed):
             assert np.array_equal(extent, ext)
         assert np.allclose(got_u, want, rtol=1e-9, atol=1e-9)
         assert np.allclose(got_v, log_gate_volume(Z, cl, lk, std), rtol=1e-13)
+        # near_rate points spread as the 'gate' model join κ_u (np.logaddexp's floats)
+        near = float(rng.uniform(0.01, 2))
+        u2, v2 = scene_density(Z, std, m1, m2, extent, a, False, math.log(3.0), area,
+                               log_gate_volume0(cl), 0.05 ** 2, near)
+        assert np.array_equal(v2, got_v)
+        assert np.array_equal(u2, np.logaddexp(got_u, math.log(near) - got_v))
         # the score sums: per class (won, 1 - won) and labelled by persistence
         s, won, persist = rng.normal(size=n), rng.uniform(0, 1, n), rng.random(n) < 0.5
         r, q = np.stack([won, 1 - won]), np.stack([persist, ~persist]).astype(float)

@@ -506,13 +506,12 @@ _NO_B = np.zeros(0, dtype=np.bool_)
 
 
 def kappa_terms(log_v: np.ndarray, place: Optional[tuple] = None, near: Optional[tuple] = None,
-                dup: Optional[tuple] = None, log_u: Optional[np.ndarray] = None,
-                near_rate: float = 0.0) -> np.ndarray:
+                dup: Optional[tuple] = None, log_u: Optional[np.ndarray] = None) -> np.ndarray:
     """(5, N_z): ``log κ_r``, ``log κ_n``, ``log κ_d`` of the detections whose clutter gates
     have ``log V`` = ``log_v`` (-inf for a part not given), then, with ``log_u`` (the
-    ``scene`` density κ_u without its near-people points), ``log(κ_u + κ_r + κ_n + κ_d)`` (the
-    shadow mixture) and ``log(κ_u + κ_n + κ_d)`` (the newborn's), κ_u with ``near_rate`` points
-    spread as the ``gate`` model when > 0.  ``place`` = (S, E, β) (:meth:`PlaceClutter.
+    ``scene`` density κ_u, its near-people points included: :func:`scene_density`),
+    ``log(κ_u + κ_r + κ_n + κ_d)`` (the shadow mixture) and ``log(κ_u + κ_n + κ_d)`` (the
+    newborn's).  ``place`` = (S, E, β) (:meth:`PlaceClutter.
     place_rate`'s sums and prior), ``near`` = (M'(z), ν, chained or None), ``dup`` = (n(z),
     q).  One numba pass (:func:`_kappa_terms`) for what was ~30 numpy calls a frame: the same
     expressions elementwise (log, exp, log1p as numpy's, np.logaddexp's formula), so the
@@ -524,14 +523,12 @@ def kappa_terms(log_v: np.ndarray, place: Optional[tuple] = None, near: Optional
     out = np.empty((5, n_z))
     _kappa_terms(log_v, S, E, PRIOR_FRAMES * beta, m, float(nu),
                  _NO_B if chained is None else chained, n, float(q),
-                 _NO_F if log_u is None else log_u,
-                 math.log(near_rate) if near_rate > 0 else 0.0, near_rate > 0, out)
+                 _NO_F if log_u is None else log_u, out)
     return out
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
-def _kappa_terms(log_v, S, E, n0_beta, m, nu, chained, n, q, log_u, log_near_rate, near_on,
-                 out):
+def _kappa_terms(log_v, S, E, n0_beta, m, nu, chained, n, q, log_u, out):
     """:func:`kappa_terms` into ``out`` (5, N_z); empty ``S`` / ``m`` / ``n`` / ``log_u``:
     that part not given; empty ``chained``: none chained."""
     for j in range(log_v.shape[0]):
@@ -552,8 +549,6 @@ def _kappa_terms(log_v, S, E, n0_beta, m, nu, chained, n, q, log_u, log_near_rat
         out[0, j], out[1, j], out[2, j] = lr, ln, ld
         if log_u.shape[0]:
             u = log_u[j]
-            if near_on:
-                u = np.logaddexp(u, log_near_rate - log_v[j])
             out[3, j] = np.logaddexp(np.logaddexp(np.logaddexp(u, lr), ln), ld)
             out[4, j] = np.logaddexp(np.logaddexp(u, ln), ld)
         else:
@@ -727,7 +722,8 @@ def _learn_shares(won, log_used, log_shadow, log_rep, log_near, log_dup, prev_li
 
 def scene_density(Z: np.ndarray, std: np.ndarray, m1: np.ndarray, m2: np.ndarray,
                   extent: np.ndarray, a: float, see: bool, log_rate: float, area: float,
-                  log_v0: float, floor: float) -> tuple[np.ndarray, np.ndarray]:
+                  log_v0: float, floor: float, near_rate: float = 0.0
+                  ) -> tuple[np.ndarray, np.ndarray]:
     """:class:`~.filter.SceneModel`'s ``scene`` density of the detections ``Z`` (N_z, 4) in
     one numba pass (:func:`_scene_density`; ~35 numpy and LAPACK calls a frame before): with
     ``see``, first their extent into ``extent`` (x0, y0, x1, y1) and the exponential averages
@@ -735,17 +731,21 @@ def scene_density(Z: np.ndarray, std: np.ndarray, m1: np.ndarray, m2: np.ndarray
     κ_u(z) = log_rate − log A + log N(log(w, h); m1, cov) − log w − log h`` (uniform over the
     image of area A = ``area`` when > 0, else the extent's ``max(w, 1) max(h, 1)``, 1 before
     any extent; the log-normal size density, ``cov = m2 − m1 m1ᵀ + floor I``, its 2 × 2
-    inverse and determinant in closed form) and the clutter gates' ``log V(z) = log_v0 +
-    Σ_d log σ_d`` of the stds ``std`` (N_z, 4).  Returns (log κ_u, log V)."""
+    inverse and determinant in closed form), with ``near_rate`` > 0 plus that many points
+    spread as the ``gate`` model around each detection (``log(κ_u + near_rate / V(z))``, as
+    np.logaddexp), and the clutter gates' ``log V(z) = log_v0 + Σ_d log σ_d`` of the stds
+    ``std`` (N_z, 4).  Returns (log κ_u, log V)."""
     out = np.empty((2, len(Z)))
     _scene_density(np.ascontiguousarray(Z, dtype=np.float64),
                    np.ascontiguousarray(std, dtype=np.float64), m1, m2, extent, float(a),
-                   bool(see), float(log_rate), float(area), float(log_v0), float(floor), out)
+                   bool(see), float(log_rate), float(area), float(log_v0), float(floor),
+                   math.log(near_rate) if near_rate > 0 else 0.0, near_rate > 0, out)
     return out[0], out[1]
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
-def _scene_density(Z, std, m1, m2, extent, a, see, log_rate, area, log_v0, floor, out):
+def _scene_density(Z, std, m1, m2, extent, a, see, log_rate, area, log_v0, floor,
+                   log_near_rate, near_on, out):
     """:func:`scene_density` into ``out`` (2, N_z)."""
     n = Z.shape[0]
     if see and n:
@@ -786,6 +786,8 @@ def _scene_density(Z, std, m1, m2, extent, a, see, log_rate, area, log_v0, floor
         l0, l1 = np.log(Z[j, 2]), np.log(Z[j, 3])
         d0, d1 = l0 - m1[0], l1 - m1[1]
         quad = (d0 * d0 * c11 - 2.0 * d0 * d1 * c01 + d1 * d1 * c00) / det
-        out[0, j] = -0.5 * quad + const - (l0 + l1)
-        out[1, j] = log_v0 + (((np.log(std[j, 0]) + np.log(std[j, 1])) + np.log(std[j, 2]))
-                              + np.log(std[j, 3]))
+        lv = log_v0 + (((np.log(std[j, 0]) + np.log(std[j, 1])) + np.log(std[j, 2]))
+                       + np.log(std[j, 3]))
+        u = -0.5 * quad + const - (l0 + l1)
+        out[0, j] = np.logaddexp(u, log_near_rate - lv) if near_on else u
+        out[1, j] = lv

@@ -611,19 +611,6 @@ class SceneModel:
             # the detections' observation stds, once a frame for every part that reads them
             if std is None:
                 std = obs_std(Z[:, 2:4], self.lk)
-            if self.extent is None and len(Z):
-                self.extent = _no_extent()
-            # the size moments, the extent, log κ_u and the clutter gates' log V(z) (log V
-            # is −log of one clutter point spread as the 'gate' model, log_gate_volume) in one
-            # pass
-            a = 1.0 / min(self.size_frames + 1, self.cl.clutter_memory)
-            log_rate = math.log(self.rate) if self.rate > 0 else -math.inf
-            log_kappa, log_v = scene_density(
-                Z, std, self.size_m1, self.size_m2,
-                _no_extent() if self.extent is None else self.extent, a, len(Z) > 0, log_rate,
-                self._image_area(frame), log_gate_volume0(self.cl), self._LOG_SIZE_FLOOR)
-            if len(Z):
-                self.size_frames += 1
             n_near = n_dup = std_wide = None
             if self.place is not None:
                 # the parts read this frame's settings (dups.on below among them)
@@ -640,10 +627,21 @@ class SceneModel:
                 a = 1.0 / min(self.frames + 5, self.cl.clutter_memory)
                 self.near = (1 - a) * self.near + a * (
                     self._neighbours(Z, std) if n_near is None else float(n_near.mean()))
-            if self.place is None:
-                if self.near > 0:
-                    log_kappa = np.logaddexp(log_kappa, math.log(self.near) - log_v)
-            else:
+            if self.extent is None and len(Z):
+                self.extent = _no_extent()
+            # the size moments, the extent, log κ_u (with near_rate points spread as the 'gate'
+            # model when > 0) and the clutter gates' log V(z) (log V is −log of one clutter
+            # point spread as the 'gate' model, log_gate_volume) in one pass
+            a = 1.0 / min(self.size_frames + 1, self.cl.clutter_memory)
+            log_rate = math.log(self.rate) if self.rate > 0 else -math.inf
+            log_kappa, log_v = scene_density(
+                Z, std, self.size_m1, self.size_m2,
+                _no_extent() if self.extent is None else self.extent, a, len(Z) > 0, log_rate,
+                self._image_area(frame), log_gate_volume0(self.cl), self._LOG_SIZE_FLOOR,
+                self.near)
+            if len(Z):
+                self.size_frames += 1
+            if self.place is not None:
                 model = self.cl.learn_update == "model"
                 S, E = self.place._weight_in_gates(Z, watched=True, std=std)
                 # a detection that continues a chain of mutually nearest detections is a
@@ -658,14 +656,12 @@ class SceneModel:
                 log_rep, log_near, log_dup, shadow, no_place = kappa_terms(
                     log_v, place=(S, E, self.place.beta),
                     near=None if m is None else (m, self.people.nu, self._chained),
-                    dup=None if n is None else (n, self.dups.q), log_u=log_kappa,
-                    near_rate=self.near)
+                    dup=None if n is None else (n, self.dups.q), log_u=log_kappa)
                 if model:
                     log_used = shadow
                 else:
-                    u = log_kappa if not self.near > 0 else np.logaddexp(
-                        log_kappa, math.log(self.near) - log_v)
-                    log_used = np.logaddexp(u, self.place.log_gate(Z, self.structured(), log_v))
+                    log_used = np.logaddexp(log_kappa,
+                                            self.place.log_gate(Z, self.structured(), log_v))
                 self._parts = (Z, std, log_rep, log_near, log_dup, shadow, log_used)
                 if self.cl.spot_places and model:
                     # a person appears no more often where clutter repeats: the newborn
