@@ -393,7 +393,9 @@ def _random_parts(rng, n):
 @pytest.mark.parametrize("seed", range(3))
 def test_kappa_terms_and_learn_shares_are_the_numpy_form_bit_for_bit(seed):
     """The learnt clutter's terms and the EM's split (one numba pass each) give the floats of
-    their numpy form (kept here: the mixture before the kernels), NaN and -inf included."""
+    their numpy form (kept here: the mixture before the kernels), NaN and -inf included; the
+    place memory's update too, its S(z) kept along the memory equal to the grid pass's up to
+    round-off."""
     from pfscope.trackers.phd.clutter import (PRIOR_FRAMES, _memory_step, kappa_terms,
                                               learn_shares)
     from pfscope.trackers.phd.gating import gate_sums
