@@ -365,8 +365,10 @@ def mass_near_skip(states, w, Z, std_z, skip, r2):
     Zn = np.empty((m, Z.shape[1]))
     sn = np.empty((m, std_z.shape[1]))
     for k in range(m):
-        Zn[k] = Z[need[k]]
-        sn[k] = std_z[need[k]]
+        for c in range(Z.shape[1]):
+            Zn[k, c] = Z[need[k], c]
+        for c in range(std_z.shape[1]):
+            sn[k, c] = std_z[need[k], c]
     ok, part = mass_near_few(states, w, Zn, sn, r2, cx, cy)
     if not ok:
         return 0, full
