@@ -268,14 +268,16 @@ def _memory_step(mem_z, mem_s, mem_w, mem_e, mem_S, Z, Z_s, share, fade, min_w, 
     for i in range(n_old):
         wi = mem_w[i] * fade
         if wi >= min_w:
-            z[k], s[k] = mem_z[i], mem_s[i]
+            for c in range(4):
+                z[k, c], s[k, c] = mem_z[i, c], mem_s[i, c]
             w[k] = wi
             e[k] = mem_e[i] * fade + 1.0
             src[k] = i
             k += 1
     for i in range(n_new):
         if share[i] >= min_w:
-            z[k], s[k] = Z[i], Z_s[i]
+            for c in range(4):
+                z[k, c], s[k, c] = Z[i, c], Z_s[i, c]
             w[k] = share[i]
             e[k] = 1.0
             src[k] = -1 - i
