@@ -5,6 +5,8 @@ detections that repeat in place -- where each fixed model fails on one of them; 
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
@@ -391,9 +393,12 @@ def _random_parts(rng, n):
 @pytest.mark.parametrize("seed", range(3))
 def test_kappa_terms_and_learn_shares_are_the_numpy_form_bit_for_bit(seed):
     """The learnt clutter's terms and the EM's split (one numba pass each) give the floats of
-    their numpy form (kept here: the mixture before the kernels), NaN and -inf included."""
+    their numpy form (kept here: the mixture before the kernels), NaN and -inf included; the
+    place memory's update too, its S(z) kept along the memory equal to the grid pass's up to
+    round-off."""
     from pfscope.trackers.phd.clutter import (PRIOR_FRAMES, _memory_step, kappa_terms,
                                               learn_shares)
+    from pfscope.trackers.phd.gating import gate_sums
 
     rng = np.random.default_rng(seed)
     for _ in range(200):
@@ -409,7 +414,7 @@ def test_kappa_terms_and_learn_shares_are_the_numpy_form_bit_for_bit(seed):
             u = np.logaddexp(log_u, np.log(near) - log_v) if near > 0 else log_u
             shadow = np.logaddexp(np.logaddexp(np.logaddexp(u, rep), nr), dup)
             birth = np.logaddexp(np.logaddexp(u, nr), dup)
-        out = kappa_terms(log_v, (S, E, beta), (m, nu, chained), (cnt, q), log_u, near)
+        out = kappa_terms(log_v, (S, E, beta), (m, nu, chained), (cnt, q), u)
         for a, b in zip(out, (rep, nr, dup, shadow, birth)):
             assert np.array_equal(a, b, equal_nan=True)
         # the EM's split of the clutter shares (SceneModel.learn's numpy form)
@@ -430,15 +435,26 @@ def test_kappa_terms_and_learn_shares_are_the_numpy_form_bit_for_bit(seed):
         for a, b in zip(got, want):
             assert np.array_equal(a, b, equal_nan=True)
         assert random == float(np.sum(sh * (1.0 - fr[0] - fr[1] - fr[2])))
-        # the place memory's update
+        # the place memory's update, its S(z) kept along (faded, minus the dropped, plus the
+        # new) against the whole grid pass over the memory after it
         k = int(rng.integers(0, 40))
         mz, mw, me = rng.normal(size=(k, 4)), rng.exponential(0.01, k), rng.uniform(1, 9, k)
-        Z = rng.normal(size=(n, 4))
-        z, wv, e = _memory_step(mz, mw, me, Z, sh, 0.97, 1e-3)
+        ms = rng.uniform(0.3, 2, (k, 4))
+        Z, Zs = rng.normal(size=(n, 4)), rng.uniform(0.3, 2, (n, 4))
+        mS = gate_sums(mz, mz, 9.0, ms, mw)[0]
+        z, sv, wv, e, S, exposure, ok = _memory_step(mz, ms, mw, me, mS, Z, Zs, sh, 0.97, 1e-3,
+                                                     9.0, 1 << 20)
         w2 = np.concatenate([mw * 0.97, sh])
         keep = w2 >= 1e-3
         assert np.array_equal(wv, w2[keep]) and np.array_equal(z, np.vstack([mz, Z])[keep])
+        assert np.array_equal(sv, np.vstack([ms, Zs])[keep])
         assert np.array_equal(e, np.concatenate([me * 0.97 + 1.0, np.ones(n)])[keep])
+        want = gate_sums(z, z, 9.0, sv, wv)[0]
+        assert ok and np.allclose(S, want, rtol=1e-12, atol=1e-15)
+        assert exposure == pytest.approx(np.sum(wv / np.maximum(want, 1.0)), rel=1e-12)
+        # over the budget: the caller's grid pass instead
+        if (sh >= 1e-3).any():
+            assert not _memory_step(mz, ms, mw, me, mS, Z, Zs, sh, 0.97, 1e-3, 9.0, 0)[6]
 
 
 def test_neighbour_counts_at_two_widths_are_the_gate_sums_counts():
@@ -465,3 +481,64 @@ def test_neighbour_counts_at_two_widths_are_the_gate_sums_counts():
             assert b.sum() >= a.sum() > 0
             wider += b.sum() > a.sum()
     assert wider > 70             # of the 140 sets, most have more pairs at the wider gate
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_scene_density_and_score_sums_are_their_numpy_form(seed):
+    """The scene density's one pass (extent, log-size moments, log κ_u with the 2 × 2 inverse
+    and determinant in closed form, log V) and the score fit's sums give their numpy / LAPACK
+    form's values (kept here) up to round-off."""
+    from pfscope.trackers.phd.clutter import scene_density
+    from pfscope.trackers.phd.filter import _score_sums, log_gate_volume, log_gate_volume0, obs_std
+
+    rng = np.random.default_rng(seed)
+    cl, lk = ClutterParams(clutter_model="learn"), LikelihoodParams()
+    m1, m2 = np.zeros(2), np.zeros((2, 2))
+    extent = np.array([np.inf, np.inf, -np.inf, -np.inf])
+    o1, o2, ext = np.zeros(2), np.zeros((2, 2)), None
+    sums = np.array([[2.0, 1.0, 3.0], [2.0, 0.5, 1.0]])
+    psums = sums + 1.0
+    for frame in range(60):
+        n = int(rng.integers(0, 30))
+        Z = np.column_stack([rng.uniform(-50, 700, (n, 2)),
+                             rng.lognormal(3.5, 0.4, (n, 1)) * [1.0, 2.4]])
+        std = obs_std(Z[:, 2:4], lk)
+        a = 1.0 / min(frame + 1, 30)
+        area = float(rng.choice([0.0, 640.0 * 480.0]))
+        got_u, got_v = scene_density(Z, std, m1, m2, extent, a, n > 0, math.log(3.0), area,
+                                     log_gate_volume0(cl), 0.05 ** 2)
+        ls = np.log(Z[:, 2:4])
+        if n:                                       # SceneModel._see_sizes before the kernel
+            box = np.concatenate([(Z[:, :2] - Z[:, 2:4] / 2).min(0),
+                                  (Z[:, :2] + Z[:, 2:4] / 2).max(0)])
+            ext = box if ext is None else np.concatenate(
+                [np.minimum(ext[:2], box[:2]), np.maximum(ext[2:], box[2:])])
+            o1 = (1 - a) * o1 + a * ls.mean(0)
+            o2 = (1 - a) * o2 + a * (ls.T @ ls) / n
+        cov = o2 - np.outer(o1, o1)
+        cov = 0.5 * (cov + cov.T) + 0.05 ** 2 * np.eye(2)
+        d = ls - o1
+        want = (-0.5 * np.einsum("ij,ij->i", d, np.linalg.solve(cov, d.T).T)
+                - math.log(2 * math.pi) - 0.5 * math.log(np.linalg.det(cov)) - ls.sum(1))
+        if area <= 0:
+            area = 1.0 if ext is None else \
+                max(ext[2] - ext[0], 1.0) * max(ext[3] - ext[1], 1.0)
+        want = math.log(3.0) - math.log(area) + want
+        assert np.allclose(m1, o1, rtol=1e-12) and np.allclose(m2, o2, rtol=1e-12)
+        if ext is not None:
+            assert np.array_equal(extent, ext)
+        assert np.allclose(got_u, want, rtol=1e-9, atol=1e-9)
+        assert np.allclose(got_v, log_gate_volume(Z, cl, lk, std), rtol=1e-13)
+        # near_rate points spread as the 'gate' model join κ_u (np.logaddexp's floats)
+        near = float(rng.uniform(0.01, 2))
+        u2, v2 = scene_density(Z, std, m1, m2, extent, a, False, math.log(3.0), area,
+                               log_gate_volume0(cl), 0.05 ** 2, near)
+        assert np.array_equal(v2, got_v)
+        assert np.array_equal(u2, np.logaddexp(got_u, math.log(near) - got_v))
+        # the score sums: per class (won, 1 - won) and labelled by persistence
+        s, won, persist = rng.normal(size=n), rng.uniform(0, 1, n), rng.random(n) < 0.5
+        r, q = np.stack([won, 1 - won]), np.stack([persist, ~persist]).astype(float)
+        want_s = 0.9 * sums + np.column_stack([r.sum(1), r @ s, r @ (s * s)])
+        want_p = 0.9 * psums + np.column_stack([q.sum(1), q @ s, q @ (s * s)])
+        _score_sums(won, s, persist, True, 0.9, sums, psums)
+        assert np.allclose(sums, want_s, rtol=1e-12) and np.allclose(psums, want_p, rtol=1e-12)

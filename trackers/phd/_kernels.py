@@ -36,6 +36,7 @@ import numpy as np
 from numba import njit
 
 from ..smc.random import normal, uniform
+from .gating import kth
 
 _HALF_LOG_2PI_4 = 2.0 * math.log(2.0 * math.pi)     # 0.5 · OBS_DIM · log(2π), OBS_DIM = 4
 
@@ -394,6 +395,65 @@ def birth_alloc_fill(m_near, j_max, complement, max_per_frame, lw_base, revive, 
     birth_fill(Z, j, lw_det, st, sigma_obs, sigma_min, pos_ratio, spread, speed_mean,
                speed_std, min_size, states, log_w, det)        # (writes their first n rows)
     return j, n
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def mass_near_skip(states, w, Z, std_z, skip, r2):
+    """``filter.mass_near(..., skip=skip)`` in one call: the grid cells of ``filter._grid_cell``
+    (``2 r`` times the per-axis median of ``std_z[:, :2]`` over every detection, 1 where not
+    > 0; the middle values by selection, :func:`.gating.kth`: np.sort's values), then
+    :func:`mass_near_few` on the detections not skipped, scattered back (0 at the skipped).
+    Returns ``(code, out)``: 1 done, 0 non-finite particle positions, -1 a non-finite std
+    (nothing computed: the caller's numpy form decides)."""
+    nz = Z.shape[0]
+    full = np.empty(nz, np.float64)
+    for j in range(nz):
+        full[j] = 0.0
+    tmp = np.empty(nz)
+    med = np.empty(2)
+    h = nz // 2
+    for c in range(2):
+        for j in range(nz):
+            if not math.isfinite(std_z[j, c]):
+                return -1, full
+            tmp[j] = std_z[j, c]
+        hi = kth(tmp, h)
+        if nz % 2:
+            med[c] = hi
+        else:
+            lo = tmp[0]                         # kth left a[:h] <= a[h]: the next is their max
+            for j in range(1, h):
+                lo = tmp[j] if tmp[j] > lo else lo
+            med[c] = (lo + hi) / 2.0
+    r = 2.0 * math.sqrt(r2)
+    cx = r * med[0]
+    cy = r * med[1]
+    cx = cx if cx > 0 else 1.0
+    cy = cy if cy > 0 else 1.0
+    m = np.int64(0)
+    for j in range(nz):
+        m += not skip[j]
+    if m == 0:
+        return 1, full
+    need = np.empty(m, np.int64)
+    k = np.int64(0)
+    for j in range(nz):
+        if not skip[j]:
+            need[k] = j
+            k += 1
+    Zn = np.empty((m, Z.shape[1]))
+    sn = np.empty((m, std_z.shape[1]))
+    for k in range(m):
+        for c in range(Z.shape[1]):
+            Zn[k, c] = Z[need[k], c]
+        for c in range(std_z.shape[1]):
+            sn[k, c] = std_z[need[k], c]
+    ok, part = mass_near_few(states, w, Zn, sn, r2, cx, cy)
+    if not ok:
+        return 0, full
+    for k in range(m):
+        full[need[k]] = part[k]
+    return 1, full
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)

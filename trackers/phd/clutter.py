@@ -108,6 +108,10 @@ class PlaceClutter:
         self.mem_z = np.zeros((0, 4))       # past detections (y1, y2, w, h)
         self.mem_w = np.zeros(0)            # their faded clutter share
         self.mem_e = np.zeros(0)            # the faded frames each has been remembered
+        # the memory's observation stds and S(z) of each entry (its faded clutter weight
+        # inside its gate), kept along the memory; for the likelihood / gate r² in _sums_of
+        self.mem_s = np.zeros((0, 4))
+        self._sums: Optional[tuple] = None  # (lk, r², S, exposure) or None: compute again
         # EM sums (exponential averages): repeated share per frame, exposure per frame; the
         # prior is one clutter point of exposure at repeat_prior
         self.num = 0.0
@@ -172,59 +176,135 @@ class PlaceClutter:
                                        self.lk)
         return math.log(share) - log_v
 
+    def _sums_of(self) -> tuple:
+        """``(lk, r², S, exposure)`` of the memory as it is: each entry's ``S`` and
+        :meth:`exposure`, kept along the memory by :meth:`learn` (:func:`_memory_step`),
+        computed again (one grid pass, :func:`.gating.gate_sums`) when missing or when the
+        likelihood (the memory's stds) or the gate changed."""
+        from .filter import OBS_DIM, gate_threshold, obs_std
+
+        r2 = gate_threshold(self.cl.clutter_gate, OBS_DIM)
+        sums = self._sums
+        if sums is None or sums[0] is not self.lk or sums[1] != r2:
+            if sums is None or sums[0] is not self.lk or len(self.mem_s) != len(self.mem_z):
+                self.mem_s = obs_std(self.mem_z[:, 2:4], self.lk)
+            S = gate_sums(self.mem_z, self.mem_z, r2, self.mem_s, self.mem_w)[0] \
+                if len(self.mem_w) else np.zeros(0)
+            sums = self._sums = (self.lk, r2, S, _exposure_sum(self.mem_w, S))
+        return sums
+
     def exposure(self) -> float:
         """Places where clutter fell, each counted once: Σ_j w_j / max(1, S(z_j))."""
-        if not len(self.mem_w):
-            return 0.0
-        S = self._weight_in_gates(self.mem_z)
-        return float(np.sum(self.mem_w / np.maximum(S, 1.0)))
+        return self._sums_of()[3] if len(self.mem_w) else 0.0
 
     def learn(self, Z: np.ndarray, clutter_share: np.ndarray, repeat_share: np.ndarray,
-              a: float) -> None:
+              a: float, std: Optional[np.ndarray] = None) -> None:
         """After the update: ``clutter_share`` (N_z,) = 1 − won, ``repeat_share`` the part of it
-        given to κ_r; ``a`` the averaging weight of this frame (as the scene rate's)."""
-        exposure = self.exposure()
+        given to κ_r; ``a`` the averaging weight of this frame (as the scene rate's); ``std``:
+        the detections' observation stds when the caller has them."""
+        from .filter import obs_std
+
+        lk, r2, S, exposure = self._sums_of()
+        if not len(self.mem_w):
+            exposure = 0.0
         self.num = (1 - a) * self.num + a * float(np.sum(repeat_share))
         self.den = (1 - a) * self.den + a * exposure
         self.beta = em_rate(self.num, self.den, self.cl.repeat_prior, a)
         self._a = a
         self.frames += 1
-        # fade the memory, add this frame's clutter, drop what has faded away (one pass)
-        self.mem_z, self.mem_w, self.mem_e = _memory_step(
-            self.mem_z, self.mem_w, self.mem_e,
-            np.ascontiguousarray(np.asarray(Z, dtype=np.float64).reshape(-1, 4)),
-            np.ascontiguousarray(clutter_share, dtype=np.float64), self.fade, MIN_WEIGHT)
+        Z = np.ascontiguousarray(np.asarray(Z, dtype=np.float64).reshape(-1, 4))
+        if std is None:
+            std = obs_std(Z[:, 2:4], self.lk)
+        # fade the memory, add this frame's clutter, drop what has faded away, and S and the
+        # exposure of the memory after it (one pass)
+        self.mem_z, self.mem_s, self.mem_w, self.mem_e, S, exposure, ok = _memory_step(
+            self.mem_z, self.mem_s, self.mem_w, self.mem_e, S, Z,
+            np.ascontiguousarray(std, dtype=np.float64),
+            np.ascontiguousarray(clutter_share, dtype=np.float64), self.fade, MIN_WEIGHT,
+            float(r2), INCREMENT_PAIRS)
+        self._sums = (lk, r2, S, exposure) if ok else None
+
+
+#: the place memory's S(z) after a frame is its S faded, minus the dropped entries, plus the
+#: new ones (one brute pass over those pairs) up to this many pairs; above, one grid pass over
+#: the whole memory the next frame (linear in the memory)
+INCREMENT_PAIRS = 65536
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
-def _memory_step(mem_z, mem_w, mem_e, Z, share, fade, min_w):
+def _exposure_sum(w, S):
+    """``Σ_j w_j / max(1, S_j)`` (numpy's pairwise order)."""
+    n = np.int64(w.shape[0])
+    t = np.empty(n)
+    for j in range(n):
+        t[j] = w[j] / (S[j] if S[j] > 1.0 else 1.0)
+    return _pairwise(t, n)
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def _memory_step(mem_z, mem_s, mem_w, mem_e, mem_S, Z, Z_s, share, fade, min_w, r2, budget):
     """The place memory after a frame: the old entries' weights and exposures faded (``w δ``,
-    ``e δ + 1``), this frame's detections appended (weight ``share``, exposure 1), those
-    below ``min_w`` dropped -- the same floats as the numpy concatenation and mask."""
+    ``e δ + 1``), this frame's detections appended (weight ``share``, exposure 1, stds
+    ``Z_s``), those below ``min_w`` dropped -- the same floats as the numpy concatenation and
+    mask; then each entry's ``S`` (the faded weight inside its gate ``d² <= r2``, itself
+    included): an old entry's ``S δ``, minus the dropped entries inside its gate, plus the new
+    ones, a new entry's by a pass over the memory; and the exposure (:func:`_exposure_sum`).
+    Returns ``(z, s, w, e, S, exposure, ok)``; ``ok`` False (S, exposure not computed) when
+    that takes more than ``budget`` pairs."""
     n_old, n_new = mem_w.shape[0], share.shape[0]
-    keep = 0
+    k_old = np.int64(0)
+    k_new = np.int64(0)
     for i in range(n_old):
-        keep += mem_w[i] * fade >= min_w
+        k_old += mem_w[i] * fade >= min_w
     for i in range(n_new):
-        keep += share[i] >= min_w
+        k_new += share[i] >= min_w
+    keep = k_old + k_new
     z = np.empty((keep, 4))
+    s = np.empty((keep, 4))
     w = np.empty(keep)
     e = np.empty(keep)
+    src = np.empty(keep, np.int64)          # an old entry's index, or -1 - a new one's
     k = 0
     for i in range(n_old):
         wi = mem_w[i] * fade
         if wi >= min_w:
-            z[k, 0], z[k, 1], z[k, 2], z[k, 3] = mem_z[i, 0], mem_z[i, 1], mem_z[i, 2], mem_z[i, 3]
+            for c in range(4):
+                z[k, c], s[k, c] = mem_z[i, c], mem_s[i, c]
             w[k] = wi
             e[k] = mem_e[i] * fade + 1.0
+            src[k] = i
             k += 1
     for i in range(n_new):
         if share[i] >= min_w:
-            z[k, 0], z[k, 1], z[k, 2], z[k, 3] = Z[i, 0], Z[i, 1], Z[i, 2], Z[i, 3]
+            for c in range(4):
+                z[k, c], s[k, c] = Z[i, c], Z_s[i, c]
             w[k] = share[i]
             e[k] = 1.0
+            src[k] = -1 - i
             k += 1
-    return z, w, e
+    S = np.empty(keep)
+    dropped = n_old - k_old
+    ok = mem_S.shape[0] == n_old and (dropped + k_new) * k_old + k_new * keep <= budget
+    if not ok:
+        return z, s, w, e, S, 0.0, False
+    for k in range(k_old):
+        i = src[k]
+        acc = mem_S[i] * fade
+        if dropped:
+            for q in range(n_old):
+                if not mem_w[q] * fade >= min_w and _in_gate(mem_z, q, mem_z, i, mem_s, r2):
+                    acc -= mem_w[q] * fade
+        for q in range(k_old, keep):
+            if _in_gate(z, q, z, k, s, r2):
+                acc += w[q]
+        S[k] = acc
+    for k in range(k_old, keep):
+        acc = 0.0
+        for q in range(keep):
+            if _in_gate(z, q, z, k, s, r2):
+                acc += w[q]
+        S[k] = acc
+    return z, s, w, e, S, _exposure_sum(w, S), True
 
 
 #: the "near people" neighbourhood: this many times the observation stds of the clutter gate
@@ -428,13 +508,12 @@ _NO_B = np.zeros(0, dtype=np.bool_)
 
 
 def kappa_terms(log_v: np.ndarray, place: Optional[tuple] = None, near: Optional[tuple] = None,
-                dup: Optional[tuple] = None, log_u: Optional[np.ndarray] = None,
-                near_rate: float = 0.0) -> np.ndarray:
+                dup: Optional[tuple] = None, log_u: Optional[np.ndarray] = None) -> np.ndarray:
     """(5, N_z): ``log κ_r``, ``log κ_n``, ``log κ_d`` of the detections whose clutter gates
     have ``log V`` = ``log_v`` (-inf for a part not given), then, with ``log_u`` (the
-    ``scene`` density κ_u without its near-people points), ``log(κ_u + κ_r + κ_n + κ_d)`` (the
-    shadow mixture) and ``log(κ_u + κ_n + κ_d)`` (the newborn's), κ_u with ``near_rate`` points
-    spread as the ``gate`` model when > 0.  ``place`` = (S, E, β) (:meth:`PlaceClutter.
+    ``scene`` density κ_u, its near-people points included: :func:`scene_density`),
+    ``log(κ_u + κ_r + κ_n + κ_d)`` (the shadow mixture) and ``log(κ_u + κ_n + κ_d)`` (the
+    newborn's).  ``place`` = (S, E, β) (:meth:`PlaceClutter.
     place_rate`'s sums and prior), ``near`` = (M'(z), ν, chained or None), ``dup`` = (n(z),
     q).  One numba pass (:func:`_kappa_terms`) for what was ~30 numpy calls a frame: the same
     expressions elementwise (log, exp, log1p as numpy's, np.logaddexp's formula), so the
@@ -446,14 +525,12 @@ def kappa_terms(log_v: np.ndarray, place: Optional[tuple] = None, near: Optional
     out = np.empty((5, n_z))
     _kappa_terms(log_v, S, E, PRIOR_FRAMES * beta, m, float(nu),
                  _NO_B if chained is None else chained, n, float(q),
-                 _NO_F if log_u is None else log_u,
-                 math.log(near_rate) if near_rate > 0 else 0.0, near_rate > 0, out)
+                 _NO_F if log_u is None else log_u, out)
     return out
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
-def _kappa_terms(log_v, S, E, n0_beta, m, nu, chained, n, q, log_u, log_near_rate, near_on,
-                 out):
+def _kappa_terms(log_v, S, E, n0_beta, m, nu, chained, n, q, log_u, out):
     """:func:`kappa_terms` into ``out`` (5, N_z); empty ``S`` / ``m`` / ``n`` / ``log_u``:
     that part not given; empty ``chained``: none chained."""
     for j in range(log_v.shape[0]):
@@ -474,8 +551,6 @@ def _kappa_terms(log_v, S, E, n0_beta, m, nu, chained, n, q, log_u, log_near_rat
         out[0, j], out[1, j], out[2, j] = lr, ln, ld
         if log_u.shape[0]:
             u = log_u[j]
-            if near_on:
-                u = np.logaddexp(u, log_near_rate - log_v[j])
             out[3, j] = np.logaddexp(np.logaddexp(np.logaddexp(u, lr), ln), ld)
             out[4, j] = np.logaddexp(np.logaddexp(u, ln), ld)
         else:
@@ -558,20 +633,20 @@ def _count_two(Z, std, wide, r2, c):
         k0 = np.int64(-1)           # z itself is inside both
         k1 = np.int64(-1)
         for q in range(n):
-            k0 += _in_gate(Z, q, j, std, r2)
-            k1 += _in_gate(Z, q, j, wide, r2)
+            k0 += _in_gate(Z, q, Z, j, std, r2)
+            k1 += _in_gate(Z, q, Z, j, wide, r2)
         c[0, j] = k0
         c[1, j] = k1
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
-def _in_gate(Z, q, j, std, r2):
-    """Whether detection q is inside detection j's gate ``d² <= r2`` of the stds ``std[j]``:
-    gating._gate_sums' distance, term by term."""
-    d0 = (Z[q, 0] - Z[j, 0]) / std[j, 0]
-    d1 = (Z[q, 1] - Z[j, 1]) / std[j, 1]
-    d2 = (Z[q, 2] - Z[j, 2]) / std[j, 2]
-    d3 = (Z[q, 3] - Z[j, 3]) / std[j, 3]
+def _in_gate(P, q, Z, j, std, r2):
+    """Whether point ``P[q]`` is inside detection ``Z[j]``'s gate ``d² <= r2`` of the stds
+    ``std[j]``: gating._gate_sums' distance, term by term."""
+    d0 = (P[q, 0] - Z[j, 0]) / std[j, 0]
+    d1 = (P[q, 1] - Z[j, 1]) / std[j, 1]
+    d2 = (P[q, 2] - Z[j, 2]) / std[j, 2]
+    d3 = (P[q, 3] - Z[j, 3]) / std[j, 3]
     return d0 * d0 + d1 * d1 + d2 * d2 + d3 * d3 <= r2
 
 
@@ -645,3 +720,76 @@ def _learn_shares(won, log_used, log_shadow, log_rep, log_near, log_dup, prev_li
             random[j] = 0.0
             out[1, j] = out[2, j] = out[3, j] = out[4, j] = 0.0
     return _pairwise(random, n_z)
+
+
+def scene_density(Z: np.ndarray, std: np.ndarray, m1: np.ndarray, m2: np.ndarray,
+                  extent: np.ndarray, a: float, see: bool, log_rate: float, area: float,
+                  log_v0: float, floor: float, near_rate: float = 0.0
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """:class:`~.filter.SceneModel`'s ``scene`` density of the detections ``Z`` (N_z, 4) in
+    one numba pass (:func:`_scene_density`; ~35 numpy and LAPACK calls a frame before): with
+    ``see``, first their extent into ``extent`` (x0, y0, x1, y1) and the exponential averages
+    (weight ``a``) of the log sizes' moments ``m1`` (2,), ``m2`` (2, 2), in place; then ``log
+    κ_u(z) = log_rate − log A + log N(log(w, h); m1, cov) − log w − log h`` (uniform over the
+    image of area A = ``area`` when > 0, else the extent's ``max(w, 1) max(h, 1)``, 1 before
+    any extent; the log-normal size density, ``cov = m2 − m1 m1ᵀ + floor I``, its 2 × 2
+    inverse and determinant in closed form), with ``near_rate`` > 0 plus that many points
+    spread as the ``gate`` model around each detection (``log(κ_u + near_rate / V(z))``, as
+    np.logaddexp), and the clutter gates' ``log V(z) = log_v0 + Σ_d log σ_d`` of the stds
+    ``std`` (N_z, 4).  Returns (log κ_u, log V)."""
+    out = np.empty((2, len(Z)))
+    _scene_density(np.ascontiguousarray(Z, dtype=np.float64),
+                   np.ascontiguousarray(std, dtype=np.float64), m1, m2, extent, float(a),
+                   bool(see), float(log_rate), float(area), float(log_v0), float(floor),
+                   math.log(near_rate) if near_rate > 0 else 0.0, near_rate > 0, out)
+    return out[0], out[1]
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def _scene_density(Z, std, m1, m2, extent, a, see, log_rate, area, log_v0, floor,
+                   log_near_rate, near_on, out):
+    """:func:`scene_density` into ``out`` (2, N_z)."""
+    n = Z.shape[0]
+    if see and n:
+        x0, y0, x1, y1 = extent[0], extent[1], extent[2], extent[3]
+        s0 = s1 = q00 = q01 = q11 = 0.0
+        for j in range(n):
+            hw, hh = Z[j, 2] / 2, Z[j, 3] / 2
+            lo, hi = Z[j, 0] - hw, Z[j, 0] + hw
+            x0 = lo if lo < x0 else x0
+            x1 = hi if hi > x1 else x1
+            lo, hi = Z[j, 1] - hh, Z[j, 1] + hh
+            y0 = lo if lo < y0 else y0
+            y1 = hi if hi > y1 else y1
+            l0, l1 = np.log(Z[j, 2]), np.log(Z[j, 3])
+            s0 += l0
+            s1 += l1
+            q00 += l0 * l0
+            q01 += l0 * l1
+            q11 += l1 * l1
+        extent[0], extent[1], extent[2], extent[3] = x0, y0, x1, y1
+        b = 1.0 - a
+        m1[0] = b * m1[0] + a * (s0 / n)
+        m1[1] = b * m1[1] + a * (s1 / n)
+        m2[0, 0] = b * m2[0, 0] + a * q00 / n
+        m2[1, 1] = b * m2[1, 1] + a * q11 / n
+        m2[0, 1] = m2[1, 0] = b * m2[0, 1] + a * q01 / n
+    c00 = m2[0, 0] - m1[0] * m1[0] + floor
+    c11 = m2[1, 1] - m1[1] * m1[1] + floor
+    c01 = 0.5 * ((m2[0, 1] - m1[0] * m1[1]) + (m2[1, 0] - m1[1] * m1[0]))
+    det = c00 * c11 - c01 * c01
+    if not area > 0:
+        area = 1.0
+        if extent[0] <= extent[2]:
+            w, h = extent[2] - extent[0], extent[3] - extent[1]
+            area = (w if w > 1.0 else 1.0) * (h if h > 1.0 else 1.0)
+    const = -math.log(2 * math.pi) - 0.5 * np.log(det) + (log_rate - np.log(area))
+    for j in range(n):
+        l0, l1 = np.log(Z[j, 2]), np.log(Z[j, 3])
+        d0, d1 = l0 - m1[0], l1 - m1[1]
+        quad = (d0 * d0 * c11 - 2.0 * d0 * d1 * c01 + d1 * d1 * c00) / det
+        lv = log_v0 + (((np.log(std[j, 0]) + np.log(std[j, 1])) + np.log(std[j, 2]))
+                       + np.log(std[j, 3]))
+        u = -0.5 * quad + const - (l0 + l1)
+        out[0, j] = np.logaddexp(u, log_near_rate - lv) if near_on else u
+        out[1, j] = lv

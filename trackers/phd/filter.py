@@ -84,11 +84,13 @@ from functools import lru_cache, partial
 from typing import Iterable, Iterator, Optional, Protocol, Union
 
 import numpy as np
+from numba import njit
 
 from ..params import param, part, with_options
 from . import _kernels, motion
 from .clutter import PlaceClutter
 from .clutter import (DuplicateBoxes, NearClutter, kappa_terms, learn_shares, neighbour_counts,
+                      scene_density,
                       neighbours)
 from .scene_motion import Chains
 from .gating import DEFAULT_BUDGET, LogGPairs, gate_pairs, tail_radius2
@@ -502,10 +504,16 @@ def log_gate_volume(Z: np.ndarray, cl: ClutterParams, lk: LikelihoodParams,
     ``std``: ``obs_std(Z[:, 2:4], lk)`` when the caller has it."""
     if std is None:
         std = obs_std(Z[:, 2:4], lk)
+    return log_gate_volume0(cl) + np.log(std).sum(-1)
+
+
+def log_gate_volume0(cl: ClutterParams) -> float:
+    """:func:`log_gate_volume` without its ``Σ_d log σ_d``: the log volume of the
+    ``clutter_gate`` ellipsoid of unit stds."""
     r2 = gate_threshold(cl.clutter_gate, OBS_DIM)
     d = OBS_DIM
     log_unit_ball = 0.5 * d * math.log(math.pi) - math.lgamma(0.5 * d + 1)
-    return log_unit_ball + 0.5 * d * math.log(r2) + np.log(std).sum(-1)
+    return log_unit_ball + 0.5 * d * math.log(r2)
 
 
 # ----------------------------------------------------------------------------- scene clutter
@@ -530,8 +538,6 @@ class SceneModel:
     Averages are over about ``clutter_memory`` frames."""
 
     _LOG_SIZE_FLOOR = 0.05 ** 2    # log-size variance floor (5 % of the size)
-    _FLOOR_EYE = _LOG_SIZE_FLOOR * np.eye(2)
-    _FLOOR_EYE.flags.writeable = False
 
     def __init__(self, params: "PHDParams"):
         self.cl, self.sp = params.clutter, params.score
@@ -581,31 +587,13 @@ class SceneModel:
     def uses_scores(self) -> bool:
         return self.sp.score_model == "gaussian"
 
-    def _area(self, frame: Optional[Frame]) -> float:
+    def _image_area(self, frame: Optional[Frame]) -> float:
+        """The frame's pixel area when it has an image, else 0 (the density takes the area of
+        the detections' extent then: :func:`.clutter.scene_density`)."""
         if frame is not None and getattr(frame, "image", None) is not None \
                 and np.ndim(frame.image) >= 2 and frame.image.size:
             return float(frame.width * frame.height)
-        if self.extent is None:
-            return 1.0
-        w, h = self.extent[2] - self.extent[0], self.extent[3] - self.extent[1]
-        return float(max(w, 1.0) * max(h, 1.0))
-
-    def _see_sizes(self, Z: np.ndarray, ls: np.ndarray) -> None:
-        """The detections' extent and log-size moments; ``ls`` = ``np.log(Z[:, 2:4])``."""
-        half = Z[:, 2:4] / 2
-        a0, a1 = Z[:, :2] - half, Z[:, :2] + half
-        # per column: numpy's axis-0 min / max of an (N, 2) array walks it ~4x slower than a
-        # column's (the same extrema, exact)
-        lo = np.array([a0[:, 0].min(), a0[:, 1].min()])
-        hi = np.array([a1[:, 0].max(), a1[:, 1].max()])
-        box = np.concatenate([lo, hi])
-        self.extent = box if self.extent is None else np.concatenate(
-            [np.minimum(self.extent[:2], lo), np.maximum(self.extent[2:], hi)])
-        a = 1.0 / min(self.size_frames + 1, self.cl.clutter_memory)
-        # ls.mean(0) is its sum over axis 0, then / n (np.mean's steps without its wrapper)
-        self.size_m1 = (1 - a) * self.size_m1 + a * (ls.sum(0) / len(ls))
-        self.size_m2 = (1 - a) * self.size_m2 + a * (ls.T @ ls) / len(ls)
-        self.size_frames += 1
+        return 0.0
 
     def log_kappa(self, Z: np.ndarray, scores: Optional[np.ndarray],
                   frame: Optional[Frame], predicted: Optional[ParticleSet] = None,
@@ -620,18 +608,6 @@ class SceneModel:
             # a no-op when the frame was linked already (PHD-MT shares its scene learner's)
             self.chains.observe(Z, None if frame is None else frame.index)
         if self.scene_clutter:
-            ls = np.log(Z[:, 2:4])      # the log sizes, once (the same floats thrice)
-            if len(Z):
-                self._see_sizes(Z, ls)
-            m1 = self.size_m1
-            cov = self.size_m2 - m1[:, None] * m1[None, :]     # np.outer's very product
-            cov = 0.5 * (cov + cov.T) + self._FLOOR_EYE
-            d = ls - self.size_m1
-            sol = np.linalg.solve(cov, d.T).T
-            log_size = (-0.5 * np.einsum("ij,ij->i", d, sol) - math.log(2 * math.pi)
-                        - 0.5 * math.log(np.linalg.det(cov)) - ls.sum(1))
-            with np.errstate(divide="ignore"):
-                log_kappa = math.log(self.rate) - math.log(self._area(frame)) + log_size
             # the detections' observation stds, once a frame for every part that reads them
             if std is None:
                 std = obs_std(Z[:, 2:4], self.lk)
@@ -651,13 +627,21 @@ class SceneModel:
                 a = 1.0 / min(self.frames + 5, self.cl.clutter_memory)
                 self.near = (1 - a) * self.near + a * (
                     self._neighbours(Z, std) if n_near is None else float(n_near.mean()))
-            # log V(z) of the clutter gate, once for every part spread as the 'gate' model
-            # (log_clutter_density at rate λ is log λ − log V: the same floats)
-            log_v = log_gate_volume(Z, self.cl, self.lk, std)
-            if self.place is None:
-                if self.near > 0:
-                    log_kappa = np.logaddexp(log_kappa, math.log(self.near) - log_v)
-            else:
+            if self.extent is None and len(Z):
+                self.extent = _no_extent()
+            # the size moments, the extent, log κ_u (with near_rate points spread as the 'gate'
+            # model when > 0) and the clutter gates' log V(z) (log V is −log of one clutter
+            # point spread as the 'gate' model, log_gate_volume) in one pass
+            a = 1.0 / min(self.size_frames + 1, self.cl.clutter_memory)
+            log_rate = math.log(self.rate) if self.rate > 0 else -math.inf
+            log_kappa, log_v = scene_density(
+                Z, std, self.size_m1, self.size_m2,
+                _no_extent() if self.extent is None else self.extent, a, len(Z) > 0, log_rate,
+                self._image_area(frame), log_gate_volume0(self.cl), self._LOG_SIZE_FLOOR,
+                self.near)
+            if len(Z):
+                self.size_frames += 1
+            if self.place is not None:
                 model = self.cl.learn_update == "model"
                 S, E = self.place._weight_in_gates(Z, watched=True, std=std)
                 # a detection that continues a chain of mutually nearest detections is a
@@ -672,15 +656,13 @@ class SceneModel:
                 log_rep, log_near, log_dup, shadow, no_place = kappa_terms(
                     log_v, place=(S, E, self.place.beta),
                     near=None if m is None else (m, self.people.nu, self._chained),
-                    dup=None if n is None else (n, self.dups.q), log_u=log_kappa,
-                    near_rate=self.near)
+                    dup=None if n is None else (n, self.dups.q), log_u=log_kappa)
                 if model:
                     log_used = shadow
                 else:
-                    u = log_kappa if not self.near > 0 else np.logaddexp(
-                        log_kappa, math.log(self.near) - log_v)
-                    log_used = np.logaddexp(u, self.place.log_gate(Z, self.structured(), log_v))
-                self._parts = (Z, log_rep, log_near, log_dup, shadow, log_used)
+                    log_used = np.logaddexp(log_kappa,
+                                            self.place.log_gate(Z, self.structured(), log_v))
+                self._parts = (Z, std, log_rep, log_near, log_dup, shadow, log_used)
                 if self.cl.spot_places and model:
                     # a person appears no more often where clutter repeats: the newborn
                     # weigh against κ without the place memory (birth_odds, log_birth_weight)
@@ -747,7 +729,7 @@ class SceneModel:
         """After the update: ``won`` (N_z,) = C/(κ + C), each detection's target share."""
         a = 1.0 / min(self.frames + 5, self.cl.clutter_memory)
         if self.place is not None and self._parts is not None:
-            Z, log_rep, log_near, log_dup, total, log_used = self._parts
+            Z, std, log_rep, log_near, log_dup, total, log_used = self._parts
             spot = self.cl.spot_places and self.cl.learn_update == "model"
             # the clutter shares and their split between the parts (in one pass)
             out, random = learn_shares(won, log_used, total, (log_rep, log_near, log_dup),
@@ -762,7 +744,7 @@ class SceneModel:
             # clutter), the last learnt frame's value at its link, 1 where it continues none)
             if spot:
                 self._chain_clutter = out[4]
-            self.place.learn(Z, out[1], out[2], a)
+            self.place.learn(Z, out[1], out[2], a, std)
             self.people.learn(out[3], a)
             if self.cl.learn_update == "model":
                 self.dups.learn(won, a)
@@ -771,23 +753,56 @@ class SceneModel:
             self.rate = (1 - a) * self.rate + a * float(np.sum(1.0 - won))
         self.frames += 1
         if self.uses_scores and scores is not None and self.score_sums is not None:
-            s = np.asarray(scores, dtype=np.float64)
-            r = np.empty((2, len(won)))                          # (2, N_z): won, 1 - won
-            r[0] = won
-            np.subtract(1.0, won, out=r[1])
+            s = np.ascontiguousarray(scores, dtype=np.float64)
+            won = np.ascontiguousarray(won, dtype=np.float64)
             d = 1.0 - 1.0 / self.cl.clutter_memory
-            self.score_sums = d * self.score_sums + _class_sums(r, s)
-            if self.persist_sums is not None and self._persist is not None \
-                    and len(self._persist) == len(s):
-                q = np.stack([self._persist, ~self._persist]).astype(np.float64)
-                self.persist_sums = d * self.persist_sums + _class_sums(q, s)
+            # the weighted S0..S2 of the scores per class (won, 1 − won), and labelled by
+            # persistence, faded and added in place (one pass: _score_sums)
+            persist = self.persist_sums is not None and self._persist is not None \
+                and len(self._persist) == len(s)
+            _score_sums(won, s, self._persist if persist else _NO_PERSIST, persist, d,
+                        self.score_sums, self.persist_sums if persist else self.score_sums)
 
 
-def _class_sums(r: np.ndarray, s: np.ndarray) -> np.ndarray:
-    """(2, 3): per class (rows of the weights ``r`` (2, N)) the weighted S0, S1, S2 of ``s``."""
-    new = np.empty((2, 3))
-    new[:, 0], new[:, 1], new[:, 2] = r.sum(1), r @ s, r @ (s * s)
-    return new
+_NO_PERSIST = np.zeros(0, dtype=np.bool_)
+
+
+def _no_extent() -> np.ndarray:
+    """An extent (x0, y0, x1, y1) before any detection: every box widens it."""
+    return np.array([np.inf, np.inf, -np.inf, -np.inf])
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def _score_sums(won, s, persist, use_p, d, sums, psums):
+    """``sums`` (2, 3) = ``d · sums`` + per class (weights ``won``, ``1 − won``) the weighted
+    S0, S1, S2 of the scores ``s``; with ``use_p``, ``psums`` alike with the weights
+    ``persist`` (N,) bool, ``~persist``."""
+    n = s.shape[0]
+    t = np.zeros(6)
+    p = np.zeros(6)
+    for j in range(n):
+        x = s[j]
+        xx = x * x
+        w = won[j]
+        v = 1.0 - w
+        t[0] += w
+        t[1] += w * x
+        t[2] += w * xx
+        t[3] += v
+        t[4] += v * x
+        t[5] += v * xx
+        if use_p:
+            k = 0 if persist[j] else 3
+            p[k] += 1.0
+            p[k + 1] += x
+            p[k + 2] += xx
+    for c in range(2):
+        for m in range(3):
+            sums[c, m] = d * sums[c, m] + t[3 * c + m]
+    if use_p:
+        for c in range(2):
+            for m in range(3):
+                psums[c, m] = d * psums[c, m] + p[3 * c + m]
 
 
 # ----------------------------------------------------------------------------- the four stages
@@ -847,16 +862,24 @@ def mass_near(predicted: ParticleSet, Z: np.ndarray, bp: BirthParams = BirthPara
     if std_z is None:
         std_z = obs_std(Z[:, 2:4], lk)
     r2 = gate_threshold(bp.gate, OBS_DIM)
-    cell = _grid_cell(std_z, r2)
-    full = np.zeros(len(Z))
-    need = np.flatnonzero(~skip)
-    if len(need):
-        # the very floats of mass_near_at's kernel on the same grid, without bucketing every
-        # particle for a few detections (_kernels.mass_near_few)
-        ok, full[need] = _kernels.mass_near_few(predicted.states, predicted.weights, Z[need],
-                                                std_z[need], r2, cell[0], cell[1])
-        if not ok:
-            raise ValueError("mass_near: non-finite particle positions")
+    # the very floats of mass_near_at's kernel on the same grid, without bucketing every
+    # particle for a few detections (_kernels.mass_near_few), the cells and the skip in the
+    # same call (_kernels.mass_near_skip)
+    code, full = _kernels.mass_near_skip(predicted.states, predicted.weights, Z,
+                                         np.ascontiguousarray(std_z, dtype=np.float64),
+                                         np.ascontiguousarray(skip, dtype=np.bool_), float(r2))
+    if code < 0:        # a non-finite std: _grid_cell's numpy form decides the cells
+        cell = _grid_cell(std_z, r2)
+        full = np.zeros(len(Z))
+        need = np.flatnonzero(~skip)
+        if len(need):
+            code, full[need] = _kernels.mass_near_few(predicted.states, predicted.weights,
+                                                      Z[need], std_z[need], r2, cell[0],
+                                                      cell[1])
+        else:
+            code = 1
+    if not code:
+        raise ValueError("mass_near: non-finite particle positions")
     return full
 
 
