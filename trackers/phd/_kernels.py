@@ -188,26 +188,41 @@ GRID_CELL_MAX = 64
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
 def grid_cell(std, r2):
-    """:func:`~.filter._grid_cell`'s cells (2,) of numpy's floats for 1 <= N <=
-    :data:`GRID_CELL_MAX` detections: ``2 sqrt(r2)`` times the median of each of the first two
-    columns of ``std`` (N, 4) in ``np.sort``'s order (NaN last; an insertion sort: np.sort's
-    compile costs ~2 s), the middle value or the mean of the two middle ones; 1 where that is
-    not > 0."""
+    """:func:`~.filter._grid_cell`'s cells (2,) of numpy's floats: ``2 sqrt(r2)`` times the
+    median of each of the first two columns of ``std`` (N, 4) -- the middle value or the mean
+    of the two middle ones of ``np.sort``'s order -- 1 where that is not > 0.  Without NaN the
+    middle values come by selection (:func:`.gating.kth`, linear); a column with NaN (last in
+    np.sort's order) is insertion-sorted, for the caller's N <= :data:`GRID_CELL_MAX` (np.sort
+    in numba costs ~2 s of compile)."""
     n = std.shape[0]
     h = n // 2
     r = 2.0 * math.sqrt(r2)
     out = np.empty(2, np.float64)
     s = np.empty(n, np.float64)
     for d in range(2):
+        nan = False
         for i in range(n):
-            v = std[i, d]
-            k = i
-            # shift the larger ones (NaN is larger than any number, as np.sort orders it)
-            while k > 0 and (s[k - 1] > v or (s[k - 1] != s[k - 1] and v == v)):
-                s[k] = s[k - 1]
-                k -= 1
-            s[k] = v
-        med = s[h] if n % 2 else (s[h - 1] + s[h]) / 2.0
+            s[i] = std[i, d]
+            nan = nan or s[i] != s[i]
+        if not nan:
+            hi = kth(s, h)                   # leaves s[:h] <= s[h]: the next is their max
+            lo = hi
+            if n % 2 == 0:
+                lo = s[0]
+                for i in range(1, h):
+                    lo = s[i] if s[i] > lo else lo
+        else:
+            for i in range(n):
+                v = std[i, d]
+                k = i
+                # shift the larger ones (NaN is larger than any number, as np.sort orders it)
+                while k > 0 and (s[k - 1] > v or (s[k - 1] != s[k - 1] and v == v)):
+                    s[k] = s[k - 1]
+                    k -= 1
+                s[k] = v
+            hi = s[h]
+            lo = s[h - 1] if n % 2 == 0 else hi
+        med = hi if n % 2 else (lo + hi) / 2.0
         c = r * med
         out[d] = c if c > 0 else 1.0
     return out
@@ -400,8 +415,8 @@ def birth_alloc_fill(m_near, j_max, complement, max_per_frame, lw_base, revive, 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
 def mass_near_skip(states, w, Z, std_z, skip, r2):
     """``filter.mass_near(..., skip=skip)`` in one call: the grid cells of ``filter._grid_cell``
-    (``2 r`` times the per-axis median of ``std_z[:, :2]`` over every detection, 1 where not
-    > 0; the middle values by selection, :func:`.gating.kth`: np.sort's values), then
+    (:func:`grid_cell`: ``2 r`` times the per-axis median of ``std_z[:, :2]`` over every
+    detection, 1 where not > 0), then
     :func:`mass_near_few` on the detections not skipped, scattered back (0 at the skipped).
     Returns ``(code, out)``: 1 done, 0 non-finite particle positions, -1 a non-finite std
     (nothing computed: the caller's numpy form decides)."""
@@ -409,27 +424,12 @@ def mass_near_skip(states, w, Z, std_z, skip, r2):
     full = np.empty(nz, np.float64)
     for j in range(nz):
         full[j] = 0.0
-    tmp = np.empty(nz)
-    med = np.empty(2)
-    h = nz // 2
     for c in range(2):
         for j in range(nz):
             if not math.isfinite(std_z[j, c]):
                 return -1, full
-            tmp[j] = std_z[j, c]
-        hi = kth(tmp, h)
-        if nz % 2:
-            med[c] = hi
-        else:
-            lo = tmp[0]                         # kth left a[:h] <= a[h]: the next is their max
-            for j in range(1, h):
-                lo = tmp[j] if tmp[j] > lo else lo
-            med[c] = (lo + hi) / 2.0
-    r = 2.0 * math.sqrt(r2)
-    cx = r * med[0]
-    cy = r * med[1]
-    cx = cx if cx > 0 else 1.0
-    cy = cy if cy > 0 else 1.0
+    cell = grid_cell(std_z, r2)
+    cx, cy = cell[0], cell[1]
     m = np.int64(0)
     for j in range(nz):
         m += not skip[j]
