@@ -195,6 +195,17 @@ def test_birth_alloc_fill_is_numpys_allocation_and_birth_fill(seed):
     with np.errstate(invalid="ignore"):
         j_np, _ = _numpy_births(m_nan, 1000, False, 50_000, lw_base, None, 0.0)
     np.testing.assert_array_equal(K.birth_counts(m_nan, 1000, False, 50_000), j_np)
+    # complement reads M(z): a NaN one gives a negative J_z, and nothing is written (J = -1);
+    # so does a total larger than the buffers
+    for m, rows in ((m_nan, 50_000), (m_near * 0.0, 10)):
+        states, log_w = np.full((rows, 6), np.nan), np.full(rows, np.nan)
+        det = np.full(rows, -1, np.int64)
+        with np.errstate(invalid="ignore"):
+            _, n = K.birth_alloc_fill(m, 1000, True, 50_000, lw_base, np.zeros(0, np.bool_),
+                                      0.0, Z, R.stream(11), lk.sigma_obs, lk.sigma_obs_min,
+                                      lk.sigma_obs_pos_ratio, 1.3, 0.05, 0.1, 4.0, states,
+                                      log_w, det)
+        assert n == -1 and np.isnan(states).all() and (det == -1).all()
 
 
 # ----------------------------------------------------------------------------- grid, M(z)

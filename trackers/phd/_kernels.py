@@ -396,9 +396,17 @@ def birth_alloc_fill(m_near, j_max, complement, max_per_frame, lw_base, revive, 
     """:func:`birth_counts`, each detection's newborn log-weight ``lw_base − log max(J_z, 1)``
     (``+ log_revive`` where ``revive``, else ``+ 0``; ``revive`` empty: none) and
     :func:`birth_fill` into the first J = ΣJ_z rows of ``states``, ``log_w``, ``det`` (which
-    must hold them: ``max_births`` rows), in one call: ``(j, J)``."""
+    must hold them: ``max_births`` rows), in one call: ``(j, J)``; ``J`` = -1 (nothing
+    written) when a J_z is negative (a NaN M(z)) or the total does not fit the buffers."""
     j = birth_counts(m_near, j_max, complement, max_per_frame)
     nz = j.shape[0]
+    n = 0
+    for z in range(nz):
+        if j[z] < 0:
+            return j, -1
+        n += j[z]
+    if n > states.shape[0] or n > log_w.shape[0] or n > det.shape[0]:
+        return j, -1
     lw_det = np.empty(nz, np.float64)
     n = 0
     for z in range(nz):

@@ -287,13 +287,19 @@ def _memory_step(mem_z, mem_s, mem_w, mem_e, mem_S, Z, Z_s, share, fade, min_w, 
     ok = mem_S.shape[0] == n_old and (dropped + k_new) * k_old + k_new * keep <= budget
     if not ok:
         return z, s, w, e, S, 0.0, False
+    drop = np.empty(dropped, np.int64)      # the dropped entries, once (in index order)
+    d = 0
+    for q in range(n_old):
+        if not mem_w[q] * fade >= min_w:
+            drop[d] = q
+            d += 1
     for k in range(k_old):
         i = src[k]
         acc = mem_S[i] * fade
-        if dropped:
-            for q in range(n_old):
-                if not mem_w[q] * fade >= min_w and _in_gate(mem_z, q, mem_z, i, mem_s, r2):
-                    acc -= mem_w[q] * fade
+        for t in range(dropped):
+            q = drop[t]
+            if _in_gate(mem_z, q, mem_z, i, mem_s, r2):
+                acc -= mem_w[q] * fade
         for q in range(k_old, keep):
             if _in_gate(z, q, z, k, s, r2):
                 acc += w[q]

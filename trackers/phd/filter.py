@@ -1000,6 +1000,9 @@ def birth(predicted: ParticleSet, Z, params: PHDParams, rng: np.random.Generator
         int(bp.max_births_per_frame), lw_base, revive, log_revive, Z, st, lk.sigma_obs,
         lk.sigma_obs_min, lk.sigma_obs_pos_ratio, bp.birth_spread, bp.birth_speed_mean,
         bp.birth_speed_std, params.motion.min_size, states, log_w, det)
+    if n < 0:
+        raise ValueError(f"birth: newborn counts {j.tolist()} do not fit the {cap} places "
+                         f"(is M(z) finite? {np.asarray(m_near).tolist()})")
     return BirthResult(ParticleSet(states[:n], log_w[:n]), j, m_near, det[:n], grid)
 
 
