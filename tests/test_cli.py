@@ -153,3 +153,35 @@ def test_video_option_offers_exactly_the_recorder_modes():
     for cmd in ("record", "compare"):
         video = next(a for a in subs.choices[cmd]._actions if "--video" in a.option_strings)
         assert tuple(video.choices) == VIDEO_MODES and video.default == "encode"
+
+
+def _entry(args, stdout, tmp_path):
+    """``pfscope`` as installed (``cli.entry``: a ``record`` ends through ``exit_process``)."""
+    import subprocess
+    import sys
+
+    code = ("import sys; from pfscope.viewer_app.cli import entry; "
+            f"sys.argv = ['pfscope', *{list(args)!r}]; entry()")
+    return subprocess.run([sys.executable, "-c", code], stdout=stdout, stderr=subprocess.PIPE,
+                          text=True, cwd=tmp_path, timeout=600)
+
+
+def test_the_command_ends_a_record_with_its_outputs_whole_and_its_status(tmp_path):
+    """``entry`` ends ``record`` without the interpreter's teardown (``exit_process``): the
+    recording and the tracks file are complete and renamed, status 0; stdout on a full device
+    gives one error line and a failure status, never a silent 0."""
+    import os
+    import subprocess
+
+    out, tracks = tmp_path / "r.rrd", tmp_path / "t.txt"
+    args = ["record", "--frames", "20", "--out", str(out), "--tracks-out", str(tracks)]
+    p = _entry(args, subprocess.PIPE, tmp_path)
+    assert p.returncode == 0, p.stderr
+    assert out.stat().st_size > 0 and tracks.read_text().strip()
+    assert not [f for f in tmp_path.iterdir() if "incomplete" in f.name or f.suffix == ".part"]
+    assert "frames" in p.stdout
+    if os.path.exists("/dev/full"):
+        with open("/dev/full", "w") as full:
+            p = _entry([*args, "--force"], full, tmp_path)
+        assert p.returncode != 0
+        assert "cannot write" in p.stderr and "Traceback" not in p.stderr

@@ -103,7 +103,7 @@ _REGISTRY: dict[str, TrackerInfo] = {}
 #: summary line).  The CLI's choices and help come from here, and a run imports only its
 #: tracker's module (:func:`tracker_info`): each module brings its own libraries (DLPF's the
 #: scorer's scipy.optimize, PHD-MT's numba kernels), ~0.5 s a module.  The summaries are the
-#: classes' (``tests/test_api.py`` checks the two agree).
+#: classes' (``tests/test_platform.py`` checks the two agree).
 BUILTIN_TRACKERS = {
     "phd": ("pfscope.trackers.phd.tracker",
             "PHD-MT: particle PHD filter + modified K-means peaks + graph-matching association."),

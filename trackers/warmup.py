@@ -266,7 +266,8 @@ def _compile_core(presets=("practical", "paper"), phd: bool = True,
     the resampling kernel (DLPF's one).  ``index``: also the systematic resampling's index
     kernel (DLPF's; the PHD filter's resampling copies the rows in its own walk), default
     ``not phd``.  Once per process: later calls return 0 at once (the kernels stay compiled
-    in the process)."""
+    in the process).  ``presets=()`` (DBN-PHD or phd-bgsub alone, :func:`phd_presets_needed`):
+    no PHD-MT step, only the helper's share, the robust spreads and the association kernels."""
     global _ready, _early
     index = (not phd) if index is None else index
     key = (presets if phd else ()) + (("resample",) if index else ())

@@ -1238,7 +1238,7 @@ def cmd_tune(args) -> int:
 def _early_compile(argv: list) -> None:
     """``record`` of a tracker that runs the PHD kernels, on a first run (empty numba cache):
     start the compile helper (:func:`pfscope.trackers.warmup.start_helper_early`) before the
-    parser imports every tracker (~2 s), so it compiles meanwhile.  Only the plain
+    run imports its tracker, so it compiles meanwhile.  Only the plain
     ``--tracker NAME`` form is read here (with ``--params`` the file names the tracker:
     ``record`` starts the helper itself later)."""
     if not argv or argv[0] != "record":
@@ -1362,13 +1362,23 @@ def exit_process(status: int) -> None:
     shutdown = getattr(threading, "_shutdown", None)
     if shutdown is None or threading.current_thread() is not threading.main_thread():
         sys.exit(status)
-    shutdown()
+    try:
+        shutdown()
+    except KeyboardInterrupt:             # Ctrl-C while the threads are joined: still exit
+        status = status or _interrupted_status()
     atexit._run_exitfuncs()
     for stream in (sys.stdout, sys.stderr):
         try:
             stream.flush()
-        except (OSError, ValueError):     # a reader that left, a closed stream
+        except (BrokenPipeError, ValueError):     # a reader that left, a closed stream
             pass
+        except OSError as e:              # a full or failing device: say so, never exit 0
+            try:
+                os.write(2, f"pfscope: error: cannot write ({e.strerror}); nothing more was "
+                            f"written\n".encode())
+            except OSError:
+                pass
+            status = status or EXIT_RUN_FAILED
     os._exit(status)
 
 

@@ -607,6 +607,6 @@ def _options_for(name: str, options: dict, n_trackers: int) -> dict:
 
 
 def _tracker_names() -> set:
-    from pfscope.trackers.api import registry
+    from pfscope.trackers.api import tracker_summaries     # the names, no tracker imported
 
-    return set(registry())
+    return set(tracker_summaries())

@@ -8,7 +8,9 @@ or two passes over the particles with no temporary larger than O(N + N_z + grid)
 - :func:`propagate_into` — the size-aware motion model, its normals drawn inside (predict).
 - :func:`grid_build` / :func:`grid_span` — a uniform grid on the particles' positions (counting
   sort by cell), so a detection visits only the particles in the cells its gate box touches.
-- :func:`mass_near_kernel` — M(z) of the birth allocation, the predicted mass in z's gate.
+- :func:`mass_near_kernel` — M(z) of the birth allocation, the predicted mass in z's gate;
+  :func:`mass_near_few` / :func:`mass_near_skip` — the learnt clutter's M'(z) (few
+  detections; the skipped ones left at 0, the grid cells included).
 - :func:`birth_fill` — the newborn states, their random numbers drawn inside;
   :func:`birth_alloc_fill` — J_z (:func:`birth_counts`), the newborn log-weights and the
   fill in one call (the filter's birth); :func:`grid_cell` — the grids' cell size.
@@ -191,8 +193,9 @@ def grid_cell(std, r2):
     """:func:`~.filter._grid_cell`'s cells (2,) of numpy's floats: ``2 sqrt(r2)`` times the
     median of each of the first two columns of ``std`` (N, 4) -- the middle value or the mean
     of the two middle ones of ``np.sort``'s order -- 1 where that is not > 0.  Without NaN the
-    middle values come by selection (:func:`.gating.kth`, linear); a column with NaN (last in
-    np.sort's order) is insertion-sorted, for the caller's N <= :data:`GRID_CELL_MAX` (np.sort
+    middle values come by selection (:func:`.gating.kth`, linear, any N: :func:`mass_near_skip`
+    calls it on finite stds); a column with NaN (last in np.sort's order) is insertion-sorted,
+    quadratic, so ``filter._grid_cell`` calls it for N <= :data:`GRID_CELL_MAX` only (np.sort
     in numba costs ~2 s of compile)."""
     n = std.shape[0]
     h = n // 2
