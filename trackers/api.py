@@ -158,10 +158,14 @@ def register(cls: Optional[T] = None, *, presets: Optional[dict[str, Any]] = Non
 
 
 def registry() -> dict[str, TrackerInfo]:
-    """Every registered tracker (the built-ins are imported on first call)."""
+    """Every registered tracker (the built-ins are imported on first call), the built-ins
+    first in :data:`BUILTIN_TRACKERS`' order whatever order they were imported in (as
+    :func:`tracker_summaries`), then the others in the order they registered."""
     for mod in BUILTIN_MODULES:
         importlib.import_module(mod)
-    return dict(_REGISTRY)
+    out = {n: _REGISTRY[n] for n in BUILTIN_TRACKERS if n in _REGISTRY}
+    out.update((n, i) for n, i in _REGISTRY.items() if n not in out)
+    return out
 
 
 def tracker_summaries() -> dict[str, str]:
