@@ -143,8 +143,7 @@ def _split_one_at_a_time(ps, Z, T, rule, max_splits=64, max_iter=50, tol=0.01):
     """kmeans_peaks' split loop spelt out in numpy, one candidate at a time (module docstring
     of trackers.phd.clustering): the heaviest non-final candidate, its farthest member, its
     nearest neighbours within twice its reach (by distance, then index), the guarded
-    pre-checks (the candidate's own mass, then its neighbourhood's), the local trial and its
-    guarded acceptance."""
+    pre-check (the candidate's own mass), the local trial and its guarded acceptance."""
     from pfscope.trackers.phd import _kmeans_kernels
     from pfscope.trackers.phd.clustering import SPLIT_NEIGHBOURS, _lloyd
     from pfscope.trackers.phd.filter import PHDParams
@@ -178,9 +177,6 @@ def _split_one_at_a_time(ps, Z, T, rule, max_splits=64, max_iter=50, tol=0.01):
         dc = np.sum((centers[:, cols] - centers[j, cols]) ** 2 * inv_j, axis=1)
         near = np.flatnonzero(dc <= 4.0 * dmin[far])
         near = np.sort(near[np.argsort(dc[near], kind="stable")][:SPLIT_NEIGHBOURS])
-        if guarded and masses[near].sum() < 2.0 * T:
-            final[j] = True
-            continue
         sel = np.flatnonzero(np.isin(labels, near))
         t_c, t_lab, t_m, t_d, it = _lloyd(X[sel], S[sel], w[sel],
                                           np.concatenate([centers[near], S[far][None]]),

@@ -193,10 +193,10 @@ def grid_cell(std, r2):
     """:func:`~.filter._grid_cell`'s cells (2,) of numpy's floats: ``2 sqrt(r2)`` times the
     median of each of the first two columns of ``std`` (N, 4) -- the middle value or the mean
     of the two middle ones of ``np.sort``'s order -- 1 where that is not > 0.  Without NaN the
-    middle values come by selection (:func:`.gating.kth`, linear, any N: :func:`mass_near_skip`
-    calls it on finite stds); a column with NaN (last in np.sort's order) is insertion-sorted,
-    quadratic, so ``filter._grid_cell`` calls it for N <= :data:`GRID_CELL_MAX` only (np.sort
-    in numba costs ~2 s of compile)."""
+    middle values come by selection (:func:`.gating.kth`, linear); a column with NaN (last in
+    np.sort's order, a broken detection's size) is insertion-sorted, quadratic, so
+    ``filter._grid_cell`` calls it for N <= :data:`GRID_CELL_MAX` only (np.sort in numba costs
+    ~2 s of compile); :func:`mass_near_skip` for any N."""
     n = std.shape[0]
     h = n // 2
     r = 2.0 * math.sqrt(r2)
@@ -429,16 +429,11 @@ def mass_near_skip(states, w, Z, std_z, skip, r2):
     (:func:`grid_cell`: ``2 r`` times the per-axis median of ``std_z[:, :2]`` over every
     detection, 1 where not > 0), then
     :func:`mass_near_few` on the detections not skipped, scattered back (0 at the skipped).
-    Returns ``(code, out)``: 1 done, 0 non-finite particle positions, -1 a non-finite std
-    (nothing computed: the caller's numpy form decides)."""
+    Returns ``(code, out)``: 1 done, 0 non-finite particle positions."""
     nz = Z.shape[0]
     full = np.empty(nz, np.float64)
     for j in range(nz):
         full[j] = 0.0
-    for c in range(2):
-        for j in range(nz):
-            if not math.isfinite(std_z[j, c]):
-                return -1, full
     cell = grid_cell(std_z, r2)
     cx, cy = cell[0], cell[1]
     m = np.int64(0)

@@ -854,9 +854,9 @@ def split_clusters(X, S, w, centers, masses, labels, dmin, scale, split_above, n
     pass: at most ``max_splits`` candidates -- clusters of mass above ``split_above`` not
     final yet, heaviest first (the lowest index among equal masses) -- are looked at, one at
     a time.  A candidate lighter than ``need`` (``guarded``: 2 ``min_split_mass``, else
-    -inf), with no member off its centre, or whose neighbourhood (:func:`split_neighbours`,
-    at most ``n_near`` clusters) holds less than ``need`` mass, is final; else a new centre
-    on its farthest member and :func:`lloyd` on the neighbourhood's particles; ``guarded``:
+    -inf) or with no member off its centre is final; else a new centre on its farthest
+    member and :func:`lloyd` on its neighbourhood's particles (:func:`split_neighbours`: j
+    and at most ``n_near`` - 1 more clusters); ``guarded``:
     kept only if j and the new cluster both reach ``min_split_mass``.
 
     ``X``, ``S``, ``w`` as for :func:`lloyd`; ``centers`` (K, 6), ``masses`` (K,) (times
@@ -898,13 +898,6 @@ def split_clusters(X, S, w, centers, masses, labels, dmin, scale, split_above, n
             final[j] = True
             continue
         nn = split_neighbours(C, K, j, dm[far], n_near, sigma_obs, sigma_min, pos_ratio, near)
-        if guarded:
-            tot = 0.0
-            for q in range(nn):
-                tot += M[near[q]]
-            if tot < need:                 # both halves could not reach min_split_mass
-                final[j] = True
-                continue
         for c in range(K):
             is_local[c] = False
         for q in range(nn):

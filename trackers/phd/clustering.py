@@ -32,8 +32,8 @@ Readings (each a parameter of :func:`kmeans_peaks`):
   anyway).  A guarded split is not tried on a cluster whose own mass is below
   ``2 min_split_mass`` (its halves could both reach ``min_split_mass`` only by taking mass
   from the neighbouring clusters, i.e. from other peaks: a single target with a little
-  clutter or a duplicate detection, mass ~1-1.2, is final at once), nor when its
-  neighbourhood holds less than that (both halves could not reach it).  (Before this
+  clutter or a duplicate detection, mass ~1-1.2, is final at once; its neighbourhood, which
+  holds it, then holds at least that much too).  (Before this
   pre-check every such trial ran its Lloyd iterations to the end and was rejected on the
   bench scene: ~5/6 of the trials' iterations at 16 targets; on the development set the
   tracks change a little, the accuracy does not -- docs/phd.md.)

@@ -204,9 +204,7 @@ class PlaceClutter:
         the detections' observation stds when the caller has them."""
         from .filter import obs_std
 
-        lk, r2, S, exposure = self._sums_of()
-        if not len(self.mem_w):
-            exposure = 0.0
+        lk, r2, S, exposure = self._sums_of()     # (an empty memory's exposure is 0)
         self.num = (1 - a) * self.num + a * float(np.sum(repeat_share))
         self.den = (1 - a) * self.den + a * exposure
         self.beta = em_rate(self.num, self.den, self.cl.repeat_prior, a)

@@ -868,16 +868,6 @@ def mass_near(predicted: ParticleSet, Z: np.ndarray, bp: BirthParams = BirthPara
     code, full = _kernels.mass_near_skip(predicted.states, predicted.weights, Z,
                                          np.ascontiguousarray(std_z, dtype=np.float64),
                                          np.ascontiguousarray(skip, dtype=np.bool_), float(r2))
-    if code < 0:        # a non-finite std: _grid_cell's numpy form decides the cells
-        cell = _grid_cell(std_z, r2)
-        full = np.zeros(len(Z))
-        need = np.flatnonzero(~skip)
-        if len(need):
-            code, full[need] = _kernels.mass_near_few(predicted.states, predicted.weights,
-                                                      Z[need], std_z[need], r2, cell[0],
-                                                      cell[1])
-        else:
-            code = 1
     if not code:
         raise ValueError("mass_near: non-finite particle positions")
     return full
