@@ -259,7 +259,7 @@ def compile_kernels(presets=("practical", "paper"), phd: bool = True,
     return time.perf_counter() - t0
 
 
-def _compile_core(presets=("practical", "paper"), phd: bool = True,
+def _compile_core(presets=PHD_PRESETS, phd: bool = True,
                   index: bool | None = None) -> float:
     """Call every kernel once on made-up data (a compile on the first run after an install,
     a load from numba's cache afterwards); returns the seconds it took.  ``phd=False``: only
