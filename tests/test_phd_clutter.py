@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import math
 
+import _libm as libm
 import numpy as np
 import pytest
 
@@ -408,10 +409,10 @@ def test_kappa_terms_and_learn_shares_are_the_numpy_form_bit_for_bit(seed):
         near = float(rng.choice([0.0, rng.uniform(0.01, 2)]))
         with np.errstate(all="ignore"):
             r = (S + PRIOR_FRAMES * beta) / (E + PRIOR_FRAMES)
-            rep = np.log(np.where(S > 0, np.minimum(r, 1.0), 0.0)) + -log_v
-            nr = np.where(chained, -np.inf, np.log(nu * np.minimum(m, 1.0)) + -log_v)
-            dup = np.log(q * cnt) + -log_v
-            u = np.logaddexp(log_u, np.log(near) - log_v) if near > 0 else log_u
+            rep = libm.log(np.where(S > 0, np.minimum(r, 1.0), 0.0)) + -log_v
+            nr = np.where(chained, -np.inf, libm.log(nu * np.minimum(m, 1.0)) + -log_v)
+            dup = libm.log(q * cnt) + -log_v
+            u = np.logaddexp(log_u, math.log(near) - log_v) if near > 0 else log_u
             shadow = np.logaddexp(np.logaddexp(np.logaddexp(u, rep), nr), dup)
             birth = np.logaddexp(np.logaddexp(u, nr), dup)
         out = kappa_terms(log_v, (S, E, beta), (m, nu, chained), (cnt, q), u)
@@ -422,9 +423,9 @@ def test_kappa_terms_and_learn_shares_are_the_numpy_form_bit_for_bit(seed):
         prior = rng.uniform(0, 1, int(rng.integers(1, 6)))
         with np.errstate(all="ignore"):
             w = np.clip(won, 0.0, 1.0)
-            sh = 1.0 / (1.0 + np.exp(np.log(w) - np.log1p(-w) + shadow - shadow))
+            sh = 1.0 / (1.0 + libm.exp(libm.log(w) - libm.log1p(-w) + shadow - shadow))
             sh = np.where(np.isfinite(sh), sh, np.where(w >= 1.0, 0.0, 1.0))
-            fr = [np.exp(x - shadow) for x in (rep, nr, dup)]
+            fr = [libm.exp(x - shadow) for x in (rep, nr, dup)]
         fr = [np.where(np.isnan(x), 0.0, x) for x in fr]
         chain = np.ones(n)
         ok = (link >= 0) & (link < len(prior))

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 from functools import cache
 
+import _libm as libm
 import numpy as np
 import pytest
 
@@ -307,7 +308,7 @@ def test_triplets_kernel_fills_the_rings_as_the_numpy_form(seed):
         z, q, r = Z[has[tri]], prev[jh[tri]], pp[prev_link[jh][tri]]
         if len(z):
             old_a.extend(((z[:, :2] - 2.0 * q[:, :2] + r[:, :2]) / q[:, 2:4]).T)
-            old_s.extend(np.log(np.stack([z[:, 2:4] / q[:, 2:4],
+            old_s.extend(libm.log(np.stack([z[:, 2:4] / q[:, 2:4],
                                           z[:, 2:4] / r[:, 2:4]])).reshape(2, -1))
         assert new_a.n == old_a.n and new_s.n == old_s.n
         assert np.array_equal(new_a.rows(), old_a.rows())
