@@ -62,7 +62,7 @@ class Frame:
         only gives the frame its size)."""
         im = self.image
         return (im is not None and getattr(im, "ndim", 0) == 3 and im.size > 0
-                and all(st != 0 for st in im.strides))
+                and 0 not in im.strides)
 
 
 def blank_image(height: int, width: int) -> np.ndarray:
@@ -137,6 +137,15 @@ class TrackSet:
             if len(conf) != len(ids):
                 raise ValueError(f"TrackSet: {len(ids)} ids but {len(conf)} conf values")
             object.__setattr__(self, "conf", conf)
+
+    @classmethod
+    def of(cls, ids: np.ndarray, boxes: np.ndarray, conf: np.ndarray | None = None) -> "TrackSet":
+        """A TrackSet of arrays already in their final form -- ``ids`` (M,) int64, ``boxes``
+        (M, 4) float64, ``conf`` None or (M,) float64 -- taken as given, without the
+        constructor's conversions and checks (a tracker's own output, built every frame)."""
+        ts = object.__new__(cls)
+        ts.__dict__.update(ids=ids, boxes=boxes, conf=conf)
+        return ts
 
     @classmethod
     def empty(cls) -> "TrackSet":

@@ -144,6 +144,18 @@ def _empty(shape, dtype=np.float64) -> np.ndarray:
 
 #: one True (read-only), appended to a frame's filled flags
 _TRUE1 = np.ones(1, dtype=bool)
+#: no (new id, old id) pairs (read-only: the result of every frame that re-links nothing)
+_NO_PAIRS = np.zeros((0, 2), dtype=np.int64)
+_NO_PAIRS.flags.writeable = False
+
+
+def _made(cls, **fields):
+    """An instance of the frozen dataclass ``cls`` with every field given in its final form,
+    without the generated ``__init__``'s per-field ``object.__setattr__`` calls and the
+    ``__post_init__`` defaults (the step's results, built every frame)."""
+    item = object.__new__(cls)
+    item.__dict__.update(fields)
+    return item
 _TRUE1.setflags(write=False)
 #: a step's edge arrays when nobody asked for them (``edges=False``): empty, shared, read-only
 _NO_EDGES = dict(edges_src=_empty((0, STATE_DIM)), edges_src_id=_empty(0, np.int64),
@@ -1031,11 +1043,15 @@ class GraphAssociator:
         # confirmed -- _relink's candidates are exactly those: most frames have none, and its
         # tests are not run; a re-link renames and re-sorts, so the lengths are read again)
         lengths = self._length[self._ids.searchsorted(ids)]
-        relinked = np.zeros((0, 2), np.int64)
-        if p.relink_depth > 0 and len(self._lost_ids) and _any(lengths == p.min_length):
+        relinked = _NO_PAIRS
+        relink = p.relink_depth > 0 and len(self._lost_ids)
+        # (a vertex whose track has min_length vertices now: a track confirmed at this frame)
+        at_min = _any(lengths == p.min_length) if relink or p.extend_heads else False
+        if relink and at_min:
             relinked = self._relink(frame, ids)
             if len(relinked):
                 lengths = self._length[self._ids.searchsorted(ids)]
+                at_min = _any(lengths == p.min_length)
         confirmed = lengths >= p.min_length
 
         # 6. bounded-lag output: rows of frames <= k − L, judged with the lengths known now
@@ -1046,20 +1062,23 @@ class GraphAssociator:
             self._dets.append((frame, d))
             # (the tracks confirmed at this frame are those of its vertices whose length is
             # min_length now: most frames have none, and the walk back is not entered)
-            if _any(lengths == p.min_length):
+            if at_min:
                 self._extend_heads(frame, relinked)
         finalised = []
-        last = frame - self.lag
+        last = frame - (max(p.min_length - 1, p.depth) if p.fill_gaps or p.extend_heads
+                        else p.min_length - 1)      # (self.lag)
         while self._buffer and self._buffer[0][0] <= last:
             if self._dets and self._dets[0][0] == self._buffer[0][0]:
                 self._dets.popleft()
             f, bid, bst, bfill = self._buffer.popleft()
-            ok = self._confirmed_ids(bid, ended_ids, ended_len)
-            finalised.append(FinalRows(f, bid[ok], bst[ok], bfill[ok]))
+            ok = _assoc_kernels.confirmed(self._ids, self._length, ended_ids, ended_len, bid,
+                                          int(p.min_length))   # (self._confirmed_ids)
+            finalised.append(_made(FinalRows, frame=f, ids=bid[ok], states=bst[ok],
+                                   filled=bfill[ok]))
 
-        return AssocResult(frame=frame, states=new, ids=ids, lengths=lengths, confirmed=confirmed,
-                           ended=ended_ids, finalised=tuple(finalised), relinked=relinked,
-                           **edge_arrays)
+        return _made(AssocResult, frame=frame, states=new, ids=ids, lengths=lengths,
+                     confirmed=confirmed, ended=ended_ids, finalised=tuple(finalised),
+                     relinked=relinked, **edge_arrays)
 
     def _remember_lost(self, expired: np.ndarray) -> None:
         """Keep the expiring confirmed tracks re-linkable (``relink_depth``)."""

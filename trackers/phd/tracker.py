@@ -262,9 +262,10 @@ def frame_rate(frame: Frame) -> Optional[float]:
 
 
 def _rows(finalised: tuple[FinalRows, ...], flagged: bool) -> Rows:
+    # (the association's arrays are in TrackSet's final form already: int64 ids, float64 boxes)
     if not flagged:
-        return [(r.frame, TrackSet(r.ids, r.boxes)) for r in finalised]
-    return [(r.frame, TrackSet(r.ids, r.boxes, np.where(r.filled, GAP_CONF, EST_CONF)))
+        return [(r.frame, TrackSet.of(r.ids, r.boxes)) for r in finalised]
+    return [(r.frame, TrackSet.of(r.ids, r.boxes, np.where(r.filled, GAP_CONF, EST_CONF)))
             for r in finalised]
 
 
@@ -324,7 +325,7 @@ class _AssociatingTracker:
                                    edges=log.wants("clusters"))
         self._report_association(frame, res, log)
         keep = res.confirmed
-        return StepResult(TrackSet(res.ids[keep], boxes_xywh(res.states[keep])),
+        return StepResult(TrackSet.of(res.ids[keep], boxes_xywh(res.states[keep])),
                           _rows(res.finalised, self._flagged), log.result())
 
     def _report_association(self, frame: Frame, res: AssocResult, log: StageLog) -> None:
