@@ -828,7 +828,7 @@ def test_frame_edges_kernel_is_the_numpy_spelling():
                             rng.uniform(3, 60, M))])
         v, b, c = tail_velocity(tails, prev, np.where(pf >= 0, tf - pf, 0), p)
         sc = score_edges(tails, v, b, c, frame - tf, new, p)
-        gain, d2, weight, floor, w0, n_ok = AK.frame_edges(
+        gain, d2, weight, floor, w0, n_ok, one = AK.frame_edges(
             tails, prev, tf, pf, frame, np.ascontiguousarray(new[:, OBS_INDEX]),
             *p.kernel_args, float(p.speed_prior))
         for got, want in ((gain, sc.gain), (d2, sc.d2), (weight, sc.weight), (floor, sc.floor)):
@@ -838,9 +838,51 @@ def test_frame_edges_kernel_is_the_numpy_spelling():
         assert n_ok == ok.sum()
         if T > 1:
             assert 0 < n_ok < T * M            # both kinds of pairs are compared
-        for got, want in zip(_match_admissible(w0, n_ok),
+        for got, want in zip(_match_admissible(w0, n_ok, one),
                              max_weight_matching(sc.weight, sc.allowed)):
             np.testing.assert_array_equal(got, want)
+
+
+def test_frame_edges_one_edge_each_matches_without_the_solver():
+    """frame_edges' ``one`` (no tail, no vertex with two admissible edges) is exactly that,
+    and the matching it allows (every admissible edge, in row order, no assignment solver)
+    is max_weight_matching's, dtypes included -- on scenes of separated targets (one edge
+    each, some tails and vertices without any) and of crowded ones (shared edges)."""
+    from pfscope.trackers.phd import _assoc_kernels as AK
+    from pfscope.trackers.phd.association import OBS_INDEX, _match_admissible
+
+    rng = np.random.default_rng(8)
+    p = AssocParams(depth=30)
+    seen = set()
+    for n in range(300):
+        T = int(rng.integers(1, 8))
+        spread = 60.0 if n % 2 else 1000.0        # crowded / separated
+        tails = np.array([state(x, y, 20.0, 50.0, vx, vy) for x, y, vx, vy in
+                          zip(*rng.uniform(0, spread, (2, T)), *rng.normal(0, 1, (2, T)))])
+        prev = tails.copy()
+        prev[:, :2] -= tails[:, 2:4]
+        tf = np.full(T, 40, np.int64)
+        pf = np.full(T, 39, np.int64)
+        pick = rng.permutation(T)[:int(rng.integers(0, T + 1))]
+        new = tails[pick].copy()
+        new[:, :2] += tails[pick, 2:4] + rng.normal(0, 1.0, (len(pick), 2))
+        clutter = [state(x, y, 20.0, 50.0) for x, y in
+                   rng.uniform(0, spread, (int(rng.integers(0, 3)), 2))]
+        new = np.concatenate([new.reshape(-1, 6), np.array(clutter).reshape(-1, 6)])
+        if not len(new):
+            continue
+        gain, d2, weight, floor, w0, n_ok, one = AK.frame_edges(
+            tails, prev, tf, pf, 41, np.ascontiguousarray(new[:, OBS_INDEX]),
+            *p.kernel_args, float(p.speed_prior))
+        ok = w0 > 0
+        assert one == (ok.sum(axis=1).max() <= 1 and ok.sum(axis=0).max() <= 1)
+        got = _match_admissible(w0, n_ok, one)
+        want = max_weight_matching(weight, d2 <= p.gate_d2)
+        for g, w in zip(got, want):
+            np.testing.assert_array_equal(g, w)
+            assert g.dtype == w.dtype == np.int64
+        seen.add((bool(one), n_ok > 0, n_ok < T))
+    assert {(True, True, True), (False, True, True)} <= seen, seen
 
 
 def _returning_numpy(a: GraphAssociator, frame: int, Z: np.ndarray) -> np.ndarray:
@@ -997,6 +1039,43 @@ def test_confirmed_rows_kernel_is_the_numpy_spelling():
     dup._ids, dup._length = np.array([3, 7]), np.array([9, 1])
     assert dup._confirmed_ids(np.array([7, 3, 5]), np.array([7, 5]),
                               np.array([9, 9])).tolist() == [False, True, True]
+
+
+def test_fill_rows_kernel_is_the_numpy_spelling():
+    """Gap filling's rows of one buffered frame (one kernel pass): the frame's arrays with the
+    kept gap rows that no estimate of the frame covers appended, flagged filled -- as the
+    mask + uncovered + np.concatenate spelling, dtypes included; nothing added leaves them."""
+    from pfscope.trackers.phd import _assoc_kernels as AK
+
+    rng = np.random.default_rng(9)
+    seen = set()
+    for _ in range(300):
+        R, B = int(rng.integers(1, 6)), int(rng.integers(0, 5))
+        box = lambda n: np.column_stack([rng.uniform(0, 100, (n, 2)),
+                                         rng.uniform(10, 30, (n, 2))])
+        st = np.array([state(*b) for b in box(R)]).reshape(-1, 6)
+        fid = rng.integers(1, 50, R).astype(np.int64)
+        bst = np.array([state(*b) for b in box(B)]).reshape(-1, 6)
+        bid = rng.integers(1, 50, B).astype(np.int64)
+        bfill = rng.random(B) < 0.4
+        lo = int(rng.integers(0, R))
+        hi = int(rng.integers(lo + 1, R + 1))
+        keep = rng.random(R) < 0.7 if rng.random() < 0.5 else np.zeros(0, dtype=bool)
+        sel = np.arange(lo, hi)
+        if len(keep):
+            sel = sel[keep[lo:hi]]
+        rows, rid = st[sel], fid[sel]
+        free = AK.uncovered(rows, bst, bfill, 0.3)
+        rows, rid = rows[free], rid[free]
+        nbid, nbst, nbfill, n = AK.fill_rows(bid, bst, bfill, st, fid, lo, hi, keep, 0.3)
+        assert n == len(rows)
+        for got, want in ((nbid, np.concatenate([bid, rid])), (nbst, np.concatenate([bst, rows])),
+                          (nbfill, np.concatenate([bfill, np.ones(len(rows), dtype=bool)]))):
+            np.testing.assert_array_equal(got, want)
+            assert got.dtype == want.dtype
+        seen.add((n > 0, n < hi - lo, len(keep) > 0))
+    assert {(True, True, True), (True, True, False), (False, True, True),
+            (True, False, False)} <= seen, seen
 
 
 def test_uncovered_kernel_is_the_numpy_spelling():

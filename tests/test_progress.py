@@ -365,10 +365,10 @@ def test_first_run_compiles_each_kernel_once_in_one_process(tmp_path):
     # rings)
     assert sorted(top) == ["_fit_kernel", "_gate_sums_cells", "_link", "_robust_stds",
                            "_triplets", "advance", "check_states",
-                           "confirmed", "edge_scores", "frame_edges", "gap_rows", "head_pick",
+                           "confirmed", "edge_scores", "fill_rows", "frame_edges", "gap_rows", "head_pick",
                            "lloyd", "mass_near_kernel", "mass_near_skip", "prepare",
                            "revive_hits",
-                           "split_clusters", "uncovered"], top
+                           "split_clusters"], top
 
 
 def test_early_helper_only_for_the_phd_kernels(monkeypatch):

@@ -192,7 +192,9 @@ def frame_edges(tail, prev, tail_frame, prev_frame, frame, z, depth, gate_d2, sv
     taken in the same pass: ``tail``/``prev`` (T, 6), ``tail_frame``/``prev_frame`` (T,)
     int64 (``prev_frame`` −1: one vertex).  Returns ``gain, d2, weight`` (T, M), ``floor``
     (T,), ``w0`` (T, M): the weight where the edge is worth matching (inside the gate, finite
-    and positive: :func:`.association.max_weight_matching`), else 0.0, and how many are."""
+    and positive: :func:`.association.max_weight_matching`), else 0.0, how many are, and
+    ``one``: no tail and no vertex has more than one such edge (then the maximum-weight
+    matching takes every one of them: :func:`.association._match_admissible`)."""
     T = tail.shape[0]
     M = z.shape[0]
     gain = np.empty((T, M), np.float64)
@@ -204,6 +206,10 @@ def frame_edges(tail, prev, tail_frame, prev_frame, frame, z, depth, gate_d2, sv
     lg = np.empty(4, np.float64)
     vbc = np.empty((3, 2), np.float64)
     n_ok = 0
+    one = True
+    col = np.empty(M, np.bool_)     # the vertex has an admissible edge (np.empty + a fill)
+    for j in range(M):
+        col[j] = False
     for t in range(T):
         d = tail_frame[t] - prev_frame[t] if prev_frame[t] >= 0 else 0
         _vbc(tail, prev, t, d, so, so_min, ratio, speed_prior, vbc)
@@ -211,14 +217,19 @@ def frame_edges(tail, prev, tail_frame, prev_frame, frame, z, depth, gate_d2, sv
                       vbc[2, 1], float(frame - tail_frame[t]), z, depth, gate_d2, sv, ss, so,
                       so_min, ratio, cc, cc2, two_pi, var, lg, gain, d2, weight)
         floor[t] = f
+        row = False
         for j in range(M):
             w = weight[t, j]
             if d2[t, j] <= gate_d2 and w - w == 0.0 and w > 0.0:
                 w0[t, j] = w
                 n_ok += 1
+                if row or col[j]:
+                    one = False
+                row = True
+                col[j] = True
             else:
                 w0[t, j] = 0.0
-    return gain, d2, weight, floor, w0, n_ok
+    return gain, d2, weight, floor, w0, n_ok, one
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
@@ -433,3 +444,37 @@ def uncovered(rows, bst, bfill, fill_overlap):
                 m = u
         out[i] = not seen or (not nan and m < fill_overlap)
     return out
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def fill_rows(bid, bst, bfill, st, fid, lo, hi, keep, fill_overlap):
+    """One buffered frame's rows -- ``bid`` (B,) int64 ids, ``bst`` (B, 6), ``bfill`` (B,) --
+    with the gap rows ``st[lo:hi]`` (ids ``fid[lo:hi]``) appended that are kept (``keep[i]``;
+    an empty ``keep``: all) and :func:`uncovered` (no estimate of the frame overlaps them by
+    ``fill_overlap``), flagged filled: the three arrays (np.concatenate's values) and how
+    many rows were added (0: the frame's rows stay as they are)."""
+    free = uncovered(st[lo:hi], bst, bfill, fill_overlap)
+    n = 0
+    for i in range(lo, hi):
+        if not (keep.shape[0] == 0 or keep[i]):
+            free[i - lo] = False
+        elif free[i - lo]:
+            n += 1
+    B = bid.shape[0]
+    nbid = np.empty(B + n, np.int64)
+    nbst = np.empty((B + n, bst.shape[1]), np.float64)
+    nbfill = np.empty(B + n, np.bool_)
+    for b in range(B):
+        nbid[b] = bid[b]
+        for c in range(bst.shape[1]):
+            nbst[b, c] = bst[b, c]
+        nbfill[b] = bfill[b]
+    o = B
+    for i in range(lo, hi):
+        if free[i - lo]:
+            nbid[o] = fid[i]
+            for c in range(bst.shape[1]):
+                nbst[o, c] = st[i, c]
+            nbfill[o] = True
+            o += 1
+    return nbid, nbst, nbfill, n

@@ -146,6 +146,8 @@ def _empty(shape, dtype=np.float64) -> np.ndarray:
 _TRUE1 = np.ones(1, dtype=bool)
 #: no (new id, old id) pairs (read-only: the result of every frame that re-links nothing)
 _NO_PAIRS = np.zeros((0, 2), dtype=np.int64)
+#: an empty mask (fill_rows: keep every row)
+_NO_BOOL = np.zeros(0, dtype=bool)
 _NO_PAIRS.flags.writeable = False
 
 
@@ -513,11 +515,19 @@ def max_weight_matching(weights: np.ndarray, allowed: np.ndarray) -> tuple[np.nd
     return rows[keep].astype(np.int64), cols[keep].astype(np.int64)
 
 
-def _match_admissible(w0: np.ndarray, n_ok: int) -> tuple[np.ndarray, np.ndarray]:
+def _match_admissible(w0: np.ndarray, n_ok: int,
+                      one: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """:func:`max_weight_matching` of weights already zero outside the admissible edges (and
-    positive on them: :func:`._assoc_kernels.frame_edges`' ``w0``, ``n_ok`` of them)."""
+    positive on them: :func:`._assoc_kernels.frame_edges`' ``w0``, ``n_ok`` of them).
+    ``one``: no row and no column holds more than one admissible edge (frame_edges' ``one``,
+    the usual frame of separated targets): every matching may then take all of them and the
+    maximum-weight one does (leaving one out loses its positive weight), so they are the
+    answer, in row order as the assignment's -- without the assignment solver."""
     if not n_ok:
         return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    if one:
+        rows, cols = np.nonzero(w0)
+        return rows.astype(np.int64, copy=False), cols.astype(np.int64, copy=False)
     rows, cols = _lsa()(w0, maximize=True)
     keep = w0[rows, cols] > 0.0
     if _all(keep):      # (every pair the assignment made is an edge: nothing to drop)
@@ -940,7 +950,7 @@ class GraphAssociator:
             if T * M <= DENSE_MAX_PAIRS:
                 # tail_velocity, score_edges and the matching's admissible weights in one
                 # kernel pass (the same floats)
-                gain, d2, weight, floor, w0, n_ok = _assoc_kernels.frame_edges(
+                gain, d2, weight, floor, w0, n_ok, one = _assoc_kernels.frame_edges(
                     self._tail, self._prev, self._tail_frame, self._prev_frame, frame,
                     new.take(OBS_INDEX, axis=1), *p.kernel_args,   # (a C copy: ~1/3 of [:, idx])
                     float(p.speed_prior))
@@ -953,7 +963,7 @@ class GraphAssociator:
                     sc = replace(sc, weight=sc.weight + p.app_weight * llr)
                     rows, cols = max_weight_matching(sc.weight, sc.allowed)
                 else:
-                    rows, cols = _match_admissible(w0, n_ok)
+                    rows, cols = _match_admissible(w0, n_ok, one)
             else:   # a storm of estimates: the gated pairs only (DENSE_MAX_PAIRS)
                 v, b, c = tail_velocity(
                     self._tail, self._prev,
@@ -1274,27 +1284,21 @@ class GraphAssociator:
                 run = np.searchsorted(fi, np.arange(len(fs) + 1)).tolist()
         fid = ids[ei]
         keep = self._likely_rows(fs, run, st, likely) if self.params.fill_err > 0 else None
-        if keep is not None and _all(keep):
-            keep = None     # (every row kept: no masks a frame)
+        if keep is None or _all(keep):
+            keep = _NO_BOOL     # (every row kept: no mask)
+        thr = float(self.params.fill_overlap)
         for k, n in enumerate(at):
-            if run[k] == run[k + 1]:
+            lo, hi = run[k], run[k + 1]
+            if lo == hi:
                 continue
-            r = slice(run[k], run[k + 1])
-            rows, rid = st[r], fid[r]
-            if keep is not None:
-                rows, rid = rows[keep[r]], rid[keep[r]]
-                if not len(rows):
-                    continue
             f, bid, bst, bfill = self._buffer[n]
-            # a box another track's estimate already covers is not filled (the gap is then
-            # the other track's frame: filling it would report one target twice)
-            free = _assoc_kernels.uncovered(rows, bst, bfill, float(self.params.fill_overlap))
-            if not _all(free):
-                rows, rid = rows[free], rid[free]
-                if not len(rows):
-                    continue
-            self._buffer[n] = (f, np.concatenate([bid, rid]), np.concatenate([bst, rows]),
-                               np.concatenate([bfill, np.ones(len(rows), dtype=bool)]))
+            # the kept rows that no other track's estimate already covers (the gap is then
+            # the other track's frame: filling it would report one target twice), appended
+            # in one kernel pass
+            bid, bst, bfill, added = _assoc_kernels.fill_rows(bid, bst, bfill, st, fid, lo, hi,
+                                                               keep, thr)
+            if added:
+                self._buffer[n] = (f, bid, bst, bfill)
 
     def _buffer_frames(self) -> np.ndarray:
         """(B,) int64 frames of the held-back rows (strictly increasing): an arange when they
