@@ -273,11 +273,13 @@ def revive_hits(tail, prev, tail_frame, prev_frame, first_frame, length, frame, 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
 def advance(live_ids, tail, tail_frame, prev, prev_frame, length, new, rows, cols, frame,
-            next_id):
+            next_id, min_length):
     """The matching's outcome in place (:meth:`.association.GraphAssociator.step`, step 3):
     each matched tail ``rows[p]`` moves to ``prev``, takes the new vertex ``cols[p]`` at
     ``frame`` and one more vertex; returns ``ids`` (M,) -- the matched vertices their tail's
-    track id, the others new ids from ``next_id`` in input order -- and ``matched`` (M,)."""
+    track id, the others new ids from ``next_id`` in input order -- ``matched`` (M,), and
+    ``unseen``: some tail of at least ``min_length`` vertices has none at ``frame`` (else no
+    track can be a returning one at the next frame: :func:`revive_hits` would find none)."""
     M = new.shape[0]
     ids = np.empty(M, np.int64)
     matched = np.empty(M, np.bool_)
@@ -300,7 +302,12 @@ def advance(live_ids, tail, tail_frame, prev, prev_frame, length, new, rows, col
         if not matched[j]:
             ids[j] = n
             n += 1
-    return ids, matched
+    unseen = False
+    for t in range(tail.shape[0]):
+        if length[t] >= min_length and tail_frame[t] < frame:
+            unseen = True
+            break
+    return ids, matched, unseen
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)

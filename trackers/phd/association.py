@@ -795,6 +795,10 @@ class GraphAssociator:
         #: the camera's image motion (frame → 2×3 similarity from the frame before,
         #: :mod:`.camera_motion`) of the recent frames where the camera moved (follow_camera)
         self._cams: dict[int, np.ndarray] = {}
+        #: after a step: (some track of at least min_length vertices had no estimate in it,
+        #: that min_length); (False, n) with min_length still >= n: no track can be a
+        #: returning one at the next frame, and returning looks no further
+        self._unseen = (True, 0)
 
     # ---- introspection
     @property
@@ -979,9 +983,10 @@ class GraphAssociator:
 
         # 3. matched vertices continue their track; the others start new tracks (input order)
         # (one kernel pass over the matched pairs, in place)
-        ids, matched = _assoc_kernels.advance(self._ids, self._tail, self._tail_frame,
-                                              self._prev, self._prev_frame, self._length, new,
-                                              rows, cols, frame, self._next_id)
+        ids, matched, unseen = _assoc_kernels.advance(
+            self._ids, self._tail, self._tail_frame, self._prev, self._prev_frame, self._length,
+            new, rows, cols, frame, self._next_id, int(p.min_length))
+        self._unseen = (unseen, p.min_length)
         n_new = M - len(rows)
         self._next_id += n_new
         if n_new:   # (most frames of a steady scene start no track: nothing to append)
@@ -1174,7 +1179,8 @@ class GraphAssociator:
         missed, not clutter that fires now and then in one place)."""
         p = self.params
         Z = np.ascontiguousarray(np.asarray(Z, dtype=np.float64).reshape(-1, 4))
-        if not len(self._ids) or not len(Z):
+        unseen, at_length = self._unseen
+        if not len(self._ids) or not len(Z) or (not unseen and p.min_length >= at_length):
             return np.zeros(len(Z), dtype=bool)
         # the lost-track test, tail_velocity and score_edges' gate in one kernel pass (the
         # same floats): most frames have no such track, and numpy spent ~20 small calls
