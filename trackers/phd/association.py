@@ -648,6 +648,7 @@ def compile_step_kernels(params: AssocParams | None = None) -> None:
     a.step(1, s[:0], detections=z, edges=False)   # a detection before the track's first
     for k in (2, 3):
         a.step(k, s, detections=z, edges=False)
+    a._unseen = (True, 0)     # (the revive kernel itself: the flag would skip it here)
     a.returning(4, z)
     a.step(4, s[:0], detections=z, edges=False)
     # a gap of one frame, filled; the track confirmed, its head extended back to frame 1
