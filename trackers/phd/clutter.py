@@ -285,6 +285,7 @@ def _memory_step(mem_z, mem_s, mem_w, mem_e, mem_S, Z, Z_s, share, fade, min_w, 
     ok = mem_S.shape[0] == n_old and (dropped + k_new) * k_old + k_new * keep <= budget
     if not ok:
         return z, s, w, e, S, 0.0, False
+    R = np.sqrt(r2) * (1.0 + GATE_MARGIN)
     drop = np.empty(dropped, np.int64)      # the dropped entries, once (in index order)
     d = 0
     for q in range(n_old):
@@ -296,16 +297,16 @@ def _memory_step(mem_z, mem_s, mem_w, mem_e, mem_S, Z, Z_s, share, fade, min_w, 
         acc = mem_S[i] * fade
         for t in range(dropped):
             q = drop[t]
-            if _in_gate(mem_z, q, mem_z, i, mem_s, r2):
+            if _in_gate_early(mem_z, q, mem_z, i, mem_s, r2, R):
                 acc -= mem_w[q] * fade
         for q in range(k_old, keep):
-            if _in_gate(z, q, z, k, s, r2):
+            if _in_gate_early(z, q, z, k, s, r2, R):
                 acc += w[q]
         S[k] = acc
     for k in range(k_old, keep):
         acc = 0.0
         for q in range(keep):
-            if _in_gate(z, q, z, k, s, r2):
+            if _in_gate_early(z, q, z, k, s, r2, R):
                 acc += w[q]
         S[k] = acc
     return z, s, w, e, S, _exposure_sum(w, S), True
@@ -648,6 +649,31 @@ def _in_gate(P, q, Z, j, std, r2):
     """Whether point ``P[q]`` is inside detection ``Z[j]``'s gate ``d² <= r2`` of the stds
     ``std[j]``: gating._gate_sums' distance, term by term."""
     d0 = (P[q, 0] - Z[j, 0]) / std[j, 0]
+    d1 = (P[q, 1] - Z[j, 1]) / std[j, 1]
+    d2 = (P[q, 2] - Z[j, 2]) / std[j, 2]
+    d3 = (P[q, 3] - Z[j, 3]) / std[j, 3]
+    return d0 * d0 + d1 * d1 + d2 * d2 + d3 * d3 <= r2
+
+
+#: :func:`_in_gate_early`'s first-coordinate bound is ``σ · √r² · (1 + GATE_MARGIN)``: wide
+#: enough that a pair beyond it is out of the gate under any rounding of the exact test
+GATE_MARGIN = 1e-9
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def _in_gate_early(P, q, Z, j, std, r2, R):
+    """:func:`_in_gate`, out at once when the first coordinates alone are farther apart than
+    ``std[j, 0] · R`` (``R = √r2 · (1 + GATE_MARGIN)``: most pairs of the place memory are
+    far apart): the same answer, as then ``d0²`` exceeds r2 by ~2·GATE_MARGIN, far above
+    its rounding, and a float sum of non-negative terms is never below any of them
+    (rounding is monotone).  A subtraction and a product instead of four divisions for a
+    far pair; a bound below 1e-300 (denormal stds, never from obs_std's floor) or NaN
+    rejects nothing (the exact test decides)."""
+    dx = P[q, 0] - Z[j, 0]
+    lim = std[j, 0] * R
+    if abs(dx) > lim and lim > 1e-300:
+        return False
+    d0 = dx / std[j, 0]
     d1 = (P[q, 1] - Z[j, 1]) / std[j, 1]
     d2 = (P[q, 2] - Z[j, 2]) / std[j, 2]
     d3 = (P[q, 3] - Z[j, 3]) / std[j, 3]
