@@ -577,3 +577,37 @@ def test_in_gate_early_out_is_the_full_test():
             assert _in_gate_early(P, q, Z, 0, std, r2, R) == want, (P[q], s)
             hits += want
     assert 0 < hits < len(P) * len(stds)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_duplicate_learn_brute_pass_is_the_grid_pass(seed, monkeypatch):
+    """DuplicateBoxes.learn on few detections (one kernel call testing every pair) learns the
+    very q / sums of the gate_sums pass it stands for (forced here by a zero brute bound):
+    people side by side, second boxes, detections far apart, won on both sides of ½ and
+    outside [0, 1]."""
+    from pfscope.trackers.phd import clutter as C
+    from pfscope.trackers.phd.filter import obs_std
+
+    cl = ClutterParams(clutter_model="learn")
+    runs = {}
+    for brute in (True, False):
+        if not brute:
+            monkeypatch.setattr(C, "BRUTE_PAIRS", 0)
+        r = np.random.default_rng(seed)
+        d = C.DuplicateBoxes(cl, LK)
+        qs = []
+        for _ in range(30):
+            n = int(r.integers(2, 20))
+            base = r.uniform(0, 300, (n, 2))
+            Z = np.c_[base, r.uniform(20, 40, (n, 1)), r.uniform(50, 90, (n, 1))]
+            pairs = r.random(n) < 0.4
+            Z[pairs, :2] = Z[np.roll(np.arange(n), 1)[pairs], :2] \
+                + r.normal(0, 3, (int(pairs.sum()), 2))
+            std = obs_std(Z[:, 2:4], LK) * C.NEAR_SCALE
+            d.counts(Z, std)
+            won = r.uniform(-0.1, 1.1, n)
+            d.learn(won, 0.05)
+            qs.append((d.q, d.num, d.den))
+        runs[brute] = qs
+    assert runs[True] == runs[False]
+    assert len({q for q, _, _ in runs[True]}) > 10

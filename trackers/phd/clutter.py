@@ -66,7 +66,7 @@ import numpy as np
 from numba import njit
 
 from .camera_motion import _pairwise
-from .gating import gate_sums
+from .gating import BRUTE_PAIRS, gate_sums
 
 if TYPE_CHECKING:  # pragma: no cover
     from .filter import ClutterParams, LikelihoodParams
@@ -463,9 +463,16 @@ class DuplicateBoxes:
             # the sums count 0s and 1s (exact), z's own term taken off again
             lost = np.empty(len(won))
             tmp = np.empty((2, len(won)))
-            _lost(won, lost)
-            num, den = _dup_sums(won, lost, gate_sums(Z, Z, r2, std, lost, ordered=False)[0], n,
-                                 tmp)
+            if len(won) * len(won) < BRUTE_PAIRS:
+                # few detections: gate_sums' brute pass (every pair, the same test) in the
+                # same kernel call as the rest
+                f = np.ascontiguousarray
+                num, den = _dup_sums_brute(won, f(Z, dtype=np.float64),
+                                           f(std, dtype=np.float64), float(r2), n, lost, tmp)
+            else:
+                _lost(won, lost)
+                num, den = _dup_sums(won, lost,
+                                     gate_sums(Z, Z, r2, std, lost, ordered=False)[0], n, tmp)
         self.num = (1 - a) * self.num + a * num
         self.den = (1 - a) * self.den + a * den
         self.q = em_rate(self.num, self.den, self.cl.duplicate_prior, a)
@@ -495,6 +502,23 @@ def _dup_sums(won, lost, near_lost, n, tmp):
         tmp[0, j] = w * (1.0 if near_lost[j] - lost[j] > 0 else 0.0)
         tmp[1, j] = w * (1.0 if n[j] > 0 else 0.0)
     return _pairwise(tmp[0], m), _pairwise(tmp[1], m)
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def _dup_sums_brute(won, Z, std, r2, n, lost, tmp):
+    """:func:`_lost`, the lost count in each detection's gate (``gate_sums(Z, Z, r2, std,
+    lost, ordered=False)``'s brute pass: every pair, the same test; sums of 0s and 1s, exact
+    in any order) and :func:`_dup_sums`, in one call."""
+    _lost(won, lost)
+    m = won.shape[0]
+    near_lost = np.empty(m)
+    for j in range(m):
+        s = 0.0
+        for q in range(m):
+            if _in_gate(Z, q, Z, j, std, r2):
+                s += lost[q]
+        near_lost[j] = s
+    return _dup_sums(won, lost, near_lost, n, tmp)
 
 
 def _log_v(Z: np.ndarray, cl: "ClutterParams", lk: "LikelihoodParams",
