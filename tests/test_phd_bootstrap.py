@@ -126,28 +126,3 @@ def test_chain_lengths():
     assert ch.length.tolist() == [0]
     ch.observe(box + [200.0, 0, 0, 0])           # 5 widths away: no link
     assert ch.length.tolist() == [0]
-
-
-@pytest.mark.parametrize("seed", SEEDS[:3])
-def test_update_kappa_is_kappa_minus_the_score_ratio(seed):
-    """SceneModel.log_kappa's update κ (one kernel call for the ratio's clip and the
-    subtraction) is the κ without scores minus log_score_ratio, float for float, frame after
-    frame of the learnt scene (the ratio clipped at both ends, a NaN score, and before the
-    fit separates the classes: no ratio)."""
-    import copy
-
-    sm = SceneModel(PHDParams.of(score_model="gaussian", persist_frames=2, max_log_ratio=2.0))
-    clipped = 0
-    for k, (Z, s, person) in enumerate(_frames(seed, 1.0, True)):
-        seen = s
-        if k % 7 == 6:
-            seen = s.copy()
-            seen[0] = np.nan                        # (only here: the sums learn the scores)
-        ref = copy.deepcopy(sm)
-        birth, got = sm.log_kappa(Z, seen, None)
-        r = copy.deepcopy(ref).log_score_ratio(seen)
-        want = ref.log_kappa(Z, None, None)[1] - r
-        assert got.tobytes() == want.tobytes(), k
-        clipped += int((np.abs(r) == 2.0).sum())
-        sm.learn(s, 0.9 * person)
-    assert clipped > 10

@@ -676,14 +676,7 @@ class SceneModel:
             self._persist = self.chains.length >= self.sp.persist_frames
         birth = log_kappa if log_birth is None else log_birth
         if self.uses_scores and scores is not None and len(Z):
-            s, line = self._score_line(scores)
-            if line is None:
-                return birth, log_kappa - 0.0          # (a new array, as with a zero ratio)
-            # log κ − log_score_ratio in one kernel call (its clip and subtractions)
-            out = np.empty(len(s))
-            _minus_score_ratio(np.ascontiguousarray(log_kappa, dtype=np.float64), s, line[0],
-                               line[1], float(self.sp.max_log_ratio), out)
-            return birth, out
+            return birth, log_kappa - self.log_score_ratio(scores)
         return birth, log_kappa
 
     def _neighbours(self, Z: np.ndarray, std: Optional[np.ndarray] = None) -> float:
@@ -696,17 +689,7 @@ class SceneModel:
         """``log p(s|target) − log p(s|clutter)``, clipped to ±max_log_ratio: the fit on the
         mass, or the fit on persistence when that one separates the classes more
         (:class:`ScoreParams`)."""
-        s, line = self._score_line(scores)
-        if line is None:
-            return np.zeros(len(s))
-        slope, mid = line
-        c = self.sp.max_log_ratio
-        return np.clip(slope * (s - mid), -c, c)
-
-    def _score_line(self, scores: np.ndarray) -> tuple[np.ndarray, Optional[tuple]]:
-        """:meth:`log_score_ratio`'s scores as float64 and its line ``(slope, midpoint)``, None
-        while the scores carry no information (the sums started at the first scores)."""
-        s = np.ascontiguousarray(scores, dtype=np.float64)
+        s = np.asarray(scores, dtype=np.float64)
         if self.score_sums is None:
             mu, var = float(s.mean()), float(s.var())
             self.score_floor = max(1e-12, 1e-3 * var)
@@ -724,8 +707,10 @@ class SceneModel:
         # more likely target, the detector's convention); otherwise the scores carry no
         # information yet (e.g. no target seen) and the ratio is 1.
         if best is None:
-            return s, None
-        return s, (best[1], best[2])
+            return np.zeros(len(s))
+        _, slope, mid = best
+        c = self.sp.max_log_ratio
+        return np.clip(slope * (s - mid), -c, c)
 
     def _two_class_fit(self, S: np.ndarray) -> Optional[tuple[float, float, float]]:
         """Two Gaussians of one pooled within-class variance from the sums ``S`` (class ×
@@ -782,17 +767,6 @@ class SceneModel:
 
 
 _NO_PERSIST = np.zeros(0, dtype=np.bool_)
-
-
-@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
-def _minus_score_ratio(log_kappa, s, slope, mid, c, out):
-    """``out = log_kappa − np.clip(slope · (s − mid), −c, c)`` elementwise (the same
-    expressions: :meth:`SceneModel.log_score_ratio`; NaN stays NaN through the clip)."""
-    for j in range(s.shape[0]):
-        v = slope * (s[j] - mid)
-        v = -c if v < -c else v
-        v = c if v > c else v
-        out[j] = log_kappa[j] - v
 
 
 def _no_extent() -> np.ndarray:
