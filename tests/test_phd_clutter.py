@@ -543,3 +543,71 @@ def test_scene_density_and_score_sums_are_their_numpy_form(seed):
         want_p = 0.9 * psums + np.column_stack([q.sum(1), q @ s, q @ (s * s)])
         _score_sums(won, s, persist, True, 0.9, sums, psums)
         assert np.allclose(sums, want_s, rtol=1e-12) and np.allclose(psums, want_p, rtol=1e-12)
+
+
+def test_in_gate_early_out_is_the_full_test():
+    """The place memory's pair test with its early out on the first coordinate
+    (:func:`_in_gate_early`) answers as the full test (:func:`_in_gate`) on every pair: random
+    ones, pairs within a few ulps of the gate's edge along the first axis (where the bound's
+    margin must hold), and NaN, infinite and zero coordinates or stds."""
+    from pfscope.trackers.phd.clutter import GATE_MARGIN, _in_gate, _in_gate_early
+
+    rng = np.random.default_rng(7)
+    r2 = 13.276704135987622
+    R = math.sqrt(r2) * (1.0 + GATE_MARGIN)
+    rows = [rng.normal(0, 4, 4) for _ in range(300)]
+    for s in (0.3, 1.0, 7.5, 1e-3, 1e6):
+        edge = s * math.sqrt(r2)
+        for k in range(-6, 7):
+            for x in (edge, np.nextafter(edge, 0.0), np.nextafter(edge, np.inf)):
+                rows.append(np.array([x * (1 + k * 2.0 ** -52), 0.0, 0.0, 0.0]))
+                rows.append(np.array([-x * (1 + k * 2.0 ** -52), 1e-9, 0.0, -1e-9]))
+    rows += [np.array(v) for v in ([np.nan, 0, 0, 0], [0, np.nan, 0, 0], [np.inf, 0, 0, 0],
+                                   [100.0, np.nan, 0, 0], [0, 0, 0, np.inf], [0, 0, 0, 0])]
+    P = np.array(rows)
+    stds = [np.full(4, s) for s in (0.3, 1.0, 7.5, 1e-3, 1e6)] + [
+        rng.uniform(0.2, 3, 4), np.array([0.0, 1.0, 1.0, 1.0]), np.array([np.nan, 1, 1, 1]),
+        np.array([np.inf, 1, 1, 1]), np.array([1.0, 0.0, 1.0, 1.0])]
+    Z = np.zeros((1, 4))
+    hits = 0
+    for s in stds:
+        std = s.reshape(1, 4)
+        for q in range(len(P)):
+            want = _in_gate(P, q, Z, 0, std, r2)
+            assert _in_gate_early(P, q, Z, 0, std, r2, R) == want, (P[q], s)
+            hits += want
+    assert 0 < hits < len(P) * len(stds)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_duplicate_learn_brute_pass_is_the_grid_pass(seed, monkeypatch):
+    """DuplicateBoxes.learn on few detections (one kernel call testing every pair) learns the
+    very q / sums of the gate_sums pass it stands for (forced here by a zero brute bound):
+    people side by side, second boxes, detections far apart, won on both sides of ½ and
+    outside [0, 1]."""
+    from pfscope.trackers.phd import clutter as C
+    from pfscope.trackers.phd.filter import obs_std
+
+    cl = ClutterParams(clutter_model="learn")
+    runs = {}
+    for brute in (True, False):
+        if not brute:
+            monkeypatch.setattr(C, "BRUTE_PAIRS", 0)
+        r = np.random.default_rng(seed)
+        d = C.DuplicateBoxes(cl, LK)
+        qs = []
+        for _ in range(30):
+            n = int(r.integers(2, 20))
+            base = r.uniform(0, 300, (n, 2))
+            Z = np.c_[base, r.uniform(20, 40, (n, 1)), r.uniform(50, 90, (n, 1))]
+            pairs = r.random(n) < 0.4
+            Z[pairs, :2] = Z[np.roll(np.arange(n), 1)[pairs], :2] \
+                + r.normal(0, 3, (int(pairs.sum()), 2))
+            std = obs_std(Z[:, 2:4], LK) * C.NEAR_SCALE
+            d.counts(Z, std)
+            won = r.uniform(-0.1, 1.1, n)
+            d.learn(won, 0.05)
+            qs.append((d.q, d.num, d.den))
+        runs[brute] = qs
+    assert runs[True] == runs[False]
+    assert len({q for q, _, _ in runs[True]}) > 10

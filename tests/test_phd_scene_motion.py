@@ -313,3 +313,31 @@ def test_triplets_kernel_fills_the_rings_as_the_numpy_form(seed):
         assert new_a.n == old_a.n and new_s.n == old_s.n
         assert np.array_equal(new_a.rows(), old_a.rows())
         assert np.array_equal(new_s.rows(), old_s.rows())
+
+
+def test_ring_spreads_kept_sorted_are_robust_stds_of_the_window():
+    """A ring's robust spreads from its window's sorted copy, moved on as samples come in
+    (_Ring.spreads), are robust_stds of the window, float for float: few samples a frame,
+    many (sorted again), more than a window, ties (values in steps, as a detector's size
+    pyramid gives), and a non-finite sample (the numpy form, then the copy built again once it
+    has left the window)."""
+    from pfscope.trackers.phd import scene_motion as S
+
+    rng = np.random.default_rng(5)
+    ring = S._Ring(2)
+    seen_sorted = 0
+    for step in range(400):
+        m = int(rng.choice([1, 2, 3, 8, 13, S.RESORT + 1, 2 * S.WINDOW]))
+        cols = rng.standard_t(3, size=(2, m))
+        if step % 3 == 0:
+            cols = np.round(cols * 4) / 4         # ties
+        if step == 200:
+            cols[1, 0] = np.nan
+        ring.extend(cols)
+        got = ring.spreads()
+        want = S.robust_stds(ring.rows())
+        assert np.array_equal(got, want, equal_nan=True), step
+        seen_sorted += int(ring._state[0] >= 0)
+        if step == 200:
+            assert np.isnan(got[1]) and ring._state[0] == -1
+    assert seen_sorted > 300

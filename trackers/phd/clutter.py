@@ -66,7 +66,7 @@ import numpy as np
 from numba import njit
 
 from .camera_motion import _pairwise
-from .gating import gate_sums
+from .gating import BRUTE_PAIRS, gate_sums
 
 if TYPE_CHECKING:  # pragma: no cover
     from .filter import ClutterParams, LikelihoodParams
@@ -285,6 +285,7 @@ def _memory_step(mem_z, mem_s, mem_w, mem_e, mem_S, Z, Z_s, share, fade, min_w, 
     ok = mem_S.shape[0] == n_old and (dropped + k_new) * k_old + k_new * keep <= budget
     if not ok:
         return z, s, w, e, S, 0.0, False
+    R = np.sqrt(r2) * (1.0 + GATE_MARGIN)
     drop = np.empty(dropped, np.int64)      # the dropped entries, once (in index order)
     d = 0
     for q in range(n_old):
@@ -296,16 +297,16 @@ def _memory_step(mem_z, mem_s, mem_w, mem_e, mem_S, Z, Z_s, share, fade, min_w, 
         acc = mem_S[i] * fade
         for t in range(dropped):
             q = drop[t]
-            if _in_gate(mem_z, q, mem_z, i, mem_s, r2):
+            if _in_gate_early(mem_z, q, mem_z, i, mem_s, r2, R):
                 acc -= mem_w[q] * fade
         for q in range(k_old, keep):
-            if _in_gate(z, q, z, k, s, r2):
+            if _in_gate_early(z, q, z, k, s, r2, R):
                 acc += w[q]
         S[k] = acc
     for k in range(k_old, keep):
         acc = 0.0
         for q in range(keep):
-            if _in_gate(z, q, z, k, s, r2):
+            if _in_gate_early(z, q, z, k, s, r2, R):
                 acc += w[q]
         S[k] = acc
     return z, s, w, e, S, _exposure_sum(w, S), True
@@ -462,9 +463,16 @@ class DuplicateBoxes:
             # the sums count 0s and 1s (exact), z's own term taken off again
             lost = np.empty(len(won))
             tmp = np.empty((2, len(won)))
-            _lost(won, lost)
-            num, den = _dup_sums(won, lost, gate_sums(Z, Z, r2, std, lost, ordered=False)[0], n,
-                                 tmp)
+            if len(won) * len(won) < BRUTE_PAIRS:
+                # few detections: gate_sums' brute pass (every pair, the same test) in the
+                # same kernel call as the rest
+                f = np.ascontiguousarray
+                num, den = _dup_sums_brute(won, f(Z, dtype=np.float64),
+                                           f(std, dtype=np.float64), float(r2), n, lost, tmp)
+            else:
+                _lost(won, lost)
+                num, den = _dup_sums(won, lost,
+                                     gate_sums(Z, Z, r2, std, lost, ordered=False)[0], n, tmp)
         self.num = (1 - a) * self.num + a * num
         self.den = (1 - a) * self.den + a * den
         self.q = em_rate(self.num, self.den, self.cl.duplicate_prior, a)
@@ -494,6 +502,23 @@ def _dup_sums(won, lost, near_lost, n, tmp):
         tmp[0, j] = w * (1.0 if near_lost[j] - lost[j] > 0 else 0.0)
         tmp[1, j] = w * (1.0 if n[j] > 0 else 0.0)
     return _pairwise(tmp[0], m), _pairwise(tmp[1], m)
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def _dup_sums_brute(won, Z, std, r2, n, lost, tmp):
+    """:func:`_lost`, the lost count in each detection's gate (``gate_sums(Z, Z, r2, std,
+    lost, ordered=False)``'s brute pass: every pair, the same test; sums of 0s and 1s, exact
+    in any order) and :func:`_dup_sums`, in one call."""
+    _lost(won, lost)
+    m = won.shape[0]
+    near_lost = np.empty(m)
+    for j in range(m):
+        s = 0.0
+        for q in range(m):
+            if _in_gate(Z, q, Z, j, std, r2):
+                s += lost[q]
+        near_lost[j] = s
+    return _dup_sums(won, lost, near_lost, n, tmp)
 
 
 def _log_v(Z: np.ndarray, cl: "ClutterParams", lk: "LikelihoodParams",
@@ -648,6 +673,31 @@ def _in_gate(P, q, Z, j, std, r2):
     """Whether point ``P[q]`` is inside detection ``Z[j]``'s gate ``d² <= r2`` of the stds
     ``std[j]``: gating._gate_sums' distance, term by term."""
     d0 = (P[q, 0] - Z[j, 0]) / std[j, 0]
+    d1 = (P[q, 1] - Z[j, 1]) / std[j, 1]
+    d2 = (P[q, 2] - Z[j, 2]) / std[j, 2]
+    d3 = (P[q, 3] - Z[j, 3]) / std[j, 3]
+    return d0 * d0 + d1 * d1 + d2 * d2 + d3 * d3 <= r2
+
+
+#: :func:`_in_gate_early`'s first-coordinate bound is ``σ · √r² · (1 + GATE_MARGIN)``: wide
+#: enough that a pair beyond it is out of the gate under any rounding of the exact test
+GATE_MARGIN = 1e-9
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def _in_gate_early(P, q, Z, j, std, r2, R):
+    """:func:`_in_gate`, out at once when the first coordinates alone are farther apart than
+    ``std[j, 0] · R`` (``R = √r2 · (1 + GATE_MARGIN)``: most pairs of the place memory are
+    far apart): the same answer, as then ``d0²`` exceeds r2 by ~2·GATE_MARGIN, far above
+    its rounding, and a float sum of non-negative terms is never below any of them
+    (rounding is monotone).  A subtraction and a product instead of four divisions for a
+    far pair; a bound below 1e-300 (denormal stds, never from obs_std's floor) or NaN
+    rejects nothing (the exact test decides)."""
+    dx = P[q, 0] - Z[j, 0]
+    lim = std[j, 0] * R
+    if abs(dx) > lim and lim > 1e-300:
+        return False
+    d0 = dx / std[j, 0]
     d1 = (P[q, 1] - Z[j, 1]) / std[j, 1]
     d2 = (P[q, 2] - Z[j, 2]) / std[j, 2]
     d3 = (P[q, 3] - Z[j, 3]) / std[j, 3]

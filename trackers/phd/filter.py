@@ -625,8 +625,10 @@ class SceneModel:
                     n_near, n_dup = neighbour_counts(
                         Z, gate_threshold(self.cl.clutter_gate, OBS_DIM), std, std_wide)
                 a = 1.0 / min(self.frames + 5, self.cl.clutter_memory)
+                # (the counts' mean as np.mean's float: their sum is exact, one division)
                 self.near = (1 - a) * self.near + a * (
-                    self._neighbours(Z, std) if n_near is None else float(n_near.mean()))
+                    self._neighbours(Z, std) if n_near is None
+                    else int(n_near.sum()) / len(n_near))
             if self.extent is None and len(Z):
                 self.extent = _no_extent()
             # the size moments, the extent, log κ_u (with near_rate points spread as the 'gate'

@@ -157,50 +157,115 @@ def robust_stds(x: np.ndarray) -> np.ndarray:
     n = x.shape[1]
     if not n:
         return np.zeros(len(x))
+    lo, hi, t = _trim_at(n)
+    out = np.empty(len(x))
+    if _robust_stds(np.ascontiguousarray(x), n, n, _NO_SORTED, _NO_SORTED_AT, _NO_STATE,
+                    lo, hi, t, out):
+        return out
+    return _robust_stds_numpy(x, lo, hi, t)
+
+
+def _trim_at(n: int) -> tuple[int, int, float]:
+    """The ranks ``lo``, ``hi`` and the weight ``t`` of np.quantile's linear rule at
+    :data:`TRIM` over ``n`` >= 1 values."""
     pos = TRIM * (n - 1)
     lo = int(math.floor(pos))
-    hi = min(lo + 1, n - 1)
-    out = np.empty(len(x))
-    if _robust_stds(np.ascontiguousarray(x), lo, hi, pos - lo, out):
-        return out
+    return lo, min(lo + 1, n - 1), pos - lo
+
+
+def _robust_stds_numpy(x: np.ndarray, lo: int, hi: int, t: float) -> np.ndarray:
+    """:func:`robust_stds`' numpy form (non-finite input)."""
+    n = x.shape[1]
     a = np.abs(x)
     # np.quantile(a, TRIM) (its 'linear' rule) by a partial sort: a tenth of its time
     part = np.partition(a, (lo, hi), axis=1)
-    t, d = pos - lo, part[:, hi] - part[:, lo]
+    d = part[:, hi] - part[:, lo]
     q = part[:, hi] - d * (1.0 - t) if t >= 0.5 else part[:, lo] + d * t   # numpy's own lerp
     np.minimum(a, q[:, None], out=a)
     # np.mean's own steps (a sum along each row, then / n) without its wrapper
     return MEAN_ABS_TO_STD * (np.add.reduce(a, axis=1) / n)
 
 
+#: no sorted copy of the window (:func:`robust_stds`: select instead)
+_NO_SORTED = np.zeros((0, 0))
+_NO_SORTED_AT = np.zeros((0, 0), dtype=np.int64)
+_NO_STATE = np.zeros(1, dtype=np.int64)
+#: a ring's sorted copy takes more new samples than this by sorting its window again
+RESORT = WINDOW // 4
+
+
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
-def _robust_stds(x, lo, hi, t, out):
-    """:func:`robust_stds` into ``out`` (k,): per row, |x|'s ``lo``-th and ``hi``-th smallest
-    (by selection: the same values as np.partition's), numpy's lerp at ``t``, |x| winsorised
-    there and summed as numpy's add.reduce (:func:`.camera_motion._pairwise`).  False (``out``
-    partly written) on a non-finite value."""
-    n = x.shape[1]
-    a = np.empty(n)
-    tmp = np.empty(n)
-    for r in range(x.shape[0]):
-        for i in range(n):
-            v = abs(x[r, i])
+def _robust_stds(buf, total, width, srt, at, state, lo, hi, t, out):
+    """:func:`robust_stds` into ``out`` (k,): per row, |x|'s ``lo``-th and ``hi``-th smallest,
+    numpy's lerp at ``t``, |x| winsorised there and summed as numpy's add.reduce
+    (:func:`.camera_motion._pairwise`).  The rows are the window of a ring of ``width``
+    (:class:`_Ring`: the last ``min(total, width)`` of ``total`` samples, sample g at ``buf[:,
+    g % width]``, the window one slice); ``buf`` (k, n) of ``total = width = n`` is n samples.
+    The ranked values come from selection (the same values as np.partition's), or with
+    ``srt`` (k, width) from a sorted copy of |x| kept along the ring: ``srt`` the values,
+    ``at`` their samples, ``state[0]`` the samples it holds (−1: none), moved on by dropping
+    the samples that left the window and inserting the new ones (a sorted array's ranks are
+    the selected values), sorted again after more than :data:`RESORT` new ones.  False
+    (``out`` partly written, the sorted copy dropped) on a non-finite value."""
+    m = total if total < width else width
+    start = total - m
+    off = start % width if total > width else 0
+    keep = srt.shape[1] == width
+    prev = state[0] if keep else -1
+    if keep:
+        state[0] = -1
+    resort = not (0 <= prev <= total and total - prev <= RESORT)
+    a = np.empty(m)
+    tmp = np.empty(m)
+    for r in range(buf.shape[0]):
+        for i in range(m):
+            v = abs(buf[r, off + i])
             if not math.isfinite(v):
                 return False
             a[i] = v
-            tmp[i] = v
-        v_lo = kth(tmp, lo)
-        v_hi = v_lo
-        if hi > lo:
-            # kth left every later element >= a[lo]: the next one is their minimum
-            v_hi = tmp[lo + 1]
-            for i in range(lo + 2, n):
-                v_hi = tmp[i] if tmp[i] < v_hi else v_hi
+        if keep:
+            if resort:
+                order = np.argsort(a, kind="mergesort")
+                for i in range(m):
+                    srt[r, i] = a[order[i]]
+                    at[r, i] = start + order[i]
+            else:
+                # the samples that left the window out, then the new ones in (after equals)
+                k = 0
+                for i in range(prev if prev < width else width):
+                    if at[r, i] >= start:
+                        srt[r, k] = srt[r, i]
+                        at[r, k] = at[r, i]
+                        k += 1
+                for g in range(prev if prev > start else start, total):
+                    v = a[g - start]
+                    p = k
+                    while p > 0 and srt[r, p - 1] > v:
+                        srt[r, p] = srt[r, p - 1]
+                        at[r, p] = at[r, p - 1]
+                        p -= 1
+                    srt[r, p] = v
+                    at[r, p] = g
+                    k += 1
+            v_lo = srt[r, lo]
+            v_hi = srt[r, hi]
+        else:
+            for i in range(m):
+                tmp[i] = a[i]
+            v_lo = kth(tmp, lo)
+            v_hi = v_lo
+            if hi > lo:
+                # kth left every later element >= a[lo]: the next one is their minimum
+                v_hi = tmp[lo + 1]
+                for i in range(lo + 2, m):
+                    v_hi = tmp[i] if tmp[i] < v_hi else v_hi
         d = v_hi - v_lo
         q = v_hi - d * (1.0 - t) if t >= 0.5 else v_lo + d * t
-        for i in range(n):
+        for i in range(m):
             a[i] = a[i] if a[i] <= q else q            # np.minimum (no NaN here)
-        out[r] = MEAN_ABS_TO_STD * (_pairwise(a, np.int64(n)) / n)
+        out[r] = MEAN_ABS_TO_STD * (_pairwise(a, np.int64(m)) / m)
+    if keep:
+        state[0] = total
     return True
 
 
@@ -255,6 +320,25 @@ class _Ring:
     def __init__(self, width: int):
         self.buf = np.empty((width, 2 * WINDOW))
         self.n = 0          # samples written in all
+        # |x| of the window sorted per row, the sample each is, the samples it holds
+        # (:func:`_robust_stds`; −1: none yet)
+        self._srt = np.empty((width, WINDOW))
+        self._at = np.empty((width, WINDOW), dtype=np.int64)
+        self._state = np.full(1, -1, dtype=np.int64)
+
+    def spreads(self) -> np.ndarray:
+        """:func:`robust_stds` of :meth:`rows` (the same floats), its ranked values from the
+        window's sorted copy kept along (a few new samples a frame: no selection over the
+        whole window each frame)."""
+        n = len(self)
+        if not n:
+            return np.zeros(len(self.buf))
+        lo, hi, t = _trim_at(n)
+        out = np.empty(len(self.buf))
+        if _robust_stds(self.buf, self.n, WINDOW, self._srt, self._at, self._state, lo, hi, t,
+                        out):
+            return out
+        return _robust_stds_numpy(self.rows(), lo, hi, t)
 
     def extend(self, cols: np.ndarray) -> None:
         """Append samples ``cols`` (width, m)."""
@@ -366,16 +450,11 @@ class SceneMotion:
         self._prev_prev = prev
 
     def _spreads(self, name: str) -> np.ndarray:
-        """:func:`robust_stds` of ring ``name``'s window, recomputed only when a ring changed
-        (both rings in one call when their windows are as long: every frame once full)."""
+        """:func:`robust_stds` of ring ``name``'s window (:meth:`_Ring.spreads`), recomputed
+        only when a ring changed."""
         key = (self.accel.n, self.size.n)
         if self._spread_key != key:
-            a, s = self.accel.rows(), self.size.rows()
-            if a.shape[1] == s.shape[1]:
-                both = robust_stds(np.concatenate((a, s)))
-                self._spread = {"accel": both[:2], "size": both[2:]}
-            else:
-                self._spread = {"accel": robust_stds(a), "size": robust_stds(s)}
+            self._spread = {"accel": self.accel.spreads(), "size": self.size.spreads()}
             self._spread_key = key
         return self._spread[name]
 
