@@ -684,12 +684,17 @@ def lloyd(X, S, w, centers, max_iter, tol, sigma_obs, sigma_min, pos_ratio, grid
     labels = np.empty(n, np.int64)
     new = np.empty(n, np.int64)
     dmin = np.empty(n, np.float64)
-    reach = np.empty(n, np.float64)
-    for i in range(n):
-        labels[i] = -1
-        new[i] = -1
-        dmin[i] = 0.0
-        reach[i] = 0.0
+    if grid_min is None:
+        # the dense look writes every label and d² before they are read, and keeps no
+        # reaches: no fill pass, no reach array (fewer fresh pages a call)
+        reach = np.empty(0, np.float64)
+    else:
+        reach = np.empty(n, np.float64)
+        for i in range(n):
+            labels[i] = -1
+            new[i] = -1
+            dmin[i] = 0.0
+            reach[i] = 0.0
     m = np.empty(K, np.float64)
     sums = np.empty((K, D), np.float64)
     stable = np.empty(K, np.bool_)
