@@ -483,6 +483,49 @@ def test_assign_is_the_argmin_lowest_index_on_ties(k, guess):
         assert not np.any(lab == k // 2)               # the tie went to centre 1
 
 
+@pytest.mark.parametrize("k", [1, 2, 7, 25])
+def test_dense_assign_is_the_serial_scan_bit_for_bit(k):
+    """The dense assignment (previous particle's centre first, a centre passed over when its
+    (y1, y2) part alone exceeds the best d²) against the serial scan of every centre
+    (:func:`_nearest_dense`'s rule): the same labels and the same d² bytes, with the particles of a
+    centre side by side (the guess usually right) and shuffled, exact ties, particles on a
+    centre, a NaN particle (centre 0), a NaN or inf size among the centres."""
+    rng = np.random.default_rng(11 + k)
+    lk = LikelihoodParams()
+    centers = _centers(rng, k)
+    if k >= 7:
+        centers[2, 4] = np.nan                         # a NaN d² after centre 0: never wins
+        centers[4, :2] = np.inf
+        # centres 1 (and its copy) and k − 1 mirrored about a point: a particle there ties
+        # them, right after a particle of centre k − 1 (the guess: the tie goes to 1 anyway)
+        centers[1] = centers[k // 2] = (5000.0, 5000.0, 0.0, 0.0, 20.0, 40.0)
+        centers[k - 1] = (5040.0, 5000.0, 0.0, 0.0, 20.0, 40.0)
+    n = 3000
+    src = np.sort(rng.integers(0, k, n))
+    X = centers[src][:, OBS] + rng.normal(0, 8, (n, 4))
+    X[~np.isfinite(X)] = 1.0
+    if k >= 7:
+        X[300] = (5040.0, 5000.0, 20.0, 40.0)
+        X[301] = (5020.0, 5000.0, 20.0, 40.0)
+    X[100:130] = centers[min(1, k - 1), OBS]           # on the tied centres
+    X[200, 0] = np.nan
+    X[201, 2] = np.inf
+    inv = KM._inv_var(centers, lk.sigma_obs, lk.sigma_obs_min, lk.sigma_obs_pos_ratio)
+    for order in (np.arange(n), rng.permutation(n)):
+        Xo = np.ascontiguousarray(X[order])
+        lab, d2 = np.empty(n, dtype=np.int64), np.empty(n)
+        KM._assign_dense(Xo, centers, inv, lab, d2)
+        C = centers[:, OBS]
+        a = Xo[:, None, :] - C[None, :, :]             # (n, k, 4), :func:`_d2`'s order
+        d = (((a[..., 0] * a[..., 0]) * inv[:, 0] + (a[..., 1] * a[..., 1]) * inv[:, 1])
+             + (a[..., 2] * a[..., 2]) * inv[:, 2]) + (a[..., 3] * a[..., 3]) * inv[:, 3]
+        want = np.zeros(n, dtype=np.int64)             # the serial scan: 0, then strictly less
+        for c in range(1, k):
+            want[d[np.arange(n), c] < d[np.arange(n), want]] = c
+        np.testing.assert_array_equal(lab, want)
+        assert d2.tobytes() == d[np.arange(n), want].tobytes()
+
+
 @pytest.mark.parametrize("layout", ["many", "line", "same", "cluster+far"])
 def test_assign_grid_of_centres_is_exact_for_any_layout(layout):
     """The grid over the centres (rings of cells around each particle) against argmin over

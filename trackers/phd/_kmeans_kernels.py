@@ -68,49 +68,69 @@ def _nearest_dense(X, i, centers, inv):
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
 def _assign_dense(X, centers, inv, labels, dmin):
-    """:func:`_nearest_dense` of every particle: the same d² floats and labels, the centres'
-    coordinates laid out by column so the K distances of a particle are one vector loop."""
+    """:func:`_nearest_dense` of every particle: the same labels and d² floats.  A particle
+    starts from centre 0 (a NaN d² there is the answer, as argmin's rule above) and the
+    previous particle's centre (resampling lays a target's particles side by side, so it is
+    usually the nearest), then looks at the others taking the lowest index among equal d²;
+    a centre whose (y1, y2) part of the sum alone exceeds the best d² is passed over without
+    its size terms (the full sum adds non-negative terms to that part: it could only be
+    larger).  Each d² is summed in :func:`_d2`'s order.  The centres and their inverse
+    variances are one row per centre, hoisted."""
     K = centers.shape[0]
     if K == 0:
         return
-    cc = np.empty((8, K), np.float64)
+    cc = np.empty((K, 8), np.float64)
     for c in range(K):
-        cc[0, c] = centers[c, 0]
-        cc[1, c] = centers[c, 1]
-        cc[2, c] = centers[c, 4]
-        cc[3, c] = centers[c, 5]
-        cc[4, c] = inv[c, 0]
-        cc[5, c] = inv[c, 1]
-        cc[6, c] = inv[c, 2]
-        cc[7, c] = inv[c, 3]
-    c0 = cc[0]
-    c1 = cc[1]
-    c2 = cc[2]
-    c3 = cc[3]
-    i0 = cc[4]
-    i1 = cc[5]
-    i2 = cc[6]
-    i3 = cc[7]
-    d = np.empty(K, np.float64)
+        cc[c, 0] = centers[c, 0]
+        cc[c, 1] = centers[c, 1]
+        cc[c, 2] = centers[c, 4]
+        cc[c, 3] = centers[c, 5]
+        cc[c, 4] = inv[c, 0]
+        cc[c, 5] = inv[c, 1]
+        cc[c, 6] = inv[c, 2]
+        cc[c, 7] = inv[c, 3]
+    g = 0
     for i in range(X.shape[0]):
         x0 = X[i, 0]
         x1 = X[i, 1]
         x2 = X[i, 2]
         x3 = X[i, 3]
-        for c in range(K):
-            a0 = x0 - c0[c]
-            a1 = x1 - c1[c]
-            a2 = x2 - c2[c]
-            a3 = x3 - c3[c]
-            d[c] = (((a0 * a0) * i0[c] + (a1 * a1) * i1[c]) + (a2 * a2) * i2[c]) + (a3 * a3) * i3[c]
+        a0 = x0 - cc[0, 0]
+        a1 = x1 - cc[0, 1]
+        a2 = x2 - cc[0, 2]
+        a3 = x3 - cc[0, 3]
+        best = (((a0 * a0) * cc[0, 4] + (a1 * a1) * cc[0, 5]) + (a2 * a2) * cc[0, 6]) \
+            + (a3 * a3) * cc[0, 7]
         lab = 0
-        best = d[0]
+        if best != best:                           # NaN at centre 0: argmin's centre 0
+            labels[i] = 0
+            dmin[i] = best
+            continue
+        if g != 0:
+            a0 = x0 - cc[g, 0]
+            a1 = x1 - cc[g, 1]
+            a2 = x2 - cc[g, 2]
+            a3 = x3 - cc[g, 3]
+            d = (((a0 * a0) * cc[g, 4] + (a1 * a1) * cc[g, 5]) + (a2 * a2) * cc[g, 6]) \
+                + (a3 * a3) * cc[g, 7]
+            if d < best:
+                best = d
+                lab = g
         for c in range(1, K):
-            if d[c] < best:
-                best = d[c]
+            a0 = x0 - cc[c, 0]
+            a1 = x1 - cc[c, 1]
+            p = (a0 * a0) * cc[c, 4] + (a1 * a1) * cc[c, 5]
+            if p > best or c == g:                 # (a NaN part goes on: it never wins)
+                continue
+            a2 = x2 - cc[c, 2]
+            a3 = x3 - cc[c, 3]
+            d = (p + (a2 * a2) * cc[c, 6]) + (a3 * a3) * cc[c, 7]
+            if d < best or (d == best and c < lab):
+                best = d
                 lab = c
         labels[i] = lab
         dmin[i] = best
+        g = lab
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
@@ -664,12 +684,17 @@ def lloyd(X, S, w, centers, max_iter, tol, sigma_obs, sigma_min, pos_ratio, grid
     labels = np.empty(n, np.int64)
     new = np.empty(n, np.int64)
     dmin = np.empty(n, np.float64)
-    reach = np.empty(n, np.float64)
-    for i in range(n):
-        labels[i] = -1
-        new[i] = -1
-        dmin[i] = 0.0
-        reach[i] = 0.0
+    if grid_min is None:
+        # the dense look writes every label and d² before they are read, and keeps no
+        # reaches: no fill pass, no reach array (fewer fresh pages a call)
+        reach = np.empty(0, np.float64)
+    else:
+        reach = np.empty(n, np.float64)
+        for i in range(n):
+            labels[i] = -1
+            new[i] = -1
+            dmin[i] = 0.0
+            reach[i] = 0.0
     m = np.empty(K, np.float64)
     sums = np.empty((K, D), np.float64)
     stable = np.empty(K, np.bool_)
