@@ -21,7 +21,7 @@ from pfscope.trackers.phd.filter import (
 from pfscope.trackers.phd.gating import tail_radius2
 from pfscope.trackers.smc import ParticleSet
 from pfscope.trackers.smc import random as R
-from pfscope.trackers.smc.resampling import _systematic_index
+from pfscope.trackers.smc.resampling import _systematic_index, _systematic_take
 
 OBS = [0, 1, 4, 5]
 
@@ -437,6 +437,35 @@ def test_systematic_index_is_searchsorted_on_the_cdf(N, n):
         got = _systematic_index(lw, lse, u0, n)
         np.testing.assert_array_equal(got, want)
         assert not np.any(np.isneginf(lw[got]))        # zero-weight bins never picked
+
+
+@pytest.mark.parametrize("N,n", [(1, 4), (2, 5), (7, 3), (2000, 3000), (5000, 40)])
+@pytest.mark.parametrize("D", [6, 3, 0])
+def test_systematic_take_copies_the_searchsorted_ancestors_rows(N, n, D):
+    # both weight routes (log-weights; linear weights times a scale), the 6-column state rows
+    # and any other width: the ancestors of searchsorted on the CDF and exactly their rows
+    # (resample's walk copies the rows itself: _systematic_index covers no copy)
+    rng = np.random.default_rng(N + n + D)
+    states = rng.normal(0, 100, (N, D))
+    w = rng.random(N) ** 3
+    w[rng.random(N) < 0.3] = 0.0
+    w[0] = 1.0
+    scale = 1.0 / w.sum()
+    with np.errstate(divide="ignore"):
+        lw = np.log(w)
+    lse = float(np.log(w.sum()))
+    for u0 in (0.0, rng.random(), 1.0 - 1e-12):
+        for args, terms in (((lw, lse, u0, n, np.empty(0), 0.0), np.exp(lw - lse)),
+                            ((np.empty(0), 0.0, u0, n, w, scale), w * scale)):
+            cdf = np.cumsum(terms)
+            cdf[-1] = 1.0
+            want = np.minimum(np.searchsorted(cdf, (u0 + np.arange(n)) / n, side="right"), N - 1)
+            idx, rows = _systematic_take(states, *args)
+            np.testing.assert_array_equal(idx, want)
+            assert rows.shape == (n, D)
+            np.testing.assert_array_equal(rows, states[want])
+            assert np.all(w[idx[idx < N - 1]] > 0)     # zero-weight bins never picked (but
+            #                                            the last, its CDF forced to 1)
 
 
 # ----------------------------------------------------------------------------- K-means
