@@ -254,9 +254,6 @@ class Stage:
 _WHERE: dict[tuple, dict] = {}
 
 
-_new = object.__new__
-
-
 def _made(cls, **fields):
     """An instance of the frozen dataclass ``cls`` with ``fields`` set as its ``__init__``
     would set them (every field given, already in its final form: :class:`Scalar`'s value a
@@ -303,11 +300,7 @@ class StageLog:
         if pos <= self._pos:
             raise ValueError(f"stage {name!r} after {self.declared[self._pos]!r}: stages must "
                              f"follow the declared order {self.declared}")
-        if self._name is not None:      # (self._close(), spelt out: a call less a stage)
-            st = _new(Stage)
-            st.__dict__.update(name=self._name, items=tuple(self._items))
-            self._stages.append(st)
-        self._items = []
+        self._close()
         self._name, self._pos = name, pos
 
     def add(self, item: Item) -> None:
@@ -320,9 +313,7 @@ class StageLog:
     def scalar(self, path: str, value: float) -> None:
         if self._name is None:
             raise ValueError("StageLog.add before any stage()")
-        item = _new(Scalar)                 # (_made, spelt out: a call less a scalar)
-        item.__dict__.update(path=path, value=float(value))
-        self._items.append(item)
+        self._items.append(_made(Scalar, path=path, value=float(value)))
 
     def event(self, path: str, message: str, severity: str = "INFO") -> None:
         self.add(Event(path, message, severity))

@@ -113,6 +113,7 @@ from functools import cached_property
 import numpy as np
 
 from ..params import param
+from ..report import _made
 from . import _assoc_kernels
 from .appearance import DIM as APP_DIM, AppearanceModel, similarity, similarity_pairs
 from .filter import STATE_DIM, obs_std
@@ -148,17 +149,8 @@ _TRUE1 = np.ones(1, dtype=bool)
 _NO_PAIRS = np.zeros((0, 2), dtype=np.int64)
 #: an empty mask (fill_rows: keep every row)
 _NO_BOOL = np.zeros(0, dtype=bool)
-_NO_PAIRS.flags.writeable = False
-
-
-def _made(cls, **fields):
-    """An instance of the frozen dataclass ``cls`` with every field given in its final form,
-    without the generated ``__init__``'s per-field ``object.__setattr__`` calls and the
-    ``__post_init__`` defaults (the step's results, built every frame)."""
-    item = object.__new__(cls)
-    item.__dict__.update(fields)
-    return item
 _TRUE1.setflags(write=False)
+_NO_PAIRS.setflags(write=False)
 #: a step's edge arrays when nobody asked for them (``edges=False``): empty, shared, read-only
 _NO_EDGES = dict(edges_src=_empty((0, STATE_DIM)), edges_src_id=_empty(0, np.int64),
                  edges_dst_index=_empty(0, np.int64), edges_gain=_empty(0),
@@ -1081,14 +1073,12 @@ class GraphAssociator:
             if at_min:
                 self._extend_heads(frame, relinked)
         finalised = []
-        last = frame - (max(p.min_length - 1, p.depth) if p.fill_gaps or p.extend_heads
-                        else p.min_length - 1)      # (self.lag)
+        last = frame - self.lag
         while self._buffer and self._buffer[0][0] <= last:
             if self._dets and self._dets[0][0] == self._buffer[0][0]:
                 self._dets.popleft()
             f, bid, bst, bfill = self._buffer.popleft()
-            ok = _assoc_kernels.confirmed(self._ids, self._length, ended_ids, ended_len, bid,
-                                          int(p.min_length))   # (self._confirmed_ids)
+            ok = self._confirmed_ids(bid, ended_ids, ended_len)
             finalised.append(_made(FinalRows, frame=f, ids=bid[ok], states=bst[ok],
                                    filled=bfill[ok]))
 

@@ -66,7 +66,7 @@ import numpy as np
 from numba import njit
 
 from .camera_motion import _pairwise
-from .gating import BRUTE_PAIRS, gate_sums
+from .gating import BRUTE_PAIRS, _gate_sums, gate_sums
 
 if TYPE_CHECKING:  # pragma: no cover
     from .filter import ClutterParams, LikelihoodParams
@@ -506,18 +506,16 @@ def _dup_sums(won, lost, near_lost, n, tmp):
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
 def _dup_sums_brute(won, Z, std, r2, n, lost, tmp):
-    """:func:`_lost`, the lost count in each detection's gate (``gate_sums(Z, Z, r2, std,
-    lost, ordered=False)``'s brute pass: every pair, the same test; sums of 0s and 1s, exact
-    in any order) and :func:`_dup_sums`, in one call."""
+    """:func:`_lost`, the lost count in each detection's gate (:func:`.gating._gate_sums`'
+    pass without a grid: every pair, as ``gate_sums(Z, Z, r2, std, lost, ordered=False)``
+    does for few pairs; sums of 0s and 1s, exact in any order) and :func:`_dup_sums`, in one
+    call."""
     _lost(won, lost)
     m = won.shape[0]
-    near_lost = np.empty(m)
-    for j in range(m):
-        s = 0.0
-        for q in range(m):
-            if _in_gate(Z, q, Z, j, std, r2):
-                s += lost[q]
-        near_lost[j] = s
+    near_lost, top, count = np.zeros(m), np.zeros(m), np.zeros(m, np.int64)
+    no_grid = np.empty(0, np.int64)
+    _gate_sums(Z, lost, lost, Z, std, r2, no_grid, no_grid, 0.0, 0.0, 1.0, 1.0, 0, 0,
+               near_lost, top, count)
     return _dup_sums(won, lost, near_lost, n, tmp)
 
 
@@ -693,15 +691,10 @@ def _in_gate_early(P, q, Z, j, std, r2, R):
     (rounding is monotone).  A subtraction and a product instead of four divisions for a
     far pair; a bound below 1e-300 (denormal stds, never from obs_std's floor) or NaN
     rejects nothing (the exact test decides)."""
-    dx = P[q, 0] - Z[j, 0]
     lim = std[j, 0] * R
-    if abs(dx) > lim and lim > 1e-300:
+    if abs(P[q, 0] - Z[j, 0]) > lim and lim > 1e-300:
         return False
-    d0 = dx / std[j, 0]
-    d1 = (P[q, 1] - Z[j, 1]) / std[j, 1]
-    d2 = (P[q, 2] - Z[j, 2]) / std[j, 2]
-    d3 = (P[q, 3] - Z[j, 3]) / std[j, 3]
-    return d0 * d0 + d1 * d1 + d2 * d2 + d3 * d3 <= r2
+    return _in_gate(P, q, Z, j, std, r2)
 
 
 def clutter_share(won: np.ndarray, log_used: np.ndarray, log_shadow: np.ndarray) -> np.ndarray:
