@@ -153,7 +153,8 @@ def _split_one_at_a_time(ps, Z, T, rule, max_splits=64, max_iter=50, tol=0.01):
     guarded = rule == "guarded"
     init = np.zeros((len(Z), 6))
     init[:, [0, 1, 4, 5]] = Z
-    _, w, shift, S, X = _kmeans_kernels.prepare(ps.states.copy(), ps.log_weights.copy())
+    _, w, shift, S, X, runs = _kmeans_kernels.prepare(ps.states.copy(),
+                                                      ps.log_weights.copy())
     scale = np.exp(ps.log_weights.max())
     centers, labels, masses, dmin, n_iter = _lloyd(X, S, w, init - shift, params, max_iter, tol)
     masses = masses * scale
@@ -195,7 +196,8 @@ def _split_one_at_a_time(ps, Z, T, rule, max_splits=64, max_iter=50, tol=0.01):
         dmin[sel] = t_d
         final = np.append(final, False)
         n_splits += 1
-    return centers + shift, masses, labels, n_splits, n_iter
+    # (runs of identical rows were merged: every particle gets its row's label)
+    return centers + shift, masses, np.repeat(labels, runs), n_splits, n_iter
 
 
 def _neighbours_reference(centers, j, reach2, n_max):
@@ -344,7 +346,7 @@ def test_guarded_split_is_tried_only_on_a_cluster_of_twice_min_split_mass(seed):
     far = [A[0] + 15.0] + A[1:]    # half a box width away: in the split's neighbourhood
     for mass, msm, tried in ((1.15, None, False), (1.3, None, True), (1.15, 0.5, True)):
         ps = cloud(rng, A, mass).concat(cloud(rng, far, 1.0))
-        _, w, shift, S, X = prepare(ps.states.copy(), ps.log_weights.copy())
+        _, w, shift, S, X, _ = prepare(ps.states.copy(), ps.log_weights.copy())
         init = np.zeros((2, 6))
         init[:, [0, 1, 4, 5]] = obs(A, far)
         first = _lloyd(X, S, w, init - shift, PHDParams(), 50, 0.01)[4]
@@ -354,3 +356,46 @@ def test_guarded_split_is_tried_only_on_a_cluster_of_twice_min_split_mass(seed):
             assert c.n_splits == 0 and c.kept.all()
         lit = kmeans_peaks(ps, obs(A, far), split_rule="literal")
         assert lit.n_iter > first
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_copies_side_by_side_are_merged_with_the_same_clusters_and_labels(seed):
+    # resampling lays an ancestor's copies side by side as identical rows: K-means runs on
+    # the distinct rows with summed weights -- the same clusters (up to summation round-off)
+    # as on the same particles shuffled so that no two copies are adjacent (nothing merged),
+    # and every particle's label is its row's (taken when first read); a merged target
+    # split in two (the split trials on merged rows), and the subsample option on top
+    from pfscope.trackers.phd.filter import PHDParams
+
+    rng = np.random.default_rng(seed)
+    Bc = [A[0] + 20.0] + A[1:]                      # merged with A: one detection, a split
+    C = [A[0] + 300.0] + A[1:]
+    base = cloud(rng, A, 1.0, n=300).concat(cloud(rng, Bc, 1.0, n=300)).concat(
+        cloud(rng, C, 1.1, n=300))
+    copies = rng.integers(1, 5, len(base))
+    states = np.repeat(base.states, copies, axis=0)
+    n = len(states)
+    lw = np.full(n, math.log(3.1 / n))
+    side = ParticleSet(states, lw)
+    while True:
+        perm = rng.permutation(n)
+        if np.all(np.any(states[perm][1:] != states[perm][:-1], axis=1)):
+            break
+    spread = ParticleSet(states[perm], lw)
+    Z = obs(A, C)
+    a = kmeans_peaks(side, Z)
+    b = kmeans_peaks(spread, Z)
+    assert a._labels is None and b._labels is not None          # a merged, b not
+    assert a.n_splits == b.n_splits == 1 and (a.n_iter, a.kept.tolist()) == (b.n_iter,
+                                                                             b.kept.tolist())
+    np.testing.assert_allclose(a.centers, b.centers, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(a.masses, b.masses, rtol=1e-12)
+    assert len(a.labels) == n
+    assert a.labels[perm].tolist() == b.labels.tolist()
+    # subsample: every 2nd particle (merged too), then every particle's nearest centre
+    s = kmeans_peaks(side, Z, subsample=2)
+    assert s.kept.tolist() == a.kept.tolist() and s.masses.sum() == pytest.approx(3.1)
+    inv = 1.0 / obs_std(s.centers[:, 4:6], PHDParams().likelihood) ** 2
+    d2 = (((states[:, None, [0, 1, 4, 5]] - s.centers[None, :, [0, 1, 4, 5]]) ** 2)
+          * inv[None]).sum(-1)
+    assert s.labels.tolist() == np.argmin(d2, axis=1).tolist()

@@ -767,20 +767,34 @@ def test_farthest_member_is_numpys_per_cluster_argmax():
 def test_prepare_is_numpys_spelling_with_runs_of_equal_weights():
     """``prepare`` (the K-means inputs in one pass) gives numpy's floats: the max, the relative
     weights ``exp(log_w − max)`` -- also for runs of equal log-weights (as resampling leaves
-    them, where the kernel takes the exp once per run) and ``-inf`` -- the mean position and
-    the shifted states."""
+    them, where the kernel takes the exp once per run) and ``-inf`` -- the mean position of
+    every particle and the shifted states; runs of consecutive identical rows (resampling's
+    copies of an ancestor) become one row weighing their sum (added in particle order), with
+    the run's length."""
     rng = np.random.default_rng(4)
-    for trial in range(20):
+    for trial in range(40):
         n = int(rng.integers(1, 300))
         states = rng.normal(300.0, 80.0, (n, 6))
+        if trial % 2:                                # copies side by side, as resampled
+            states = np.repeat(states, rng.integers(1, 5, n), axis=0)[:n]
+            if trial % 3 == 0 and n > 2:             # equal rows that are not adjacent
+                states[-1] = states[0]
         log_w = np.repeat(rng.normal(-5.0, 2.0, n), rng.integers(1, 6, n))[:n]
         if trial % 4 == 0:
             log_w[rng.integers(0, n, 3)] = -np.inf
-        lmax, w, shift, S, X = KM.prepare(states, log_w)
+        lmax, w, shift, S, X, runs = KM.prepare(states, log_w)
         assert lmax == np.max(log_w)
-        np.testing.assert_array_equal(w, libm.exp(log_w - np.max(log_w)))
+        new = np.ones(n, dtype=bool)
+        new[1:] = np.any(states[1:] != states[:-1], axis=1)
+        starts = np.flatnonzero(new)
+        w_each = libm.exp(log_w - np.max(log_w))
+        want_w = [sum(w_each[a:b].tolist(), 0.0) if b - a > 1 else w_each[a]
+                  for a, b in zip(starts, list(starts[1:]) + [n])]
+        assert runs.tolist() == np.diff(np.append(starts, n)).tolist()
+        np.testing.assert_array_equal(w, want_w)
         want_shift = np.zeros(6)
         want_shift[:2] = states[:, :2].mean(axis=0)
         np.testing.assert_array_equal(shift, want_shift)
-        np.testing.assert_array_equal(S, states - want_shift)
-        np.testing.assert_array_equal(X, (states - want_shift)[:, [0, 1, 4, 5]])
+        np.testing.assert_array_equal(S, (states - want_shift)[starts])
+        np.testing.assert_array_equal(X, (states - want_shift)[starts][:, [0, 1, 4, 5]])
+        assert (trial % 2 == 0) == (len(w) == n)
