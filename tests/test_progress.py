@@ -335,7 +335,7 @@ def _fresh_process(code: str, tmp_path) -> list:
 
 def test_first_run_compiles_each_kernel_once_in_one_process(tmp_path):
     """A first run's warm-up (empty numba cache, a second core: the helper compiles the filter's
-    kernels but M(z), and the IoU of gap filling) compiles in this process the K-means kernels,
+    kernels but M(z), and the IoU of gap filling) compiles in this process the K-means kernel,
     the association's edge scores, input check, frame edges, matching outcome, revive test,
     gap rows and their overlap test, head walk and confirmed test, and M(z) only, one
     specialisation each: none of the helper's kernels again (the helper's calls have the
@@ -366,9 +366,8 @@ def test_first_run_compiles_each_kernel_once_in_one_process(tmp_path):
     assert sorted(top) == ["_fit_kernel", "_gate_sums_cells", "_link", "_robust_stds",
                            "_triplets", "advance", "check_states",
                            "confirmed", "edge_scores", "fill_rows", "frame_edges", "gap_rows", "head_pick",
-                           "lloyd", "mass_near_kernel", "mass_near_skip", "prepare",
-                           "revive_hits",
-                           "split_clusters"], top
+                           "mass_near_kernel", "mass_near_skip", "peaks",
+                           "revive_hits"], top
 
 
 def test_early_helper_only_for_the_phd_kernels(monkeypatch):

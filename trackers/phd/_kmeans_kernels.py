@@ -994,3 +994,83 @@ def split_clusters(X, S, w, centers, masses, labels, dmin, scale, split_above, n
         n_splits += 1
         far_of = farthest(lab, dm, K)
     return C[:K].copy(), M[:K].copy(), lab, dm, n_splits, n_iter
+
+
+#: ``Clusters.origin`` codes (re-exported by :mod:`.clustering`): a centre made by a split, a
+#: centre not initialised on an observation (an extra centre, or the particles' mean).
+ORIGIN_SPLIT = -1
+ORIGIN_EXTRA = -2
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def peaks(states, log_w, Z, extra, scale, T, split_above, need, min_split_mass, guarded,
+          max_splits, n_near, max_iter, tol, sigma_obs, sigma_min, pos_ratio, grid_min):
+    """:func:`~.clustering.kmeans_peaks` after its argument checks, in one call (each numpy or
+    Python operation of a frame costs 2-3 times more when the caches are cold, as between two
+    frames of a real run): the observations' check, :func:`prepare`, the initial centres
+    (§3: on the observations ``Z`` (N_z, 4) with zero velocity, then the ``extra`` (E, 6)
+    ones; with neither, the particles' weighted mean), :func:`lloyd`, :func:`split_clusters`
+    and the kept test ``mass >= T``.  ``scale`` is ``exp(max log_w)`` (numpy's exp, taken by
+    the caller; the largest log-weight must be finite).
+
+    Returns ``(bad, centers, masses, labels, runs, kept, origin, n_splits, n_iter)``:
+    ``bad`` 1 for a non-finite observation, 2 for a width or height <= 0 (nothing else
+    computed), else 0; ``labels`` (M,) of the merged rows, ``runs`` (M,) their lengths."""
+    nz = Z.shape[0]
+    bad = 0
+    for c in range(nz):
+        for d in range(4):
+            v = Z[c, d]
+            if not v - v == 0.0:                   # (not finite)
+                bad = 1
+    if bad == 0:
+        for c in range(nz):
+            if not (Z[c, 2] > 0.0 and Z[c, 3] > 0.0):
+                bad = 2
+    ne = extra.shape[0]
+    K0 = nz + ne
+    k0 = K0 if K0 > 0 else 1
+    if bad != 0:
+        return (bad, np.empty((0, 6), np.float64), np.empty(0, np.float64),
+                np.empty(0, np.int64), np.empty(0, np.int64), np.empty(0, np.bool_),
+                np.empty(0, np.int64), 0, 0)
+    lmax, w, shift, S, X, runs = prepare(states, log_w)
+    m = w.shape[0]
+    # the centres in the shifted coordinates: the same floats as numpy's ``init - shift``
+    init = np.empty((k0, 6), np.float64)
+    for c in range(nz):
+        init[c, 0] = Z[c, 0] - shift[0]
+        init[c, 1] = Z[c, 1] - shift[1]
+        init[c, 2] = 0.0 - shift[2]
+        init[c, 3] = 0.0 - shift[3]
+        init[c, 4] = Z[c, 2] - shift[4]
+        init[c, 5] = Z[c, 3] - shift[5]
+    for e in range(ne):
+        for d in range(6):
+            init[nz + e, d] = extra[e, d] - shift[d]
+    if K0 == 0:                                    # the particles' weighted mean
+        tw = 0.0
+        for d in range(6):
+            init[0, d] = 0.0
+        for i in range(m):
+            tw += w[i]
+            for d in range(6):
+                init[0, d] += w[i] * S[i, d]
+        for d in range(6):
+            init[0, d] = init[0, d] / tw
+    centers, labels, masses, dmin, it = lloyd(X, S, w, init, max_iter, tol, sigma_obs,
+                                              sigma_min, pos_ratio, grid_min)
+    for c in range(k0):
+        masses[c] = masses[c] * scale
+    C, M, lab, dm, n_splits, it2 = split_clusters(
+        X, S, w, centers, masses, labels, dmin, scale, split_above, need, min_split_mass,
+        guarded, max_splits, n_near, max_iter, tol, sigma_obs, sigma_min, pos_ratio)
+    K = C.shape[0]
+    kept = np.empty(K, np.bool_)
+    origin = np.empty(K, np.int64)
+    for c in range(K):
+        for d in range(6):
+            C[c, d] += shift[d]
+        kept[c] = M[c] >= T
+        origin[c] = c if c < nz else (ORIGIN_EXTRA if c < k0 else ORIGIN_SPLIT)
+    return bad, C, M, lab, runs, kept, origin, n_splits, it + it2

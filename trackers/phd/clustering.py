@@ -107,11 +107,11 @@ import numpy as np
 from ..smc.weights import ParticleSet
 from ..types import cxcywh_to_xywh
 from . import _kmeans_kernels
-from .filter import OBS_COLS, STATE_DIM, PHDParams, as_observations, gated_log_g
+from .filter import OBS_COLS, OBS_DIM, STATE_DIM, PHDParams, as_observations, gated_log_g
 
 #: ``Clusters.origin`` codes for centres not initialised on an observation.
-ORIGIN_SPLIT = -1
-ORIGIN_EXTRA = -2
+ORIGIN_SPLIT = _kmeans_kernels.ORIGIN_SPLIT
+ORIGIN_EXTRA = _kmeans_kernels.ORIGIN_EXTRA
 
 #: From this many centres on, the assignment step looks only at the centres near each particle
 #: (a grid of the centres, :func:`._kmeans_kernels.assign`; same labels as looking at all of them).
@@ -211,20 +211,23 @@ def kmeans_peaks(ps: ParticleSet, Z, T: float = 0.6, *, params: PHDParams | None
     guarded = split_rule == "guarded"
     params = params if params is not None else PHDParams()
     min_split_mass = T if min_split_mass is None else min_split_mass
-    Z = as_observations(Z)
+    # (as_observations' checks: the shape here, the values in the kernel)
+    if hasattr(Z, "observations"):
+        Z = Z.observations()
+    Z = np.ascontiguousarray(Z, dtype=np.float64)
+    if not Z.flags.writeable:           # (the kernel's one specialisation: writable arrays)
+        Z = Z.copy()
+    if Z.size == 0:
+        Z = _NO_OBS
+    elif Z.ndim != 2 or Z.shape[1] != OBS_DIM:
+        raise ValueError(f"observations: expected shape (N, 4) (y1, y2, w, h), got {Z.shape}")
     states = ps.states
     if states.shape[1] != STATE_DIM:
         raise ValueError(f"kmeans_peaks: expected (N, 6) particle states, got {states.shape}")
-    n = len(ps)
-
-    # §3: centres on the observations with zero velocity.
-    init = np.zeros((len(Z), STATE_DIM))
-    init[:, OBS_COLS] = Z
-    origin = np.arange(len(Z), dtype=np.int64)
+    n = len(states)
+    extra = _NO_EXTRA
     if extra_centers is not None and len(extra_centers):
-        extra = np.asarray(extra_centers, dtype=np.float64).reshape(-1, STATE_DIM)
-        init = np.concatenate([init, extra])
-        origin = np.concatenate([origin, np.full(len(extra), ORIGIN_EXTRA, dtype=np.int64)])
+        extra = np.array(extra_centers, dtype=np.float64).reshape(-1, STATE_DIM)
     log_w = ps.log_weights
     full = None
     if subsample > 1 and n >= 2 * subsample and log_w[0] == log_w[-1] \
@@ -232,50 +235,53 @@ def kmeans_peaks(ps: ParticleSet, Z, T: float = 0.6, *, params: PHDParams | None
         full = states
         states = states[::subsample]
         log_w = np.full(len(states), log_w[0] + math.log(n / len(states)))
-    if n == 0:
-        K = len(init)
-        return Clusters(init, np.zeros(K), np.zeros(0, dtype=np.int64), np.zeros(K, dtype=bool),
-                        origin)
-
-    # Weights relative to the largest keep the means exact even when masses underflow.
-    # Positions are centred (not the sizes: they set the metric) so the expanded distance
-    # loses no precision on large images; centres stay in these coordinates until the end.
-    # Runs of identical rows (resampling's copies of an ancestor) are merged into one row of
-    # their summed weight: same labels, same centres up to round-off, ~1/3 fewer rows.
-    # (One kernel pass: _kmeans_kernels.prepare.)
-    lmax, w_rel, shift, S, X, runs = _kmeans_kernels.prepare(
-        np.ascontiguousarray(states, dtype=np.float64),
-        np.ascontiguousarray(log_w, dtype=np.float64))
-    if not np.isfinite(lmax):
+    lmax = log_w.max() if n else -math.inf
+    if not math.isfinite(lmax):         # no particle, or no finite weight: nothing to cluster
+        Z = as_observations(Z)
+        init, origin = _initial_centers(Z, extra)
         K = len(init)
         return Clusters(init, np.zeros(K), np.zeros(n, dtype=np.int64), np.zeros(K, dtype=bool),
                         origin)
-    scale = np.exp(lmax)
-    if len(init) == 0:
-        init = (w_rel @ S / w_rel.sum())[None, :] + shift
-        origin = np.array([ORIGIN_EXTRA], dtype=np.int64)
-    centers, labels, masses, dmin, n_iter = _lloyd(X, S, w_rel, init - shift, params,
-                                                   max_iter, tol)
-    masses = masses * scale
-    # the split loop (guarded or literal rule, local trials) in one kernel call
+    # Everything else in one kernel call (_kmeans_kernels.peaks): the weights relative to the
+    # largest keep the means exact even when masses underflow; positions are centred (not
+    # the sizes: they set the metric) so the expanded distance loses no precision on large
+    # images; runs of identical rows (resampling's copies of an ancestor) are merged into one
+    # row of their summed weight (_kmeans_kernels.prepare); the first Lloyd run, then the
+    # split loop (guarded or literal rule, local trials: _kmeans_kernels.split_clusters).
     lk = params.likelihood
-    centers, masses, labels, dmin, n_splits, it = _kmeans_kernels.split_clusters(
-        X, S, w_rel, centers, masses, labels, dmin, scale, float(split_above),
-        float(2.0 * min_split_mass if guarded else -np.inf), float(min_split_mass), guarded,
-        int(max_splits), int(SPLIT_NEIGHBOURS), int(max_iter), float(tol), lk.sigma_obs,
-        lk.sigma_obs_min, lk.sigma_obs_pos_ratio)
-    n_iter += int(it)
-    if n_splits:
-        origin = np.concatenate([origin, np.full(n_splits, ORIGIN_SPLIT, dtype=np.int64)])
-    kept = masses >= T
-    centers += shift
+    K0 = len(Z) + len(extra)
+    bad, centers, masses, labels, runs, kept, origin, n_splits, n_iter = _kmeans_kernels.peaks(
+        np.ascontiguousarray(states, dtype=np.float64),
+        np.ascontiguousarray(log_w, dtype=np.float64), Z, extra, np.exp(lmax), float(T),
+        float(split_above), float(2.0 * min_split_mass if guarded else -np.inf),
+        float(min_split_mass), guarded, int(max_splits), int(SPLIT_NEIGHBOURS), int(max_iter),
+        float(tol), lk.sigma_obs, lk.sigma_obs_min, lk.sigma_obs_pos_ratio,
+        int(INDEX_MIN_CENTERS) if K0 >= INDEX_MIN_CENTERS else None)
+    if bad:
+        as_observations(Z)              # (raises its message)
     if full is not None:
         return Clusters(centers, masses, None, kept, origin, n_splits, n_iter,
                         partial(_nearest_labels, full, ps.log_weights, centers, params))
-    if len(labels) != len(states):      # merged rows: every particle's label when first read
+    if len(labels) != n:                # merged rows: every particle's label when first read
         return Clusters(centers, masses, None, kept, origin, n_splits, n_iter,
                         partial(np.repeat, labels, runs))
     return Clusters(centers, masses, labels, kept, origin, n_splits, n_iter)
+
+
+_NO_OBS = np.zeros((0, OBS_DIM))
+_NO_EXTRA = np.zeros((0, STATE_DIM))
+
+
+def _initial_centers(Z, extra):
+    """§3's initial centres (observations with zero velocity, then ``extra``) and their
+    origins, for the no-particle answer."""
+    init = np.zeros((len(Z), STATE_DIM))
+    init[:, OBS_COLS] = Z
+    origin = np.arange(len(Z), dtype=np.int64)
+    if len(extra):
+        init = np.concatenate([init, extra])
+        origin = np.concatenate([origin, np.full(len(extra), ORIGIN_EXTRA, dtype=np.int64)])
+    return init, origin
 
 
 def _nearest_labels(states, log_w, centers, params: PHDParams) -> np.ndarray:
