@@ -149,8 +149,8 @@ class Clusters:
     @property
     def labels(self) -> np.ndarray:
         """(N,) int64 cluster of each particle (taken when first read, when K-means ran on a
-        subsample: only the particle-level stage data and the per-measurement estimates read
-        them)."""
+        subsample or on merged runs of identical rows: only the particle-level stage data and
+        the per-measurement estimates read them)."""
         if self._labels is None and self._labeller is not None:
             object.__setattr__(self, "_labels", self._labeller())
             object.__setattr__(self, "_labeller", None)
