@@ -485,3 +485,212 @@ def fill_rows(bid, bst, bfill, st, fid, lo, hi, keep, fill_overlap):
             nbfill[o] = True
             o += 1
     return nbid, nbst, nbfill, n
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
+def _tail_w0(tail, t, v0, v1, b0, b1, c0, c1, i, new, depth, gate_d2, sv, ss, so, so_min,
+             ratio, cc, cc2, two_pi, var, lg, w0):
+    """Tail t's row of :func:`frame_edges`' ``w0`` (the admissible weights, else 0.0) against
+    the states ``new`` (M, 6) -- :func:`_tail_row`'s floats, without its gain and d² rows."""
+    _var4(tail, t, b0, b1, c0, c1, depth, sv, ss, so, so_min, ratio, cc, cc2, var)
+    for k in range(4):
+        lg[k] = math.log(two_pi * var[k])
+    floor = -0.5 * gate_d2 - 0.5 * (((lg[0] + lg[1]) + lg[2]) + lg[3])
+    _var4(tail, t, b0, b1, c0, c1, i, sv, ss, so, so_min, ratio, cc, cc2, var)
+    for k in range(4):
+        lg[k] = math.log(two_pi * var[k])
+    log_det = ((lg[0] + lg[1]) + lg[2]) + lg[3]
+    m0 = tail[t, 0] + i * v0
+    m1 = tail[t, 1] + i * v1
+    m2 = tail[t, 4]
+    m3 = tail[t, 5]
+    for j in range(new.shape[0]):
+        r0 = new[j, 0] - m0
+        r1 = new[j, 1] - m1
+        r2 = new[j, 4] - m2
+        r3 = new[j, 5] - m3
+        d = ((r0 * r0 / var[0] + r1 * r1 / var[1]) + r2 * r2 / var[2]) + r3 * r3 / var[3]
+        w = (-0.5 * d - 0.5 * log_det) - floor
+        if d <= gate_d2 and w - w == 0.0 and w > 0.0:
+            w0[t, j] = w
+        else:
+            w0[t, j] = 0.0
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def frame_step(live_ids, tail, tail_frame, prev, prev_frame, length, new, frame, kv, next_id,
+               min_length, rows, cols, given):
+    """:meth:`.association.GraphAssociator.step`'s steps 1-3 for a frame without colour
+    features or edge arrays, in one pass: no tail expires (else ``status`` 2, nothing done),
+    :func:`frame_edges`' admissible weights of the live tails against ``new`` (M, 6) (``kv``:
+    ``kernel_args`` then ``speed_prior``; the same floats), the matching when no tail and no
+    vertex has two admissible edges (``np.nonzero(w0)``'s pairs, as
+    :func:`.association._match_admissible`), then :func:`advance` in place.  When the
+    matching needs the assignment solver: ``status`` 1, nothing done; called again with its
+    ``rows``, ``cols`` and ``given`` true, it advances with them.  Returns one int64 array
+    (one object to hand back): ``status, flags, P``, then the vertices' track ``ids`` (M,),
+    their tracks' ``lengths`` (M,) after the frame (a new track's 1) and the ``P`` matched
+    pairs' ``rows``, ``cols``.  ``flags``: 1 some tail of ``min_length`` vertices unseen at
+    ``frame`` (:func:`advance`), 2 some vertex's track has ``min_length`` vertices now, 4 some
+    matched tail had a gap of more than one frame."""
+    T = tail.shape[0]
+    M = new.shape[0]
+    if not given:
+        depth = kv[0]
+        for t in range(T):
+            if frame - tail_frame[t] > depth:
+                out = np.empty(3, np.int64)
+                out[0] = 2
+                out[1] = 0
+                out[2] = 0
+                return out
+        w0 = np.empty((T, M), np.float64)
+        var = np.empty(4, np.float64)
+        lg = np.empty(4, np.float64)
+        vbc = np.empty((3, 2), np.float64)
+        n_ok = 0
+        one = True
+        for t in range(T):
+            d = tail_frame[t] - prev_frame[t] if prev_frame[t] >= 0 else 0
+            _vbc(tail, prev, t, d, kv[4], kv[5], kv[6], kv[10], vbc)
+            _tail_w0(tail, t, vbc[0, 0], vbc[0, 1], vbc[1, 0], vbc[1, 1], vbc[2, 0],
+                     vbc[2, 1], float(frame - tail_frame[t]), new, kv[0], kv[1], kv[2], kv[3],
+                     kv[4], kv[5], kv[6], kv[7], kv[8], kv[9], var, lg, w0)
+            row = 0
+            for j in range(M):
+                if w0[t, j] != 0.0:
+                    n_ok += 1
+                    row += 1
+            if row > 1:
+                one = False
+        if one:
+            for j in range(M):
+                col = 0
+                for t in range(T):
+                    if w0[t, j] != 0.0:
+                        col += 1
+                if col > 1:
+                    one = False
+                    break
+        if not one:
+            out = np.empty(3, np.int64)
+            out[0] = 1
+            out[1] = 0
+            out[2] = 0
+            return out
+        rows = np.empty(n_ok, np.int64)
+        cols = np.empty(n_ok, np.int64)
+        n = 0
+        for t in range(T):
+            for j in range(M):
+                if w0[t, j] != 0.0:
+                    rows[n] = t
+                    cols[n] = j
+                    n += 1
+    P = rows.shape[0]
+    out = np.empty(3 + 2 * M + 2 * P, np.int64)
+    flags = 0
+    for p in range(P):
+        if frame - tail_frame[rows[p]] > 1:
+            flags |= 4
+        out[3 + 2 * M + p] = rows[p]
+        out[3 + 2 * M + P + p] = cols[p]
+    ids, matched, unseen = advance(live_ids, tail, tail_frame, prev, prev_frame, length, new,
+                                   rows, cols, frame, next_id, min_length)
+    if unseen:
+        flags |= 1
+    for j in range(M):
+        out[3 + j] = ids[j]
+        out[3 + M + j] = 1
+    for p in range(P):
+        out[3 + M + cols[p]] = length[rows[p]]
+    for j in range(M):
+        if out[3 + M + j] == min_length:
+            flags |= 2
+    out[0] = 0
+    out[1] = flags
+    out[2] = P
+    return out
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def final_rows(live_ids, live_len, extra_ids, extra_len, bid, bst, bfill, min_length):
+    """A held-back frame's rows ``bid`` (R,), ``bst`` (R, 6), ``bfill`` (R,) of the tracks with
+    at least ``min_length`` vertices (:func:`confirmed`), as ``a[mask]`` for each."""
+    ok = confirmed(live_ids, live_len, extra_ids, extra_len, bid, min_length)
+    n = 0
+    for r in range(ok.shape[0]):
+        if ok[r]:
+            n += 1
+    oid = np.empty(n, np.int64)
+    ost = np.empty((n, bst.shape[1]), np.float64)
+    ofill = np.empty(n, np.bool_)
+    o = 0
+    for r in range(ok.shape[0]):
+        if ok[r]:
+            oid[o] = bid[r]
+            for c in range(bst.shape[1]):
+                ost[o, c] = bst[r, c]
+            ofill[o] = bfill[r]
+            o += 1
+    return oid, ost, ofill
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def track_boxes(ids, states, keep):
+    """The tracks a step reports: ``ids[keep]`` and the top-left boxes ``(x, y, w, h)`` of
+    ``states[keep]`` (:func:`.association.boxes_xywh`: ``x − w / 2``, ``y − h / 2``, the same
+    floats)."""
+    n = 0
+    for j in range(keep.shape[0]):
+        if keep[j]:
+            n += 1
+    oid = np.empty(n, np.int64)
+    out = np.empty((n, 4), np.float64)
+    o = 0
+    for j in range(keep.shape[0]):
+        if keep[j]:
+            oid[o] = ids[j]
+            w = states[j, 4]
+            h = states[j, 5]
+            out[o, 0] = states[j, 0] - w / 2.0
+            out[o, 1] = states[j, 1] - h / 2.0
+            out[o, 2] = w
+            out[o, 3] = h
+            o += 1
+    return oid, out
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def row_boxes(states, filled, gap_conf, est_conf):
+    """A finalised frame's top-left boxes (:func:`.association.boxes_xywh`, the same floats)
+    and tracks-file conf ``np.where(filled, gap_conf, est_conf)``."""
+    R = states.shape[0]
+    out = np.empty((R, 4), np.float64)
+    conf = np.empty(R, np.float64)
+    for j in range(R):
+        w = states[j, 4]
+        h = states[j, 5]
+        out[j, 0] = states[j, 0] - w / 2.0
+        out[j, 1] = states[j, 1] - h / 2.0
+        out[j, 2] = w
+        out[j, 3] = h
+        conf[j] = gap_conf if filled[j] else est_conf
+    return out, conf
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def centre_boxes(boxes):
+    """(N, 4) top-left boxes -> centre boxes ``(cx, cy, w, h)``
+    (:func:`pfscope.trackers.types.xywh_to_cxcywh`, the same floats)."""
+    N = boxes.shape[0]
+    out = np.empty((N, 4), np.float64)
+    for j in range(N):
+        w = boxes[j, 2]
+        h = boxes[j, 3]
+        out[j, 0] = boxes[j, 0] + w / 2.0
+        out[j, 1] = boxes[j, 1] + h / 2.0
+        out[j, 2] = w
+        out[j, 3] = h
+    return out
