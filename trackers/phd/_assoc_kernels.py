@@ -518,24 +518,88 @@ def _tail_w0(tail, t, v0, v1, b0, b1, c0, c1, i, new, depth, gate_d2, sv, ss, so
             w0[t, j] = 0.0
 
 
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
+def _star_pick(w0, rdeg, cdeg):
+    """The maximum-weight matching of the admissible edges (``w0`` != 0, positive; ``rdeg``,
+    ``cdeg`` their count per tail and per vertex) when it needs no assignment solver: every
+    connected group of edges is a star -- one edge, a tail whose vertices have no other tail,
+    or a vertex whose tails have no other vertex -- with a single heaviest edge (a tie: the
+    solver decides).  A star's matching is its heaviest edge, so the maximum-weight matching
+    is those and it is unique (the solver's, :func:`.association._match_admissible`).
+    Returns ``pick`` (T,): each tail's vertex, −1 none; empty (T > 0): the solver is needed."""
+    T = w0.shape[0]
+    M = w0.shape[1]
+    pick = np.empty(T, np.int64)
+    none = np.empty(0, np.int64)
+    for t in range(T):
+        pick[t] = -1
+    for t in range(T):
+        if rdeg[t] == 0:
+            continue
+        if rdeg[t] == 1:
+            for j in range(M):
+                if w0[t, j] != 0.0:
+                    break
+            if cdeg[j] == 1:
+                pick[t] = j
+            continue
+        best = -1
+        tie = False
+        for j in range(M):
+            w = w0[t, j]
+            if w != 0.0:
+                if cdeg[j] != 1:
+                    return none            # not a star: the solver
+                if best < 0 or w > w0[t, best]:
+                    best = j
+                    tie = False
+                elif w == w0[t, best]:
+                    tie = True
+        if tie:
+            return none
+        pick[t] = best
+    for j in range(M):
+        if cdeg[j] < 2:
+            continue
+        best = -1
+        tie = False
+        for t in range(T):
+            w = w0[t, j]
+            if w != 0.0:
+                if rdeg[t] != 1:
+                    return none
+                if best < 0 or w > w0[best, j]:
+                    best = t
+                    tie = False
+                elif w == w0[best, j]:
+                    tie = True
+        if tie:
+            return none
+        pick[best] = j
+    return pick
+
+
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
 def frame_step(live_ids, tail, tail_frame, prev, prev_frame, length, new, frame, kv, next_id,
                min_length, rows, cols, given):
     """:meth:`.association.GraphAssociator.step`'s steps 1-3 for a frame without colour
     features or edge arrays, in one pass: no tail expires (else ``status`` 2, nothing done),
     :func:`frame_edges`' admissible weights of the live tails against ``new`` (M, 6) (``kv``:
-    ``kernel_args`` then ``speed_prior``; the same floats), the matching when no tail and no
-    vertex has two admissible edges (``np.nonzero(w0)``'s pairs, as
-    :func:`.association._match_admissible`), then :func:`advance` in place.  When the
-    matching needs the assignment solver: ``status`` 1, nothing done; called again with its
-    ``rows``, ``cols`` and ``given`` true, it advances with them.  Returns one int64 array
-    (one object to hand back): ``status, flags, P``, then the vertices' track ``ids`` (M,),
+    ``kernel_args`` then ``speed_prior``; the same floats), the matching when it needs no
+    assignment solver (:func:`_star_pick`: every group of admissible edges a star, the
+    usual frame), then :func:`advance` in place.  When the
+    matching needs the assignment solver: ``status`` 1 and ``w0`` (T, M) (:func:`frame_edges`'
+    admissible weights, else 0.0), nothing done; called again with the solver's ``rows``,
+    ``cols`` and ``given`` true, it advances with them.  Returns ``w0`` (empty unless status
+    1) and one int64 array: ``status, flags, P``, then the vertices' track ``ids`` (M,),
     their tracks' ``lengths`` (M,) after the frame (a new track's 1) and the ``P`` matched
     pairs' ``rows``, ``cols``.  ``flags``: 1 some tail of ``min_length`` vertices unseen at
     ``frame`` (:func:`advance`), 2 some vertex's track has ``min_length`` vertices now, 4 some
     matched tail had a gap of more than one frame."""
     T = tail.shape[0]
     M = new.shape[0]
+    w0 = np.empty((0, 0), np.float64)
     if not given:
         depth = kv[0]
         for t in range(T):
@@ -544,7 +608,7 @@ def frame_step(live_ids, tail, tail_frame, prev, prev_frame, length, new, frame,
                 out[0] = 2
                 out[1] = 0
                 out[2] = 0
-                return out
+                return w0, out
         w0 = np.empty((T, M), np.float64)
         var = np.empty(4, np.float64)
         lg = np.empty(4, np.float64)
@@ -557,37 +621,35 @@ def frame_step(live_ids, tail, tail_frame, prev, prev_frame, length, new, frame,
             _tail_w0(tail, t, vbc[0, 0], vbc[0, 1], vbc[1, 0], vbc[1, 1], vbc[2, 0],
                      vbc[2, 1], float(frame - tail_frame[t]), new, kv[0], kv[1], kv[2], kv[3],
                      kv[4], kv[5], kv[6], kv[7], kv[8], kv[9], var, lg, w0)
-            row = 0
+        rdeg = np.empty(T, np.int64)
+        cdeg = np.empty(M, np.int64)
+        for j in range(M):
+            cdeg[j] = 0
+        for t in range(T):
+            rdeg[t] = 0
             for j in range(M):
                 if w0[t, j] != 0.0:
-                    n_ok += 1
-                    row += 1
-            if row > 1:
-                one = False
-        if one:
-            for j in range(M):
-                col = 0
-                for t in range(T):
-                    if w0[t, j] != 0.0:
-                        col += 1
-                if col > 1:
-                    one = False
-                    break
-        if not one:
+                    rdeg[t] += 1
+                    cdeg[j] += 1
+        pick = _star_pick(w0, rdeg, cdeg)
+        if pick.shape[0] == 0 and T > 0:
             out = np.empty(3, np.int64)
             out[0] = 1
             out[1] = 0
             out[2] = 0
-            return out
-        rows = np.empty(n_ok, np.int64)
-        cols = np.empty(n_ok, np.int64)
+            return w0, out
         n = 0
         for t in range(T):
-            for j in range(M):
-                if w0[t, j] != 0.0:
-                    rows[n] = t
-                    cols[n] = j
-                    n += 1
+            if pick[t] >= 0:
+                n += 1
+        rows = np.empty(n, np.int64)
+        cols = np.empty(n, np.int64)
+        n = 0
+        for t in range(T):
+            if pick[t] >= 0:
+                rows[n] = t
+                cols[n] = pick[t]
+                n += 1
     P = rows.shape[0]
     out = np.empty(3 + 2 * M + 2 * P, np.int64)
     flags = 0
@@ -611,7 +673,7 @@ def frame_step(live_ids, tail, tail_frame, prev, prev_frame, length, new, frame,
     out[0] = 0
     out[1] = flags
     out[2] = P
-    return out
+    return np.empty((0, 0), np.float64), out
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)

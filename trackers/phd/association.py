@@ -1084,17 +1084,14 @@ class GraphAssociator:
         min_length = int(p.min_length)
         args = (self._ids, self._tail, self._tail_frame, self._prev, self._prev_frame,
                 self._length, new, frame, kv, self._next_id, min_length)
-        out = _assoc_kernels.frame_step(*args, _NO_IDS, _NO_IDS, False)
+        w0, out = _assoc_kernels.frame_step(*args, _NO_IDS, _NO_IDS, False)
         status, flags, P = out[:3].tolist()
         if status == 2:
             return None
         if status == 1:
-            # (the assignment solver on frame_edges' admissible weights, then the advance)
-            w0 = _assoc_kernels.frame_edges(
-                self._tail, self._prev, self._tail_frame, self._prev_frame, frame,
-                new.take(OBS_INDEX, axis=1), *p.kernel_args, float(p.speed_prior))[4]
+            # (the assignment solver on the admissible weights, then the advance)
             rows, cols = _match_admissible(w0, 1)
-            out = _assoc_kernels.frame_step(*args, rows, cols, True)
+            w0, out = _assoc_kernels.frame_step(*args, rows, cols, True)
             status, flags, P = out[:3].tolist()
         M = len(new)
         ids, lengths = out[3:3 + M], out[3 + M:3 + 2 * M]
