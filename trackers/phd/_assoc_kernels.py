@@ -234,11 +234,22 @@ def frame_edges(tail, prev, tail_frame, prev_frame, frame, z, depth, gate_d2, sv
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
 def revive_hits(tail, prev, tail_frame, prev_frame, first_frame, length, frame, z, min_length,
-                depth, revive_rate, gate_d2, sv, ss, so, so_min, ratio, cc, cc2, speed_prior):
+                revive_rate, kv):
     """:meth:`.association.GraphAssociator.returning` in one pass: ``hit`` (N,) bool, the
     detections ``z`` (N, 4) ``(cx, cy, w, h)`` inside the edge gate (:func:`edge_scores`'s
     d², the same floats) of a confirmed tail unseen in the frame before ``frame`` (within
-    ``depth``) with estimates in at least ``revive_rate`` of its frames."""
+    the graph depth) with estimates in at least ``revive_rate`` of its frames.  ``kv``:
+    ``AssocParams.kernel_vec`` (one argument for eleven floats: fewer to type and unbox)."""
+    depth = int(kv[0])
+    gate_d2 = kv[1]
+    sv = kv[2]
+    ss = kv[3]
+    so = kv[4]
+    so_min = kv[5]
+    ratio = kv[6]
+    cc = kv[7]
+    cc2 = kv[8]
+    speed_prior = kv[10]
     N = z.shape[0]
     hit = np.empty(N, np.bool_)      # np.empty + a fill: no np.zeros overload to compile
     for j in range(N):

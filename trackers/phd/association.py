@@ -1271,12 +1271,10 @@ class GraphAssociator:
             return np.zeros(len(Z), dtype=bool)
         # the lost-track test, tail_velocity and score_edges' gate in one kernel pass (the
         # same floats): most frames have no such track, and numpy spent ~20 small calls
-        depth, gate_d2, sv, ss, so, so_min, ratio, cc, cc2, _ = p.kernel_args
         return _assoc_kernels.revive_hits(
             self._tail, self._prev, self._tail_frame, self._prev_frame, self._first_frame,
-            self._length, int(frame), Z, int(p.min_length), int(p.depth),
-            float(p.revive_rate), gate_d2, sv, ss, so, so_min, ratio, cc, cc2,
-            float(p.speed_prior))
+            self._length, int(frame), Z, int(p.min_length), float(p.revive_rate),
+            p.kernel_vec)
 
     def _extend_heads(self, frame: int, relinked: np.ndarray) -> None:
         """``extend_heads``: the tracks confirmed at ``frame`` (not re-linked) get rows in the
