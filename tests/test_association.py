@@ -1138,3 +1138,116 @@ def test_uncovered_kernel_is_the_numpy_spelling():
         if len(est) and bfill.any():
             seen.add("filled rows ignored")
     assert seen == {True, False, "filled rows ignored"}
+
+
+def _walker_frames(rng, n_frames, n_targets, spread):
+    """Estimates (M, 6) per frame of walkers that cross (shared edges), vanish for a while
+    (gaps, expiries, re-links) and come with clutter; velocities known on some frames."""
+    pos = rng.uniform(0, spread, (n_targets, 2))
+    vel = rng.normal(0, 2.0, (n_targets, 2))
+    size = rng.uniform(15, 40, n_targets)
+    away = np.zeros(n_targets, np.int64)
+    out = []
+    for k in range(n_frames):
+        pos += vel
+        away = np.where((away == 0) & (rng.random(n_targets) < 0.04),
+                        rng.integers(1, 12, n_targets), np.maximum(away - 1, 0))
+        seen = (away == 0) & (rng.random(n_targets) < 0.85)
+        rows = [state(x + rng.normal(0, 1), y + rng.normal(0, 1), w, 2.5 * w,
+                      *((vx, vy) if k % 3 else (NAN, NAN)))
+                for (x, y), (vx, vy), w in zip(pos[seen], vel[seen], size[seen])]
+        rows += [state(x, y, w, 2.5 * w) for x, y, w in
+                 zip(*rng.uniform(0, spread, (2, int(rng.poisson(1.0)))),
+                     rng.uniform(15, 40, 5))]
+        out.append(np.array(rows).reshape(-1, 6))
+    return out
+
+
+def test_step_fast_path_is_the_general_one():
+    """A step without colour features or edge arrays (one kernel pass: frame_step, the
+    solver between two calls when the matching is not a set of stars) gives what the
+    general path (the solver on every shared edge) gives
+    (edges=True): the ids, lengths, confirmations, ended and re-linked tracks and finalised
+    rows of every frame -- on scenes with crossings (the solver), gaps, expiries, re-links,
+    gap filling and extended heads."""
+    from pfscope.trackers.phd import _assoc_kernels as AK
+
+    calls = []
+    orig = AK.frame_step
+
+    def spy(*a):
+        out = orig(*a)
+        calls.append(int(out[1][0]))      # (w0, [status, ...])
+        return out
+
+    rng = np.random.default_rng(11)
+    stars = 0
+    for depth, spread, settings in ((4, 120.0, {}),
+                                    (6, 300.0, dict(fill_gaps=True, extend_heads=True,
+                                                    head_skip=1, relink_depth=30,
+                                                    fill_support=0.25, fill_err=0.2)),
+                                    (3, 80.0, dict(fill_gaps=True, relink_depth=10))):
+        p = AssocParams(depth=depth, min_length=3, **settings)
+        fast, slow = GraphAssociator(p), GraphAssociator(p)
+        fast.area = slow.area = 640.0 * 480.0
+        AK.frame_step = spy
+        try:
+            for k, s in enumerate(_walker_frames(rng, 150, 6, spread), start=1):
+                det = s[:, [0, 1, 4, 5]] + 0.5
+                n0 = len(calls)
+                a = fast.step(k, s, detections=det, edges=False)
+                b = slow.step(k, s, detections=det, edges=True)
+                ok = b.edges_weight > 0
+                shared = (np.bincount(b.edges_src_id[ok]).max(initial=0) > 1
+                          or np.bincount(b.edges_dst_index[ok]).max(initial=0) > 1)
+                if shared and calls[n0:] == [0]:
+                    stars += 1      # some tail or vertex with two edges: no solver
+                for name in ("ids", "lengths", "confirmed", "ended", "relinked"):
+                    np.testing.assert_array_equal(getattr(a, name), getattr(b, name), name)
+                assert [r.frame for r in a.finalised] == [r.frame for r in b.finalised]
+                for ra, rb in zip(a.finalised, b.finalised):
+                    for name in ("ids", "states", "filled"):
+                        np.testing.assert_array_equal(getattr(ra, name), getattr(rb, name))
+                assert fast._unseen == slow._unseen
+                np.testing.assert_array_equal(fast._ids, slow._ids)
+                np.testing.assert_array_equal(fast._tail, slow._tail)
+                np.testing.assert_array_equal(fast._lost_ids, slow._lost_ids)
+        finally:
+            AK.frame_step = orig
+        for ra, rb in zip(fast.flush(), slow.flush()):
+            np.testing.assert_array_equal(ra.ids, rb.ids)
+            np.testing.assert_array_equal(ra.states, rb.states)
+    # every way out of the kernel was taken: done (stars too), the solver, an expiring tail
+    assert {0, 1, 2} <= set(calls) and stars > 10, (set(calls), stars)
+
+
+def test_output_kernels_are_the_numpy_spelling():
+    """The step's output kernels give numpy's floats: final_rows (the confirmed rows of a
+    held-back frame), track_boxes (the confirmed tracks' top-left boxes), row_boxes (a
+    finalised frame's boxes and conf) and centre_boxes (xywh_to_cxcywh)."""
+    from pfscope.trackers.phd import _assoc_kernels as AK
+    from pfscope.trackers.types import xywh_to_cxcywh
+
+    rng = np.random.default_rng(3)
+    for n in (0, 1, 7):
+        st = rng.uniform(1, 300, (n, 6))
+        ids = rng.permutation(20)[:n].astype(np.int64)
+        keep = rng.random(n) < 0.5
+        live = np.sort(rng.permutation(20)[:10]).astype(np.int64)
+        live_len = rng.integers(1, 6, 10).astype(np.int64)
+        extra = np.setdiff1d(np.arange(20), live)[:4].astype(np.int64)
+        extra_len = rng.integers(1, 6, len(extra)).astype(np.int64)
+        ok = AK.confirmed(live, live_len, extra, extra_len, ids, 3)
+        got = AK.final_rows(live, live_len, extra, extra_len, ids, st, keep, 3)
+        for g, w in zip(got, (ids[ok], st[ok], keep[ok])):
+            np.testing.assert_array_equal(g, w)
+            assert g.dtype == w.dtype
+        tid, tb = AK.track_boxes(ids, st, keep)
+        np.testing.assert_array_equal(tid, ids[keep])
+        np.testing.assert_array_equal(tb, boxes_xywh(st[keep]).reshape(-1, 4))
+        rb, conf = AK.row_boxes(st, keep, 0.5, 1.0)
+        np.testing.assert_array_equal(rb, boxes_xywh(st).reshape(-1, 4))
+        np.testing.assert_array_equal(conf, np.where(keep, 0.5, 1.0))
+        b = st[:, :4]
+        np.testing.assert_array_equal(AK.centre_boxes(np.ascontiguousarray(b)),
+                                      xywh_to_cxcywh(b))

@@ -234,11 +234,22 @@ def frame_edges(tail, prev, tail_frame, prev_frame, frame, z, depth, gate_d2, sv
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
 def revive_hits(tail, prev, tail_frame, prev_frame, first_frame, length, frame, z, min_length,
-                depth, revive_rate, gate_d2, sv, ss, so, so_min, ratio, cc, cc2, speed_prior):
+                revive_rate, kv):
     """:meth:`.association.GraphAssociator.returning` in one pass: ``hit`` (N,) bool, the
     detections ``z`` (N, 4) ``(cx, cy, w, h)`` inside the edge gate (:func:`edge_scores`'s
     d², the same floats) of a confirmed tail unseen in the frame before ``frame`` (within
-    ``depth``) with estimates in at least ``revive_rate`` of its frames."""
+    the graph depth) with estimates in at least ``revive_rate`` of its frames.  ``kv``:
+    ``AssocParams.kernel_vec`` (one argument for eleven floats: fewer to type and unbox)."""
+    depth = int(kv[0])
+    gate_d2 = kv[1]
+    sv = kv[2]
+    ss = kv[3]
+    so = kv[4]
+    so_min = kv[5]
+    ratio = kv[6]
+    cc = kv[7]
+    cc2 = kv[8]
+    speed_prior = kv[10]
     N = z.shape[0]
     hit = np.empty(N, np.bool_)      # np.empty + a fill: no np.zeros overload to compile
     for j in range(N):
@@ -485,3 +496,274 @@ def fill_rows(bid, bst, bfill, st, fid, lo, hi, keep, fill_overlap):
             nbfill[o] = True
             o += 1
     return nbid, nbst, nbfill, n
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
+def _tail_w0(tail, t, v0, v1, b0, b1, c0, c1, i, new, depth, gate_d2, sv, ss, so, so_min,
+             ratio, cc, cc2, two_pi, var, lg, w0):
+    """Tail t's row of :func:`frame_edges`' ``w0`` (the admissible weights, else 0.0) against
+    the states ``new`` (M, 6) -- :func:`_tail_row`'s floats, without its gain and d² rows."""
+    _var4(tail, t, b0, b1, c0, c1, depth, sv, ss, so, so_min, ratio, cc, cc2, var)
+    for k in range(4):
+        lg[k] = math.log(two_pi * var[k])
+    floor = -0.5 * gate_d2 - 0.5 * (((lg[0] + lg[1]) + lg[2]) + lg[3])
+    _var4(tail, t, b0, b1, c0, c1, i, sv, ss, so, so_min, ratio, cc, cc2, var)
+    for k in range(4):
+        lg[k] = math.log(two_pi * var[k])
+    log_det = ((lg[0] + lg[1]) + lg[2]) + lg[3]
+    m0 = tail[t, 0] + i * v0
+    m1 = tail[t, 1] + i * v1
+    m2 = tail[t, 4]
+    m3 = tail[t, 5]
+    for j in range(new.shape[0]):
+        r0 = new[j, 0] - m0
+        r1 = new[j, 1] - m1
+        r2 = new[j, 4] - m2
+        r3 = new[j, 5] - m3
+        d = ((r0 * r0 / var[0] + r1 * r1 / var[1]) + r2 * r2 / var[2]) + r3 * r3 / var[3]
+        w = (-0.5 * d - 0.5 * log_det) - floor
+        if d <= gate_d2 and w - w == 0.0 and w > 0.0:
+            w0[t, j] = w
+        else:
+            w0[t, j] = 0.0
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
+def _star_pick(w0, rdeg, cdeg):
+    """The maximum-weight matching of the admissible edges (``w0`` != 0, positive; ``rdeg``,
+    ``cdeg`` their count per tail and per vertex) when it needs no assignment solver: every
+    connected group of edges is a star -- one edge, a tail whose vertices have no other tail,
+    or a vertex whose tails have no other vertex -- with a single heaviest edge (a tie: the
+    solver decides).  A star's matching is its heaviest edge, so the maximum-weight matching
+    is those and it is unique (the solver's, :func:`.association._match_admissible`).
+    Returns ``pick`` (T,): each tail's vertex, −1 none; empty (T > 0): the solver is needed."""
+    T = w0.shape[0]
+    M = w0.shape[1]
+    pick = np.empty(T, np.int64)
+    none = np.empty(0, np.int64)
+    for t in range(T):
+        pick[t] = -1
+    for t in range(T):
+        if rdeg[t] == 0:
+            continue
+        if rdeg[t] == 1:
+            for j in range(M):
+                if w0[t, j] != 0.0:
+                    break
+            if cdeg[j] == 1:
+                pick[t] = j
+            continue
+        best = -1
+        tie = False
+        for j in range(M):
+            w = w0[t, j]
+            if w != 0.0:
+                if cdeg[j] != 1:
+                    return none            # not a star: the solver
+                if best < 0 or w > w0[t, best]:
+                    best = j
+                    tie = False
+                elif w == w0[t, best]:
+                    tie = True
+        if tie:
+            return none
+        pick[t] = best
+    for j in range(M):
+        if cdeg[j] < 2:
+            continue
+        best = -1
+        tie = False
+        for t in range(T):
+            w = w0[t, j]
+            if w != 0.0:
+                if rdeg[t] != 1:
+                    return none
+                if best < 0 or w > w0[best, j]:
+                    best = t
+                    tie = False
+                elif w == w0[best, j]:
+                    tie = True
+        if tie:
+            return none
+        pick[best] = j
+    return pick
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def frame_step(live_ids, tail, tail_frame, prev, prev_frame, length, new, frame, kv, next_id,
+               min_length, rows, cols, given):
+    """:meth:`.association.GraphAssociator.step`'s steps 1-3 for a frame without colour
+    features or edge arrays, in one pass: no tail expires (else ``status`` 2, nothing done),
+    :func:`frame_edges`' admissible weights of the live tails against ``new`` (M, 6) (``kv``:
+    ``kernel_args`` then ``speed_prior``; the same floats), the matching when it needs no
+    assignment solver (:func:`_star_pick`: every group of admissible edges a star, the
+    usual frame), then :func:`advance` in place.  When the
+    matching needs the assignment solver: ``status`` 1 and ``w0`` (T, M) (:func:`frame_edges`'
+    admissible weights, else 0.0), nothing done; called again with the solver's ``rows``,
+    ``cols`` and ``given`` true, it advances with them.  Returns ``w0`` (empty unless status
+    1) and one int64 array: ``status, flags, P``, then the vertices' track ``ids`` (M,),
+    their tracks' ``lengths`` (M,) after the frame (a new track's 1) and the ``P`` matched
+    pairs' ``rows``, ``cols``.  ``flags``: 1 some tail of ``min_length`` vertices unseen at
+    ``frame`` (:func:`advance`), 2 some vertex's track has ``min_length`` vertices now, 4 some
+    matched tail had a gap of more than one frame."""
+    T = tail.shape[0]
+    M = new.shape[0]
+    w0 = np.empty((0, 0), np.float64)
+    if not given:
+        depth = kv[0]
+        for t in range(T):
+            if frame - tail_frame[t] > depth:
+                out = np.empty(3, np.int64)
+                out[0] = 2
+                out[1] = 0
+                out[2] = 0
+                return w0, out
+        w0 = np.empty((T, M), np.float64)
+        var = np.empty(4, np.float64)
+        lg = np.empty(4, np.float64)
+        vbc = np.empty((3, 2), np.float64)
+        n_ok = 0
+        one = True
+        for t in range(T):
+            d = tail_frame[t] - prev_frame[t] if prev_frame[t] >= 0 else 0
+            _vbc(tail, prev, t, d, kv[4], kv[5], kv[6], kv[10], vbc)
+            _tail_w0(tail, t, vbc[0, 0], vbc[0, 1], vbc[1, 0], vbc[1, 1], vbc[2, 0],
+                     vbc[2, 1], float(frame - tail_frame[t]), new, kv[0], kv[1], kv[2], kv[3],
+                     kv[4], kv[5], kv[6], kv[7], kv[8], kv[9], var, lg, w0)
+        rdeg = np.empty(T, np.int64)
+        cdeg = np.empty(M, np.int64)
+        for j in range(M):
+            cdeg[j] = 0
+        for t in range(T):
+            rdeg[t] = 0
+            for j in range(M):
+                if w0[t, j] != 0.0:
+                    rdeg[t] += 1
+                    cdeg[j] += 1
+        pick = _star_pick(w0, rdeg, cdeg)
+        if pick.shape[0] == 0 and T > 0:
+            out = np.empty(3, np.int64)
+            out[0] = 1
+            out[1] = 0
+            out[2] = 0
+            return w0, out
+        n = 0
+        for t in range(T):
+            if pick[t] >= 0:
+                n += 1
+        rows = np.empty(n, np.int64)
+        cols = np.empty(n, np.int64)
+        n = 0
+        for t in range(T):
+            if pick[t] >= 0:
+                rows[n] = t
+                cols[n] = pick[t]
+                n += 1
+    P = rows.shape[0]
+    out = np.empty(3 + 2 * M + 2 * P, np.int64)
+    flags = 0
+    for p in range(P):
+        if frame - tail_frame[rows[p]] > 1:
+            flags |= 4
+        out[3 + 2 * M + p] = rows[p]
+        out[3 + 2 * M + P + p] = cols[p]
+    ids, matched, unseen = advance(live_ids, tail, tail_frame, prev, prev_frame, length, new,
+                                   rows, cols, frame, next_id, min_length)
+    if unseen:
+        flags |= 1
+    for j in range(M):
+        out[3 + j] = ids[j]
+        out[3 + M + j] = 1
+    for p in range(P):
+        out[3 + M + cols[p]] = length[rows[p]]
+    for j in range(M):
+        if out[3 + M + j] == min_length:
+            flags |= 2
+    out[0] = 0
+    out[1] = flags
+    out[2] = P
+    return np.empty((0, 0), np.float64), out
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def final_rows(live_ids, live_len, extra_ids, extra_len, bid, bst, bfill, min_length):
+    """A held-back frame's rows ``bid`` (R,), ``bst`` (R, 6), ``bfill`` (R,) of the tracks with
+    at least ``min_length`` vertices (:func:`confirmed`), as ``a[mask]`` for each."""
+    ok = confirmed(live_ids, live_len, extra_ids, extra_len, bid, min_length)
+    n = 0
+    for r in range(ok.shape[0]):
+        if ok[r]:
+            n += 1
+    oid = np.empty(n, np.int64)
+    ost = np.empty((n, bst.shape[1]), np.float64)
+    ofill = np.empty(n, np.bool_)
+    o = 0
+    for r in range(ok.shape[0]):
+        if ok[r]:
+            oid[o] = bid[r]
+            for c in range(bst.shape[1]):
+                ost[o, c] = bst[r, c]
+            ofill[o] = bfill[r]
+            o += 1
+    return oid, ost, ofill
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def track_boxes(ids, states, keep):
+    """The tracks a step reports: ``ids[keep]`` and the top-left boxes ``(x, y, w, h)`` of
+    ``states[keep]`` (:func:`.association.boxes_xywh`: ``x − w / 2``, ``y − h / 2``, the same
+    floats)."""
+    n = 0
+    for j in range(keep.shape[0]):
+        if keep[j]:
+            n += 1
+    oid = np.empty(n, np.int64)
+    out = np.empty((n, 4), np.float64)
+    o = 0
+    for j in range(keep.shape[0]):
+        if keep[j]:
+            oid[o] = ids[j]
+            w = states[j, 4]
+            h = states[j, 5]
+            out[o, 0] = states[j, 0] - w / 2.0
+            out[o, 1] = states[j, 1] - h / 2.0
+            out[o, 2] = w
+            out[o, 3] = h
+            o += 1
+    return oid, out
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def row_boxes(states, filled, gap_conf, est_conf):
+    """A finalised frame's top-left boxes (:func:`.association.boxes_xywh`, the same floats)
+    and tracks-file conf ``np.where(filled, gap_conf, est_conf)``."""
+    R = states.shape[0]
+    out = np.empty((R, 4), np.float64)
+    conf = np.empty(R, np.float64)
+    for j in range(R):
+        w = states[j, 4]
+        h = states[j, 5]
+        out[j, 0] = states[j, 0] - w / 2.0
+        out[j, 1] = states[j, 1] - h / 2.0
+        out[j, 2] = w
+        out[j, 3] = h
+        conf[j] = gap_conf if filled[j] else est_conf
+    return out, conf
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def centre_boxes(boxes):
+    """(N, 4) top-left boxes -> centre boxes ``(cx, cy, w, h)``
+    (:func:`pfscope.trackers.types.xywh_to_cxcywh`, the same floats)."""
+    N = boxes.shape[0]
+    out = np.empty((N, 4), np.float64)
+    for j in range(N):
+        w = boxes[j, 2]
+        h = boxes[j, 3]
+        out[j, 0] = boxes[j, 0] + w / 2.0
+        out[j, 1] = boxes[j, 1] + h / 2.0
+        out[j, 2] = w
+        out[j, 3] = h
+    return out

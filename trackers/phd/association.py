@@ -287,6 +287,14 @@ class AssocParams:
                 float(self.sigma_obs_pos_ratio), float(self.accel_to_position),
                 float(self.accel_to_position ** 2), 2.0 * np.pi)
 
+    @cached_property
+    def kernel_vec(self) -> np.ndarray:
+        """:attr:`kernel_args` then ``speed_prior`` as one read-only float64 array (one
+        argument of :func:`._assoc_kernels.frame_step` instead of eleven floats to type)."""
+        a = np.array(self.kernel_args + (float(self.speed_prior),), dtype=np.float64)
+        a.setflags(write=False)
+        return a
+
 
 # --------------------------------------------------------------------------- pure functions
 
@@ -645,7 +653,19 @@ def compile_step_kernels(params: AssocParams | None = None) -> None:
     a.step(4, s[:0], detections=z, edges=False)
     # a gap of one frame, filled; the track confirmed, its head extended back to frame 1
     a.step(5, s, detections=z, edges=False)
+    a.step(6, s, detections=z, edges=True)        # the general path (edges, colour)
+    # the tail expires (the general path) and the rows held back are final; then the fast
+    # path's finalised rows
+    a.step(7 + a.lag, s, detections=z, edges=False)
+    a.step(8 + 2 * a.lag, s, detections=z, edges=False)
+    a.step(9 + 2 * a.lag, s[:0], detections=z, edges=False)
     a.flush()                      # the confirmed test of the rows held back
+    # the tracker's output: the confirmed tracks' and the final rows' boxes, its detections'
+    # centres
+    res = a.step(10 + 3 * a.lag, s, detections=z, edges=False)
+    _assoc_kernels.track_boxes(res.ids, res.states, res.confirmed)
+    _assoc_kernels.row_boxes(res.states, res.confirmed, GAP_CONF, EST_CONF)
+    _assoc_kernels.centre_boxes(np.ascontiguousarray(z))
 
 
 def boxes_xywh(states: np.ndarray) -> np.ndarray:
@@ -913,6 +933,13 @@ class GraphAssociator:
         self._last_frame = frame
         p = self.params
         M = len(new)
+        use_app = features is not None and p.app_weight > 0
+        if not (use_app or edges) and len(self._ids) * M <= DENSE_MAX_PAIRS:
+            # no colour features and no edge arrays (the unrecorded run): steps 1-3 in one
+            # kernel pass (the same floats and pairs) unless a tail expires
+            res = self._step_fast(frame, new, detections)
+            if res is not None:
+                return res
 
         # 1. forget tails older than K frames: their tracks end (bounded memory)
         gaps = frame - self._tail_frame
@@ -1044,17 +1071,84 @@ class GraphAssociator:
             if _any(long):
                 r, c = rows[long], cols[long]
                 self._fill_gaps(self._prev[r], self._prev_frame[r], new[c], frame, self._ids[r])
+        lengths = self._length[self._ids.searchsorted(ids)]
+        return self._finish(frame, new, ids, lengths, None, ended_ids, ended_len, detections,
+                            edge_arrays)
+
+    def _step_fast(self, frame: int, new: np.ndarray, detections) -> "AssocResult | None":
+        """:meth:`step` without colour features or edge arrays: steps 1-3 in one kernel
+        (:func:`._assoc_kernels.frame_step`; the assignment solver between two calls when
+        the matching needs it); None (nothing done) when a tail expires this frame."""
+        p = self.params
+        kv = p.kernel_vec
+        min_length = int(p.min_length)
+        args = (self._ids, self._tail, self._tail_frame, self._prev, self._prev_frame,
+                self._length, new, frame, kv, self._next_id, min_length)
+        w0, out = _assoc_kernels.frame_step(*args, _NO_IDS, _NO_IDS, False)
+        status, flags, P = out[:3].tolist()
+        if status == 2:
+            return None
+        if status == 1:
+            # (the assignment solver on the admissible weights, then the advance)
+            rows, cols = _match_admissible(w0, 1)
+            w0, out = _assoc_kernels.frame_step(*args, rows, cols, True)
+            status, flags, P = out[:3].tolist()
+        M = len(new)
+        ids, lengths = out[3:3 + M], out[3 + M:3 + 2 * M]
+        if len(self._lost_ids):
+            keep = frame - self._lost_frame <= p.relink_depth
+            if not _all(keep):
+                self._lost_ids, self._lost, self._lost_frame = (
+                    self._lost_ids[keep], self._lost[keep], self._lost_frame[keep])
+                self._lost_vbc, self._lost_len = self._lost_vbc[keep], self._lost_len[keep]
+                self._lost_app, self._lost_app_n = self._lost_app[keep], self._lost_app_n[keep]
+        self._unseen = (bool(flags & 1), p.min_length)
+        n_new = M - P
+        if n_new:
+            unmatched = ids >= self._next_id      # (new tracks' ids: from _next_id on)
+            self._ids = np.concatenate([self._ids, ids[unmatched]])
+            self._tail = np.concatenate([self._tail, new[unmatched]])
+            self._tail_frame = np.concatenate([self._tail_frame,
+                                               np.full(n_new, frame, dtype=np.int64)])
+            self._prev = np.concatenate([self._prev, np.full((n_new, STATE_DIM), np.nan)])
+            self._prev_frame = np.concatenate([self._prev_frame,
+                                               np.full(n_new, -1, dtype=np.int64)])
+            self._length = np.concatenate([self._length, np.ones(n_new, dtype=np.int64)])
+            self._first = np.concatenate([self._first, new[unmatched]])
+            self._first_frame = np.concatenate([self._first_frame,
+                                                np.full(n_new, frame, dtype=np.int64)])
+            self._app = np.concatenate([self._app, np.full((n_new, APP_DIM), np.nan)])
+            self._app_n = np.concatenate([self._app_n, np.zeros(n_new)])
+            self._next_id += n_new
+        if p.fill_gaps and flags & 4:
+            # (a matched tail's previous frame is now in _prev_frame: its gap was frame − that)
+            rows, cols = out[3 + 2 * M:3 + 2 * M + P], out[3 + 2 * M + P:]
+            long = frame - self._prev_frame[rows] > 1
+            r, c = rows[long], cols[long]
+            self._fill_gaps(self._prev[r], self._prev_frame[r], new[c], frame, self._ids[r])
+        return self._finish(frame, new, ids, lengths, bool(flags & 2), _NO_IDS, _NO_IDS,
+                            detections, _NO_EDGES)
+
+    def _finish(self, frame: int, new: np.ndarray, ids: np.ndarray, lengths: np.ndarray,
+                at_min, ended_ids: np.ndarray, ended_len: np.ndarray, detections,
+                edge_arrays: dict) -> "AssocResult":
+        """:meth:`step`'s steps 5b-6 (``lengths``: of this frame's vertices' tracks;
+        ``at_min``: some is ``min_length``, None: not known yet)."""
+        p = self.params
+        M = len(new)
 
         # 5b. re-linking: a track confirmed now may continue a recently ended one (renames it
         # in the live arrays, the buffer and ``ids``)
         # (only a track of this frame's vertices whose length is min_length now can be newly
         # confirmed -- _relink's candidates are exactly those: most frames have none, and its
         # tests are not run; a re-link renames and re-sorts, so the lengths are read again)
-        lengths = self._length[self._ids.searchsorted(ids)]
         relinked = _NO_PAIRS
         relink = p.relink_depth > 0 and len(self._lost_ids)
         # (a vertex whose track has min_length vertices now: a track confirmed at this frame)
-        at_min = _any(lengths == p.min_length) if relink or p.extend_heads else False
+        if not (relink or p.extend_heads):
+            at_min = False
+        elif at_min is None:
+            at_min = _any(lengths == p.min_length)
         if relink and at_min:
             relinked = self._relink(frame, ids)
             if len(relinked):
@@ -1078,9 +1172,11 @@ class GraphAssociator:
             if self._dets and self._dets[0][0] == self._buffer[0][0]:
                 self._dets.popleft()
             f, bid, bst, bfill = self._buffer.popleft()
-            ok = self._confirmed_ids(bid, ended_ids, ended_len)
-            finalised.append(_made(FinalRows, frame=f, ids=bid[ok], states=bst[ok],
-                                   filled=bfill[ok]))
+            # (the confirmed test and the three masks in one kernel pass)
+            fid, fst, ffill = _assoc_kernels.final_rows(self._ids, self._length, ended_ids,
+                                                        ended_len, bid, bst, bfill,
+                                                        int(p.min_length))
+            finalised.append(_made(FinalRows, frame=f, ids=fid, states=fst, filled=ffill))
 
         return _made(AssocResult, frame=frame, states=new, ids=ids, lengths=lengths,
                      confirmed=confirmed, ended=ended_ids, finalised=tuple(finalised),
@@ -1175,12 +1271,10 @@ class GraphAssociator:
             return np.zeros(len(Z), dtype=bool)
         # the lost-track test, tail_velocity and score_edges' gate in one kernel pass (the
         # same floats): most frames have no such track, and numpy spent ~20 small calls
-        depth, gate_d2, sv, ss, so, so_min, ratio, cc, cc2, _ = p.kernel_args
         return _assoc_kernels.revive_hits(
             self._tail, self._prev, self._tail_frame, self._prev_frame, self._first_frame,
-            self._length, int(frame), Z, int(p.min_length), int(p.depth),
-            float(p.revive_rate), gate_d2, sv, ss, so, so_min, ratio, cc, cc2,
-            float(p.speed_prior))
+            self._length, int(frame), Z, int(p.min_length), float(p.revive_rate),
+            p.kernel_vec)
 
     def _extend_heads(self, frame: int, relinked: np.ndarray) -> None:
         """``extend_heads``: the tracks confirmed at ``frame`` (not re-linked) get rows in the

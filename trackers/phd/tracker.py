@@ -58,7 +58,8 @@ from ..params import param, part, to_dict, with_options
 from ..report import Boxes, Points, Segments, StageLog
 from ..types import Detections, Frame, TrackSet, xywh_to_cxcywh
 from .association import (EST_CONF, GAP_CONF, AssocParams, AssocResult, FinalRows,
-                          GraphAssociator, boxes_xywh)
+                          GraphAssociator)
+from . import _assoc_kernels
 from .appearance import box_features
 from .camera_motion import MEMORY_S as CAMERA_MEMORY_S, scale as camera_scale, warp_states
 from .clustering import Clusters, kmeans_peaks, measurement_estimates
@@ -262,11 +263,13 @@ def frame_rate(frame: Frame) -> Optional[float]:
 
 
 def _rows(finalised: tuple[FinalRows, ...], flagged: bool) -> Rows:
-    # (the association's arrays are in TrackSet's final form already: int64 ids, float64 boxes)
-    if not flagged:
-        return [(r.frame, TrackSet.of(r.ids, r.boxes)) for r in finalised]
-    return [(r.frame, TrackSet.of(r.ids, r.boxes, np.where(r.filled, GAP_CONF, EST_CONF)))
-            for r in finalised]
+    # (the association's arrays are in TrackSet's final form already: int64 ids, float64 boxes;
+    # a frame's top-left boxes and conf flags in one kernel pass, boxes_xywh's floats)
+    out = []
+    for r in finalised:
+        boxes, conf = _assoc_kernels.row_boxes(r.states, r.filled, GAP_CONF, EST_CONF)
+        out.append((r.frame, TrackSet.of(r.ids, boxes, conf if flagged else None)))
+    return out
 
 
 class _AssociatingTracker:
@@ -324,9 +327,10 @@ class _AssociatingTracker:
         res = self.associator.step(frame.index, states, feats, detections,
                                    edges=log.wants("clusters"))
         self._report_association(frame, res, log)
-        keep = res.confirmed
-        return StepResult(TrackSet.of(res.ids[keep], boxes_xywh(res.states[keep])),
-                          _rows(res.finalised, self._flagged), log.result())
+        # (ids[confirmed] and their top-left boxes in one kernel pass: boxes_xywh's floats)
+        ids, boxes = _assoc_kernels.track_boxes(res.ids, res.states, res.confirmed)
+        return StepResult(TrackSet.of(ids, boxes), _rows(res.finalised, self._flagged),
+                          log.result())
 
     def _report_association(self, frame: Frame, res: AssocResult, log: StageLog) -> None:
         log.scalar("assoc/tracks/live", self.associator.n_live)
@@ -503,7 +507,8 @@ class PHDTracker(_AssociatingTracker):
              level: Optional[str] = None) -> StepResult:
         dets = detections if detections is not None else Detections.empty()
         self._retime(frame)
-        z = xywh_to_cxcywh(dets.boxes)      # read-only below: one conversion a frame
+        # read-only below: one conversion a frame (xywh_to_cxcywh's floats, one kernel pass)
+        z = _assoc_kernels.centre_boxes(np.ascontiguousarray(dets.boxes))
         cam = None
         if self.jitter is not None or self.scene_motion is not None:
             self._learn_scene(frame, z)
