@@ -13,15 +13,22 @@ from pfscope.trackers.phd.filter import (
     PHDFilter,
     PHDParams,
     _grid_cell,
+    _birth_weight_terms,
+    as_observations,
+    detection_noise,
+    log_birth_weight,
     log_likelihood,
     mass_near,
     obs_std,
+    observations_noise,
     update,
 )
 from pfscope.trackers.phd.gating import tail_radius2
 from pfscope.trackers.smc import ParticleSet
 from pfscope.trackers.smc import random as R
 from pfscope.trackers.smc.resampling import _systematic_index, _systematic_take
+
+_NO_F = np.zeros(0, np.float64)
 
 OBS = [0, 1, 4, 5]
 
@@ -179,7 +186,7 @@ def test_birth_alloc_fill_is_numpys_allocation_and_birth_fill(seed):
         n_max = min(nz * j_max, cap)
         states, log_w = np.full((n_max + 5, 6), np.nan), np.full(n_max + 5, np.nan)
         det = np.full(n_max + 5, -1, np.int64)
-        j, n = K.birth_alloc_fill(m_near, j_max, complement, cap, lw_base,
+        j, n = K.birth_alloc_fill(m_near, j_max, complement, cap, lw_base, 0, _NO_F, _NO_F,
                                   revive if rev else np.zeros(0, np.bool_), 0.7, Z,
                                   R.stream(11), lk.sigma_obs, lk.sigma_obs_min,
                                   lk.sigma_obs_pos_ratio, 1.3, 0.05, 0.1, 4.0, states, log_w,
@@ -202,11 +209,79 @@ def test_birth_alloc_fill_is_numpys_allocation_and_birth_fill(seed):
         states, log_w = np.full((rows, 6), np.nan), np.full(rows, np.nan)
         det = np.full(rows, -1, np.int64)
         with np.errstate(invalid="ignore"):
-            _, n = K.birth_alloc_fill(m, 1000, True, 50_000, lw_base, np.zeros(0, np.bool_),
+            _, n = K.birth_alloc_fill(m, 1000, True, 50_000, lw_base, 0, _NO_F, _NO_F,
+                                      np.zeros(0, np.bool_),
                                       0.0, Z, R.stream(11), lk.sigma_obs, lk.sigma_obs_min,
                                       lk.sigma_obs_pos_ratio, 1.3, 0.05, 0.1, 4.0, states,
                                       log_w, det)
         assert n == -1 and np.isnan(states).all() and (det == -1).all()
+
+
+@pytest.mark.parametrize("odds", [0.0, 0.05, 3.0])
+def test_birth_alloc_fill_makes_log_birth_weights_bit_for_bit(odds):
+    """The newborn log-weights made in the kernel from log κ and Σ log σ (birth_odds) or the
+    constant birth intensity are numpy's log_birth_weight, then the per-newborn division;
+    a flipped or reordered operation in the kernel shows as an ulp here."""
+    rng = np.random.default_rng(7)
+    params = PHDParams.of(birth_odds=odds, birth_spread=1.3, p_miss=0.07,
+                          birth_intensity=0.02)
+    lk = params.likelihood
+    for _ in range(40):
+        nz = int(rng.integers(1, 25))
+        Z = np.c_[rng.uniform(0, 600, nz), rng.uniform(0, 400, nz),
+                  rng.uniform(0.5, 90, nz), rng.uniform(0.5, 200, nz)]
+        std, log_norm = detection_noise(Z, lk)
+        log_kappa = rng.normal(-14, 3, nz)
+        m_near = rng.uniform(0, 1.2, nz)
+        lw_base, mode, c = _birth_weight_terms(params, log_kappa)
+        assert mode == (2 if odds > 0 else 1)
+        states, log_w = np.empty((nz * 50, 6)), np.empty(nz * 50)
+        det = np.empty(nz * 50, np.int64)
+        j, n = K.birth_alloc_fill(m_near, 50, True, 50_000, lw_base, mode, log_norm, c,
+                                  np.zeros(0, np.bool_), 0.0, Z, R.stream(3), lk.sigma_obs,
+                                  lk.sigma_obs_min, lk.sigma_obs_pos_ratio, 1.3, 0.0, 0.1,
+                                  1.0, states, log_w, det)
+        want = log_birth_weight(Z, params, log_kappa, log_norm)
+        want = np.repeat(want - np.array([libm.log(float(max(v, 1))) for v in j]), j)
+        assert n == j.sum()
+        np.testing.assert_array_equal(log_w[:n].view(np.int64), want.view(np.int64))
+
+
+def test_observation_noise_is_obs_std_and_as_observations_checks():
+    """The detections' one-pass kernel: obs_std's stds bit for bit (sizes on both sides of the
+    σ floor, ties with it) and as_observations' verdict (finite first, then sizes > 0), and
+    observations_noise = as_observations + detection_noise, errors included."""
+    rng = np.random.default_rng(5)
+    lk = LikelihoodParams()
+    for _ in range(200):
+        nz = int(rng.integers(1, 20))
+        Z = np.c_[rng.uniform(-50, 600, nz), rng.uniform(0, 400, nz),
+                  rng.choice([0.5, 1 / 0.15, 20.0, 3.0], nz) * rng.uniform(0.9, 1.1, nz),
+                  rng.choice([1 / 0.15, 70.0, 2.0], nz)]
+        code, std = K.observation_noise(Z, lk.sigma_obs, lk.sigma_obs_min,
+                                        lk.sigma_obs_pos_ratio)
+        assert code == 0
+        np.testing.assert_array_equal(std, obs_std(Z[:, 2:4], lk))
+        z2, (s2, ln2) = observations_noise(Z, lk)
+        s1, ln1 = detection_noise(as_observations(Z), lk)
+        np.testing.assert_array_equal(s2, s1)
+        np.testing.assert_array_equal(ln2.view(np.int64), ln1.view(np.int64))
+        bad = Z.copy()
+        if rng.random() < 0.5:            # a size <= 0 too: the non-finite value wins
+            bad[int(rng.integers(nz)), 2 + int(rng.integers(2))] = 0.0
+        bad[int(rng.integers(nz)), int(rng.integers(4))] = rng.choice([np.nan, np.inf, -np.inf])
+        assert K.observation_noise(bad, 0.15, 1.0, 0.5)[0] == 1
+        with pytest.raises(ValueError, match="non-finite"):
+            observations_noise(bad, lk)
+        with pytest.raises(ValueError, match="non-finite"):
+            as_observations(bad)
+        neg = Z.copy()
+        neg[int(rng.integers(nz)), 2 + int(rng.integers(2))] = rng.choice([0.0, -3.0])
+        assert K.observation_noise(neg, 0.15, 1.0, 0.5)[0] == 2
+        with pytest.raises(ValueError, match="> 0"):
+            observations_noise(neg, lk)
+        with pytest.raises(ValueError, match="> 0"):
+            as_observations(neg)
 
 
 # ----------------------------------------------------------------------------- grid, M(z)

@@ -71,6 +71,37 @@ def propagate_into(x, st, sigma_v, sigma_size, accel_to_position, min_size, out)
     st[0] = s
 
 
+# ----------------------------------------------------------------------------- detections
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def observation_noise(Z, sigma_obs, sigma_min, pos_ratio):
+    """``filter.as_observations``' checks and ``filter.obs_std`` of the sizes in one pass over
+    the detections ``Z`` (N_z, 4): ``(code, std)``, ``code`` 0 when every value is finite and
+    every width and height > 0, 1 when a value is not finite (the check made first), 2 when a
+    size is <= 0; ``std`` (N_z, 4) ``(r σ_w, r σ_h, σ_w, σ_h)``, ``σ = max(sigma_obs · size,
+    sigma_min)`` -- numpy's floats (``np.maximum`` keeps its first operand on a tie: the same
+    value)."""
+    n = Z.shape[0]
+    std = np.empty((n, 4), np.float64)
+    finite = True
+    positive = True
+    for i in range(n):
+        for d in range(4):
+            finite = finite and math.isfinite(Z[i, d])
+        w = Z[i, 2]
+        h = Z[i, 3]
+        positive = positive and not (w <= 0.0 or h <= 0.0)
+        sw = sigma_obs * w
+        sw = sw if sw >= sigma_min else sigma_min
+        sh = sigma_obs * h
+        sh = sh if sh >= sigma_min else sigma_min
+        std[i, 0] = pos_ratio * sw
+        std[i, 1] = pos_ratio * sh
+        std[i, 2] = sw
+        std[i, 3] = sh
+    return (0 if positive else 2) if finite else 1, std
+
+
 # ----------------------------------------------------------------------------- grid index
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
@@ -393,14 +424,19 @@ def birth_counts(m_near, j_max, complement, max_per_frame):
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
-def birth_alloc_fill(m_near, j_max, complement, max_per_frame, lw_base, revive, log_revive,
-                     Z, st, sigma_obs, sigma_min, pos_ratio, spread, speed_mean, speed_std,
-                     min_size, states, log_w, det):
-    """:func:`birth_counts`, each detection's newborn log-weight ``lw_base − log max(J_z, 1)``
+def birth_alloc_fill(m_near, j_max, complement, max_per_frame, lw_base, lw_mode, log_norm,
+                     lw_c, revive, log_revive, Z, st, sigma_obs, sigma_min, pos_ratio, spread,
+                     speed_mean, speed_std, min_size, states, log_w, det):
+    """:func:`birth_counts`, each detection's newborn log-weight ``base_z − log max(J_z, 1)``
     (``+ log_revive`` where ``revive``, else ``+ 0``; ``revive`` empty: none) and
     :func:`birth_fill` into the first J = ΣJ_z rows of ``states``, ``log_w``, ``det`` (which
     must hold them: ``max_births`` rows), in one call: ``(j, J)``; ``J`` = -1 (nothing
-    written) when a J_z is negative (a NaN M(z)) or the total does not fit the buffers."""
+    written) when a J_z is negative (a NaN M(z)) or the total does not fit the buffers.
+
+    ``base_z`` (``filter.log_birth_weight``'s floats, its numpy operations in their order):
+    ``lw_mode`` 0: ``lw_base[z]``; 1: the constant ``lw_c[0]``; 2: the ``birth_odds`` weight
+    of ``lw_base`` = log κ and ``log_norm`` = Σ log σ(z), ``lw_c`` = (log odds, log(1 − p_M),
+    ½ d log 2π, ½ d log(1 + spread²)): ``((c₀ + log κ) − c₁) − ((−log_norm − c₂) − c₃)``."""
     j = birth_counts(m_near, j_max, complement, max_per_frame)
     nz = j.shape[0]
     n = 0
@@ -414,7 +450,13 @@ def birth_alloc_fill(m_near, j_max, complement, max_per_frame, lw_base, revive, 
     n = 0
     for z in range(nz):
         jz = j[z]
-        lw_det[z] = lw_base[z] - math.log(float(jz if jz > 1 else 1))
+        if lw_mode == 0:
+            base = lw_base[z]
+        elif lw_mode == 1:
+            base = lw_c[0]
+        else:
+            base = ((lw_c[0] + lw_base[z]) - lw_c[1]) - ((-log_norm[z] - lw_c[2]) - lw_c[3])
+        lw_det[z] = base - math.log(float(jz if jz > 1 else 1))
         if revive.shape[0] == nz:
             lw_det[z] = lw_det[z] + (log_revive if revive[z] else 0.0)
         n += jz
