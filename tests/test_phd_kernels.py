@@ -12,6 +12,7 @@ from pfscope.trackers.phd.filter import (
     LikelihoodParams,
     PHDFilter,
     PHDParams,
+    _NO_GRID,
     _grid_cell,
     _birth_weight_terms,
     as_observations,
@@ -486,6 +487,43 @@ def test_update_on_the_birth_grid_and_newborn_blocks_is_the_one_grid_update(seed
     assert b[k] > lw[k] + np.log(0.05) + 1
     with pytest.raises(ValueError, match="non-finite"):   # the blocks must cover the rows
         update(ps, GatedGaussian(Z, lk, r2, persistent=(n, grid, j[:-1])), log_kappa, 0.05)
+
+
+@pytest.mark.parametrize("p_miss", [0.05, 1.0])
+def test_update_kernels_log_den_is_numpys_logaddexp(p_miss):
+    """The linear update's log(κ + C) per detection is ``np.logaddexp(log κ, log C)`` with
+    numpy's ``where(isfinite, ., 0)``, bit for bit: κ below, equal to and above C, C = 0 (a
+    detection far from every particle, or p_D = 0), κ = 0 (log κ = -inf, alone and with
+    C = 0), and an infinite κ."""
+    rng = np.random.default_rng(4)
+    x = _states(rng, 800, far=10)
+    Z = _dets_near(rng, x, 12)
+    Z[3, :2] += 1e5                                    # no particle in its gate: C = 0
+    Z[4, :2] -= 1e5
+    std, log_norm = detection_noise(Z, LikelihoodParams())
+    lw = np.full(len(x), -7.0)
+    log_pd = np.log1p(-p_miss) if p_miss < 1 else -np.inf
+    log_pm = np.log(p_miss)
+    args = (x, lw, Z, std, log_norm)
+    first = K.gauss_update_linear(*args, rng.normal(-14, 1, len(Z)), log_pd, log_pm,
+                                  tail_radius2(1e-12), 30.0, 30.0, len(x), _NO_GRID,
+                                  np.empty(0, np.int64))
+    log_c = first[3]
+    log_kappa = log_c + rng.choice([-3.0, 0.0, 2.0, -0.5], len(Z))
+    log_kappa[6] = log_c[6]                            # κ = C exactly
+    log_kappa[[7, 4]] = -np.inf                        # κ = 0, with C > 0 and with C = 0
+    log_kappa[8] = np.inf
+    log_kappa[3] = -13.5
+    ok, done, *_, den = K.gauss_update_linear(*args, log_kappa, log_pd, log_pm,
+                                              tail_radius2(1e-12), 30.0, 30.0, len(x),
+                                              _NO_GRID, np.empty(0, np.int64))
+    assert ok and done
+    got_c = _[1]
+    want = np.logaddexp(log_kappa, got_c)
+    want = np.where(np.isfinite(want), want, 0.0)
+    np.testing.assert_array_equal(den.view(np.int64), want.view(np.int64))
+    assert np.isfinite(got_c[[5, 6, 7, 9, 10, 11]]).all() == (p_miss < 1)
+    assert got_c[3] == got_c[4] == -np.inf
 
 
 def test_gauss_update_refuses_non_finite_positions():

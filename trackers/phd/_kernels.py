@@ -590,12 +590,14 @@ _LIN_RANGE = 600.0
 def gauss_update_linear(states, lw, Z, std, log_norm, log_kappa, log_pd, log_pm, r2,
                         cell_x, cell_y, n_grid, grid, j_born):
     """:func:`gauss_update`'s linear route alone (per-detection stds), the same floats:
-    ``(ok, done, bracket, log_c, log_mass, log_pred, lin, scale)``, ``bracket`` (N,) each
+    ``(ok, done, bracket, log_c, log_mass, log_pred, lin, scale, log_den)``, ``bracket`` (N,) each
     particle's ``p_M + Σ_z ψ_z/(κ_z + C_z)`` (:func:`bracket_log_weights` makes the new
     log-weights of it, only when someone reads them: a run reads the mass and ``lin``),
     ``lin · scale`` (N,) the normalised weights ``e^{new_lw − log_mass}`` as the update's sums
     made them (for the resampling walk: no exp a particle there); ``done`` False when the
-    weights span more than e^600 (nothing computed: call :func:`gauss_update`).  A run whose weights never
+    weights span more than e^600 (nothing computed: call :func:`gauss_update`); ``log_den``
+    (N_z,) ``log(κ + C)`` as numpy's ``np.logaddexp(log_kappa, log_c)`` (its formula, libm's
+    exp and log1p), 0 where not finite (κ = C = 0: the filter's ``np.where``).  A run whose weights never
     spread that wide compiles this kernel only, not the log-space route (first-run compile).
 
     A detection's gated pairs come from two kinds of rows: the first ``n_grid`` through
@@ -619,14 +621,14 @@ def gauss_update_linear(states, lw, Z, std, log_norm, log_kappa, log_pd, log_pm,
             top = v if v > top else top
             low = v if v < low else low
     if not (top > -np.inf and top - low <= _LIN_RANGE and top < np.inf):
-        return True, False, lw, log_c, -np.inf, -np.inf, lw, 0.0
+        return True, False, lw, log_c, -np.inf, -np.inf, lw, 0.0, log_c
     x0, y0, cx, cy, ni, nj, order, starts = grid
     if order.shape[0] != n_grid:
         ok, x0, y0, cx, cy, ni, nj, order, starts = grid_build(states[:n_grid, 0],
                                                                states[:n_grid, 1],
                                                                cell_x, cell_y)
         if not ok:
-            return False, True, lw, log_c, -np.inf, -np.inf, lw, 0.0
+            return False, True, lw, log_c, -np.inf, -np.inf, lw, 0.0, log_c
     # the blocks' bounding boxes (y1 lo, hi, y2 lo, hi): an empty block's never meets a gate
     n_blk = j_born.shape[0]
     b_end = np.empty(n_blk + 1, np.int64)
@@ -642,7 +644,7 @@ def gauss_update_linear(states, lw, Z, std, log_norm, log_kappa, log_pd, log_pm,
             a = states[i, 0]
             c = states[i, 1]
             if not (math.isfinite(a) and math.isfinite(c)):
-                return False, True, lw, log_c, -np.inf, -np.inf, lw, 0.0
+                return False, True, lw, log_c, -np.inf, -np.inf, lw, 0.0, log_c
             lo0 = a if a < lo0 else lo0
             hi0 = a if a > hi0 else hi0
             lo1 = c if c < lo1 else lo1
@@ -652,7 +654,7 @@ def gauss_update_linear(states, lw, Z, std, log_norm, log_kappa, log_pd, log_pm,
         box[z, 2] = lo1
         box[z, 3] = hi1
     if b_end[n_blk] != n:
-        return False, True, lw, log_c, -np.inf, -np.inf, lw, 0.0
+        return False, True, lw, log_c, -np.inf, -np.inf, lw, 0.0, log_c
     inv = np.empty((std.shape[0], 4), np.float64)
     for k in range(std.shape[0]):
         for d in range(4):
@@ -674,7 +676,11 @@ def gauss_update_linear(states, lw, Z, std, log_norm, log_kappa, log_pd, log_pm,
     log_pred = top + math.log(tot_pred) if tot_pred > 0.0 else -np.inf
     buf_i = np.empty(n, np.int64)
     buf_v = np.empty(n, np.float64)
+    den = np.empty(nz, np.float64)
     for j in range(nz):
+        # C = 0 (no pair, or p_D = 0): log(κ + 0) = np.logaddexp(log κ, -inf), 0 unless finite
+        lk = log_kappa[j]
+        den[j] = lk if math.isfinite(lk) else 0.0
         i0, i1, j0, j1 = gate_cells(Z[j, 0], Z[j, 1], std[j, 0], std[j, 1], r,
                                     x0, cx, ni, y0, cy, nj)
         hx = r * std[j, 0] * (1.0 + 1e-6) + 1e-9          # gate_cells' box
@@ -724,6 +730,7 @@ def gauss_update_linear(states, lw, Z, std, log_norm, log_kappa, log_pd, log_pm,
         hi = lc if lc > lk else lk        # max(lk, lc), min(lk, lc), spelt out
         lo = lc if lc < lk else lk
         log_den = hi + math.log1p(math.exp(lo - hi))
+        den[j] = log_den if math.isfinite(log_den) else 0.0
         log_f = log_scale - log_den       # ψ/(κ + C) = f e^{−d²/2}
         if log_f <= _LIN_RANGE:
             f = math.exp(log_f)
@@ -738,7 +745,7 @@ def gauss_update_linear(states, lw, Z, std, log_norm, log_kappa, log_pd, log_pm,
         tot += v
         e[i] = v                          # the linear weight, e^{new_lw − top}
     return (True, True, b, log_c, (top + math.log(tot)) if tot > 0.0 else -np.inf,
-            log_pred, e, 1.0 / tot if tot > 0.0 else 0.0)
+            log_pred, e, 1.0 / tot if tot > 0.0 else 0.0, den)
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
@@ -791,7 +798,7 @@ def gauss_update(states, lw, Z, std, log_norm, by_det, log_kappa, log_pd, log_pm
     :func:`gauss_update_linear` (called first here; :func:`..filter.update` calls it alone
     when it can, so a first run compiles the log route only if a frame needs it)."""
     if by_det:
-        ok, done, b, log_c, log_mass, log_pred, _, _ = gauss_update_linear(
+        ok, done, b, log_c, log_mass, log_pred, _, _, _ = gauss_update_linear(
             states, lw, Z, std, log_norm, log_kappa, log_pd, log_pm, r2, cell_x, cell_y,
             states.shape[0], (0.0, 0.0, cell_x, cell_y, 0, 0, np.empty(0, np.int64),
                               _zero_start()), np.empty(0, np.int64))

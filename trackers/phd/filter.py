@@ -1147,7 +1147,9 @@ def update(particles: ParticleSet, log_g: LogG, log_kappa: np.ndarray,
 
     ``log_kappa`` (N_z,) is ``log κ(z)``; the filter never knows which likelihood it runs (like
     nchopin/particles' ``logG``).  The sparse form costs O(pairs + N per chunk)."""
-    log_kappa = np.asarray(log_kappa, dtype=np.float64).reshape(-1)
+    if not (type(log_kappa) is np.ndarray and log_kappa.dtype == np.float64
+            and log_kappa.ndim == 1):
+        log_kappa = np.asarray(log_kappa, dtype=np.float64).reshape(-1)
     if not 0.0 <= p_miss <= 1.0:
         raise ValueError(f"update: p_miss must be in [0, 1], got {p_miss}")
     if isinstance(log_g, np.ndarray):
@@ -1206,7 +1208,10 @@ def _update_gaussian(particles: ParticleSet, g: GatedGaussian, log_kappa: np.nda
     (C(z) and each particle's bracket by online log-sum-exps; the same sums as
     :func:`_update_pairs` on the gated pairs, in another order)."""
     lw = particles.log_weights
-    Z = np.asarray(g.Z, dtype=np.float64).reshape(-1, OBS_DIM)
+    Z = g.Z
+    if not (type(Z) is np.ndarray and Z.dtype == np.float64 and Z.ndim == 2
+            and Z.shape[1] == OBS_DIM):
+        Z = np.asarray(Z, dtype=np.float64).reshape(-1, OBS_DIM)
     n, n_z = len(particles), len(log_kappa)
     if len(Z) != n_z:
         raise ValueError(f"update: {len(Z)} detections but {n_z} clutter densities")
@@ -1227,7 +1232,7 @@ def _update_gaussian(particles: ParticleSet, g: GatedGaussian, log_kappa: np.nda
             (n_grid, grid, j_born), cell = g.persistent, (1.0, 1.0)
         else:
             n_grid, grid, j_born, cell = n, _NO_GRID, _NO_BLOCKS, _grid_cell(std, g.r2)
-        ok, done, bracket, log_c, log_mass, log_pred, lin, scale = (
+        ok, done, bracket, log_c, log_mass, log_pred, lin, scale, log_den = (
             _kernels.gauss_update_linear(particles.states, lw, Z, std, log_norm, log_kappa,
                                          log_pd, log_pm, float(g.r2), cell[0], cell[1],
                                          n_grid, grid, j_born))
@@ -1238,8 +1243,9 @@ def _update_gaussian(particles: ParticleSet, g: GatedGaussian, log_kappa: np.nda
             float(g.r2), cell[0], cell[1])
     if not ok:
         raise ValueError("update: non-finite particle positions")
-    log_den = np.logaddexp(log_kappa, log_c)
-    log_den = np.where(np.isfinite(log_den), log_den, 0.0)              # κ = C = 0: term is 0
+    if not done:    # (the linear route's kernel made these, the same floats)
+        log_den = np.logaddexp(log_kappa, log_c)
+        log_den = np.where(np.isfinite(log_den), log_den, 0.0)          # κ = C = 0: term is 0
     if done:        # the logs of the bracket made only if read (a run reads lin and the mass)
         out: ParticleSet = LazyParticleSet(
             particles.states, partial(_kernels.bracket_log_weights, lw, bracket),

@@ -143,9 +143,10 @@ def resample(ps: ParticleSet, n: int, rng: np.random.Generator,
 
     An empty or zero-mass input, or ``n == 0``, gives an empty set."""
     n = int(n)
-    if len(ps) == 0 or n == 0 or not np.isfinite(ps.log_mass):
+    if len(ps) == 0 or n == 0 or not math.isfinite(ps.log_mass):
         return ps.take(np.zeros(0, dtype=np.int64))
-    lw = np.full(n, ps.log_mass - np.log(n))
+    lw = np.empty(n)                 # np.full's values (np.full is empty + copyto in Python)
+    lw.fill(ps.log_mass - np.log(n))
     if scheme == "systematic":      # the log-mass is known: one walk that also copies the rows
         known = ps.normalised        # the walk reads these or the log-weights, not both
         w, scale = known or (_NO_WEIGHTS, 0.0)
