@@ -573,10 +573,13 @@ def test_systematic_take_copies_the_searchsorted_ancestors_rows(N, n, D):
             cdf = np.cumsum(terms)
             cdf[-1] = 1.0
             want = np.minimum(np.searchsorted(cdf, (u0 + np.arange(n)) / n, side="right"), N - 1)
-            idx, rows = _systematic_take(states, *args)
+            idx, rows = _systematic_take(states, *args, True)
             np.testing.assert_array_equal(idx, want)
             assert rows.shape == (n, D)
             np.testing.assert_array_equal(rows, states[want])
+            no_idx, rows2 = _systematic_take(states, *args, False)   # the rows alone
+            assert no_idx.shape == (0,)
+            np.testing.assert_array_equal(rows2, rows)
             assert np.all(w[idx[idx < N - 1]] > 0)     # zero-weight bins never picked (but
             #                                            the last, its CDF forced to 1)
 
