@@ -61,7 +61,15 @@ def test_propagate_kernel_is_the_numpy_model_bit_for_bit():
     x = _states(rng, 500)
     x[:10, 4:6] = 0.5                                  # clipped to min_size
     out = np.empty_like(x)
-    K.propagate_into(x, R.stream(123), 0.03, 0.1, 0.5, 1.0, out)
+    lw = rng.normal(-7, 2, 500)
+    lw[:3] = [-np.inf, 0.0, 1e-300]
+    lw_out = np.full(505, np.nan)
+    K.propagate_into(x, R.stream(123), 0.03, 0.1, 0.5, 1.0, out, lw, np.log(0.99), lw_out)
+    np.testing.assert_array_equal(lw_out[:500], lw + np.log(0.99))   # numpy's add
+    assert np.isnan(lw_out[500:]).all()
+    out2 = np.empty_like(x)                            # without weights: the same states
+    K.propagate_into(x, R.stream(123), 0.03, 0.1, 0.5, 1.0, out2, np.empty(0), 0.0, lw_out)
+    np.testing.assert_array_equal(out2, out)
     eps = np.empty(500 * 4)                            # the same stream, 4 normals a particle
     R.fill_normal(R.stream(123), eps)
     eps = eps.reshape(500, 4)

@@ -46,12 +46,18 @@ _HALF_LOG_2PI_4 = 2.0 * math.log(2.0 * math.pi)     # 0.5 · OBS_DIM · log(2π)
 # ----------------------------------------------------------------------------- predict
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
-def propagate_into(x, st, sigma_v, sigma_size, accel_to_position, min_size, out):
+def propagate_into(x, st, sigma_v, sigma_size, accel_to_position, min_size, out, lw, log_e,
+                   lw_out):
     """``out[:N]`` (N, 6) = f(x) with four normals ``ε`` per particle drawn in order from the
     stream ``st`` (:mod:`~trackers.smc.random`): ``a = σ_v (w, h) ε₀₁``, ``y += v + c a``,
-    ``v += a``, ``(w, h) = max((w, h) + σ_s (w, h) ε₂₃, min_size)`` (:func:`~.motion.propagate`)."""
+    ``v += a``, ``(w, h) = max((w, h) + σ_s (w, h) ε₂₃, min_size)`` (:func:`~.motion.propagate`);
+    with ``lw`` (N,) (else empty), also ``lw_out[:N] = lw + log_e`` in the same pass (the
+    prediction's survival factor, numpy's add)."""
     s = st[0]
+    with_lw = lw.shape[0] == x.shape[0]
     for i in range(x.shape[0]):
+        if with_lw:
+            lw_out[i] = lw[i] + log_e
         s, e0 = normal(s)
         s, e1 = normal(s)
         s, e2 = normal(s)

@@ -839,11 +839,20 @@ def predict(ps: ParticleSet, mp: MotionParams, rng: np.random.Generator,
     so the newborn can follow in the same arrays (:meth:`PHDFilter.step`)."""
     n = len(ps)
     S, L = out if out is not None else (None, np.empty(n))
-    states = motion.propagate(ps.states, rng, sigma_v=mp.sigma_v, sigma_size=mp.sigma_size,
-                              accel_to_position=mp.accel_to_position, min_size=mp.min_size,
-                              out=S)
     log_e = math.log(mp.p_survival) if mp.p_survival > 0 else -np.inf
-    lw = np.add(ps.log_weights, log_e, out=L[:n])
+    lw0 = ps.log_weights
+    if n and type(lw0) is np.ndarray and lw0.dtype == np.float64 and L.dtype == np.float64:
+        # ω · e written by the motion kernel's pass (numpy's add, the same floats)
+        states = motion.propagate(ps.states, rng, sigma_v=mp.sigma_v, sigma_size=mp.sigma_size,
+                                  accel_to_position=mp.accel_to_position,
+                                  min_size=mp.min_size, out=S, log_weights=lw0, log_e=log_e,
+                                  lw_out=L)
+        lw = L[:n]
+    else:
+        states = motion.propagate(ps.states, rng, sigma_v=mp.sigma_v, sigma_size=mp.sigma_size,
+                                  accel_to_position=mp.accel_to_position,
+                                  min_size=mp.min_size, out=S)
+        lw = np.add(lw0, log_e, out=L[:n])
     out = ParticleSet(states, lw, ps.labels, ps.extra)
     if ps.is_known_equal():       # equal weights times e: equal (ParticleSet.weights)
         out.known_equal()
