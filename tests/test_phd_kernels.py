@@ -12,16 +12,24 @@ from pfscope.trackers.phd.filter import (
     LikelihoodParams,
     PHDFilter,
     PHDParams,
+    _NO_GRID,
     _grid_cell,
+    _birth_weight_terms,
+    as_observations,
+    detection_noise,
+    log_birth_weight,
     log_likelihood,
     mass_near,
     obs_std,
+    observations_noise,
     update,
 )
 from pfscope.trackers.phd.gating import tail_radius2
 from pfscope.trackers.smc import ParticleSet
 from pfscope.trackers.smc import random as R
 from pfscope.trackers.smc.resampling import _systematic_index, _systematic_take
+
+_NO_F = np.zeros(0, np.float64)
 
 OBS = [0, 1, 4, 5]
 
@@ -53,7 +61,15 @@ def test_propagate_kernel_is_the_numpy_model_bit_for_bit():
     x = _states(rng, 500)
     x[:10, 4:6] = 0.5                                  # clipped to min_size
     out = np.empty_like(x)
-    K.propagate_into(x, R.stream(123), 0.03, 0.1, 0.5, 1.0, out)
+    lw = rng.normal(-7, 2, 500)
+    lw[:3] = [-np.inf, 0.0, 1e-300]
+    lw_out = np.full(505, np.nan)
+    K.propagate_into(x, R.stream(123), 0.03, 0.1, 0.5, 1.0, out, lw, np.log(0.99), lw_out)
+    np.testing.assert_array_equal(lw_out[:500], lw + np.log(0.99))   # numpy's add
+    assert np.isnan(lw_out[500:]).all()
+    out2 = np.empty_like(x)                            # without weights: the same states
+    K.propagate_into(x, R.stream(123), 0.03, 0.1, 0.5, 1.0, out2, np.empty(0), 0.0, lw_out)
+    np.testing.assert_array_equal(out2, out)
     eps = np.empty(500 * 4)                            # the same stream, 4 normals a particle
     R.fill_normal(R.stream(123), eps)
     eps = eps.reshape(500, 4)
@@ -179,7 +195,7 @@ def test_birth_alloc_fill_is_numpys_allocation_and_birth_fill(seed):
         n_max = min(nz * j_max, cap)
         states, log_w = np.full((n_max + 5, 6), np.nan), np.full(n_max + 5, np.nan)
         det = np.full(n_max + 5, -1, np.int64)
-        j, n = K.birth_alloc_fill(m_near, j_max, complement, cap, lw_base,
+        j, n = K.birth_alloc_fill(m_near, j_max, complement, cap, lw_base, 0, _NO_F, _NO_F,
                                   revive if rev else np.zeros(0, np.bool_), 0.7, Z,
                                   R.stream(11), lk.sigma_obs, lk.sigma_obs_min,
                                   lk.sigma_obs_pos_ratio, 1.3, 0.05, 0.1, 4.0, states, log_w,
@@ -202,11 +218,79 @@ def test_birth_alloc_fill_is_numpys_allocation_and_birth_fill(seed):
         states, log_w = np.full((rows, 6), np.nan), np.full(rows, np.nan)
         det = np.full(rows, -1, np.int64)
         with np.errstate(invalid="ignore"):
-            _, n = K.birth_alloc_fill(m, 1000, True, 50_000, lw_base, np.zeros(0, np.bool_),
+            _, n = K.birth_alloc_fill(m, 1000, True, 50_000, lw_base, 0, _NO_F, _NO_F,
+                                      np.zeros(0, np.bool_),
                                       0.0, Z, R.stream(11), lk.sigma_obs, lk.sigma_obs_min,
                                       lk.sigma_obs_pos_ratio, 1.3, 0.05, 0.1, 4.0, states,
                                       log_w, det)
         assert n == -1 and np.isnan(states).all() and (det == -1).all()
+
+
+@pytest.mark.parametrize("odds", [0.0, 0.05, 3.0])
+def test_birth_alloc_fill_makes_log_birth_weights_bit_for_bit(odds):
+    """The newborn log-weights made in the kernel from log κ and Σ log σ (birth_odds) or the
+    constant birth intensity are numpy's log_birth_weight, then the per-newborn division;
+    a flipped or reordered operation in the kernel shows as an ulp here."""
+    rng = np.random.default_rng(7)
+    params = PHDParams.of(birth_odds=odds, birth_spread=1.3, p_miss=0.07,
+                          birth_intensity=0.02)
+    lk = params.likelihood
+    for _ in range(40):
+        nz = int(rng.integers(1, 25))
+        Z = np.c_[rng.uniform(0, 600, nz), rng.uniform(0, 400, nz),
+                  rng.uniform(0.5, 90, nz), rng.uniform(0.5, 200, nz)]
+        std, log_norm = detection_noise(Z, lk)
+        log_kappa = rng.normal(-14, 3, nz)
+        m_near = rng.uniform(0, 1.2, nz)
+        lw_base, mode, c = _birth_weight_terms(params, log_kappa)
+        assert mode == (2 if odds > 0 else 1)
+        states, log_w = np.empty((nz * 50, 6)), np.empty(nz * 50)
+        det = np.empty(nz * 50, np.int64)
+        j, n = K.birth_alloc_fill(m_near, 50, True, 50_000, lw_base, mode, log_norm, c,
+                                  np.zeros(0, np.bool_), 0.0, Z, R.stream(3), lk.sigma_obs,
+                                  lk.sigma_obs_min, lk.sigma_obs_pos_ratio, 1.3, 0.0, 0.1,
+                                  1.0, states, log_w, det)
+        want = log_birth_weight(Z, params, log_kappa, log_norm)
+        want = np.repeat(want - np.array([libm.log(float(max(v, 1))) for v in j]), j)
+        assert n == j.sum()
+        np.testing.assert_array_equal(log_w[:n].view(np.int64), want.view(np.int64))
+
+
+def test_observation_noise_is_obs_std_and_as_observations_checks():
+    """The detections' one-pass kernel: obs_std's stds bit for bit (sizes on both sides of the
+    σ floor, ties with it) and as_observations' verdict (finite first, then sizes > 0), and
+    observations_noise = as_observations + detection_noise, errors included."""
+    rng = np.random.default_rng(5)
+    lk = LikelihoodParams()
+    for _ in range(200):
+        nz = int(rng.integers(1, 20))
+        Z = np.c_[rng.uniform(-50, 600, nz), rng.uniform(0, 400, nz),
+                  rng.choice([0.5, 1 / 0.15, 20.0, 3.0], nz) * rng.uniform(0.9, 1.1, nz),
+                  rng.choice([1 / 0.15, 70.0, 2.0], nz)]
+        code, std = K.observation_noise(Z, lk.sigma_obs, lk.sigma_obs_min,
+                                        lk.sigma_obs_pos_ratio)
+        assert code == 0
+        np.testing.assert_array_equal(std, obs_std(Z[:, 2:4], lk))
+        z2, (s2, ln2) = observations_noise(Z, lk)
+        s1, ln1 = detection_noise(as_observations(Z), lk)
+        np.testing.assert_array_equal(s2, s1)
+        np.testing.assert_array_equal(ln2.view(np.int64), ln1.view(np.int64))
+        bad = Z.copy()
+        if rng.random() < 0.5:            # a size <= 0 too: the non-finite value wins
+            bad[int(rng.integers(nz)), 2 + int(rng.integers(2))] = 0.0
+        bad[int(rng.integers(nz)), int(rng.integers(4))] = rng.choice([np.nan, np.inf, -np.inf])
+        assert K.observation_noise(bad, 0.15, 1.0, 0.5)[0] == 1
+        with pytest.raises(ValueError, match="non-finite"):
+            observations_noise(bad, lk)
+        with pytest.raises(ValueError, match="non-finite"):
+            as_observations(bad)
+        neg = Z.copy()
+        neg[int(rng.integers(nz)), 2 + int(rng.integers(2))] = rng.choice([0.0, -3.0])
+        assert K.observation_noise(neg, 0.15, 1.0, 0.5)[0] == 2
+        with pytest.raises(ValueError, match="> 0"):
+            observations_noise(neg, lk)
+        with pytest.raises(ValueError, match="> 0"):
+            as_observations(neg)
 
 
 # ----------------------------------------------------------------------------- grid, M(z)
@@ -413,6 +497,43 @@ def test_update_on_the_birth_grid_and_newborn_blocks_is_the_one_grid_update(seed
         update(ps, GatedGaussian(Z, lk, r2, persistent=(n, grid, j[:-1])), log_kappa, 0.05)
 
 
+@pytest.mark.parametrize("p_miss", [0.05, 1.0])
+def test_update_kernels_log_den_is_numpys_logaddexp(p_miss):
+    """The linear update's log(κ + C) per detection is ``np.logaddexp(log κ, log C)`` with
+    numpy's ``where(isfinite, ., 0)``, bit for bit: κ below, equal to and above C, C = 0 (a
+    detection far from every particle, or p_D = 0), κ = 0 (log κ = -inf, alone and with
+    C = 0), and an infinite κ."""
+    rng = np.random.default_rng(4)
+    x = _states(rng, 800, far=10)
+    Z = _dets_near(rng, x, 12)
+    Z[3, :2] += 1e5                                    # no particle in its gate: C = 0
+    Z[4, :2] -= 1e5
+    std, log_norm = detection_noise(Z, LikelihoodParams())
+    lw = np.full(len(x), -7.0)
+    log_pd = np.log1p(-p_miss) if p_miss < 1 else -np.inf
+    log_pm = np.log(p_miss)
+    args = (x, lw, Z, std, log_norm)
+    first = K.gauss_update_linear(*args, rng.normal(-14, 1, len(Z)), log_pd, log_pm,
+                                  tail_radius2(1e-12), 30.0, 30.0, len(x), _NO_GRID,
+                                  np.empty(0, np.int64))
+    log_c = first[3]
+    log_kappa = log_c + rng.choice([-3.0, 0.0, 2.0, -0.5], len(Z))
+    log_kappa[6] = log_c[6]                            # κ = C exactly
+    log_kappa[[7, 4]] = -np.inf                        # κ = 0, with C > 0 and with C = 0
+    log_kappa[8] = np.inf
+    log_kappa[3] = -13.5
+    ok, done, *_, den = K.gauss_update_linear(*args, log_kappa, log_pd, log_pm,
+                                              tail_radius2(1e-12), 30.0, 30.0, len(x),
+                                              _NO_GRID, np.empty(0, np.int64))
+    assert ok and done
+    got_c = _[1]
+    want = np.logaddexp(log_kappa, got_c)
+    want = np.where(np.isfinite(want), want, 0.0)
+    np.testing.assert_array_equal(den.view(np.int64), want.view(np.int64))
+    assert np.isfinite(got_c[[5, 6, 7, 9, 10, 11]]).all() == (p_miss < 1)
+    assert got_c[3] == got_c[4] == -np.inf
+
+
 def test_gauss_update_refuses_non_finite_positions():
     x = _states(np.random.default_rng(5), 10)
     x[3, 1] = np.inf
@@ -460,10 +581,13 @@ def test_systematic_take_copies_the_searchsorted_ancestors_rows(N, n, D):
             cdf = np.cumsum(terms)
             cdf[-1] = 1.0
             want = np.minimum(np.searchsorted(cdf, (u0 + np.arange(n)) / n, side="right"), N - 1)
-            idx, rows = _systematic_take(states, *args)
+            idx, rows = _systematic_take(states, *args, True)
             np.testing.assert_array_equal(idx, want)
             assert rows.shape == (n, D)
             np.testing.assert_array_equal(rows, states[want])
+            no_idx, rows2 = _systematic_take(states, *args, False)   # the rows alone
+            assert no_idx.shape == (0,)
+            np.testing.assert_array_equal(rows2, rows)
             assert np.all(w[idx[idx < N - 1]] > 0)     # zero-weight bins never picked (but
             #                                            the last, its CDF forced to 1)
 

@@ -46,12 +46,18 @@ _HALF_LOG_2PI_4 = 2.0 * math.log(2.0 * math.pi)     # 0.5 · OBS_DIM · log(2π)
 # ----------------------------------------------------------------------------- predict
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
-def propagate_into(x, st, sigma_v, sigma_size, accel_to_position, min_size, out):
+def propagate_into(x, st, sigma_v, sigma_size, accel_to_position, min_size, out, lw, log_e,
+                   lw_out):
     """``out[:N]`` (N, 6) = f(x) with four normals ``ε`` per particle drawn in order from the
     stream ``st`` (:mod:`~trackers.smc.random`): ``a = σ_v (w, h) ε₀₁``, ``y += v + c a``,
-    ``v += a``, ``(w, h) = max((w, h) + σ_s (w, h) ε₂₃, min_size)`` (:func:`~.motion.propagate`)."""
+    ``v += a``, ``(w, h) = max((w, h) + σ_s (w, h) ε₂₃, min_size)`` (:func:`~.motion.propagate`);
+    with ``lw`` (N,) (else empty), also ``lw_out[:N] = lw + log_e`` in the same pass (the
+    prediction's survival factor, numpy's add)."""
     s = st[0]
+    with_lw = lw.shape[0] == x.shape[0]
     for i in range(x.shape[0]):
+        if with_lw:
+            lw_out[i] = lw[i] + log_e
         s, e0 = normal(s)
         s, e1 = normal(s)
         s, e2 = normal(s)
@@ -69,6 +75,37 @@ def propagate_into(x, st, sigma_v, sigma_size, accel_to_position, min_size, out)
         out[i, 4] = nw if not nw < min_size else min_size
         out[i, 5] = nh if not nh < min_size else min_size
     st[0] = s
+
+
+# ----------------------------------------------------------------------------- detections
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def observation_noise(Z, sigma_obs, sigma_min, pos_ratio):
+    """``filter.as_observations``' checks and ``filter.obs_std`` of the sizes in one pass over
+    the detections ``Z`` (N_z, 4): ``(code, std)``, ``code`` 0 when every value is finite and
+    every width and height > 0, 1 when a value is not finite (the check made first), 2 when a
+    size is <= 0; ``std`` (N_z, 4) ``(r σ_w, r σ_h, σ_w, σ_h)``, ``σ = max(sigma_obs · size,
+    sigma_min)`` -- numpy's floats (``np.maximum`` keeps its first operand on a tie: the same
+    value)."""
+    n = Z.shape[0]
+    std = np.empty((n, 4), np.float64)
+    finite = True
+    positive = True
+    for i in range(n):
+        for d in range(4):
+            finite = finite and math.isfinite(Z[i, d])
+        w = Z[i, 2]
+        h = Z[i, 3]
+        positive = positive and not (w <= 0.0 or h <= 0.0)
+        sw = sigma_obs * w
+        sw = sw if sw >= sigma_min else sigma_min
+        sh = sigma_obs * h
+        sh = sh if sh >= sigma_min else sigma_min
+        std[i, 0] = pos_ratio * sw
+        std[i, 1] = pos_ratio * sh
+        std[i, 2] = sw
+        std[i, 3] = sh
+    return (0 if positive else 2) if finite else 1, std
 
 
 # ----------------------------------------------------------------------------- grid index
@@ -393,14 +430,19 @@ def birth_counts(m_near, j_max, complement, max_per_frame):
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
-def birth_alloc_fill(m_near, j_max, complement, max_per_frame, lw_base, revive, log_revive,
-                     Z, st, sigma_obs, sigma_min, pos_ratio, spread, speed_mean, speed_std,
-                     min_size, states, log_w, det):
-    """:func:`birth_counts`, each detection's newborn log-weight ``lw_base − log max(J_z, 1)``
+def birth_alloc_fill(m_near, j_max, complement, max_per_frame, lw_base, lw_mode, log_norm,
+                     lw_c, revive, log_revive, Z, st, sigma_obs, sigma_min, pos_ratio, spread,
+                     speed_mean, speed_std, min_size, states, log_w, det):
+    """:func:`birth_counts`, each detection's newborn log-weight ``base_z − log max(J_z, 1)``
     (``+ log_revive`` where ``revive``, else ``+ 0``; ``revive`` empty: none) and
     :func:`birth_fill` into the first J = ΣJ_z rows of ``states``, ``log_w``, ``det`` (which
     must hold them: ``max_births`` rows), in one call: ``(j, J)``; ``J`` = -1 (nothing
-    written) when a J_z is negative (a NaN M(z)) or the total does not fit the buffers."""
+    written) when a J_z is negative (a NaN M(z)) or the total does not fit the buffers.
+
+    ``base_z`` (``filter.log_birth_weight``'s floats, its numpy operations in their order):
+    ``lw_mode`` 0: ``lw_base[z]``; 1: the constant ``lw_c[0]``; 2: the ``birth_odds`` weight
+    of ``lw_base`` = log κ and ``log_norm`` = Σ log σ(z), ``lw_c`` = (log odds, log(1 − p_M),
+    ½ d log 2π, ½ d log(1 + spread²)): ``((c₀ + log κ) − c₁) − ((−log_norm − c₂) − c₃)``."""
     j = birth_counts(m_near, j_max, complement, max_per_frame)
     nz = j.shape[0]
     n = 0
@@ -414,7 +456,13 @@ def birth_alloc_fill(m_near, j_max, complement, max_per_frame, lw_base, revive, 
     n = 0
     for z in range(nz):
         jz = j[z]
-        lw_det[z] = lw_base[z] - math.log(float(jz if jz > 1 else 1))
+        if lw_mode == 0:
+            base = lw_base[z]
+        elif lw_mode == 1:
+            base = lw_c[0]
+        else:
+            base = ((lw_c[0] + lw_base[z]) - lw_c[1]) - ((-log_norm[z] - lw_c[2]) - lw_c[3])
+        lw_det[z] = base - math.log(float(jz if jz > 1 else 1))
         if revive.shape[0] == nz:
             lw_det[z] = lw_det[z] + (log_revive if revive[z] else 0.0)
         n += jz
@@ -548,12 +596,14 @@ _LIN_RANGE = 600.0
 def gauss_update_linear(states, lw, Z, std, log_norm, log_kappa, log_pd, log_pm, r2,
                         cell_x, cell_y, n_grid, grid, j_born):
     """:func:`gauss_update`'s linear route alone (per-detection stds), the same floats:
-    ``(ok, done, bracket, log_c, log_mass, log_pred, lin, scale)``, ``bracket`` (N,) each
+    ``(ok, done, bracket, log_c, log_mass, log_pred, lin, scale, log_den)``, ``bracket`` (N,) each
     particle's ``p_M + Σ_z ψ_z/(κ_z + C_z)`` (:func:`bracket_log_weights` makes the new
     log-weights of it, only when someone reads them: a run reads the mass and ``lin``),
     ``lin · scale`` (N,) the normalised weights ``e^{new_lw − log_mass}`` as the update's sums
     made them (for the resampling walk: no exp a particle there); ``done`` False when the
-    weights span more than e^600 (nothing computed: call :func:`gauss_update`).  A run whose weights never
+    weights span more than e^600 (nothing computed: call :func:`gauss_update`); ``log_den``
+    (N_z,) ``log(κ + C)`` as numpy's ``np.logaddexp(log_kappa, log_c)`` (its formula, libm's
+    exp and log1p), 0 where not finite (κ = C = 0: the filter's ``np.where``).  A run whose weights never
     spread that wide compiles this kernel only, not the log-space route (first-run compile).
 
     A detection's gated pairs come from two kinds of rows: the first ``n_grid`` through
@@ -577,14 +627,14 @@ def gauss_update_linear(states, lw, Z, std, log_norm, log_kappa, log_pd, log_pm,
             top = v if v > top else top
             low = v if v < low else low
     if not (top > -np.inf and top - low <= _LIN_RANGE and top < np.inf):
-        return True, False, lw, log_c, -np.inf, -np.inf, lw, 0.0
+        return True, False, lw, log_c, -np.inf, -np.inf, lw, 0.0, log_c
     x0, y0, cx, cy, ni, nj, order, starts = grid
     if order.shape[0] != n_grid:
         ok, x0, y0, cx, cy, ni, nj, order, starts = grid_build(states[:n_grid, 0],
                                                                states[:n_grid, 1],
                                                                cell_x, cell_y)
         if not ok:
-            return False, True, lw, log_c, -np.inf, -np.inf, lw, 0.0
+            return False, True, lw, log_c, -np.inf, -np.inf, lw, 0.0, log_c
     # the blocks' bounding boxes (y1 lo, hi, y2 lo, hi): an empty block's never meets a gate
     n_blk = j_born.shape[0]
     b_end = np.empty(n_blk + 1, np.int64)
@@ -600,7 +650,7 @@ def gauss_update_linear(states, lw, Z, std, log_norm, log_kappa, log_pd, log_pm,
             a = states[i, 0]
             c = states[i, 1]
             if not (math.isfinite(a) and math.isfinite(c)):
-                return False, True, lw, log_c, -np.inf, -np.inf, lw, 0.0
+                return False, True, lw, log_c, -np.inf, -np.inf, lw, 0.0, log_c
             lo0 = a if a < lo0 else lo0
             hi0 = a if a > hi0 else hi0
             lo1 = c if c < lo1 else lo1
@@ -610,7 +660,7 @@ def gauss_update_linear(states, lw, Z, std, log_norm, log_kappa, log_pd, log_pm,
         box[z, 2] = lo1
         box[z, 3] = hi1
     if b_end[n_blk] != n:
-        return False, True, lw, log_c, -np.inf, -np.inf, lw, 0.0
+        return False, True, lw, log_c, -np.inf, -np.inf, lw, 0.0, log_c
     inv = np.empty((std.shape[0], 4), np.float64)
     for k in range(std.shape[0]):
         for d in range(4):
@@ -632,7 +682,11 @@ def gauss_update_linear(states, lw, Z, std, log_norm, log_kappa, log_pd, log_pm,
     log_pred = top + math.log(tot_pred) if tot_pred > 0.0 else -np.inf
     buf_i = np.empty(n, np.int64)
     buf_v = np.empty(n, np.float64)
+    den = np.empty(nz, np.float64)
     for j in range(nz):
+        # C = 0 (no pair, or p_D = 0): log(κ + 0) = np.logaddexp(log κ, -inf), 0 unless finite
+        lk = log_kappa[j]
+        den[j] = lk if math.isfinite(lk) else 0.0
         i0, i1, j0, j1 = gate_cells(Z[j, 0], Z[j, 1], std[j, 0], std[j, 1], r,
                                     x0, cx, ni, y0, cy, nj)
         hx = r * std[j, 0] * (1.0 + 1e-6) + 1e-9          # gate_cells' box
@@ -682,6 +736,7 @@ def gauss_update_linear(states, lw, Z, std, log_norm, log_kappa, log_pd, log_pm,
         hi = lc if lc > lk else lk        # max(lk, lc), min(lk, lc), spelt out
         lo = lc if lc < lk else lk
         log_den = hi + math.log1p(math.exp(lo - hi))
+        den[j] = log_den if math.isfinite(log_den) else 0.0
         log_f = log_scale - log_den       # ψ/(κ + C) = f e^{−d²/2}
         if log_f <= _LIN_RANGE:
             f = math.exp(log_f)
@@ -696,7 +751,7 @@ def gauss_update_linear(states, lw, Z, std, log_norm, log_kappa, log_pd, log_pm,
         tot += v
         e[i] = v                          # the linear weight, e^{new_lw − top}
     return (True, True, b, log_c, (top + math.log(tot)) if tot > 0.0 else -np.inf,
-            log_pred, e, 1.0 / tot if tot > 0.0 else 0.0)
+            log_pred, e, 1.0 / tot if tot > 0.0 else 0.0, den)
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
@@ -749,7 +804,7 @@ def gauss_update(states, lw, Z, std, log_norm, by_det, log_kappa, log_pd, log_pm
     :func:`gauss_update_linear` (called first here; :func:`..filter.update` calls it alone
     when it can, so a first run compiles the log route only if a frame needs it)."""
     if by_det:
-        ok, done, b, log_c, log_mass, log_pred, _, _ = gauss_update_linear(
+        ok, done, b, log_c, log_mass, log_pred, _, _, _ = gauss_update_linear(
             states, lw, Z, std, log_norm, log_kappa, log_pd, log_pm, r2, cell_x, cell_y,
             states.shape[0], (0.0, 0.0, cell_x, cell_y, 0, 0, np.empty(0, np.int64),
                               _zero_start()), np.empty(0, np.int64))

@@ -375,12 +375,34 @@ def as_observations(Z) -> np.ndarray:
         return np.zeros((0, OBS_DIM))
     if z.ndim != 2 or z.shape[1] != OBS_DIM:
         raise ValueError(f"observations: expected shape (N, 4) (y1, y2, w, h), got {z.shape}")
-    # ndarray methods, not np.all/np.any: this runs three times a frame
+    # ndarray methods, not np.all/np.any (the filter's step checks in its kernel pass instead,
+    # observations_noise; not here: the warm-up's main process would compile that kernel
+    # again, the first-run helper compiles it)
     if not np.isfinite(z).all():
         raise ValueError("observations: non-finite values")
     if (z[:, 2:4] <= 0).any():
         raise ValueError("observations: box width and height must be > 0")
     return z
+
+
+def observations_noise(Z, lk: LikelihoodParams) -> tuple[np.ndarray,
+                                                         tuple[np.ndarray, np.ndarray]]:
+    """:func:`as_observations` then :func:`detection_noise` (the same arrays and errors), the
+    checks and the stds of a float64 (N_z, 4) array in one kernel pass
+    (:func:`._kernels.observation_noise`): what :meth:`PHDFilter.step` needs of ``Z``."""
+    if hasattr(Z, "observations"):
+        Z = Z.observations()
+    if not (type(Z) is np.ndarray and Z.dtype == np.float64 and Z.ndim == 2
+            and Z.shape[1] == OBS_DIM and len(Z) and Z.flags.c_contiguous):
+        Z = as_observations(Z)
+        return Z, detection_noise(Z, lk)
+    code, std = _kernels.observation_noise(Z, lk.sigma_obs, lk.sigma_obs_min,
+                                           lk.sigma_obs_pos_ratio)
+    if code:
+        as_observations(Z)              # raises its error
+        raise AssertionError("observations_noise: the kernel's check and numpy's disagree")
+    # Σ_d log σ_d: numpy's log (not libm's: one ulp apart at times) and ndarray.sum's reduce
+    return Z, (std, np.add.reduce(np.log(std), -1))
 
 
 def obs_std(sizes: np.ndarray, lk: LikelihoodParams = LikelihoodParams()) -> np.ndarray:
@@ -817,18 +839,27 @@ def predict(ps: ParticleSet, mp: MotionParams, rng: np.random.Generator,
     so the newborn can follow in the same arrays (:meth:`PHDFilter.step`)."""
     n = len(ps)
     S, L = out if out is not None else (None, np.empty(n))
-    states = motion.propagate(ps.states, rng, sigma_v=mp.sigma_v, sigma_size=mp.sigma_size,
-                              accel_to_position=mp.accel_to_position, min_size=mp.min_size,
-                              out=S)
     log_e = math.log(mp.p_survival) if mp.p_survival > 0 else -np.inf
-    lw = np.add(ps.log_weights, log_e, out=L[:n])
+    lw0 = ps.log_weights
+    if n and type(lw0) is np.ndarray and lw0.dtype == np.float64 and L.dtype == np.float64:
+        # ω · e written by the motion kernel's pass (numpy's add, the same floats)
+        states = motion.propagate(ps.states, rng, sigma_v=mp.sigma_v, sigma_size=mp.sigma_size,
+                                  accel_to_position=mp.accel_to_position,
+                                  min_size=mp.min_size, out=S, log_weights=lw0, log_e=log_e,
+                                  lw_out=L)
+        lw = L[:n]
+    else:
+        states = motion.propagate(ps.states, rng, sigma_v=mp.sigma_v, sigma_size=mp.sigma_size,
+                                  accel_to_position=mp.accel_to_position,
+                                  min_size=mp.min_size, out=S)
+        lw = np.add(lw0, log_e, out=L[:n])
     out = ParticleSet(states, lw, ps.labels, ps.extra)
     if ps.is_known_equal():       # equal weights times e: equal (ParticleSet.weights)
         out.known_equal()
     return out
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, init=False)
 class BirthResult:
     """Newborn particles of one frame.
 
@@ -842,6 +873,14 @@ class BirthResult:
     det_index: np.ndarray
     #: the grid M(z)'s kernel bucketed the predicted particles on (the update reuses it)
     grid: Optional[tuple] = field(default=None, repr=False, compare=False)
+
+    def __init__(self, particles: ParticleSet, j_per_det: np.ndarray, mass_near: np.ndarray,
+                 det_index: np.ndarray, grid: Optional[tuple] = None):
+        # (a frozen dataclass's generated __init__ sets each field by object.__setattr__:
+        # the instance dict directly costs a fraction; made every frame)
+        d = self.__dict__
+        d["particles"], d["j_per_det"], d["mass_near"] = particles, j_per_det, mass_near
+        d["det_index"], d["grid"] = det_index, grid
 
 
 def mass_near(predicted: ParticleSet, Z: np.ndarray, bp: BirthParams = BirthParams(),
@@ -942,6 +981,39 @@ def log_birth_weight(Z: np.ndarray, params: PHDParams,
     return math.log(bp.birth_odds) + np.asarray(log_kappa) - log_pd - log_gbar
 
 
+def _birth_weight_terms(params: PHDParams, log_kappa: Optional[np.ndarray]
+                        ) -> tuple[np.ndarray, int, np.ndarray]:
+    """:func:`log_birth_weight` as ``(lw_base, lw_mode, lw_c)`` for
+    :func:`._kernels.birth_alloc_fill`, which does its arithmetic (the same operations in the
+    same order): mode 1 the constant ``log birth_intensity``, mode 2 the ``birth_odds``
+    weight of ``log_kappa`` and the detections' ``Σ log σ``."""
+    bp = params.birth
+    if bp.birth_odds <= 0 or log_kappa is None:
+        return _NO_LW, 1, _weight_consts(bp.birth_intensity, 0.0, 0.0, False)
+    lkap = log_kappa
+    if not (type(lkap) is np.ndarray and lkap.dtype == np.float64 and lkap.ndim == 1):
+        lkap = np.asarray(lkap, dtype=np.float64).reshape(-1)
+    return lkap, 2, _weight_consts(bp.birth_odds, params.likelihood.p_miss, bp.birth_spread,
+                                   True)
+
+
+_NO_LW = np.zeros(0, np.float64)
+
+
+@lru_cache(maxsize=16)
+def _weight_consts(a: float, p_miss: float, spread: float, odds: bool) -> np.ndarray:
+    """The constants of :func:`_birth_weight_terms` (read-only): ``[log a]`` (a the birth
+    intensity), or for ``birth_odds`` = a :func:`log_birth_weight`'s Python floats."""
+    if odds:
+        log_pd = math.log1p(-p_miss) if p_miss < 1 else 0.0
+        c = np.array([math.log(a), log_pd, 0.5 * OBS_DIM * math.log(2 * math.pi),
+                      0.5 * OBS_DIM * math.log1p(spread ** 2)])
+    else:
+        c = np.array([math.log(a)])
+    c.setflags(write=False)
+    return c
+
+
 def max_births(n_z: int, bp: BirthParams) -> int:
     """The most newborn :func:`allocate_births` can give ``n_z`` detections."""
     return min(n_z * bp.j_max, bp.max_births_per_frame)
@@ -969,8 +1041,11 @@ def birth(predicted: ParticleSet, Z, params: PHDParams, rng: np.random.Generator
     m_near, grid = _mass_near(predicted, Z, bp, lk, noise[0])
     st = stream(key_from(rng))
     # eq. (4), newborn branch, with γ_z ∝ p_z: every newborn of z weighs birth_intensity / J_z
-    # (the division and the revive odds in the kernel: numpy's floats)
-    lw_base = log_birth_weight(Z, params, log_kappa, noise[1])
+    # (log_birth_weight's arithmetic, the division and the revive odds in the kernel: numpy's
+    # floats, no array operation here)
+    lw_base, lw_mode, lw_c = _birth_weight_terms(params, log_kappa)
+    if lw_mode == 2 and len(lw_base) != len(Z):
+        raise ValueError(f"birth: {len(lw_base)} clutter densities for {len(Z)} detections")
     if revive is not None and bp.revive_odds > bp.birth_odds > 0 and log_kappa is not None:
         revive = np.asarray(revive, dtype=np.bool_).reshape(-1)
         if len(revive) != len(Z):
@@ -989,7 +1064,8 @@ def birth(predicted: ParticleSet, Z, params: PHDParams, rng: np.random.Generator
     # sizes clipped to min_size
     j, n = _kernels.birth_alloc_fill(
         m_near, int(bp.j_max), bp.birth_allocation == "complement",
-        int(bp.max_births_per_frame), lw_base, revive, log_revive, Z, st, lk.sigma_obs,
+        int(bp.max_births_per_frame), lw_base, lw_mode, noise[1], lw_c, revive, log_revive,
+        Z, st, lk.sigma_obs,
         lk.sigma_obs_min, lk.sigma_obs_pos_ratio, bp.birth_spread, bp.birth_speed_mean,
         bp.birth_speed_std, params.motion.min_size, states, log_w, det)
     if n < 0:
@@ -1001,7 +1077,7 @@ def birth(predicted: ParticleSet, Z, params: PHDParams, rng: np.random.Generator
 _NO_REVIVE = np.zeros(0, np.bool_)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, init=False)
 class UpdateResult:
     """The updated PHD (maggio2007 eq. (5)).
 
@@ -1016,8 +1092,16 @@ class UpdateResult:
     per_det_mass: np.ndarray
     miss_mass: float
 
+    def __init__(self, particles: ParticleSet, c_z: np.ndarray, kappa: np.ndarray,
+                 per_det_mass: np.ndarray, miss_mass: float):
+        # (a frozen dataclass's generated __init__ sets each field by object.__setattr__:
+        # the instance dict directly costs a fraction; made every frame)
+        d = self.__dict__
+        d["particles"], d["c_z"], d["kappa"] = particles, c_z, kappa
+        d["per_det_mass"], d["miss_mass"] = per_det_mass, miss_mass
 
-@dataclass(frozen=True)
+
+@dataclass(frozen=True, init=False)
 class GatedGaussian:
     """``log g`` of :class:`GaussianLikelihood` on the pairs inside the update gate, left for
     :func:`update` to evaluate on the fly: one fused pass over the particles near each
@@ -1036,6 +1120,15 @@ class GatedGaussian:
     r2: float
     noise: Optional[tuple[np.ndarray, np.ndarray]] = None
     persistent: Optional[tuple[int, tuple, np.ndarray]] = None
+
+    def __init__(self, Z: np.ndarray, params: LikelihoodParams, r2: float,
+                 noise: Optional[tuple[np.ndarray, np.ndarray]] = None,
+                 persistent: Optional[tuple[int, tuple, np.ndarray]] = None):
+        # (a frozen dataclass's generated __init__ sets each field by object.__setattr__:
+        # the instance dict directly costs a fraction; made every frame)
+        d = self.__dict__
+        d["Z"], d["params"], d["r2"], d["noise"], d["persistent"] = (Z, params, r2, noise,
+                                                                     persistent)
 
 
 #: What :func:`update` takes as the likelihood: a dense (N, N_z) matrix, one
@@ -1063,7 +1156,9 @@ def update(particles: ParticleSet, log_g: LogG, log_kappa: np.ndarray,
 
     ``log_kappa`` (N_z,) is ``log κ(z)``; the filter never knows which likelihood it runs (like
     nchopin/particles' ``logG``).  The sparse form costs O(pairs + N per chunk)."""
-    log_kappa = np.asarray(log_kappa, dtype=np.float64).reshape(-1)
+    if not (type(log_kappa) is np.ndarray and log_kappa.dtype == np.float64
+            and log_kappa.ndim == 1):
+        log_kappa = np.asarray(log_kappa, dtype=np.float64).reshape(-1)
     if not 0.0 <= p_miss <= 1.0:
         raise ValueError(f"update: p_miss must be in [0, 1], got {p_miss}")
     if isinstance(log_g, np.ndarray):
@@ -1122,7 +1217,10 @@ def _update_gaussian(particles: ParticleSet, g: GatedGaussian, log_kappa: np.nda
     (C(z) and each particle's bracket by online log-sum-exps; the same sums as
     :func:`_update_pairs` on the gated pairs, in another order)."""
     lw = particles.log_weights
-    Z = np.asarray(g.Z, dtype=np.float64).reshape(-1, OBS_DIM)
+    Z = g.Z
+    if not (type(Z) is np.ndarray and Z.dtype == np.float64 and Z.ndim == 2
+            and Z.shape[1] == OBS_DIM):
+        Z = np.asarray(Z, dtype=np.float64).reshape(-1, OBS_DIM)
     n, n_z = len(particles), len(log_kappa)
     if len(Z) != n_z:
         raise ValueError(f"update: {len(Z)} detections but {n_z} clutter densities")
@@ -1143,7 +1241,7 @@ def _update_gaussian(particles: ParticleSet, g: GatedGaussian, log_kappa: np.nda
             (n_grid, grid, j_born), cell = g.persistent, (1.0, 1.0)
         else:
             n_grid, grid, j_born, cell = n, _NO_GRID, _NO_BLOCKS, _grid_cell(std, g.r2)
-        ok, done, bracket, log_c, log_mass, log_pred, lin, scale = (
+        ok, done, bracket, log_c, log_mass, log_pred, lin, scale, log_den = (
             _kernels.gauss_update_linear(particles.states, lw, Z, std, log_norm, log_kappa,
                                          log_pd, log_pm, float(g.r2), cell[0], cell[1],
                                          n_grid, grid, j_born))
@@ -1154,8 +1252,9 @@ def _update_gaussian(particles: ParticleSet, g: GatedGaussian, log_kappa: np.nda
             float(g.r2), cell[0], cell[1])
     if not ok:
         raise ValueError("update: non-finite particle positions")
-    log_den = np.logaddexp(log_kappa, log_c)
-    log_den = np.where(np.isfinite(log_den), log_den, 0.0)              # κ = C = 0: term is 0
+    if not done:    # (the linear route's kernel made these, the same floats)
+        log_den = np.logaddexp(log_kappa, log_c)
+        log_den = np.where(np.isfinite(log_den), log_den, 0.0)          # κ = C = 0: term is 0
     if done:        # the logs of the bracket made only if read (a run reads lin and the mass)
         out: ParticleSet = LazyParticleSet(
             particles.states, partial(_kernels.bracket_log_weights, lw, bracket),
@@ -1310,7 +1409,13 @@ def resample(ps: ParticleSet, rp: ResamplingParams, rng: np.random.Generator) ->
 
 # ----------------------------------------------------------------------------- the stateful filter
 
-@dataclass(frozen=True)
+def _same(a, b) -> bool:
+    """``a == b`` for settings, without the dataclass's field-tuple comparison when they are
+    one object (every frame of a run)."""
+    return a is b or a == b
+
+
+@dataclass(frozen=True, init=False)
 class PHDStepResult:
     """Every stage of one frame. ``updated.particles`` is ``predicted`` followed by
     ``birth.particles`` (so its first ``len(predicted)`` rows are the persistent particles);
@@ -1322,6 +1427,14 @@ class PHDStepResult:
     updated: UpdateResult
     resampled: ParticleSet
     mass: float
+
+    def __init__(self, observations: np.ndarray, predicted: ParticleSet, birth: BirthResult,
+                 updated: UpdateResult, resampled: ParticleSet, mass: float):
+        # (a frozen dataclass's generated __init__ sets each field by object.__setattr__:
+        # the instance dict directly costs a fraction; made every frame)
+        d = self.__dict__
+        d["observations"], d["predicted"], d["birth"] = observations, predicted, birth
+        d["updated"], d["resampled"], d["mass"] = updated, resampled, mass
 
     @property
     def born(self) -> ParticleSet:
@@ -1376,8 +1489,8 @@ class PHDFilter:
         (image-based likelihoods need the pixels); ``revive`` (N_z,) bool: detections whose
         newborn get ``revive_odds`` (:func:`birth`)."""
         scores = getattr(Z, "scores", None)
-        Z = as_observations(Z)
         p = self.params
+        Z, noise = observations_noise(Z, p.likelihood)
         prev = self.particles
         # the persistent particles then the newborn in one pair of arrays: no concatenation
         n = len(prev)
@@ -1387,10 +1500,10 @@ class PHDFilter:
             cap = n + max_births(len(Z), p.birth)
             buf = (np.empty((cap, STATE_DIM)), np.empty(cap))
         predicted = predict(prev, p.motion, self.rng, buf)
-        noise = detection_noise(Z, p.likelihood)
         # the scene model's stds are these when it has the filter's likelihood (set_params)
         log_kappa_geo, log_kappa = self.scene.log_kappa(
-            Z, scores, frame, predicted, noise[0] if self.scene.lk == p.likelihood else None)
+            Z, scores, frame, predicted,
+            noise[0] if _same(self.scene.lk, p.likelihood) else None)
         born = birth(predicted, Z, p, self.rng, log_kappa_geo, revive,
                      None if buf is None else (buf[0][n:], buf[1][n:]), noise)
         m = n + len(born.particles)
@@ -1402,8 +1515,8 @@ class PHDFilter:
             # maggio2007's Gaussian: evaluated inside the update's fused kernel
             log_g: LogG = GatedGaussian(Z, self.likelihood.params,
                                         tail_radius2(p.gating.gate_tail, OBS_DIM),
-                                        noise if self.likelihood.params == p.likelihood
-                                        else None,
+                                        noise if _same(self.likelihood.params,
+                                                       p.likelihood) else None,
                                         None if born.grid is None
                                         else (n, born.grid, born.j_per_det))
         else:

@@ -35,13 +35,17 @@ MIN_SIZE = 1.0        # pixels
 
 def propagate(states: np.ndarray, rng: np.random.Generator, *, sigma_v: float = SIGMA_V,
               sigma_size: float = SIGMA_SIZE, accel_to_position: float = ACCEL_TO_POSITION,
-              min_size: float = MIN_SIZE, out: np.ndarray | None = None) -> np.ndarray:
+              min_size: float = MIN_SIZE, out: np.ndarray | None = None,
+              log_weights: np.ndarray | None = None, log_e: float = 0.0,
+              lw_out: np.ndarray | None = None) -> np.ndarray:
     """Draw ``x_k ~ f(. | x_{k-1})`` for every row of ``states`` (N, 6); returns a new (N, 6)
     (or the first N rows of ``out``, an (M >= N, 6) float64 array it writes into).
 
     Noise std is proportional to each particle's own size at k-1 (maggio2007 §2, §4).
     Takes one word of ``rng`` (the key of the stream the kernel draws its 4 N normals from,
-    :mod:`~trackers.smc.random`); none when there are no particles."""
+    :mod:`~trackers.smc.random`); none when there are no particles.  With ``log_weights`` (N,)
+    float64 and ``lw_out`` (>= N,) float64, also writes ``lw_out[:N] = log_weights + log_e``
+    in the same pass (the PHD prediction's survival factor)."""
     x = np.asarray(states, dtype=np.float64)
     if x.ndim != 2 or x.shape[1] != 6:
         raise ValueError(f"propagate: expected states (N, 6), got {x.shape}")
@@ -56,6 +60,15 @@ def propagate(states: np.ndarray, rng: np.random.Generator, *, sigma_v: float = 
     # one fused pass (numba) drawing its own normals ε: a = σ_v (w, h) ε, y += v + c a,
     # v += a (first order on position), (w, h) += σ_size (w, h) ε clipped to min_size (zero
     # order on size)
+    if log_weights is None:
+        log_weights = lw_out = _NO_LW
+    elif not (len(log_weights) == n and len(lw_out) >= n):
+        raise ValueError(f"propagate: {len(log_weights)} log-weights (out {len(lw_out)}) for "
+                         f"{n} states")
     propagate_into(x, stream(key_from(rng)), float(sigma_v), float(sigma_size),
-                   float(accel_to_position), float(min_size), out)
+                   float(accel_to_position), float(min_size), out, log_weights, float(log_e),
+                   lw_out)
     return out
+
+
+_NO_LW = np.empty(0, np.float64)

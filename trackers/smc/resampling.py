@@ -30,22 +30,23 @@ def _systematic_index(lw, log_mass, u0, n):
     first bin whose CDF exceeds ``u_k`` (``searchsorted(side="right")``: zero-weight bins are
     never picked). The walk of :func:`_systematic_take` with no columns to copy."""
     return _systematic_take(np.empty((lw.shape[0], 0), np.float64), lw, log_mass, u0, n,
-                            np.empty(0, np.float64), 0.0)[0]
+                            np.empty(0, np.float64), 0.0, True)[0]
 
 
 _NO_WEIGHTS = np.empty(0, np.float64)
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
-def _systematic_take(states, lw, log_mass, u0, n, w, scale):
+def _systematic_take(states, lw, log_mass, u0, n, w, scale, want_idx):
     """:func:`_systematic_index` and the ancestors' rows of ``states`` (N, D) in the same walk:
-    returns ``(idx (n,), states[idx] (n, D))`` with no exp or gather pass of its own.  With
+    returns ``(idx (n,), states[idx] (n, D))`` with no exp or gather pass of its own (``idx``
+    empty unless ``want_idx``: a set without labels or extra needs only the rows).  With
     ``w`` (N,) given (else empty), the normalised weights are ``w · scale`` instead of
     ``exp(lw − log_mass)`` (:meth:`~.weights.ParticleSet.known_normalised`): no exp at all,
     and ``lw`` is not read (may be empty)."""
     N = states.shape[0]
     D = states.shape[1]
-    idx = np.empty(n, np.int64)
+    idx = np.empty(n if want_idx else 0, np.int64)
     out = np.empty((n, D), np.float64)
     lin = w.shape[0] == N
     j = 0
@@ -55,7 +56,8 @@ def _systematic_take(states, lw, log_mass, u0, n, w, scale):
         while j < N - 1 and c <= u:
             j += 1
             c = c + (w[j] * scale if lin else math.exp(lw[j] - log_mass)) if j < N - 1 else 1.0
-        idx[k] = j
+        if want_idx:
+            idx[k] = j
         for d in range(D):
             out[k, d] = states[j, d]
     return idx, out
@@ -143,14 +145,16 @@ def resample(ps: ParticleSet, n: int, rng: np.random.Generator,
 
     An empty or zero-mass input, or ``n == 0``, gives an empty set."""
     n = int(n)
-    if len(ps) == 0 or n == 0 or not np.isfinite(ps.log_mass):
+    if len(ps) == 0 or n == 0 or not math.isfinite(ps.log_mass):
         return ps.take(np.zeros(0, dtype=np.int64))
-    lw = np.full(n, ps.log_mass - np.log(n))
+    lw = np.empty(n)                 # np.full's values (np.full is empty + copyto in Python)
+    lw.fill(ps.log_mass - np.log(n))
     if scheme == "systematic":      # the log-mass is known: one walk that also copies the rows
         known = ps.normalised        # the walk reads these or the log-weights, not both
         w, scale = known or (_NO_WEIGHTS, 0.0)
         idx, states = _systematic_take(ps.states, _NO_WEIGHTS if known else ps.log_weights,
-                                       ps.log_mass, float(rng.random()), n, w, scale)
+                                       ps.log_mass, float(rng.random()), n, w, scale,
+                                       ps.labels is not None or ps.extra is not None)
         out = ParticleSet(states, lw, None if ps.labels is None else ps.labels[idx],
                           None if ps.extra is None else ps.extra[idx])
         out.known_equal()                                   # (np.full)

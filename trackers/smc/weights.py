@@ -160,7 +160,9 @@ class ParticleSet:
     def known_log_mass(self, log_mass: float) -> None:
         """Record ``log_mass`` when the code that made the weights already summed them (the
         PHD update's kernel): :attr:`log_mass` then needs no pass of its own."""
-        self.__dict__["log_mass"] = float(log_mass)
+        d = self.__dict__
+        d["log_mass"] = float(log_mass)
+        d.pop("_mass", None)
 
     def known_normalised(self, w: np.ndarray, scale: float) -> None:
         """Record ``w · scale`` (N,), the normalised weights ``exp(log_weights − log_mass)``
@@ -176,8 +178,13 @@ class ParticleSet:
 
     @property
     def mass(self) -> float:
-        """Total weight ``exp(logsumexp(log_weights))`` (0 for an empty set)."""
-        return float(np.exp(self.log_mass))
+        """Total weight ``exp(logsumexp(log_weights))`` (0 for an empty set), computed once
+        (the PHD filter's resampling, its step result and the tracker read the updated
+        set's)."""
+        m = self.__dict__.get("_mass")
+        if m is None:
+            m = self.__dict__["_mass"] = float(np.exp(self.log_mass))
+        return m
 
     @cached_property
     def weights(self) -> np.ndarray:
