@@ -45,12 +45,18 @@ def pets() -> Path:
 
 def read_rrd(path, footer: bool = True) -> dict:
     """Entity path -> list of (timeline values dict, columns dict) per row, read with
-    ``rr.chunk.RrdReader``. ``footer=False`` streams a file that was never finished."""
+    ``rr.chunk.RrdReader``. ``footer=False``: a file that was never finished, read as pfscope's
+    readers do (streamed; one a killed run left torn inside an entry up to its last whole
+    entry)."""
     import pyarrow as pa
     import rerun as rr
 
-    reader = rr.chunk.RrdReader(str(path))
-    chunks = reader.store().stream() if footer else reader.stream()
+    if footer:
+        chunks = rr.chunk.RrdReader(str(path)).store().stream()
+    else:
+        from pfscope.viewer_app.rrdfile import open_chunks
+
+        chunks, _, _ = open_chunks(path, note=False)
     out: dict = defaultdict(list)
     for ch in chunks:
         rb = ch.to_record_batch()

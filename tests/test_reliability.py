@@ -8,6 +8,7 @@ import os
 import signal
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 from pathlib import Path
@@ -212,8 +213,12 @@ def test_sigkill_leaves_readable_partial_files_and_repair_makes_them_whole(tmp_p
     proc.kill()
     proc.wait(timeout=30)
     assert not out.exists() and not tracks.exists()
+    # wherever the kill landed (between two entries, or inside one: a torn tail) the partial
+    # file reads up to its last whole entry
+    whole = _whole_prefix(partial.read_bytes())
     frames = {t["frame"] for t, _ in read_rrd(partial, footer=False)["/video"]}
     assert len(frames) >= 10
+    assert frames == _frames_of_prefix(partial, whole, tmp_path), whole
     part = tmp_path / "t.txt.part"
     assert part.exists() and part.read_text().count("\n") > 0  # rows written so far
     assert subprocess.run([str(RERUN), "rrd", "verify", str(partial)],
@@ -223,10 +228,168 @@ def test_sigkill_leaves_readable_partial_files_and_repair_makes_them_whole(tmp_p
     fixed = tmp_path / "run.incomplete.repaired.rrd"
     assert subprocess.run([str(RERUN), "rrd", "verify", str(fixed)],
                           capture_output=True).returncode == 0
-    assert {t["frame"] for t, _ in read_rrd(fixed)["/video"]} >= frames - {max(frames)}
+    assert {t["frame"] for t, _ in read_rrd(fixed)["/video"]} == frames
     # the next run on the same output says what was left behind instead of deleting it
     again = cli("record", "--frames", "2", "--out", out, "--quiet")
     assert "pfscope repair" in one_line_error(again) and partial.exists()
+
+
+# --------------------------------------------------------- a recording torn inside an entry
+# A run killed while Rerun writes an entry leaves a file that ends inside it; Rerun's reader,
+# `rrd verify` and viewer refuse such a file as a whole.  Deterministic cuts (no kill timing).
+
+def _entries(data: bytes) -> list[tuple[int, int, int]]:
+    """(offset, kind, payload length) of each entry of an .rrd, up to its end entry (kind 0):
+    after the 12-byte file header, a 16-byte header (kind, length; u64 little-endian) each."""
+    import struct
+
+    assert data[:4] == b"RRF2"
+    out, off = [], 12
+    while off + 16 <= len(data):
+        kind, n = struct.unpack_from("<QQ", data, off)
+        out.append((off, kind, n))
+        off += 16 + n
+        if kind == 0:
+            break
+    return out
+
+
+def _whole_prefix(data: bytes) -> int:
+    """Bytes up to the end of the last entry the file holds whole (all of them when the file
+    ends between two entries or inside an entry's header, which Rerun skips)."""
+    for off, kind, n in _entries(data):
+        if off + 16 + n > len(data):
+            return off
+    return len(data)
+
+
+def _frames_of_prefix(path: Path, length: int, tmp: Path) -> set:
+    """The video frames Rerun itself reads from the file's first ``length`` bytes."""
+    import rerun as rr
+    import warnings
+
+    ref = tmp / f"ref-{length}.rrd"
+    ref.write_bytes(path.read_bytes()[:length])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        chunks = rr.chunk.RrdReader(str(ref)).stream()
+        frames = set()
+        for ch in chunks:
+            if ch.entity_path == "/video":
+                frames.update(ch.to_record_batch().column("frame").to_pylist())
+    ref.unlink()
+    return frames
+
+
+@pytest.fixture(scope="module")
+def whole_rrd(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("torn") / "x.rrd"
+    assert cli("record", "--frames", "12", "--out", out, "--quiet").returncode == 0
+    return out
+
+
+def _cuts(data: bytes) -> dict[str, int]:
+    ents = _entries(data)
+    assert ents[-1][1] == 0, "a finished recording ends with its end entry"
+    big = max(ents[:-1], key=lambda e: e[2])
+    last = ents[-2]
+    return {"inside the largest entry": big[0] + 16 + big[2] // 2,
+            "inside the last data entry": last[0] + 16 + last[2] // 2,
+            "inside the end entry (the footer's index)": ents[-1][0] + 16 + ents[-1][2] // 3,
+            "inside an entry's 16-byte header": big[0] + 9,
+            "between two entries": big[0]}
+
+
+@pytest.mark.parametrize("where", ["inside the largest entry", "inside the last data entry",
+                                   "inside the end entry (the footer's index)",
+                                   "inside an entry's 16-byte header", "between two entries"])
+def test_a_torn_recording_reads_up_to_its_last_whole_entry(tmp_path, whole_rrd, where):
+    import hashlib
+    import json
+
+    from pfscope.viewer_app.properties import read_properties
+
+    copies = set(Path(tempfile.gettempdir()).glob("pfscope-whole-*"))
+    data = whole_rrd.read_bytes()
+    at = _cuts(data)[where]
+    cut = tmp_path / "x.incomplete.rrd"
+    cut.write_bytes(data[:at])
+    whole = _whole_prefix(data[:at])
+    torn = whole < at
+    assert torn == (where.startswith("inside") and not where.endswith("header")), (where, at)
+    want = _frames_of_prefix(cut, whole, tmp_path)   # what Rerun reads of the whole entries
+    digest = hashlib.sha256(cut.read_bytes()).hexdigest()
+
+    # the test helper and the properties reader (the run's properties come first)
+    assert {t["frame"] for t, _ in read_rrd(cut, footer=False).get("/video", [])} == want
+    assert read_properties(cut, note=False)["run"] == read_properties(whole_rrd)["run"]
+
+    # info: works, and its first line says the tail was cut (no traceback, no Rerun warning)
+    r = cli("info", cut)
+    assert r.returncode == 0, r.stderr
+    assert "Traceback" not in r.stderr and "Warning" not in r.stderr, r.stderr
+    head = r.stdout.splitlines()[0]
+    assert ("cut inside an entry" in head) == torn, head
+    assert ("no footer" in head) == (not torn), head
+    info = json.loads(cli("info", "--json", cut).stdout)
+    assert info["frames"]["count"] == len(want)
+    assert (info["cut"] or {}).get("read_bytes") == (whole if torn else None)
+
+    # export: draws the frames read, and says once, in one line, that the tail was cut
+    gif = tmp_path / "x.gif"
+    r = cli("export", cut, "--out", gif, "--quiet")
+    notes = [ln for ln in r.stderr.splitlines() if ln.startswith("pfscope")]
+    if want:
+        assert r.returncode == 0 and f"({len(want)} frames)" in r.stdout, r.stderr
+        assert len(notes) == (1 if torn else 0), r.stderr
+    else:
+        line = one_line_error(r)
+        assert "no recorded frames" in line and not gif.exists()
+        assert ("cut inside an entry" in line) == torn, line
+    if torn:
+        assert "cut inside an entry" in notes[0] and f"pfscope repair {cut}" in notes[0]
+
+    # view: the Rerun viewer refuses a torn file: one line that says what to do
+    if torn:
+        assert "pfscope repair" in one_line_error(cli("view", cut))
+
+    # repair still makes it whole, with the same frames; the cut file is never written to
+    r = cli("repair", cut)
+    assert r.returncode == 0, r.stderr
+    fixed = tmp_path / "x.incomplete.repaired.rrd"
+    assert subprocess.run([str(RERUN), "rrd", "verify", str(fixed)],
+                          capture_output=True).returncode == 0
+    assert {t["frame"] for t, _ in read_rrd(fixed).get("/video", [])} == want
+    assert hashlib.sha256(cut.read_bytes()).hexdigest() == digest
+    assert set(Path(tempfile.gettempdir()).glob("pfscope-whole-*")) <= copies  # removed
+
+
+def test_a_recording_torn_inside_its_first_entry_is_one_line(tmp_path, whole_rrd):
+    data = whole_rrd.read_bytes()
+    first = _entries(data)[0]
+    cut = tmp_path / "x.rrd"
+    cut.write_bytes(data[:first[0] + 16 + first[2] // 2])
+    for cmd in ("info", "export"):
+        args = (cmd, cut) + (("--out", tmp_path / "x.gif") if cmd == "export" else ())
+        assert "nothing recorded" in one_line_error(cli(*args))
+
+
+def test_snapshot_of_a_torn_recording(tmp_path, whole_rrd):
+    from pfscope.viewer_app.snapshot import vulkan_problem
+
+    problem = vulkan_problem()
+    if problem:
+        pytest.skip(problem)
+    data = whole_rrd.read_bytes()
+    at = _cuts(data)["inside the end entry (the footer's index)"]
+    cut = tmp_path / "x.rrd"
+    cut.write_bytes(data[:at])
+    png = tmp_path / "s.png"
+    r = cli("snapshot", cut, "--frame", "6", "--out", png)
+    assert r.returncode == 0, r.stderr
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    notes = [ln for ln in r.stderr.splitlines() if ln.startswith("pfscope")]
+    assert len(notes) == 1 and "cut inside an entry" in notes[0], r.stderr
 
 
 def _burn(stop):

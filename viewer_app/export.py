@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import fnmatch
 import os
+import sys
 from pathlib import Path
 from typing import Optional
 
@@ -70,7 +71,7 @@ def _matches(entity: str, patterns: list[str]) -> bool:
 class Recording:
     """The rows of a recording's video and of the chosen entities, read once."""
 
-    def __init__(self, path: Path, patterns: list[str]):
+    def __init__(self, path: Path, patterns: list[str], note: bool = True):
         from .info import _open
 
         self.path = path
@@ -79,7 +80,7 @@ class Recording:
         #: entity -> list of (frame, stage, kind, row dict)
         self.rows: dict[str, list] = {}
         self.transforms: dict[str, tuple[float, float]] = {}
-        chunks, _ = _open(path)
+        chunks, _ = _open(path, note=note)
         for ch in chunks:
             ent = ch.entity_path
             want = ent == "/video" or _matches(ent, patterns)
@@ -347,12 +348,17 @@ def export(rrd, out, *, tab: Optional[str] = None, frames: Optional[tuple[int, i
     info = recording_info(rrd)
     t = _tab(info.get("tabs") or [], tab)
     patterns = list(t["entities"]) + [e for v in t.get("lanes") or [] for e in v["entities"]]
-    rec = Recording(rrd, patterns)
+    rec = Recording(rrd, patterns, note=False)
     todo = [f for f in rec.frames if frames is None or frames[0] <= f <= frames[1]]
+    cut = info.get("cut")   # torn inside an entry (a killed run): read up to the last whole one
     if not todo:
         raise InputError(f"{rrd}: no recorded frames" + (
             f" in {frames[0]}:{frames[1]} (recorded: {rec.frames[0]}..{rec.frames[-1]})"
-            if frames and rec.frames else ""))
+            if frames and rec.frames else "") + (
+            f" in its first {cut['read_bytes'] / 1e6:.1f} MB, up to where it is cut inside "
+            f"an entry (a killed run?); `pfscope repair {rrd}` makes it whole" if cut else ""))
+    if cut:
+        print(f"pfscope: {cut['note']}", file=sys.stderr, flush=True)
     ts = [rec.times[f] for f in todo if f in rec.times]
     fps = DEFAULT_FPS
     if len(ts) > 1 and ts[-1] > ts[0]:

@@ -1,7 +1,8 @@
 """``pfscope info FILE.rrd``: what a recording is, read from the file alone (its properties, its
 entities, its frames, its failure index); and ``pfscope view FILE.rrd``.
 
-Reads with ``rr.chunk.RrdReader``; a file left without its footer (a killed run) is streamed.
+Reads with ``rr.chunk.RrdReader``; a file left without its footer (a killed run) is streamed, one
+torn inside an entry is read up to its last whole entry (:mod:`.rrdfile`).
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ from typing import Any
 from pfscope.trackers.errors import InputError
 
 from .properties import PROPERTY_ROOT, read_properties
+from .rrdfile import cut_note
 from .tabs import from_property as tabs_from_property
 
 #: The scores ``info`` prints (all of them are in ``--json``).
@@ -40,32 +42,20 @@ def check_rrd_header(path: Path) -> None:
                          f"{RRD_MAGIC.decode()})")
 
 
-def _open(path: Path):
-    import rerun as rr
+def _open(path: Path, note: bool = True):
+    """``(chunks, footer)``; a torn file (a killed run) is read up to its last whole entry, with
+    one line on stderr when ``note`` (:func:`pfscope.viewer_app.rrdfile.open_chunks`)."""
+    chunks, footer, _ = _open_layout(path, note)
+    return chunks, footer
+
+
+def _open_layout(path: Path, note: bool = True):
+    from .rrdfile import open_chunks
 
     if not path.is_file():
         raise InputError(f"{path}: no such recording")
     check_rrd_header(path)
-    import warnings
-
-    try:
-        with warnings.catch_warnings():
-            # a file without footer (a killed or cut-short run) is streamed below: Rerun's
-            # "no footer/manifest ... legacy format" warning would only add two lines of noise
-            warnings.filterwarnings("ignore", message=".*no footer")
-            reader = rr.chunk.RrdReader(str(path))
-    except Exception as e:  # noqa: BLE001 - any reader error is the file's fault
-        raise InputError(f"{path}: not a readable Rerun recording ({e})") from None
-    try:
-        return reader.store().stream(), True
-    except Exception:  # noqa: BLE001 - no footer (killed run): stream what is there
-        pass
-    try:
-        return reader.stream(), False
-    except Exception as e:  # noqa: BLE001 - cut short inside an entry
-        msg = str(e).splitlines()[0] if str(e) else type(e).__name__
-        raise InputError(f"{path}: cut short, not readable as it is ({msg[:160]}); try "
-                         f"`pfscope repair {path}`") from None
+    return open_chunks(path, note=note)
 
 
 def check_readable(path) -> None:
@@ -75,13 +65,8 @@ def check_readable(path) -> None:
     path = Path(path)
     chunks, _ = _open(path)
     n = 0
-    try:
-        for _ in chunks:
-            n += 1
-    except Exception as e:  # noqa: BLE001 - cut short inside an entry
-        msg = str(e).splitlines()[0] if str(e) else type(e).__name__
-        raise InputError(f"{path}: cut short, not readable as it is ({msg[:160]}); try "
-                         f"`pfscope repair {path}`") from None
+    for _ in chunks:   # an InputError (one line) when it cannot be read
+        n += 1
     if n == 0:
         raise InputError(f"{path}: holds no recorded data")
 
@@ -91,7 +76,7 @@ def recording_info(path, top: int = 10) -> dict[str, Any]:
     import pyarrow as pa
 
     path = Path(path)
-    chunks, footer = _open(path)
+    chunks, footer, layout = _open_layout(path, note=False)   # the header line says it
     entities: set[str] = set()
     frames: set[int] = set()
     times: list[int] = []
@@ -144,11 +129,15 @@ def recording_info(path, top: int = 10) -> dict[str, Any]:
                             # "-": no id (the recorder never logs an empty string)
                             ev[k] = [int(x) for x in ev[k].split() if x != "-"]
                     events.setdefault(lane, []).append(ev)
+    except InputError:
+        raise
     except Exception as e:  # noqa: BLE001
         raise InputError(f"{path}: unreadable chunk ({type(e).__name__}: {e})") from None
     try:
-        props = read_properties(path)
+        props = read_properties(path, note=False)
     except Exception as e:  # noqa: BLE001 - the file's fault
+        if isinstance(e, InputError):
+            raise
         raise InputError(f"{path}: unreadable properties ({type(e).__name__}: "
                          f"{str(e).splitlines()[0][:160] if str(e) else ''})") from None
     lanes = {g.split(".", 1)[1]: v for g, v in props.items() if g.startswith("tracker.")}
@@ -177,6 +166,9 @@ def recording_info(path, top: int = 10) -> dict[str, Any]:
                  if "#" in e["message"] else 0)
     return {
         "file": str(path), "bytes": path.stat().st_size, "complete": footer,
+        # a torn file (the run killed inside an entry): the bytes read, up to its last whole one
+        "cut": ({"read_bytes": layout.whole, "note": cut_note(path, layout)}
+                if layout is not None and layout.torn else None),
         "name": props.get("recording", {}).get("name"),
         "run": props.get("run", {}), "source": props.get("source", {}),
         "lanes": lanes, "versions": props.get("versions", {}),
@@ -208,7 +200,13 @@ def print_info(info: dict, out=None, params: bool = True) -> None:
         print(s, file=out)
 
     run, src = info["run"], info["source"]
-    p(f"{info['file']}  ({info['bytes'] / 1e6:.1f} MB{'' if info['complete'] else ', no footer: a killed run? try pfscope repair'})")
+    if info.get("cut"):
+        state = (f", cut inside an entry (a killed run?): read its first "
+                 f"{info['cut']['read_bytes'] / 1e6:.1f} MB, up to its last whole entry; try "
+                 f"pfscope repair")
+    else:
+        state = "" if info["complete"] else ", no footer: a killed run? try pfscope repair"
+    p(f"{info['file']}  ({info['bytes'] / 1e6:.1f} MB{state})")
     if info.get("name"):
         p(f"recording: {info['name']}")
     if src:
@@ -293,6 +291,9 @@ def cmd_view(args) -> int:
     path = Path(args.file)
     if not path.is_file():
         raise InputError(f"{path}: no such recording")
+    from .rrdfile import check_whole_for_viewer
+
+    check_whole_for_viewer(path)   # the viewer refuses a torn file: say what to do instead
     if getattr(args, "web", False):
         from .serve import cmd_view_web
 

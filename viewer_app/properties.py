@@ -131,15 +131,13 @@ def about_markdown(title: str, views: Iterable[tuple[str, Iterable[str]]],
 
 # ------------------------------------------------------------------------------ reading back
 
-def read_properties(path) -> dict[str, dict]:
-    """``{group: {field: value}}`` of a recording's properties (single values unwrapped)."""
-    import rerun as rr
+def read_properties(path, note: bool = True) -> dict[str, dict]:
+    """``{group: {field: value}}`` of a recording's properties (single values unwrapped).  A
+    file without footer is streamed; one torn inside an entry (a killed run) is read up to its
+    last whole entry, saying so in one line on stderr when ``note``."""
+    from .rrdfile import open_chunks
 
-    reader = rr.chunk.RrdReader(str(path))
-    try:
-        chunks = reader.store().stream()
-    except Exception:  # noqa: BLE001 - a file without footer still streams
-        chunks = reader.stream()
+    chunks, _, _ = open_chunks(path, note=note)
     out: dict[str, dict] = {}
     for ch in chunks:
         ent = ch.entity_path

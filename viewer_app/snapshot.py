@@ -233,11 +233,21 @@ def snapshot(rrd, out, *, frame: Optional[int] = None, tab: Optional[str] = None
     problem = vulkan_problem()
     if problem:
         raise RunFailed(problem)
-    viewer = _Viewer(timeout)
+    from .rrdfile import release, scan, trimmed_copy
+
+    # the viewer refuses a file torn inside an entry (a killed run): it gets the whole entries
+    # (a temporary copy; check_readable said so in one line)
+    layout = scan(rrd)
+    shown_file = trimmed_copy(rrd, layout.whole) if layout.torn else None
+    try:
+        viewer = _Viewer(timeout)
+    except BaseException:
+        release(shown_file)
+        raise
     try:
         client = viewer.client
         try:
-            client.open(str(rrd.resolve()))
+            client.open(shown_file or str(rrd.resolve()))
         except Exception as e:  # noqa: BLE001
             raise RunFailed(f"the headless viewer could not open {rrd} "
                             f"({type(e).__name__}: {str(e)[:200]}); {VULKAN_HINT}") from None
@@ -289,6 +299,7 @@ def snapshot(rrd, out, *, frame: Optional[int] = None, tab: Optional[str] = None
                             f"{str(e).splitlines()[0][:200] if str(e) else ''})") from None
     finally:
         viewer.close()
+        release(shown_file)
     if len(jobs) > 1:
         return [o for _, _, o in jobs]
     return outs if frames else outs[0]
