@@ -57,7 +57,7 @@ import numpy as np
 from numba import njit
 
 from . import camera_motion
-from .camera_motion import _pairwise
+from .camera_motion import _fit_kernel, _pairwise
 from .gating import kth
 
 #: detections of two frames are linked within this many box sizes (Δx / w, Δy / h)
@@ -311,20 +311,111 @@ def _triplets(Z, prev, pp, j, prev_link, a_buf, a_n, s_buf, s_n):
     return t - skip_a, 2 * t - skip_s
 
 
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def _ring_spreads(buf, total, srt, at, state, out):
+    """:meth:`_Ring.spreads` of a ring with ``total`` samples into ``out`` (its rows) inside a
+    kernel (the ranks of :func:`_trim_at`, the same floats).  False: a non-finite value (the
+    caller takes the numpy form)."""
+    m = total if total < WINDOW else WINDOW
+    if m == 0:
+        for r in range(out.shape[0]):
+            out[r] = 0.0
+        return True
+    pos = TRIM * (m - 1)
+    lo = np.int64(math.floor(pos))
+    hi = lo + 1 if lo + 1 < m - 1 else m - 1
+    return _robust_stds(buf, total, WINDOW, srt, at, state, lo, hi, pos - lo, out)
+
+
+#: :class:`SceneMotion`'s float work array ``wk`` (one kernel argument): the camera's fit of
+#: the frame (s, t_x, t_y, significant) and its information (3×3), the camera level's ``b``
+#: and ``H`` (:class:`.camera_motion.CameraMotion`), the rings' robust spreads (accel x, y,
+#: size 1-frame, 2-frame); each piece starts 16-byte aligned, as a fresh array does
+_WK_FIT, _WK_FIT_H, _WK_B, _WK_H, _WK_SPREAD, _WK_LEN = 0, 4, 14, 18, 28, 32
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def _observe(Z, prev, pp, prev_link, prev_length, buf, srt, at, state, wk, a_n, s_n, camera,
+             base, speed_var, memory, since0):
+    """:meth:`SceneMotion.observe`'s per-frame work in one pass, the same floats as its parts
+    (kept as the reference, :meth:`SceneMotion._observe_parts`: :func:`_links`,
+    :meth:`.camera_motion.CameraMotion.step`, :func:`_triplets`, :meth:`_Ring.spreads`):
+    this frame's links into ``prev`` and chain lengths (from ``prev_length``); with
+    ``camera``, the camera's robust fit on the links that continue a chain (``base``,
+    ``speed_var`` as :func:`.camera_motion._fit_kernel`'s) and the level's forgetting
+    (``memory`` frames) and the fit's information added to its ``H`` -- not when ``since0``
+    (the last frame was significant) and this one is too: the caller shrinks the level first
+    (:meth:`~.camera_motion.CameraMotion.advance`); the triplets into the rings (``buf``,
+    ``srt``, ``at`` (4, ·) and ``state`` (2,): rows 0-1 the acceleration ring's of ``a_n``
+    samples, 2-3 the size ring's of ``s_n``); when a ring took samples and the acceleration's
+    window holds :data:`MIN_SAMPLES`, both rings' robust spreads.  ``wk``: :data:`_WK_FIT`...
+    Returns ``(links, lengths, samples into the acceleration ring, into the size ring, fit:
+    −1 none tried / 0 no inlier / 1 found / 2 found, significant after a significant frame
+    (H not added), spreads: 0 not computed / 1 computed / −1 a non-finite value)``."""
+    nc = Z.shape[0]
+    npv = prev.shape[0]
+    j = np.full(nc, -1, dtype=np.int64)
+    length = np.zeros(nc, dtype=np.int64)
+    if npv and nc and npv * nc <= MAX_PAIRS:
+        _link(prev, Z, j, prev_length, length)
+    found = -1
+    if camera:
+        fit = wk[_WK_FIT:_WK_FIT + 4]
+        fit_H = wk[_WK_FIT_H:_WK_FIT_H + 9].reshape((3, 3))
+        if npv:
+            # links that continue a chain (SceneMotion._observe_parts)
+            jl = np.empty(nc, dtype=np.int64)
+            for a in range(nc):
+                jl[a] = j[a] if length[a] >= 2 else -1
+            for r in range(9):
+                wk[_WK_FIT_H + r] = 0.0
+            found = 1 if _fit_kernel(prev, Z, jl, base, speed_var, fit_H, fit) else 0
+        # the level's forgetting (CameraMotion.advance), then this frame's information
+        lam = math.exp(-1.0 / (memory if memory > 1.0 else 1.0))
+        for r in range(9):
+            wk[_WK_H + r] *= lam
+        for r in range(3):
+            wk[_WK_B + r] *= lam
+        if found == 1 and since0 and fit[3] != 0.0:
+            found = 2
+        elif found == 1:
+            for r in range(9):
+                wk[_WK_H + r] += wk[_WK_FIT_H + r]
+    na = ns = np.int64(0)
+    if prev_link.shape[0] and nc:
+        na, ns = _triplets(Z, prev, pp, j, prev_link, buf[:2], a_n, buf[2:], s_n)
+    done = 0
+    a_n += na
+    s_n += ns
+    if (na or ns) and (a_n if a_n < WINDOW else WINDOW) >= MIN_SAMPLES:
+        done = 1
+        if not _ring_spreads(buf[:2], a_n, srt[:2], at[:2], state[:1],
+                             wk[_WK_SPREAD:_WK_SPREAD + 2]):
+            done = -1
+        elif not _ring_spreads(buf[2:], s_n, srt[2:], at[2:], state[1:],
+                               wk[_WK_SPREAD + 2:_WK_SPREAD + 4]):
+            done = -1
+    return j, length, na, ns, found, done
+
+
 class _Ring:
     """The most recent :data:`WINDOW` samples of ``width`` statistics, one row per statistic
     (a numpy ring: no per-frame conversion of Python lists; each statistic contiguous).  Every
     sample is stored twice, at ``i`` and ``i + WINDOW``, so the window oldest first is one slice
     (no copy)."""
 
-    def __init__(self, width: int):
-        self.buf = np.empty((width, 2 * WINDOW))
+    def __init__(self, width: int, store: Optional[tuple] = None):
+        """``store``: ``(buf, srt, at, state)``, views of arrays shared with other rings (one
+        kernel argument each for all of them: :class:`SceneMotion`), else its own."""
+        if store is None:
+            store = (np.empty((width, 2 * WINDOW)), np.empty((width, WINDOW)),
+                     np.empty((width, WINDOW), dtype=np.int64), np.empty(1, dtype=np.int64))
+        self.buf = store[0]
         self.n = 0          # samples written in all
         # |x| of the window sorted per row, the sample each is, the samples it holds
         # (:func:`_robust_stds`; −1: none yet)
-        self._srt = np.empty((width, WINDOW))
-        self._at = np.empty((width, WINDOW), dtype=np.int64)
-        self._state = np.full(1, -1, dtype=np.int64)
+        self._srt, self._at, self._state = store[1:]
+        self._state[0] = -1
 
     def spreads(self) -> np.ndarray:
         """:func:`robust_stds` of :meth:`rows` (the same floats), its ranked values from the
@@ -417,18 +508,76 @@ class SceneMotion:
         #: the tracker from the frame rate)
         self.camera_memory = 1.0
         self._camera = camera_motion.CameraMotion()
+        # one float work array for the kernel pass (_observe): the camera's fit, its level,
+        # the rings' spreads
+        self._wk = np.zeros(_WK_LEN)
+        self._camera.H = self._wk[_WK_H:_WK_H + 9].reshape(3, 3)
+        self._camera.b = self._wk[_WK_B:_WK_B + 3]
         #: the likelihood's size std as a fraction of the box size (σ_size; the camera fit)
         self.size_std = 2.0 * self.pos_std
-        self.accel = _Ring(2)    # second differences over (w, h)
-        self.size = _Ring(2)     # (1-frame, 2-frame) log size changes
-        # the robust spreads of the windows, kept until a sample comes in (_spreads)
-        self._spread: dict[str, np.ndarray] = {}
+        # the two rings' storage, shared (one kernel argument each: _observe)
+        self._store = (np.empty((4, 2 * WINDOW)), np.empty((4, WINDOW)),
+                       np.empty((4, WINDOW), dtype=np.int64), np.empty(2, dtype=np.int64))
+        st = self._store
+        self.accel = _Ring(2, tuple(a[:2] if a.ndim > 1 else a[:1] for a in st))  # (w, h)
+        self.size = _Ring(2, tuple(a[2:] if a.ndim > 1 else a[1:] for a in st))   # 1, 2 frames
+        # the robust spreads of the windows (accel x, y; size 1-frame, 2-frame), kept until a
+        # sample comes in (_spreads), and the rings' sample counts they are of
+        self._spread = self._wk[_WK_SPREAD:_WK_SPREAD + 4]
         self._spread_key: Optional[tuple[int, int]] = None
+        # the camera's fit of the last frame (_observe): (s, t_x, t_y), its information
+        self._fit_th = self._wk[_WK_FIT:_WK_FIT + 3]
+        self._fit_H = self._wk[_WK_FIT_H:_WK_FIT_H + 9].reshape(3, 3)
 
     def observe(self, Z: np.ndarray, key=None) -> None:
         """One frame's detections (N, 4) ``(cx, cy, w, h)``; an empty frame breaks the links.
         ``key``: the frame's key for :class:`Chains` (shared with a reader that observes the
-        same frame after this)."""
+        same frame after this).  One kernel call a frame (:func:`_observe`; the same floats as
+        :meth:`_observe_parts`, which a frame its Chains has seen already takes)."""
+        ch = self.chains
+        if key is not None and key == ch.key:
+            self._observe_parts(Z, key)
+            return
+        Z = np.ascontiguousarray(Z, dtype=np.float64)
+        if Z.ndim != 2:
+            Z = Z.reshape(-1, 4)
+        prev = ch.prev
+        a, s = self.accel, self.size
+        cam = self.camera_on
+        c = self._camera
+        st = self._store
+        memory = self.camera_memory
+        j, length, na, ns, found, done = _observe(
+            Z, prev, self._prev_prev, ch.prev_link, ch.length, st[0], st[1], st[2], st[3],
+            self._wk, a.n, s.n, cam, 2.0 * (self.pos_std ** 2 + self.size_std ** 2 / 4),
+            float(self.speed_var), float(memory), c.since == 0)
+        ch.key = key
+        ch.prev, ch.prev_link, ch.length = Z, j, length
+        a.n += na
+        s.n += ns
+        if done > 0:
+            self._spread_key = (a.n, s.n)
+        if cam:
+            # CameraMotion.advance after the kernel's part of it (forgetting, H)
+            if found > 0:
+                th, H = self._fit_th, self._fit_H
+                if found == 2:
+                    f = c._consistent(th, H)
+                    c.H *= f
+                    c.b *= f
+                    c.H += H
+                c.b += H @ th
+                if self._wk[_WK_FIT + 3] != 0.0:
+                    c.since = 0
+                elif c.since is not None:
+                    c.since += 1
+            elif c.since is not None:
+                c.since += 1
+            self.camera = None if c.since is None or c.since > memory else c.level()
+        self._prev_prev = prev
+
+    def _observe_parts(self, Z: np.ndarray, key=None) -> None:
+        """:meth:`observe` a piece at a time (the reference of :func:`_observe`)."""
         Z = np.asarray(Z, dtype=np.float64).reshape(-1, 4)
         ch = self.chains
         prev, prev_link = ch.prev, ch.prev_link
@@ -449,21 +598,35 @@ class SceneMotion:
             self.size.n += ns
         self._prev_prev = prev
 
-    def _spreads(self, name: str) -> np.ndarray:
-        """:func:`robust_stds` of ring ``name``'s window (:meth:`_Ring.spreads`), recomputed
-        only when a ring changed."""
+    def _spreads(self) -> np.ndarray:
+        """:func:`robust_stds` of both rings' windows (:meth:`_Ring.spreads`; accel x, y, size
+        1-frame, 2-frame), recomputed only when a ring changed (:meth:`observe` computes them
+        in its pass)."""
         key = (self.accel.n, self.size.n)
         if self._spread_key != key:
-            self._spread = {"accel": self.accel.spreads(), "size": self.size.spreads()}
+            self._spread[:2] = self.accel.spreads()
+            self._spread[2:] = self.size.spreads()
             self._spread_key = key
-        return self._spread[name]
+        return self._spread
+
+    def sigmas(self) -> tuple[Optional[float], Optional[float]]:
+        """``(sigma_v(), sigma_size())`` (the spreads read once)."""
+        if len(self.accel) < MIN_SAMPLES:
+            return None, None
+        sx, sy, one, two = self._spreads().tolist()
+        s = max(sx, sy)
+        sv = math.sqrt(max(0.0, 2.0 * (s * s - 6.0 * self.pos_std ** 2)))
+        if len(self.size) < 2 * MIN_SAMPLES:
+            return sv, None
+        margin = 2.0 * math.sqrt(2.0 * (one ** 4 + two ** 4) / len(self.size))
+        return sv, math.sqrt(max(0.0, two * two - one * one - margin))
 
     def sigma_v(self) -> Optional[float]:
         """Measured acceleration std per frame (fraction of w, h), 0 when the observation
         noise explains the residuals; None before :data:`MIN_SAMPLES` triplets."""
         if len(self.accel) < MIN_SAMPLES:
             return None
-        sx, sy = self._spreads("accel").tolist()
+        sx, sy = self._spreads()[:2].tolist()
         s = max(sx, sy)
         return math.sqrt(max(0.0, 2.0 * (s * s - 6.0 * self.pos_std ** 2)))
 
@@ -472,7 +635,7 @@ class SceneMotion:
         jitter explains the changes; None before :data:`MIN_SAMPLES` triplets."""
         if len(self.size) < 2 * MIN_SAMPLES:
             return None
-        one, two = self._spreads("size").tolist()
+        one, two = self._spreads()[2:].tolist()
         # the difference of two sampled variances is noisy (Var(ŝ²) ≈ 2 s⁴ / n each): only
         # its excess over two standard errors is motion, or a jittery detector whose boxes do
         # not change size at all would read as a size noise of ~0.07-0.1 from sampling alone
