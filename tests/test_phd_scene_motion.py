@@ -356,7 +356,7 @@ def test_observe_kernel_pass_is_its_parts_bit_for_bit(seed):
     fused, parts = S.SceneMotion(0.075, camera=True), S.SceneMotion(0.075, camera=True)
     pos = rng.uniform([100, 100], [900, 300], (6, 2))
     size = np.c_[rng.uniform(20, 40, 6), rng.uniform(60, 110, 6)]
-    moved = consistent = 0
+    moved = consistent = flushed = 0
     for k in range(400):
         burst = (k // 40) % 2 == 1
         s = 1.0 + (0.03 * np.sin(k / 5.0) if burst else 0.0)
@@ -378,8 +378,15 @@ def test_observe_kernel_pass_is_its_parts_bit_for_bit(seed):
         parts._observe_parts(Z, k)
         moved += fused.camera is not None
         consistent += was0 and fused._camera.since == 0
-        for a, b in ((fused.camera, parts.camera), (fused._camera.H, parts._camera.H),
-                     (fused._camera.b, parts._camera.b), (fused.chains.length, parts.chains.length),
+        # the level's b where its queued updates were applied (a batched matmul: every frame
+        # the level is read, else every PENDING frames), and at the end
+        pending = int(fused._I[S._I_PEND])
+        flushed += pending == 0 and k > 0
+        if k == 399:
+            fused._flush()
+        b_pair = (fused._camera.b, parts._camera.b) if k == 399 or not pending else (0, 0)
+        for a, b in ((fused.camera, parts.camera), (fused._camera.H, parts._camera.H), b_pair,
+                     (fused.chains.length, parts.chains.length),
                      (fused.chains.prev_link, parts.chains.prev_link),
                      (fused.accel.rows(), parts.accel.rows()),
                      (fused.size.rows(), parts.size.rows())):
@@ -388,4 +395,4 @@ def test_observe_kernel_pass_is_its_parts_bit_for_bit(seed):
         got = fused.sigmas()
         assert got == (parts.sigma_v(), parts.sigma_size()) or np.isnan(got).any(), k
         assert got == (fused.sigma_v(), fused.sigma_size()) or np.isnan(got).any(), k
-    assert moved > 50 and consistent > 5 and fused.sigma_v() is not None
+    assert moved > 50 and consistent > 5 and flushed > 50 and fused.sigma_v() is not None

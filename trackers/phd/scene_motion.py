@@ -327,31 +327,46 @@ def _ring_spreads(buf, total, srt, at, state, out):
     return _robust_stds(buf, total, WINDOW, srt, at, state, lo, hi, pos - lo, out)
 
 
-#: :class:`SceneMotion`'s float work array ``wk`` (one kernel argument): the camera's fit of
-#: the frame (s, t_x, t_y, significant) and its information (3×3), the camera level's ``b``
-#: and ``H`` (:class:`.camera_motion.CameraMotion`), the rings' robust spreads (accel x, y,
-#: size 1-frame, 2-frame); each piece starts 16-byte aligned, as a fresh array does
-_WK_FIT, _WK_FIT_H, _WK_B, _WK_H, _WK_SPREAD, _WK_LEN = 0, 4, 14, 18, 28, 32
+#: frames whose camera-level update ``b ← λ b + H_k θ_k`` waits for one batched numpy matmul
+#: (:meth:`SceneMotion._flush`; ``b`` is read only where the camera moved recently)
+PENDING = 64
+#: :class:`SceneMotion`'s float state ``F`` (one kernel argument): the camera's fit of the
+#: frame (s, t_x, t_y, significant) and its information (3×3), the camera level's ``b`` and
+#: ``H`` (:class:`.camera_motion.CameraMotion`), the rings' robust spreads (accel x, y, size
+#: 1-frame, 2-frame), the pending level updates (λ, θ, H per frame), the rings' buffers and
+#: sorted copies (:class:`_Ring`, rows 0-1 accel, 2-3 size); each piece 16-byte aligned
+_F_FIT, _F_FIT_H, _F_B, _F_H, _F_SPREAD, _F_PLAM = 0, 4, 14, 18, 28, 32
+_F_PTH = _F_PLAM + PENDING
+_F_PH = _F_PTH + 3 * PENDING
+_F_BUF = _F_PH + 9 * PENDING
+_F_SRT = _F_BUF + 4 * 2 * WINDOW
+_F_LEN = _F_SRT + 4 * WINDOW
+#: ... and its int state ``I``: the rings' sorted copies' samples and states, the pending
+#: updates' count and whether each adds ``H_k θ_k``
+_I_AT, _I_STATE = 0, 4 * WINDOW
+_I_PEND = _I_STATE + 2
+_I_PFLAG = _I_PEND + 1
+_I_LEN = _I_PFLAG + PENDING
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
-def _observe(Z, prev, pp, prev_link, prev_length, buf, srt, at, state, wk, a_n, s_n, camera,
-             base, speed_var, memory, since0):
+def _observe(Z, prev, pp, prev_link, prev_length, F, I, a_n, s_n, camera, base, speed_var,
+             memory, since0):
     """:meth:`SceneMotion.observe`'s per-frame work in one pass, the same floats as its parts
     (kept as the reference, :meth:`SceneMotion._observe_parts`: :func:`_links`,
     :meth:`.camera_motion.CameraMotion.step`, :func:`_triplets`, :meth:`_Ring.spreads`):
     this frame's links into ``prev`` and chain lengths (from ``prev_length``); with
     ``camera``, the camera's robust fit on the links that continue a chain (``base``,
-    ``speed_var`` as :func:`.camera_motion._fit_kernel`'s) and the level's forgetting
-    (``memory`` frames) and the fit's information added to its ``H`` -- not when ``since0``
-    (the last frame was significant) and this one is too: the caller shrinks the level first
-    (:meth:`~.camera_motion.CameraMotion.advance`); the triplets into the rings (``buf``,
-    ``srt``, ``at`` (4, ·) and ``state`` (2,): rows 0-1 the acceleration ring's of ``a_n``
-    samples, 2-3 the size ring's of ``s_n``); when a ring took samples and the acceleration's
-    window holds :data:`MIN_SAMPLES`, both rings' robust spreads.  ``wk``: :data:`_WK_FIT`...
-    Returns ``(links, lengths, samples into the acceleration ring, into the size ring, fit:
-    −1 none tried / 0 no inlier / 1 found / 2 found, significant after a significant frame
-    (H not added), spreads: 0 not computed / 1 computed / −1 a non-finite value)``."""
+    ``speed_var`` as :func:`.camera_motion._fit_kernel`'s), the level's forgetting (``memory``
+    frames) and the fit's information added to its ``H`` -- not when ``since0`` (the last
+    frame was significant) and this one is too: the caller shrinks the level first
+    (:meth:`~.camera_motion.CameraMotion.advance`) -- and the frame's update of the level's
+    ``b`` queued (:data:`PENDING`); the triplets into the rings (``a_n``, ``s_n`` samples so
+    far); when a ring took samples and the acceleration's window holds :data:`MIN_SAMPLES`,
+    both rings' robust spreads.  ``F``, ``I``: :data:`_F_FIT`..., :data:`_I_AT`....  Returns
+    ``(links, lengths, samples into the acceleration ring, into the size ring, fit: −1 none
+    tried / 0 no inlier / 1 found / 2 found, significant after a significant frame (H not
+    added), spreads: 0 not computed / 1 computed / −1 a non-finite value, pending updates)``."""
     nc = Z.shape[0]
     npv = prev.shape[0]
     j = np.full(nc, -1, dtype=np.int64)
@@ -359,43 +374,70 @@ def _observe(Z, prev, pp, prev_link, prev_length, buf, srt, at, state, wk, a_n, 
     if npv and nc and npv * nc <= MAX_PAIRS:
         _link(prev, Z, j, prev_length, length)
     found = -1
+    pend = I[_I_PEND]
     if camera:
-        fit = wk[_WK_FIT:_WK_FIT + 4]
-        fit_H = wk[_WK_FIT_H:_WK_FIT_H + 9].reshape((3, 3))
+        fit = F[_F_FIT:_F_FIT + 4]
+        fit_H = F[_F_FIT_H:_F_FIT_H + 9].reshape((3, 3))
         if npv:
             # links that continue a chain (SceneMotion._observe_parts)
             jl = np.empty(nc, dtype=np.int64)
             for a in range(nc):
                 jl[a] = j[a] if length[a] >= 2 else -1
             for r in range(9):
-                wk[_WK_FIT_H + r] = 0.0
+                F[_F_FIT_H + r] = 0.0
             found = 1 if _fit_kernel(prev, Z, jl, base, speed_var, fit_H, fit) else 0
         # the level's forgetting (CameraMotion.advance), then this frame's information
         lam = math.exp(-1.0 / (memory if memory > 1.0 else 1.0))
         for r in range(9):
-            wk[_WK_H + r] *= lam
-        for r in range(3):
-            wk[_WK_B + r] *= lam
+            F[_F_H + r] *= lam
         if found == 1 and since0 and fit[3] != 0.0:
             found = 2
         elif found == 1:
             for r in range(9):
-                wk[_WK_H + r] += wk[_WK_FIT_H + r]
+                F[_F_H + r] += F[_F_FIT_H + r]
+        # b's update queued: b ← λ b (+ H_k θ_k where found == 1; found == 2: the caller's)
+        F[_F_PLAM + pend] = lam
+        I[_I_PFLAG + pend] = 1 if found == 1 else 0
+        if found == 1:
+            for r in range(3):
+                F[_F_PTH + 3 * pend + r] = F[_F_FIT + r]
+            for r in range(9):
+                F[_F_PH + 9 * pend + r] = F[_F_FIT_H + r]
+        pend += 1
+        I[_I_PEND] = pend
     na = ns = np.int64(0)
+    buf = F[_F_BUF:_F_SRT].reshape((4, 2 * WINDOW))
     if prev_link.shape[0] and nc:
         na, ns = _triplets(Z, prev, pp, j, prev_link, buf[:2], a_n, buf[2:], s_n)
     done = 0
     a_n += na
     s_n += ns
     if (na or ns) and (a_n if a_n < WINDOW else WINDOW) >= MIN_SAMPLES:
+        srt = F[_F_SRT:_F_LEN].reshape((4, WINDOW))
+        at = I[_I_AT:_I_STATE].reshape((4, WINDOW))
         done = 1
-        if not _ring_spreads(buf[:2], a_n, srt[:2], at[:2], state[:1],
-                             wk[_WK_SPREAD:_WK_SPREAD + 2]):
+        if not _ring_spreads(buf[:2], a_n, srt[:2], at[:2], I[_I_STATE:_I_STATE + 1],
+                             F[_F_SPREAD:_F_SPREAD + 2]):
             done = -1
-        elif not _ring_spreads(buf[2:], s_n, srt[2:], at[2:], state[1:],
-                               wk[_WK_SPREAD + 2:_WK_SPREAD + 4]):
+        elif not _ring_spreads(buf[2:], s_n, srt[2:], at[2:], I[_I_STATE + 1:_I_STATE + 2],
+                               F[_F_SPREAD + 2:_F_SPREAD + 4]):
             done = -1
-    return j, length, na, ns, found, done
+    return j, length, na, ns, found, done, pend
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def _replay(F, I, V):
+    """The queued updates of the camera level's ``b`` in order (:meth:`SceneMotion._flush`):
+    ``b ← λ b``, then ``+ V[i]`` (``H_k θ_k``, numpy's matmul) where flagged; the queue
+    emptied."""
+    for i in range(I[_I_PEND]):
+        lam = F[_F_PLAM + i]
+        for r in range(3):
+            F[_F_B + r] *= lam
+        if I[_I_PFLAG + i]:
+            for r in range(3):
+                F[_F_B + r] += V[i, r, 0]
+    I[_I_PEND] = 0
 
 
 class _Ring:
@@ -508,26 +550,28 @@ class SceneMotion:
         #: the tracker from the frame rate)
         self.camera_memory = 1.0
         self._camera = camera_motion.CameraMotion()
-        # one float work array for the kernel pass (_observe): the camera's fit, its level,
-        # the rings' spreads
-        self._wk = np.zeros(_WK_LEN)
-        self._camera.H = self._wk[_WK_H:_WK_H + 9].reshape(3, 3)
-        self._camera.b = self._wk[_WK_B:_WK_B + 3]
         #: the likelihood's size std as a fraction of the box size (σ_size; the camera fit)
         self.size_std = 2.0 * self.pos_std
-        # the two rings' storage, shared (one kernel argument each: _observe)
-        self._store = (np.empty((4, 2 * WINDOW)), np.empty((4, WINDOW)),
-                       np.empty((4, WINDOW), dtype=np.int64), np.empty(2, dtype=np.int64))
-        st = self._store
-        self.accel = _Ring(2, tuple(a[:2] if a.ndim > 1 else a[:1] for a in st))  # (w, h)
-        self.size = _Ring(2, tuple(a[2:] if a.ndim > 1 else a[1:] for a in st))   # 1, 2 frames
+        # the kernel pass's state (_observe): floats F, ints I, and views of them
+        self._F = F = np.zeros(_F_LEN)
+        self._I = I = np.zeros(_I_LEN, dtype=np.int64)
+        self._camera.H = F[_F_H:_F_H + 9].reshape(3, 3)
+        self._camera.b = F[_F_B:_F_B + 3]
+        buf = F[_F_BUF:_F_SRT].reshape(4, 2 * WINDOW)
+        srt = F[_F_SRT:_F_LEN].reshape(4, WINDOW)
+        at = I[_I_AT:_I_STATE].reshape(4, WINDOW)
+        self.accel = _Ring(2, (buf[:2], srt[:2], at[:2], I[_I_STATE:_I_STATE + 1]))  # (w, h)
+        self.size = _Ring(2, (buf[2:], srt[2:], at[2:], I[_I_STATE + 1:_I_STATE + 2]))
         # the robust spreads of the windows (accel x, y; size 1-frame, 2-frame), kept until a
         # sample comes in (_spreads), and the rings' sample counts they are of
-        self._spread = self._wk[_WK_SPREAD:_WK_SPREAD + 4]
+        self._spread = F[_F_SPREAD:_F_SPREAD + 4]
         self._spread_key: Optional[tuple[int, int]] = None
-        # the camera's fit of the last frame (_observe): (s, t_x, t_y), its information
-        self._fit_th = self._wk[_WK_FIT:_WK_FIT + 3]
-        self._fit_H = self._wk[_WK_FIT_H:_WK_FIT_H + 9].reshape(3, 3)
+        # the camera's fit of the last frame (_observe): (s, t_x, t_y), its information; the
+        # queued updates of the level's b (_flush)
+        self._fit_th = F[_F_FIT:_F_FIT + 3]
+        self._fit_H = F[_F_FIT_H:_F_FIT_H + 9].reshape(3, 3)
+        self._pend_th = F[_F_PTH:_F_PH].reshape(PENDING, 3, 1)
+        self._pend_H = F[_F_PH:_F_BUF].reshape(PENDING, 3, 3)
 
     def observe(self, Z: np.ndarray, key=None) -> None:
         """One frame's detections (N, 4) ``(cx, cy, w, h)``; an empty frame breaks the links.
@@ -545,12 +589,11 @@ class SceneMotion:
         a, s = self.accel, self.size
         cam = self.camera_on
         c = self._camera
-        st = self._store
         memory = self.camera_memory
-        j, length, na, ns, found, done = _observe(
-            Z, prev, self._prev_prev, ch.prev_link, ch.length, st[0], st[1], st[2], st[3],
-            self._wk, a.n, s.n, cam, 2.0 * (self.pos_std ** 2 + self.size_std ** 2 / 4),
-            float(self.speed_var), float(memory), c.since == 0)
+        j, length, na, ns, found, done, pend = _observe(
+            Z, prev, self._prev_prev, ch.prev_link, ch.length, self._F, self._I, a.n, s.n, cam,
+            2.0 * (self.pos_std ** 2 + self.size_std ** 2 / 4), float(self.speed_var),
+            float(memory), c.since == 0)
         ch.key = key
         ch.prev, ch.prev_link, ch.length = Z, j, length
         a.n += na
@@ -558,26 +601,42 @@ class SceneMotion:
         if done > 0:
             self._spread_key = (a.n, s.n)
         if cam:
-            # CameraMotion.advance after the kernel's part of it (forgetting, H)
+            # CameraMotion.advance after the kernel's part of it (forgetting, H; b queued)
             if found > 0:
-                th, H = self._fit_th, self._fit_H
                 if found == 2:
+                    th, H = self._fit_th, self._fit_H
+                    self._flush()
                     f = c._consistent(th, H)
                     c.H *= f
                     c.b *= f
                     c.H += H
-                c.b += H @ th
-                if self._wk[_WK_FIT + 3] != 0.0:
+                    c.b += H @ th
+                if self._F[_F_FIT + 3] != 0.0:
                     c.since = 0
                 elif c.since is not None:
                     c.since += 1
             elif c.since is not None:
                 c.since += 1
-            self.camera = None if c.since is None or c.since > memory else c.level()
+            if c.since is None or c.since > memory:
+                self.camera = None
+                if pend >= PENDING:
+                    self._flush()
+            else:
+                self._flush()
+                self.camera = c.level()
         self._prev_prev = prev
+
+    def _flush(self) -> None:
+        """The camera level's queued updates of ``b`` (:func:`_observe`) applied in order: their
+        ``H_k θ_k`` by one batched numpy matmul (the floats of one ``H_k @ θ_k`` each, as
+        :meth:`.camera_motion.CameraMotion.advance` computes them), then :func:`_replay`."""
+        n = int(self._I[_I_PEND])
+        if n:
+            _replay(self._F, self._I, np.matmul(self._pend_H[:n], self._pend_th[:n]))
 
     def _observe_parts(self, Z: np.ndarray, key=None) -> None:
         """:meth:`observe` a piece at a time (the reference of :func:`_observe`)."""
+        self._flush()
         Z = np.asarray(Z, dtype=np.float64).reshape(-1, 4)
         ch = self.chains
         prev, prev_link = ch.prev, ch.prev_link
