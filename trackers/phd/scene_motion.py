@@ -365,8 +365,9 @@ def _observe(Z, prev, pp, prev_link, prev_length, F, I, a_n, s_n, camera, base, 
     far); when a ring took samples and the acceleration's window holds :data:`MIN_SAMPLES`,
     both rings' robust spreads.  ``F``, ``I``: :data:`_F_FIT`..., :data:`_I_AT`....  Returns
     ``(links, lengths, samples into the acceleration ring, into the size ring, fit: −1 none
-    tried / 0 no inlier / 1 found / 2 found, significant after a significant frame (H not
-    added), spreads: 0 not computed / 1 computed / −1 a non-finite value, pending updates)``."""
+    tried / 0 no inlier / 1 found / 3 found, significant / 2 found, significant after a
+    significant frame (H not added), spreads: 0 not computed / 1 computed / −1 a non-finite
+    value, pending updates, the four spreads)``."""
     nc = Z.shape[0]
     npv = prev.shape[0]
     j = np.full(nc, -1, dtype=np.int64)
@@ -390,15 +391,21 @@ def _observe(Z, prev, pp, prev_link, prev_length, F, I, a_n, s_n, camera, base, 
         lam = math.exp(-1.0 / (memory if memory > 1.0 else 1.0))
         for r in range(9):
             F[_F_H + r] *= lam
-        if found == 1 and since0 and fit[3] != 0.0:
+        sig = found == 1 and fit[3] != 0.0
+        if sig and since0:
             found = 2
         elif found == 1:
             for r in range(9):
                 F[_F_H + r] += F[_F_FIT_H + r]
-        # b's update queued: b ← λ b (+ H_k θ_k where found == 1; found == 2: the caller's)
+            if sig:
+                found = 3
+        # b's update queued: b ← λ b (+ H_k θ_k where H was added; found 2: the caller's)
+        if pend >= PENDING:
+            raise ValueError("SceneMotion: the camera level's queue is full (_flush)")
         F[_F_PLAM + pend] = lam
-        I[_I_PFLAG + pend] = 1 if found == 1 else 0
-        if found == 1:
+        added = found == 1 or found == 3
+        I[_I_PFLAG + pend] = 1 if added else 0
+        if added:
             for r in range(3):
                 F[_F_PTH + 3 * pend + r] = F[_F_FIT + r]
             for r in range(9):
@@ -422,7 +429,8 @@ def _observe(Z, prev, pp, prev_link, prev_length, F, I, a_n, s_n, camera, base, 
         elif not _ring_spreads(buf[2:], s_n, srt[2:], at[2:], I[_I_STATE + 1:_I_STATE + 2],
                                F[_F_SPREAD + 2:_F_SPREAD + 4]):
             done = -1
-    return j, length, na, ns, found, done, pend
+    return (j, length, na, ns, found, done, pend, F[_F_SPREAD], F[_F_SPREAD + 1],
+            F[_F_SPREAD + 2], F[_F_SPREAD + 3])
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
@@ -566,6 +574,7 @@ class SceneMotion:
         # sample comes in (_spreads), and the rings' sample counts they are of
         self._spread = F[_F_SPREAD:_F_SPREAD + 4]
         self._spread_key: Optional[tuple[int, int]] = None
+        self._sp = (0.0, 0.0, 0.0, 0.0)       # ... as floats
         # the camera's fit of the last frame (_observe): (s, t_x, t_y), its information; the
         # queued updates of the level's b (_flush)
         self._fit_th = F[_F_FIT:_F_FIT + 3]
@@ -590,7 +599,7 @@ class SceneMotion:
         cam = self.camera_on
         c = self._camera
         memory = self.camera_memory
-        j, length, na, ns, found, done, pend = _observe(
+        j, length, na, ns, found, done, pend, sx, sy, one, two = _observe(
             Z, prev, self._prev_prev, ch.prev_link, ch.length, self._F, self._I, a.n, s.n, cam,
             2.0 * (self.pos_std ** 2 + self.size_std ** 2 / 4), float(self.speed_var),
             float(memory), c.since == 0)
@@ -600,6 +609,7 @@ class SceneMotion:
         s.n += ns
         if done > 0:
             self._spread_key = (a.n, s.n)
+            self._sp = (sx, sy, one, two)
         if cam:
             # CameraMotion.advance after the kernel's part of it (forgetting, H; b queued)
             if found > 0:
@@ -611,7 +621,7 @@ class SceneMotion:
                     c.b *= f
                     c.H += H
                     c.b += H @ th
-                if self._F[_F_FIT + 3] != 0.0:
+                if found > 1:                       # significant
                     c.since = 0
                 elif c.since is not None:
                     c.since += 1
@@ -666,18 +676,23 @@ class SceneMotion:
             self._spread[:2] = self.accel.spreads()
             self._spread[2:] = self.size.spreads()
             self._spread_key = key
+            self._sp = tuple(self._spread.tolist())
         return self._spread
 
     def sigmas(self) -> tuple[Optional[float], Optional[float]]:
         """``(sigma_v(), sigma_size())`` (the spreads read once)."""
-        if len(self.accel) < MIN_SAMPLES:
+        n_a, n_s = self.accel.n, self.size.n
+        if n_a < MIN_SAMPLES:                   # (MIN_SAMPLES <= WINDOW)
             return None, None
-        sx, sy, one, two = self._spreads().tolist()
+        if self._spread_key != (n_a, n_s):
+            self._spreads()
+        sx, sy, one, two = self._sp
         s = max(sx, sy)
         sv = math.sqrt(max(0.0, 2.0 * (s * s - 6.0 * self.pos_std ** 2)))
-        if len(self.size) < 2 * MIN_SAMPLES:
+        m = n_s if n_s < WINDOW else WINDOW
+        if m < 2 * MIN_SAMPLES:
             return sv, None
-        margin = 2.0 * math.sqrt(2.0 * (one ** 4 + two ** 4) / len(self.size))
+        margin = 2.0 * math.sqrt(2.0 * (one ** 4 + two ** 4) / m)
         return sv, math.sqrt(max(0.0, two * two - one * one - margin))
 
     def sigma_v(self) -> Optional[float]:
