@@ -581,6 +581,9 @@ class SceneMotion:
         self._fit_H = F[_F_FIT_H:_F_FIT_H + 9].reshape(3, 3)
         self._pend_th = F[_F_PTH:_F_PH].reshape(PENDING, 3, 1)
         self._pend_H = F[_F_PH:_F_BUF].reshape(PENDING, 3, 3)
+        # the queue's kernel loaded (or compiled) with the tracker, as _observe is in its
+        # first frame: its first real call may come long after the warm-up's frames
+        _replay(F, I, np.zeros((0, 3, 1)))
 
     def observe(self, Z: np.ndarray, key=None) -> None:
         """One frame's detections (N, 4) ``(cx, cy, w, h)``; an empty frame breaks the links.
