@@ -431,8 +431,9 @@ class CameraMotion:
     def advance(self, th_r: Optional[np.ndarray], H_r: Optional[np.ndarray], significant: bool,
                 memory: float) -> Optional[np.ndarray]:
         """:meth:`step` once the frame's robust fit is known (:func:`_robust_fit`: ``th_r``
-        its ``(s, t_x, t_y)`` and ``H_r`` its information, ``th_r`` None: no fit), e.g. from
-        :func:`.scene_motion._observe`'s pass."""
+        its ``(s, t_x, t_y)`` and ``H_r`` its information, ``th_r`` None: no fit).
+        :meth:`.scene_motion.SceneMotion.observe` does the same in its kernel pass (the
+        forgetting and ``H``) and around it (``b``'s updates queued, the rest here's)."""
         lam = math.exp(-1.0 / max(float(memory), 1.0))
         self.H *= lam
         self.b *= lam
