@@ -341,3 +341,58 @@ def test_ring_spreads_kept_sorted_are_robust_stds_of_the_window():
         if step == 200:
             assert np.isnan(got[1]) and ring._state[0] == -1
     assert seen_sorted > 300
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_observe_kernel_pass_is_its_parts_bit_for_bit(seed):
+    """SceneMotion.observe's one kernel pass (links, camera fit and level, triplets, spreads)
+    leaves everything as the piece-by-piece form (_observe_parts: Chains.observe,
+    CameraMotion.step, _triplets, _Ring.spreads), float for float, on a camera that pans and
+    zooms in bursts (the level's adaptive forgetting included), still stretches, empty frames,
+    clutter and now and then a degenerate box (non-finite samples: the spreads' numpy form)."""
+    from pfscope.trackers.phd import scene_motion as S
+
+    rng = np.random.default_rng(40 + seed)
+    fused, parts = S.SceneMotion(0.075, camera=True), S.SceneMotion(0.075, camera=True)
+    pos = rng.uniform([100, 100], [900, 300], (6, 2))
+    size = np.c_[rng.uniform(20, 40, 6), rng.uniform(60, 110, 6)]
+    moved = consistent = flushed = 0
+    for k in range(400):
+        burst = (k // 40) % 2 == 1
+        s = 1.0 + (0.03 * np.sin(k / 5.0) if burst else 0.0)
+        t = rng.normal(0, 6, 2) + (15.0 if burst else 0.0)
+        pos = s * pos + t + rng.normal(0, 1.5, pos.shape)
+        size = s * size
+        keep = rng.random(6) < 0.85
+        Z = np.c_[pos + rng.normal(0, 1, pos.shape), size * (1 + rng.normal(0, 0.03, size.shape))]
+        Z = np.vstack([Z[keep], np.c_[rng.uniform(0, 1000, (3, 2)), rng.uniform(15, 100, (3, 2))]])
+        if k % 97 == 50:
+            Z = Z[:0]                                             # an empty frame
+        if k % 61 == 30 and len(Z):
+            Z[0, 3] = 0.0                                         # a degenerate box
+        for sm in (fused, parts):
+            sm.speed_var = 0.02
+            sm.camera_memory = 10.0
+        was0 = fused._camera.since == 0
+        fused.observe(Z, k)
+        parts._observe_parts(Z, k)
+        moved += fused.camera is not None
+        consistent += was0 and fused._camera.since == 0
+        # the level's b where its queued updates were applied (a batched matmul: every frame
+        # the level is read, else every PENDING frames), and at the end
+        pending = int(fused._I[S._I_PEND])
+        flushed += pending == 0 and k > 0
+        if k == 399:
+            fused._flush()
+        b_pair = (fused._camera.b, parts._camera.b) if k == 399 or not pending else (0, 0)
+        for a, b in ((fused.camera, parts.camera), (fused._camera.H, parts._camera.H), b_pair,
+                     (fused.chains.length, parts.chains.length),
+                     (fused.chains.prev_link, parts.chains.prev_link),
+                     (fused.accel.rows(), parts.accel.rows()),
+                     (fused.size.rows(), parts.size.rows())):
+            assert (a is None and b is None) or np.array_equal(a, b, equal_nan=True), k
+        assert fused._camera.since == parts._camera.since
+        got = fused.sigmas()
+        assert got == (parts.sigma_v(), parts.sigma_size()) or np.isnan(got).any(), k
+        assert got == (fused.sigma_v(), fused.sigma_size()) or np.isnan(got).any(), k
+    assert moved > 50 and consistent > 5 and flushed > 50 and fused.sigma_v() is not None

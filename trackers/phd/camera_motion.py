@@ -424,27 +424,43 @@ class CameraMotion:
         """The camera's motion into this frame (2×3), or None: still.  Arguments as
         :func:`fit`; ``memory``: the level's time constant in frames."""
         r = _robust_fit(prev, cur, links, pos_std, size_std, speed_var) if len(prev) else None
+        if r is None:
+            return self.advance(None, None, False, memory)
+        return self.advance(np.array([r.s, r.t[0], r.t[1]]), r.H, r.significant, memory)
+
+    def advance(self, th_r: Optional[np.ndarray], H_r: Optional[np.ndarray], significant: bool,
+                memory: float) -> Optional[np.ndarray]:
+        """:meth:`step` once the frame's robust fit is known (:func:`_robust_fit`: ``th_r``
+        its ``(s, t_x, t_y)`` and ``H_r`` its information, ``th_r`` None: no fit).
+        :meth:`.scene_motion.SceneMotion.observe` does the same in its kernel pass (the
+        forgetting and ``H``) and around it (``b``'s updates queued, the rest here's)."""
         lam = math.exp(-1.0 / max(float(memory), 1.0))
         self.H *= lam
         self.b *= lam
-        if r is not None:
-            th_r = np.array([r.s, r.t[0], r.t[1]])
-            if r.significant and self.since == 0:
+        if th_r is not None:
+            if significant and self.since == 0:
                 # two frames in a row whose own links beat a still camera (one such frame on a
                 # still camera is the test's 1 % false alarm) and this one contradicts the
                 # level: the camera changed its motion beyond what the level's drift allows,
                 # so the level's information shrinks until this frame is consistent with it
-                a = self._consistent(th_r, r.H)
+                a = self._consistent(th_r, H_r)
                 self.H *= a
                 self.b *= a
-            self.H += r.H
-            self.b += r.H @ th_r
-        if r is not None and r.significant:
-            self.since = 0
+            self.H += H_r
+            self.b += H_r @ th_r
+            if significant:
+                self.since = 0
+            elif self.since is not None:
+                self.since += 1
         elif self.since is not None:
             self.since += 1
         if self.since is None or self.since > memory:
             return None
+        return self.level()
+
+    def level(self) -> Optional[np.ndarray]:
+        """The level's motion (2×3), None where it does not differ from a still camera (χ²₃
+        99 % in its own covariance) or is singular."""
         try:
             th = np.linalg.solve(self.H, self.b)
         except np.linalg.LinAlgError:

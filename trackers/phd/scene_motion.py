@@ -57,7 +57,7 @@ import numpy as np
 from numba import njit
 
 from . import camera_motion
-from .camera_motion import _pairwise
+from .camera_motion import _fit_kernel, _pairwise
 from .gating import kth
 
 #: detections of two frames are linked within this many box sizes (Δx / w, Δy / h)
@@ -311,20 +311,161 @@ def _triplets(Z, prev, pp, j, prev_link, a_buf, a_n, s_buf, s_n):
     return t - skip_a, 2 * t - skip_s
 
 
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def _ring_spreads(buf, total, srt, at, state, out):
+    """:meth:`_Ring.spreads` of a ring with ``total`` samples into ``out`` (its rows) inside a
+    kernel (the ranks of :func:`_trim_at`, the same floats).  False: a non-finite value (the
+    caller takes the numpy form)."""
+    m = total if total < WINDOW else WINDOW
+    if m == 0:
+        for r in range(out.shape[0]):
+            out[r] = 0.0
+        return True
+    pos = TRIM * (m - 1)
+    lo = np.int64(math.floor(pos))
+    hi = lo + 1 if lo + 1 < m - 1 else m - 1
+    return _robust_stds(buf, total, WINDOW, srt, at, state, lo, hi, pos - lo, out)
+
+
+#: frames whose camera-level update ``b ← λ b + H_k θ_k`` waits for one batched numpy matmul
+#: (:meth:`SceneMotion._flush`; ``b`` is read only where the camera moved recently)
+PENDING = 64
+#: :class:`SceneMotion`'s float state ``F`` (one kernel argument): the camera's fit of the
+#: frame (s, t_x, t_y, significant) and its information (3×3), the camera level's ``b`` and
+#: ``H`` (:class:`.camera_motion.CameraMotion`), the rings' robust spreads (accel x, y, size
+#: 1-frame, 2-frame), the pending level updates (λ, θ, H per frame), the rings' buffers and
+#: sorted copies (:class:`_Ring`, rows 0-1 accel, 2-3 size); each piece 16-byte aligned
+_F_FIT, _F_FIT_H, _F_B, _F_H, _F_SPREAD, _F_PLAM = 0, 4, 14, 18, 28, 32
+_F_PTH = _F_PLAM + PENDING
+_F_PH = _F_PTH + 3 * PENDING
+_F_BUF = _F_PH + 9 * PENDING
+_F_SRT = _F_BUF + 4 * 2 * WINDOW
+_F_LEN = _F_SRT + 4 * WINDOW
+#: ... and its int state ``I``: the rings' sorted copies' samples and states, the pending
+#: updates' count and whether each adds ``H_k θ_k``
+_I_AT, _I_STATE = 0, 4 * WINDOW
+_I_PEND = _I_STATE + 2
+_I_PFLAG = _I_PEND + 1
+_I_LEN = _I_PFLAG + PENDING
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def _observe(Z, prev, pp, prev_link, prev_length, F, I, a_n, s_n, camera, base, speed_var,
+             memory, since0):
+    """:meth:`SceneMotion.observe`'s per-frame work in one pass, the same floats as its parts
+    (kept as the reference, :meth:`SceneMotion._observe_parts`: :func:`_links`,
+    :meth:`.camera_motion.CameraMotion.step`, :func:`_triplets`, :meth:`_Ring.spreads`):
+    this frame's links into ``prev`` and chain lengths (from ``prev_length``); with
+    ``camera``, the camera's robust fit on the links that continue a chain (``base``,
+    ``speed_var`` as :func:`.camera_motion._fit_kernel`'s), the level's forgetting (``memory``
+    frames) and the fit's information added to its ``H`` -- not when ``since0`` (the last
+    frame was significant) and this one is too: the caller shrinks the level first
+    (:meth:`~.camera_motion.CameraMotion.advance`) -- and the frame's update of the level's
+    ``b`` queued (:data:`PENDING`); the triplets into the rings (``a_n``, ``s_n`` samples so
+    far); when a ring took samples and the acceleration's window holds :data:`MIN_SAMPLES`,
+    both rings' robust spreads.  ``F``, ``I``: :data:`_F_FIT`..., :data:`_I_AT`....  Returns
+    ``(links, lengths, samples into the acceleration ring, into the size ring, fit: −1 none
+    tried / 0 no inlier / 1 found / 3 found, significant / 2 found, significant after a
+    significant frame (H not added), spreads: 0 not computed / 1 computed / −1 a non-finite
+    value, pending updates, the four spreads)``."""
+    nc = Z.shape[0]
+    npv = prev.shape[0]
+    j = np.full(nc, -1, dtype=np.int64)
+    length = np.zeros(nc, dtype=np.int64)
+    if npv and nc and npv * nc <= MAX_PAIRS:
+        _link(prev, Z, j, prev_length, length)
+    found = -1
+    pend = I[_I_PEND]
+    if camera:
+        fit = F[_F_FIT:_F_FIT + 4]
+        fit_H = F[_F_FIT_H:_F_FIT_H + 9].reshape((3, 3))
+        if npv:
+            # links that continue a chain (SceneMotion._observe_parts)
+            jl = np.empty(nc, dtype=np.int64)
+            for a in range(nc):
+                jl[a] = j[a] if length[a] >= 2 else -1
+            for r in range(9):
+                F[_F_FIT_H + r] = 0.0
+            found = 1 if _fit_kernel(prev, Z, jl, base, speed_var, fit_H, fit) else 0
+        # the level's forgetting (CameraMotion.advance), then this frame's information
+        lam = math.exp(-1.0 / (memory if memory > 1.0 else 1.0))
+        for r in range(9):
+            F[_F_H + r] *= lam
+        sig = found == 1 and fit[3] != 0.0
+        if sig and since0:
+            found = 2
+        elif found == 1:
+            for r in range(9):
+                F[_F_H + r] += F[_F_FIT_H + r]
+            if sig:
+                found = 3
+        # b's update queued: b ← λ b (+ H_k θ_k where H was added; found 2: the caller's)
+        if pend >= PENDING:
+            raise ValueError("SceneMotion: the camera level's queue is full (_flush)")
+        F[_F_PLAM + pend] = lam
+        added = found == 1 or found == 3
+        I[_I_PFLAG + pend] = 1 if added else 0
+        if added:
+            for r in range(3):
+                F[_F_PTH + 3 * pend + r] = F[_F_FIT + r]
+            for r in range(9):
+                F[_F_PH + 9 * pend + r] = F[_F_FIT_H + r]
+        pend += 1
+        I[_I_PEND] = pend
+    na = ns = np.int64(0)
+    buf = F[_F_BUF:_F_SRT].reshape((4, 2 * WINDOW))
+    if prev_link.shape[0] and nc:
+        na, ns = _triplets(Z, prev, pp, j, prev_link, buf[:2], a_n, buf[2:], s_n)
+    done = 0
+    a_n += na
+    s_n += ns
+    if (na or ns) and (a_n if a_n < WINDOW else WINDOW) >= MIN_SAMPLES:
+        srt = F[_F_SRT:_F_LEN].reshape((4, WINDOW))
+        at = I[_I_AT:_I_STATE].reshape((4, WINDOW))
+        done = 1
+        if not _ring_spreads(buf[:2], a_n, srt[:2], at[:2], I[_I_STATE:_I_STATE + 1],
+                             F[_F_SPREAD:_F_SPREAD + 2]):
+            done = -1
+        elif not _ring_spreads(buf[2:], s_n, srt[2:], at[2:], I[_I_STATE + 1:_I_STATE + 2],
+                               F[_F_SPREAD + 2:_F_SPREAD + 4]):
+            done = -1
+    return (j, length, na, ns, found, done, pend, F[_F_SPREAD], F[_F_SPREAD + 1],
+            F[_F_SPREAD + 2], F[_F_SPREAD + 3])
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def _replay(F, I, V):
+    """The queued updates of the camera level's ``b`` in order (:meth:`SceneMotion._flush`):
+    ``b ← λ b``, then ``+ V[i]`` (``H_k θ_k``, numpy's matmul) where flagged; the queue
+    emptied."""
+    for i in range(I[_I_PEND]):
+        lam = F[_F_PLAM + i]
+        for r in range(3):
+            F[_F_B + r] *= lam
+        if I[_I_PFLAG + i]:
+            for r in range(3):
+                F[_F_B + r] += V[i, r, 0]
+    I[_I_PEND] = 0
+
+
 class _Ring:
     """The most recent :data:`WINDOW` samples of ``width`` statistics, one row per statistic
     (a numpy ring: no per-frame conversion of Python lists; each statistic contiguous).  Every
     sample is stored twice, at ``i`` and ``i + WINDOW``, so the window oldest first is one slice
     (no copy)."""
 
-    def __init__(self, width: int):
-        self.buf = np.empty((width, 2 * WINDOW))
+    def __init__(self, width: int, store: Optional[tuple] = None):
+        """``store``: ``(buf, srt, at, state)``, views of arrays shared with other rings (one
+        kernel argument each for all of them: :class:`SceneMotion`), else its own."""
+        if store is None:
+            store = (np.empty((width, 2 * WINDOW)), np.empty((width, WINDOW)),
+                     np.empty((width, WINDOW), dtype=np.int64), np.empty(1, dtype=np.int64))
+        self.buf = store[0]
         self.n = 0          # samples written in all
         # |x| of the window sorted per row, the sample each is, the samples it holds
         # (:func:`_robust_stds`; −1: none yet)
-        self._srt = np.empty((width, WINDOW))
-        self._at = np.empty((width, WINDOW), dtype=np.int64)
-        self._state = np.full(1, -1, dtype=np.int64)
+        self._srt, self._at, self._state = store[1:]
+        self._state[0] = -1
 
     def spreads(self) -> np.ndarray:
         """:func:`robust_stds` of :meth:`rows` (the same floats), its ranked values from the
@@ -419,16 +560,96 @@ class SceneMotion:
         self._camera = camera_motion.CameraMotion()
         #: the likelihood's size std as a fraction of the box size (σ_size; the camera fit)
         self.size_std = 2.0 * self.pos_std
-        self.accel = _Ring(2)    # second differences over (w, h)
-        self.size = _Ring(2)     # (1-frame, 2-frame) log size changes
-        # the robust spreads of the windows, kept until a sample comes in (_spreads)
-        self._spread: dict[str, np.ndarray] = {}
+        # the kernel pass's state (_observe): floats F, ints I, and views of them
+        self._F = F = np.zeros(_F_LEN)
+        self._I = I = np.zeros(_I_LEN, dtype=np.int64)
+        self._camera.H = F[_F_H:_F_H + 9].reshape(3, 3)
+        self._camera.b = F[_F_B:_F_B + 3]
+        buf = F[_F_BUF:_F_SRT].reshape(4, 2 * WINDOW)
+        srt = F[_F_SRT:_F_LEN].reshape(4, WINDOW)
+        at = I[_I_AT:_I_STATE].reshape(4, WINDOW)
+        self.accel = _Ring(2, (buf[:2], srt[:2], at[:2], I[_I_STATE:_I_STATE + 1]))  # (w, h)
+        self.size = _Ring(2, (buf[2:], srt[2:], at[2:], I[_I_STATE + 1:_I_STATE + 2]))
+        # the robust spreads of the windows (accel x, y; size 1-frame, 2-frame), kept until a
+        # sample comes in (_spreads), and the rings' sample counts they are of
+        self._spread = F[_F_SPREAD:_F_SPREAD + 4]
         self._spread_key: Optional[tuple[int, int]] = None
+        self._sp = (0.0, 0.0, 0.0, 0.0)       # ... as floats
+        # the camera's fit of the last frame (_observe): (s, t_x, t_y), its information; the
+        # queued updates of the level's b (_flush)
+        self._fit_th = F[_F_FIT:_F_FIT + 3]
+        self._fit_H = F[_F_FIT_H:_F_FIT_H + 9].reshape(3, 3)
+        self._pend_th = F[_F_PTH:_F_PH].reshape(PENDING, 3, 1)
+        self._pend_H = F[_F_PH:_F_BUF].reshape(PENDING, 3, 3)
+        # the queue's kernel loaded (or compiled) with the tracker, as _observe is in its
+        # first frame: its first real call may come long after the warm-up's frames
+        _replay(F, I, np.zeros((0, 3, 1)))
 
     def observe(self, Z: np.ndarray, key=None) -> None:
         """One frame's detections (N, 4) ``(cx, cy, w, h)``; an empty frame breaks the links.
         ``key``: the frame's key for :class:`Chains` (shared with a reader that observes the
-        same frame after this)."""
+        same frame after this).  One kernel call a frame (:func:`_observe`; the same floats as
+        :meth:`_observe_parts`, which a frame its Chains has seen already takes)."""
+        ch = self.chains
+        if key is not None and key == ch.key:
+            self._observe_parts(Z, key)
+            return
+        Z = np.ascontiguousarray(Z, dtype=np.float64)
+        if Z.ndim != 2:
+            Z = Z.reshape(-1, 4)
+        prev = ch.prev
+        a, s = self.accel, self.size
+        cam = self.camera_on
+        c = self._camera
+        memory = self.camera_memory
+        j, length, na, ns, found, done, pend, sx, sy, one, two = _observe(
+            Z, prev, self._prev_prev, ch.prev_link, ch.length, self._F, self._I, a.n, s.n, cam,
+            2.0 * (self.pos_std ** 2 + self.size_std ** 2 / 4), float(self.speed_var),
+            float(memory), c.since == 0)
+        ch.key = key
+        ch.prev, ch.prev_link, ch.length = Z, j, length
+        a.n += na
+        s.n += ns
+        if done > 0:
+            self._spread_key = (a.n, s.n)
+            self._sp = (sx, sy, one, two)
+        if cam:
+            # CameraMotion.advance after the kernel's part of it (forgetting, H; b queued)
+            if found > 0:
+                if found == 2:
+                    th, H = self._fit_th, self._fit_H
+                    self._flush()
+                    f = c._consistent(th, H)
+                    c.H *= f
+                    c.b *= f
+                    c.H += H
+                    c.b += H @ th
+                if found > 1:                       # significant
+                    c.since = 0
+                elif c.since is not None:
+                    c.since += 1
+            elif c.since is not None:
+                c.since += 1
+            if c.since is None or c.since > memory:
+                self.camera = None
+                if pend >= PENDING:
+                    self._flush()
+            else:
+                self._flush()
+                self.camera = c.level()
+        self._prev_prev = prev
+
+    def _flush(self) -> None:
+        """The camera level's queued updates of ``b`` (:func:`_observe`) applied in order: their
+        ``H_k θ_k`` by one batched numpy matmul (the floats of one ``H_k @ θ_k`` each, as
+        :meth:`.camera_motion.CameraMotion.advance` computes them), then :func:`_replay`."""
+        n = int(self._I[_I_PEND])
+        if n:
+            _replay(self._F, self._I, np.matmul(self._pend_H[:n], self._pend_th[:n]))
+
+    def _observe_parts(self, Z: np.ndarray, key=None) -> None:
+        """:meth:`observe` a piece at a time (the reference of :func:`_observe`)."""
+        self._flush()
         Z = np.asarray(Z, dtype=np.float64).reshape(-1, 4)
         ch = self.chains
         prev, prev_link = ch.prev, ch.prev_link
@@ -449,21 +670,40 @@ class SceneMotion:
             self.size.n += ns
         self._prev_prev = prev
 
-    def _spreads(self, name: str) -> np.ndarray:
-        """:func:`robust_stds` of ring ``name``'s window (:meth:`_Ring.spreads`), recomputed
-        only when a ring changed."""
+    def _spreads(self) -> np.ndarray:
+        """:func:`robust_stds` of both rings' windows (:meth:`_Ring.spreads`; accel x, y, size
+        1-frame, 2-frame), recomputed only when a ring changed (:meth:`observe` computes them
+        in its pass)."""
         key = (self.accel.n, self.size.n)
         if self._spread_key != key:
-            self._spread = {"accel": self.accel.spreads(), "size": self.size.spreads()}
+            self._spread[:2] = self.accel.spreads()
+            self._spread[2:] = self.size.spreads()
             self._spread_key = key
-        return self._spread[name]
+            self._sp = tuple(self._spread.tolist())
+        return self._spread
+
+    def sigmas(self) -> tuple[Optional[float], Optional[float]]:
+        """``(sigma_v(), sigma_size())`` (the spreads read once)."""
+        n_a, n_s = self.accel.n, self.size.n
+        if n_a < MIN_SAMPLES:                   # (MIN_SAMPLES <= WINDOW)
+            return None, None
+        if self._spread_key != (n_a, n_s):
+            self._spreads()
+        sx, sy, one, two = self._sp
+        s = max(sx, sy)
+        sv = math.sqrt(max(0.0, 2.0 * (s * s - 6.0 * self.pos_std ** 2)))
+        m = n_s if n_s < WINDOW else WINDOW
+        if m < 2 * MIN_SAMPLES:
+            return sv, None
+        margin = 2.0 * math.sqrt(2.0 * (one ** 4 + two ** 4) / m)
+        return sv, math.sqrt(max(0.0, two * two - one * one - margin))
 
     def sigma_v(self) -> Optional[float]:
         """Measured acceleration std per frame (fraction of w, h), 0 when the observation
         noise explains the residuals; None before :data:`MIN_SAMPLES` triplets."""
         if len(self.accel) < MIN_SAMPLES:
             return None
-        sx, sy = self._spreads("accel").tolist()
+        sx, sy = self._spreads()[:2].tolist()
         s = max(sx, sy)
         return math.sqrt(max(0.0, 2.0 * (s * s - 6.0 * self.pos_std ** 2)))
 
@@ -472,7 +712,7 @@ class SceneMotion:
         jitter explains the changes; None before :data:`MIN_SAMPLES` triplets."""
         if len(self.size) < 2 * MIN_SAMPLES:
             return None
-        one, two = self._spreads("size").tolist()
+        one, two = self._spreads()[2:].tolist()
         # the difference of two sampled variances is noisy (Var(ŝ²) ≈ 2 s⁴ / n each): only
         # its excess over two standard errors is motion, or a jittery detector whose boxes do
         # not change size at all would read as a size noise of ~0.07-0.1 from sampling alone

@@ -463,7 +463,7 @@ class PHDTracker(_AssociatingTracker):
             sm.observe(boxes, frame.index)
             # the residuals the likelihood explains: the learnt width's when there is one
             sm.pos_std = want.likelihood.sigma_obs * want.likelihood.sigma_obs_pos_ratio
-            sv, ss = sm.sigma_v(), sm.sigma_size()
+            sv, ss = sm.sigmas()
             self.associator.scene_sigma_v = sv or 0.0
             sv, ss = max(fp.motion.sigma_v, sv or 0.0), max(fp.motion.sigma_size, ss or 0.0)
             # the same settings as the last frame's: nothing to build or compare (two
