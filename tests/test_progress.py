@@ -366,7 +366,7 @@ def test_first_run_compiles_each_kernel_once_in_one_process(tmp_path):
     assert sorted(top) == ["_fit_kernel", "_gate_sums_cells", "_link", "_robust_stds",
                            "_triplets", "advance", "check_states",
                            "confirmed", "edge_scores", "fill_rows", "frame_edges", "gap_rows", "head_pick",
-                           "lloyd", "mass_near_kernel", "mass_near_skip", "prepare",
+                           "lloyd", "mass_near_kernel", "mass_near_two", "prepare",
                            "revive_hits",
                            "split_clusters"], top
 

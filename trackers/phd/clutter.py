@@ -371,11 +371,15 @@ class NearClutter:
         predicted particles or detections; records the predicted mass for :meth:`learn`."""
         from .filter import mass_near
 
-        self._exposure = float(predicted.mass) if predicted is not None else 0.0
+        self.record(predicted)
         if predicted is None or not len(Z):
             return None
         wide, bp = self._wide()
         return mass_near(predicted, Z, bp, wide, std_z=std, skip=chained)
+
+    def record(self, predicted) -> None:
+        """Records the predicted mass of this frame for :meth:`learn` (:meth:`mass` does)."""
+        self._exposure = float(predicted.mass) if predicted is not None else 0.0
 
     def learn(self, near_share: np.ndarray, a: float) -> None:
         """After the update: ``near_share`` (N_z,) the clutter share the EM gives to κ_n (none

@@ -565,6 +565,9 @@ class SceneModel:
         self.people = NearClutter(self.cl, self.lk) if learn else None
         self.dups = DuplicateBoxes(self.cl, self.lk) if learn else None
         self._parts: Optional[tuple] = None
+        #: the birth gate's r² (:func:`birth`'s M(z)): where it is the clutter gate's, κ_n's
+        #: M'(z) and the birth's M(z) come from one pass (:meth:`_near_mass`)
+        self._birth_r2 = gate_threshold(params.birth.gate, OBS_DIM)
 
     def set_likelihood(self, lk: LikelihoodParams) -> None:
         """New observation-noise widths for the clutter volumes (PHDFilter.set_params)."""
@@ -651,7 +654,7 @@ class SceneModel:
                 # is 0 there, so it takes no share of it in the EM (the update alike with
                 # learn_update 'model')
                 self._chained = self.chains.length >= 1
-                m = self.people.mass(Z, predicted, self._chained, std_wide)
+                m = self._near_mass(Z, predicted, std, std_wide)
                 # a second box on a person already boxed, which a Poisson κ cannot express:
                 # the duplicate term (.clutter.DuplicateBoxes) joins the mixture ('model')
                 n = self.dups.counts(Z, std_wide, n_dup) if model else None
@@ -678,6 +681,21 @@ class SceneModel:
         if self.uses_scores and scores is not None and len(Z):
             return birth, log_kappa - self.log_score_ratio(scores)
         return birth, log_kappa
+
+    def _near_mass(self, Z: np.ndarray, predicted: Optional[ParticleSet], std: np.ndarray,
+                   std_wide: Optional[np.ndarray]) -> Optional[np.ndarray]:
+        """κ_n's ``M'(z)`` (:meth:`.clutter.NearClutter.mass`, 0 where chained).  Where the birth
+        gate is the clutter gate (the presets), the birth's M(z) of this frame comes from the
+        same pass over the predicted particles (:func:`mass_near_two`) and waits for
+        :func:`birth`'s :func:`_mass_near` of the same ``predicted``, ``Z`` and ``std``."""
+        people = self.people
+        if predicted is None or not len(Z) or not len(predicted) or std_wide is None:
+            return people.mass(Z, predicted, self._chained, std_wide)
+        r2 = gate_threshold(self.cl.clutter_gate, OBS_DIM)
+        if r2 != self._birth_r2:
+            return people.mass(Z, predicted, self._chained, std_wide)
+        people.record(predicted)
+        return mass_near_two(predicted, Z, std, r2, std_wide, self._chained)
 
     def _neighbours(self, Z: np.ndarray, std: Optional[np.ndarray] = None) -> float:
         """Mean number of other detections inside each detection's ``clutter_gate`` ellipsoid
@@ -878,7 +896,15 @@ def mass_near(predicted: ParticleSet, Z: np.ndarray, bp: BirthParams = BirthPara
 def _mass_near(predicted: ParticleSet, Z: np.ndarray, bp: BirthParams, lk: LikelihoodParams,
                std_z: Optional[np.ndarray]) -> tuple[np.ndarray, Optional[tuple]]:
     """:func:`mass_near` and the grid its kernel bucketed the predicted particles on (None
-    when it made none), which the update reuses (:class:`GatedGaussian` ``persistent``)."""
+    when it made none), which the update reuses (:class:`GatedGaussian` ``persistent``).
+    The result :func:`mass_near_two` computed ahead for these very ``predicted``, ``Z`` and
+    ``std_z`` objects and this gate, when there is one (taken once)."""
+    ahead = _AHEAD[0]
+    if ahead is not None:
+        _AHEAD[0] = None
+        if ahead[0] is predicted and ahead[1] is Z and ahead[2] is std_z \
+                and ahead[3] == gate_threshold(bp.gate, OBS_DIM):
+            return ahead[4], ahead[5]
     Z = np.asarray(Z, dtype=np.float64).reshape(-1, OBS_DIM)
     if len(predicted) == 0 or len(Z) == 0:
         return np.zeros(len(Z)), None
@@ -886,6 +912,32 @@ def _mass_near(predicted: ParticleSet, Z: np.ndarray, bp: BirthParams, lk: Likel
         std_z = obs_std(Z[:, 2:4], lk)
     r2 = gate_threshold(bp.gate, OBS_DIM)
     return mass_near_at(predicted, Z, std_z, r2, _grid_cell(std_z, r2))
+
+
+#: M(z) computed ahead by :func:`mass_near_two`: ``(predicted, Z, std_z, r², M(z), grid)``
+#: for the next :func:`_mass_near` (the birth's, :meth:`PHDFilter.step`), or None.  Matched by
+#: identity and taken once: the arrays are not written between the two calls.
+_AHEAD: list = [None]
+
+
+def mass_near_two(predicted: ParticleSet, Z: np.ndarray, std_z: np.ndarray, r2: float,
+                  std_wide: np.ndarray, skip: np.ndarray) -> np.ndarray:
+    """:func:`mass_near` with the stds ``std_wide`` (``2 std_z``: κ_n's, :data:`.clutter.
+    NEAR_SCALE`) and ``skip``, returned, and the birth's M(z) with the stds ``std_z`` and its
+    grid (``_mass_near(predicted, Z, bp, lk, std_z)`` where ``bp.gate`` gives ``r2``), kept
+    for :func:`_mass_near` (:data:`_AHEAD`): one pass over the predicted particles
+    (:func:`._kernels.mass_near_two`), the very floats of both calls.  ``predicted``: not
+    empty; ``Z``: (N_z >= 1, 4) float64."""
+    Zc = np.asarray(Z, dtype=np.float64).reshape(-1, OBS_DIM)
+    cell = _grid_cell(std_z, r2)
+    code, m, grid, near = _kernels.mass_near_two(
+        predicted.states, predicted.weights, Zc, std_z, float(r2), cell[0], cell[1],
+        np.ascontiguousarray(std_wide, dtype=np.float64),
+        np.ascontiguousarray(skip, dtype=np.bool_))
+    if not code:
+        raise ValueError("mass_near: non-finite particle positions")
+    _AHEAD[0] = (predicted, Z, std_z, r2, m, grid)
+    return near
 
 
 def mass_near_at(predicted: ParticleSet, Z: np.ndarray, std_z: np.ndarray, r2: float,
