@@ -430,12 +430,21 @@ def test_kappa_terms_and_learn_shares_are_the_numpy_form_bit_for_bit(seed):
         chain = np.ones(n)
         ok = (link >= 0) & (link < len(prior))
         chain[ok] = prior[link[ok]]
-        got, random = learn_shares(won, shadow, shadow, (rep, nr, dup), link, prior)
+        sums = np.empty(3)
+        got, random = learn_shares(won, shadow, shadow, (rep, nr, dup), link, prior, sums)
         want = (sh, sh * (1.0 - fr[1] - fr[2]) * chain, sh * fr[0] * chain, sh * fr[1],
                 chain * (1.0 - won))
         for a, b in zip(got, want):
             assert np.array_equal(a, b, equal_nan=True)
-        assert random == float(np.sum(sh * (1.0 - fr[0] - fr[1] - fr[2])))
+        assert random == float(np.sum(sh * (1.0 - fr[0] - fr[1] - fr[2]))) == sums[0]
+        # the repeated and near shares' sums (PlaceClutter / NearClutter.learn): np.sum's
+        # floats, its 0.0 for -0.0s included
+        for k, x in ((1, want[2]), (2, want[3])):
+            assert np.float64(sums[k]).tobytes() == np.sum(x).tobytes(), (k, sums[k], x)
+        neg = learn_shares(np.ones(12), np.zeros(12), np.zeros(12), (np.zeros(12),) * 3,
+                           np.zeros(12, np.int64), -np.ones(3), sums)[0]
+        assert np.signbit(neg[2]).all() and not np.signbit(sums[1])   # -0.0s: 0.0
+        assert np.float64(sums[1]).tobytes() == np.sum(neg[2]).tobytes()
         # the place memory's update, its S(z) kept along (faded, minus the dropped, plus the
         # new) against the whole grid pass over the memory after it
         k = int(rng.integers(0, 40))

@@ -593,8 +593,9 @@ class SceneModel:
     def _image_area(self, frame: Optional[Frame]) -> float:
         """The frame's pixel area when it has an image, else 0 (the density takes the area of
         the detections' extent then: :func:`.clutter.scene_density`)."""
-        if frame is not None and getattr(frame, "image", None) is not None \
-                and np.ndim(frame.image) >= 2 and frame.image.size:
+        im = None if frame is None else getattr(frame, "image", None)
+        if im is not None and (im.ndim if isinstance(im, np.ndarray) else np.ndim(im)) >= 2 \
+                and im.size:
             return float(frame.width * frame.height)
         return 0.0
 
@@ -752,9 +753,10 @@ class SceneModel:
             Z, std, log_rep, log_near, log_dup, total, log_used = self._parts
             spot = self.cl.spot_places and self.cl.learn_update == "model"
             # the clutter shares and their split between the parts (in one pass)
+            sums = np.empty(3)
             out, random = learn_shares(won, log_used, total, (log_rep, log_near, log_dup),
                                        self.chains.prev_link if spot else None,
-                                       self._chain_clutter if spot else None)
+                                       self._chain_clutter if spot else None, sums)
             self.rate = (1 - a) * self.rate + a * random
             # a duplicate box is the person's, not a place's: it leaves no place memory;
             # with spot_places a place's memory counts a detection that continues a chain by
@@ -764,8 +766,9 @@ class SceneModel:
             # clutter), the last learnt frame's value at its link, 1 where it continues none)
             if spot:
                 self._chain_clutter = out[4]
-            self.place.learn(Z, out[1], out[2], a, std)
-            self.people.learn(out[3], a)
+            # (the sums of out[2], out[3] from the same pass: np.sum's floats)
+            self.place.learn(Z, out[1], out[2], a, std, float(sums[1]))
+            self.people.learn(out[3], a, float(sums[2]))
             if self.cl.learn_update == "model":
                 self.dups.learn(won, a)
             self._parts = None
