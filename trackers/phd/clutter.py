@@ -66,7 +66,7 @@ import numpy as np
 from numba import njit
 
 from .camera_motion import _pairwise
-from .gating import BRUTE_PAIRS, _gate_sums, gate_sums
+from .gating import BRUTE_PAIRS, _gate_sums, _gate_sums_cells, gate_sums
 
 if TYPE_CHECKING:  # pragma: no cover
     from .filter import ClutterParams, LikelihoodParams
@@ -806,6 +806,57 @@ def scene_density(Z: np.ndarray, std: np.ndarray, m1: np.ndarray, m2: np.ndarray
                    bool(see), float(log_rate), float(area), float(log_v0), float(floor),
                    math.log(near_rate) if near_rate > 0 else 0.0, near_rate > 0, out)
     return out[0], out[1]
+
+
+def scene_terms(density: tuple, mem_z: np.ndarray, mem_w: np.ndarray, mem_e: np.ndarray,
+                r2: float, beta: float, near: Optional[tuple] = None,
+                dup: Optional[tuple] = None) -> np.ndarray:
+    """:func:`scene_density` of the arguments ``density`` (its in-place updates included),
+    the place memory's ``S(z)``, ``E(z)`` in each detection's clutter gate (``r2``; the
+    memory ``mem_z``, ``mem_w``, ``mem_e``: :meth:`PlaceClutter._weight_in_gates`, by
+    :func:`.gating.gate_sums`' grid pass) and :func:`kappa_terms` of them with ``place`` =
+    (S, E, ``beta``), ``near``, ``dup`` and ``log_u`` = log κ_u, in one call
+    (:func:`_scene_terms`) for what were three kernels and their wrappers: the same floats.
+    Returns (7, N_z): log κ_u, log V, then kappa_terms' five rows.  Where gate_sums' one-pass
+    grid declines (non-finite values, a sparse grid), its GridIndex path and kappa_terms
+    follow in Python."""
+    Z, std, m1, m2, extent, a, see, log_rate, area, log_v0, floor, near_rate = density
+    f = np.ascontiguousarray
+    Z, std = f(Z, dtype=np.float64), f(std, dtype=np.float64)
+    mem_z, mem_w, mem_e = (f(mem_z, dtype=np.float64), f(mem_w, dtype=np.float64),
+                           f(mem_e, dtype=np.float64))
+    m, nu, chained = near if near is not None else (_NO_F, 0.0, None)
+    n, q = dup if dup is not None else (_NO_I, 0.0)
+    chained = _NO_B if chained is None else chained
+    out = np.empty((7, len(Z)))
+    if _scene_terms(Z, std, m1, m2, extent, float(a), bool(see), float(log_rate), float(area),
+                    float(log_v0), float(floor),
+                    math.log(near_rate) if near_rate > 0 else 0.0, near_rate > 0,
+                    mem_z, mem_w, mem_e, float(r2), PRIOR_FRAMES * beta, m, float(nu),
+                    chained, n, float(q), out):
+        return out
+    S, E, _ = gate_sums(mem_z, Z, r2, std, mem_w, mem_e)
+    _kappa_terms(out[1], S, E, PRIOR_FRAMES * beta, m, float(nu), chained, n, float(q),
+                 out[0], out[2:])
+    return out
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def _scene_terms(Z, std, m1, m2, extent, a, see, log_rate, area, log_v0, floor, log_near_rate,
+                 near_on, mem_z, mem_w, mem_e, r2, n0_beta, m, nu, chained, n, q, out):
+    """:func:`scene_terms` into ``out`` (7, N_z); False (the density written, the rest not)
+    where gate_sums' one-pass grid declines."""
+    nz = Z.shape[0]
+    _scene_density(Z, std, m1, m2, extent, a, see, log_rate, area, log_v0, floor,
+                   log_near_rate, near_on, out[0:2])
+    S = np.zeros(nz)
+    E = np.zeros(nz)
+    if mem_z.shape[0] and nz:
+        C = np.zeros(nz, np.int64)
+        if not _gate_sums_cells(mem_z, mem_w, mem_e, Z, std, r2, S, E, C):
+            return False
+    _kappa_terms(out[1], S, E, n0_beta, m, nu, chained, n, q, out[0], out[2:7])
+    return True
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)

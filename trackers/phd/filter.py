@@ -90,7 +90,7 @@ from ..params import param, part, with_options
 from . import _kernels, motion
 from .clutter import PlaceClutter
 from .clutter import (DuplicateBoxes, NearClutter, kappa_terms, learn_shares, neighbour_counts,
-                      scene_density,
+                      scene_density, scene_terms,
                       neighbours)
 from .scene_motion import Chains
 from .gating import DEFAULT_BUDGET, LogGPairs, gate_pairs, tail_radius2
@@ -637,19 +637,20 @@ class SceneModel:
                 self.extent = _no_extent()
             # the size moments, the extent, log κ_u (with near_rate points spread as the 'gate'
             # model when > 0) and the clutter gates' log V(z) (log V is −log of one clutter
-            # point spread as the 'gate' model, log_gate_volume) in one pass
+            # point spread as the 'gate' model, log_gate_volume) in one pass: scene_density's
+            # arguments (with 'learn', scene_terms below takes them)
             a = 1.0 / min(self.size_frames + 1, self.cl.clutter_memory)
             log_rate = math.log(self.rate) if self.rate > 0 else -math.inf
-            log_kappa, log_v = scene_density(
-                Z, std, self.size_m1, self.size_m2,
-                _no_extent() if self.extent is None else self.extent, a, len(Z) > 0, log_rate,
-                self._image_area(frame), log_gate_volume0(self.cl), self._LOG_SIZE_FLOOR,
-                self.near)
-            if len(Z):
-                self.size_frames += 1
-            if self.place is not None:
+            density = (Z, std, self.size_m1, self.size_m2,
+                       _no_extent() if self.extent is None else self.extent, a, len(Z) > 0,
+                       log_rate, self._image_area(frame), log_gate_volume0(self.cl),
+                       self._LOG_SIZE_FLOOR, self.near)
+            if self.place is None:
+                log_kappa, log_v = scene_density(*density)
+                if len(Z):
+                    self.size_frames += 1
+            else:
                 model = self.cl.learn_update == "model"
-                S, E = self.place._weight_in_gates(Z, watched=True, std=std)
                 # a detection that continues a chain of mutually nearest detections is a
                 # person's or a spot's, not a box beside a person (those do not chain): κ_n
                 # is 0 there, so it takes no share of it in the EM (the update alike with
@@ -659,10 +660,16 @@ class SceneModel:
                 # a second box on a person already boxed, which a Poisson κ cannot express:
                 # the duplicate term (.clutter.DuplicateBoxes) joins the mixture ('model')
                 n = self.dups.counts(Z, std_wide, n_dup) if model else None
-                log_rep, log_near, log_dup, shadow, no_place = kappa_terms(
-                    log_v, place=(S, E, self.place.beta),
-                    near=None if m is None else (m, self.people.nu, self._chained),
-                    dup=None if n is None else (n, self.dups.q), log_u=log_kappa)
+                # scene_density, the place memory's sums in each detection's gate
+                # (PlaceClutter._weight_in_gates) and the parts of κ (kappa_terms) in one call
+                place = self.place
+                log_kappa, log_v, log_rep, log_near, log_dup, shadow, no_place = scene_terms(
+                    density, place.mem_z, place.mem_w, place.mem_e,
+                    gate_threshold(self.cl.clutter_gate, OBS_DIM), place.beta,
+                    None if m is None else (m, self.people.nu, self._chained),
+                    None if n is None else (n, self.dups.q))
+                if len(Z):
+                    self.size_frames += 1
                 if model:
                     log_used = shadow
                 else:
