@@ -430,12 +430,21 @@ def test_kappa_terms_and_learn_shares_are_the_numpy_form_bit_for_bit(seed):
         chain = np.ones(n)
         ok = (link >= 0) & (link < len(prior))
         chain[ok] = prior[link[ok]]
-        got, random = learn_shares(won, shadow, shadow, (rep, nr, dup), link, prior)
+        sums = np.empty(3)
+        got, random = learn_shares(won, shadow, shadow, (rep, nr, dup), link, prior, sums)
         want = (sh, sh * (1.0 - fr[1] - fr[2]) * chain, sh * fr[0] * chain, sh * fr[1],
                 chain * (1.0 - won))
         for a, b in zip(got, want):
             assert np.array_equal(a, b, equal_nan=True)
-        assert random == float(np.sum(sh * (1.0 - fr[0] - fr[1] - fr[2])))
+        assert random == float(np.sum(sh * (1.0 - fr[0] - fr[1] - fr[2]))) == sums[0]
+        # the repeated and near shares' sums (PlaceClutter / NearClutter.learn): np.sum's
+        # floats, its 0.0 for -0.0s included
+        for k, x in ((1, want[2]), (2, want[3])):
+            assert np.float64(sums[k]).tobytes() == np.sum(x).tobytes(), (k, sums[k], x)
+        neg = learn_shares(np.ones(12), np.zeros(12), np.zeros(12), (np.zeros(12),) * 3,
+                           np.zeros(12, np.int64), -np.ones(3), sums)[0]
+        assert np.signbit(neg[2]).all() and not np.signbit(sums[1])   # -0.0s: 0.0
+        assert np.float64(sums[1]).tobytes() == np.sum(neg[2]).tobytes()
         # the place memory's update, its S(z) kept along (faded, minus the dropped, plus the
         # new) against the whole grid pass over the memory after it
         k = int(rng.integers(0, 40))
@@ -611,3 +620,41 @@ def test_duplicate_learn_brute_pass_is_the_grid_pass(seed, monkeypatch):
         runs[brute] = qs
     assert runs[True] == runs[False]
     assert len({q for q, _, _ in runs[True]}) > 10
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_scene_terms_is_the_three_calls_bit_for_bit(seed):
+    """scene_terms (the scene density, the place memory's gate sums and kappa_terms in one
+    call): the very floats and in-place updates of scene_density, gate_sums and kappa_terms
+    -- with and without a memory, the near and duplicate parts, and where gate_sums' one-pass
+    grid declines (a memory spread too sparsely: its GridIndex path)."""
+    from pfscope.trackers.phd.clutter import kappa_terms, scene_density, scene_terms
+    from pfscope.trackers.phd.filter import _no_extent
+    from pfscope.trackers.phd.gating import gate_sums
+
+    rng = np.random.default_rng(seed)
+    for t in range(40):
+        nz, k = int(rng.integers(0, 12)), int(rng.integers(0, 300)) * (t % 5 != 0)
+        Z = np.column_stack([rng.uniform(0, 600, (nz, 2)), rng.uniform(10, 80, (nz, 2))])
+        std = rng.uniform(1, 12, (nz, 4))
+        mz = np.column_stack([rng.uniform(0, 600, (k, 2)), rng.uniform(10, 80, (k, 2))])
+        if t % 4 == 3 and k:
+            mz[0, :2] = 1e9                      # a sparse grid: gate_sums' GridIndex path
+        mw, me = rng.exponential(0.05, k), rng.uniform(1, 20, k)
+        m1 = rng.normal(3, 0.2, 2)
+        m2 = np.outer(m1, m1) + [[0.04, 0.01], [0.01, 0.05]]
+        ext = _no_extent() if t % 2 else np.array([0.0, 0.0, 500.0, 400.0])
+        args = [Z, std, m1, m2, ext, 0.1, nz > 0, -1.5, 640.0 * 480 * (t % 3 == 0),
+                -2.0, 0.0025, 0.3 * (t % 2)]
+        near = (rng.uniform(0, 2, nz), 0.2, rng.random(nz) < 0.5) if t % 3 else None
+        dup = (rng.integers(0, 3, nz), 0.7) if t % 2 else None
+        want_args = [x.copy() if isinstance(x, np.ndarray) else x for x in args]
+        log_u, log_v = scene_density(*want_args)
+        S, E, _ = gate_sums(mz, Z, 13.28, std, mw, me)
+        want = kappa_terms(log_v, place=(S, E, 0.4), near=near, dup=dup, log_u=log_u)
+        got = scene_terms(tuple(args), mz, mw, me, 13.28, 0.4, near, dup)
+        assert np.isfinite(log_u).all() and np.array_equal(got[0], log_u)
+        assert np.array_equal(got[1], log_v)
+        assert np.array_equal(got[2:], want, equal_nan=True), t
+        for a, b in zip(args[2:5], want_args[2:5]):
+            assert np.array_equal(a, b)

@@ -362,6 +362,97 @@ def test_mass_near_few_is_the_grid_kernel_bit_for_bit(seed):
     assert not K.mass_near_few(x, w, Z, std, 13.28, 5.0, 5.0)[0]
 
 
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_mass_near_two_is_both_kernels_bit_for_bit(seed):
+    """The birth's M(z) and κ_n's M'(z) (stds doubled, some detections skipped) in one pass:
+    the very floats and grid of mass_near_kernel and mass_near_skip -- on a grid that did not
+    grow (M'(z)'s cells merge ours 2 x 2), one that grew (the same grid), points on cell
+    edges, detections off the grid, cells of 1 (a median std of 0: mass_near_skip itself)."""
+    rng = np.random.default_rng(seed)
+    merged = grown = 0
+    for t in range(80):
+        n = int(rng.integers(1, 2500))
+        x = _states(rng, n, spread=float(rng.uniform(5, 600)), far=int(rng.integers(0, 3)))
+        if t % 3 == 0:
+            x[:, :2] = np.round(x[:, :2] / 7.0) * 7.0
+        Z = _dets_near(rng, x, int(rng.integers(1, min(n, 14) + 1)), clutter=int(t % 3))
+        Z[0, :2] += 1e4 * (t % 5 == 1)
+        w = rng.exponential(1e-3, n)
+        std = obs_std(Z[:, 2:4])
+        if t % 7 == 3:
+            std[:, :2] = 0.0
+        r2 = 13.28
+        cell = _grid_cell(std, r2) * (rng.uniform(0.02, 0.5) if t % 4 == 2 else 1.0)
+        skip = rng.random(len(Z)) < 0.4
+        wide = std * 2.0
+        ok, want, grid = K.mass_near_kernel(x, w, Z, std, r2, cell[0], cell[1])
+        code, want_near = K.mass_near_skip(x, w, Z, wide, skip, r2)
+        code2, got, grid2, near = K.mass_near_two(x, w, Z, std, r2, cell[0], cell[1], wide,
+                                                  skip)
+        assert ok and code and code2 == 1
+        assert np.array_equal(got, want) and np.array_equal(near, want_near), t
+        assert all(np.array_equal(a, b) for a, b in zip(grid, grid2))
+        assert (near[skip] == 0).all()
+        if t % 4 != 2 and t % 7 != 3:
+            merged += grid[2] == cell[0]
+            grown += grid[2] != cell[0]
+    assert merged >= 10 and grown >= 3, (merged, grown)
+    x[0, 0] = np.nan
+    assert K.mass_near_two(x, w, Z, std, 13.28, 5.0, 5.0, 2.0 * std, skip)[0] == 0
+
+
+def test_scene_model_hands_the_birth_its_mass_near():
+    """The practical filter's κ_n computes the birth's M(z) in the same pass; the birth takes it
+    (the very floats and grid of its own call) for the same particles, detections and stds
+    only, once."""
+    import pfscope.trackers.phd.filter as F
+    from pfscope.trackers.phd.tracker import PHD_PRACTICAL
+
+    p = PHD_PRACTICAL.filter
+    f = F.PHDFilter(p, rng=np.random.default_rng(0))
+    rng = np.random.default_rng(3)
+    seen = []
+    orig = F._mass_near
+
+    def spy(predicted, Z, bp, lk, std_z):
+        ahead = F._AHEAD[0]
+        got = orig(predicted, Z, bp, lk, std_z)
+        F._AHEAD[0] = None
+        want = orig(predicted, Z, bp, lk, std_z)
+        seen.append(ahead is not None and ahead[0] is predicted)
+        assert np.array_equal(got[0], want[0])
+        assert (got[1] is None and want[1] is None) or all(
+            np.array_equal(a, b) for a, b in zip(got[1], want[1]))
+        return got
+
+    F._mass_near = spy
+    try:
+        for k in range(6):
+            Z = np.column_stack([np.linspace(50, 550, 6) + 3 * k, np.full(6, 200.0),
+                                 np.full(6, 30.0), np.full(6, 70.0)])
+            Z = np.vstack([Z, rng.uniform(0, 600, (3, 4)) * [1, 1, 0.1, 0.1] + [0, 0, 20, 50]])
+            f.step(Z)
+    finally:
+        F._AHEAD[0] = None
+        F._mass_near = orig
+    assert not seen[0] and all(seen[1:]), seen
+    # other detections (the same stds), other stds, other particles: computed again
+    ps = f.particles
+    Z = np.array([[68.0, 200.0, 30.0, 70.0], [268.0, 200.0, 30.0, 70.0]])   # on the walkers
+    Z2 = Z + [6.0, 0.0, 0.0, 0.0]
+    std = obs_std(Z[:, 2:4], p.likelihood)
+    r2 = F.gate_threshold(p.birth.gate)
+    want = F.mass_near_at(ps, Z2, std, r2, _grid_cell(std, r2))[0]
+    assert not np.array_equal(want, F.mass_near_at(ps, Z, std, r2, _grid_cell(std, r2))[0])
+    for other in ((ps, Z2, std), (ps, Z2, std.copy()), (ps.concat(ps), Z2, std)):
+        F.mass_near_two(ps, Z, std, r2, 2.0 * std, np.zeros(2, bool))
+        assert F._AHEAD[0] is not None
+        got = F._mass_near(other[0], other[1], p.birth, p.likelihood, other[2])[0]
+        assert F._AHEAD[0] is None
+        assert np.array_equal(got, F.mass_near_at(other[0], Z2, std, r2,
+                                                  _grid_cell(std, r2))[0])
+
+
 # ----------------------------------------------------------------------------- update
 
 def _dense_reference(ps, Z, lk, log_kappa, p_miss, r2):

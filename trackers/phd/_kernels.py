@@ -511,6 +511,102 @@ def mass_near_skip(states, w, Z, std_z, skip, r2):
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def mass_near_two(states, w, Z, std_z, r2, cell_x, cell_y, std_wide, skip):
+    """:func:`mass_near_kernel` (``std_z``, ``r2``, cells ``(cell_x, cell_y)``) and
+    :func:`mass_near_skip` (``std_wide``, ``skip``, the same ``r2``) in one pass over the
+    particles: ``(code, out, grid, near)``, ``code`` 1 done, 0 non-finite particle positions.
+    The birth's M(z) and κ_n's M'(z) of one frame (:meth:`.filter.SceneModel.log_kappa`):
+    with ``std_wide = 2 std_z`` (:data:`.clutter.NEAR_SCALE`) M'(z)'s grid cells are twice
+    M(z)'s, and both grids grow from the particles' same minima by doubling, so M'(z)'s grid
+    is M(z)'s grown grid (when that grew at least once) or its cells merged 2 × 2 (a power of
+    two scales a float exactly: a particle's cell there is its cell here halved, rounded
+    down); its sums then run over M(z)'s buckets in mass_near_few's order (cell key, then
+    particle index: the merged cells' runs merged by index), so the very floats of both calls
+    -- without mass_near_skip's two passes over every particle.  Other wide cells (a cell
+    of 1 where a median is not > 0, NaN stds): mass_near_skip itself."""
+    ok, out, grid = mass_near_kernel(states, w, Z, std_z, r2, cell_x, cell_y)
+    if not ok:
+        return 0, out, grid, out
+    nz = Z.shape[0]
+    cw = grid_cell(std_wide, r2)
+    if not (cw[0] == 2.0 * cell_x and cw[1] == 2.0 * cell_y) or nz == 0 \
+            or states.shape[0] == 0:
+        code, near = mass_near_skip(states, w, Z, std_wide, skip, r2)
+        return code, out, grid, near
+    x0, y0, cx, cy, ni, nj, order, starts = grid
+    near = np.empty(nz, np.float64)
+    for j in range(nz):
+        near[j] = 0.0
+    r = math.sqrt(r2)
+    if cx != cell_x or cy != cell_y:
+        # the grid grew: M'(z)'s grid is this one
+        for j in range(nz):
+            if skip[j]:
+                continue
+            i0, i1, j0, j1 = gate_cells(Z[j, 0], Z[j, 1], std_wide[j, 0], std_wide[j, 1], r,
+                                        x0, cx, ni, y0, cy, nj)
+            s = 0.0
+            for ci in range(i0, i1 + 1):
+                for p in range(starts[ci * nj + j0], starts[ci * nj + j1 + 1]):
+                    i = order[p]
+                    if _gate_d2(states, i, Z, j, std_wide, j, r2) <= r2:
+                        s += w[i]
+            near[j] = s
+        return 1, out, grid, near
+    # M'(z)'s grid: these cells merged 2 x 2 (its cell of a particle is ours // 2)
+    wx, wy = 2.0 * cx, 2.0 * cy
+    wi, wj = (ni - 1) // 2 + 1, (nj - 1) // 2 + 1
+    for j in range(nz):
+        if skip[j]:
+            continue
+        i0, i1, j0, j1 = gate_cells(Z[j, 0], Z[j, 1], std_wide[j, 0], std_wide[j, 1], r,
+                                    x0, wx, wi, y0, wy, wj)
+        s = 0.0
+        for ci in range(i0, i1 + 1):
+            # the two rows of our cells in this wide row
+            ra = 2 * ci
+            rb = ra + 1
+            for cj in range(j0, j1 + 1):
+                ca = 2 * cj
+                cb = ca + 2 if ca + 2 <= nj else nj
+                a, a_end = starts[ra * nj + ca], starts[ra * nj + cb]
+                b, b_end = a_end, a_end             # (no second row: empty runs)
+                if rb < ni:
+                    b, b_end = starts[rb * nj + ca], starts[rb * nj + cb]
+                # each row's run holds two cells, each sorted by index: four sorted runs
+                am = starts[ra * nj + ca + 1] if ca + 1 < cb else a_end
+                bm = b_end
+                if rb < ni:
+                    bm = starts[rb * nj + ca + 1] if ca + 1 < cb else b_end
+                p0, e0, p1, e1, p2, e2, p3, e3 = a, am, am, a_end, b, bm, bm, b_end
+                while True:
+                    best = -1
+                    bi = np.int64(0)
+                    if p0 < e0:
+                        best, bi = 0, order[p0]
+                    if p1 < e1 and (best < 0 or order[p1] < bi):
+                        best, bi = 1, order[p1]
+                    if p2 < e2 and (best < 0 or order[p2] < bi):
+                        best, bi = 2, order[p2]
+                    if p3 < e3 and (best < 0 or order[p3] < bi):
+                        best, bi = 3, order[p3]
+                    if best < 0:
+                        break
+                    if best == 0:
+                        p0 += 1
+                    elif best == 1:
+                        p1 += 1
+                    elif best == 2:
+                        p2 += 1
+                    else:
+                        p3 += 1
+                    if _gate_d2(states, bi, Z, j, std_wide, j, r2) <= r2:
+                        s += w[bi]
+        near[j] = s
+    return 1, out, grid, near
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
 def birth_fill(Z, j, lw_det, st, sigma_obs, sigma_min, pos_ratio, spread, speed_mean,
                speed_std, min_size, states, log_w, det):
     """The J = Σ j newborn into ``states[:J]`` (J, 6), ``log_w[:J]``, ``det[:J]``: detection

@@ -66,7 +66,7 @@ import numpy as np
 from numba import njit
 
 from .camera_motion import _pairwise
-from .gating import BRUTE_PAIRS, _gate_sums, gate_sums
+from .gating import BRUTE_PAIRS, _gate_sums, _gate_sums_cells, gate_sums
 
 if TYPE_CHECKING:  # pragma: no cover
     from .filter import ClutterParams, LikelihoodParams
@@ -134,15 +134,14 @@ class PlaceClutter:
         """``S(z)`` (N_z,): the memory's faded clutter weight inside each z's gate; with
         ``watched`` also ``E(z)``, the faded frames the oldest of them has been remembered.
         ``std``: ``obs_std(Z[:, 2:4], lk)`` when the caller has it."""
-        from .filter import OBS_DIM, gate_threshold, obs_std
-
-        S = np.zeros(len(Z))
-        E = np.zeros(len(Z))
+        F = _filter
         if len(Z) and len(self.mem_w):
-            r2 = gate_threshold(self.cl.clutter_gate, OBS_DIM)
-            S, E, _ = gate_sums(self.mem_z, Z, r2,
-                                obs_std(Z[:, 2:4], self.lk) if std is None else std,
+            S, E, _ = gate_sums(self.mem_z, Z, F.gate_threshold(self.cl.clutter_gate, F.OBS_DIM),
+                                F.obs_std(Z[:, 2:4], self.lk) if std is None else std,
                                 self.mem_w, self.mem_e)
+        else:
+            S = np.zeros(len(Z))
+            E = np.zeros(len(Z))
         return (S, E) if watched else S
 
     def place_rate(self, Z: np.ndarray, std: Optional[np.ndarray] = None) -> np.ndarray:
@@ -181,13 +180,12 @@ class PlaceClutter:
         :meth:`exposure`, kept along the memory by :meth:`learn` (:func:`_memory_step`),
         computed again (one grid pass, :func:`.gating.gate_sums`) when missing or when the
         likelihood (the memory's stds) or the gate changed."""
-        from .filter import OBS_DIM, gate_threshold, obs_std
-
-        r2 = gate_threshold(self.cl.clutter_gate, OBS_DIM)
+        F = _filter
+        r2 = F.gate_threshold(self.cl.clutter_gate, F.OBS_DIM)
         sums = self._sums
         if sums is None or sums[0] is not self.lk or sums[1] != r2:
             if sums is None or sums[0] is not self.lk or len(self.mem_s) != len(self.mem_z):
-                self.mem_s = obs_std(self.mem_z[:, 2:4], self.lk)
+                self.mem_s = F.obs_std(self.mem_z[:, 2:4], self.lk)
             S = gate_sums(self.mem_z, self.mem_z, r2, self.mem_s, self.mem_w)[0] \
                 if len(self.mem_w) else np.zeros(0)
             sums = self._sums = (self.lk, r2, S, _exposure_sum(self.mem_w, S))
@@ -198,21 +196,23 @@ class PlaceClutter:
         return self._sums_of()[3] if len(self.mem_w) else 0.0
 
     def learn(self, Z: np.ndarray, clutter_share: np.ndarray, repeat_share: np.ndarray,
-              a: float, std: Optional[np.ndarray] = None) -> None:
+              a: float, std: Optional[np.ndarray] = None,
+              repeat_sum: Optional[float] = None) -> None:
         """After the update: ``clutter_share`` (N_z,) = 1 − won, ``repeat_share`` the part of it
         given to κ_r; ``a`` the averaging weight of this frame (as the scene rate's); ``std``:
-        the detections' observation stds when the caller has them."""
-        from .filter import obs_std
-
+        the detections' observation stds when the caller has them; ``repeat_sum``:
+        ``np.sum(repeat_share)`` when the caller has it (:func:`learn_shares`)."""
         lk, r2, S, exposure = self._sums_of()     # (an empty memory's exposure is 0)
-        self.num = (1 - a) * self.num + a * float(np.sum(repeat_share))
+        if repeat_sum is None:
+            repeat_sum = float(np.sum(repeat_share))
+        self.num = (1 - a) * self.num + a * repeat_sum
         self.den = (1 - a) * self.den + a * exposure
         self.beta = em_rate(self.num, self.den, self.cl.repeat_prior, a)
         self._a = a
         self.frames += 1
         Z = np.ascontiguousarray(np.asarray(Z, dtype=np.float64).reshape(-1, 4))
         if std is None:
-            std = obs_std(Z[:, 2:4], self.lk)
+            std = _filter.obs_std(Z[:, 2:4], self.lk)
         # fade the memory, add this frame's clutter, drop what has faded away, and S and the
         # exposure of the memory after it (one pass)
         self.mem_z, self.mem_s, self.mem_w, self.mem_e, S, exposure, ok = _memory_step(
@@ -371,16 +371,23 @@ class NearClutter:
         predicted particles or detections; records the predicted mass for :meth:`learn`."""
         from .filter import mass_near
 
-        self._exposure = float(predicted.mass) if predicted is not None else 0.0
+        self.record(predicted)
         if predicted is None or not len(Z):
             return None
         wide, bp = self._wide()
         return mass_near(predicted, Z, bp, wide, std_z=std, skip=chained)
 
-    def learn(self, near_share: np.ndarray, a: float) -> None:
+    def record(self, predicted) -> None:
+        """Records the predicted mass of this frame for :meth:`learn` (:meth:`mass` does)."""
+        self._exposure = float(predicted.mass) if predicted is not None else 0.0
+
+    def learn(self, near_share: np.ndarray, a: float, near_sum: Optional[float] = None) -> None:
         """After the update: ``near_share`` (N_z,) the clutter share the EM gives to κ_n (none
-        for a detection that continues a chain: :meth:`.filter.SceneModel.learn`)."""
-        self.num = (1 - a) * self.num + a * float(np.sum(near_share))
+        for a detection that continues a chain: :meth:`.filter.SceneModel.learn`);
+        ``near_sum``: ``np.sum(near_share)`` when the caller has it (:func:`learn_shares`)."""
+        if near_sum is None:
+            near_sum = float(np.sum(near_share))
+        self.num = (1 - a) * self.num + a * near_sum
         self.den = (1 - a) * self.den + a * self._exposure
         self.nu = em_rate(self.num, self.den, NEAR_PRIOR, a)
         self._a = a
@@ -594,11 +601,10 @@ def _wide_gate(Z: np.ndarray, cl: "ClutterParams", lk: "LikelihoodParams",
                scale: float, std: Optional[np.ndarray] = None) -> tuple[np.ndarray, float]:
     """The detections' observation stds times ``scale`` (``std`` when the caller has them)
     and the ``clutter_gate`` radius r²."""
-    from .filter import OBS_DIM, gate_threshold, obs_std
-
+    F = _filter
     if std is None:
-        std = obs_std(Z[:, 2:4], _widened(lk, scale))
-    return std, gate_threshold(cl.clutter_gate, OBS_DIM)
+        std = F.obs_std(Z[:, 2:4], _widened(lk, scale))
+    return std, F.gate_threshold(cl.clutter_gate, F.OBS_DIM)
 
 
 def neighbour_pairs(Z: np.ndarray, cl: "ClutterParams", lk: "LikelihoodParams",
@@ -705,7 +711,8 @@ def clutter_share(won: np.ndarray, log_used: np.ndarray, log_shadow: np.ndarray)
 
 def learn_shares(won: np.ndarray, log_used: np.ndarray, log_shadow: np.ndarray,
                  parts: Optional[tuple] = None, prev_link: Optional[np.ndarray] = None,
-                 chain_clutter: Optional[np.ndarray] = None) -> tuple[np.ndarray, float]:
+                 chain_clutter: Optional[np.ndarray] = None,
+                 sums: Optional[np.ndarray] = None) -> tuple[np.ndarray, float]:
     """The EM's split of this frame's clutter (:meth:`.filter.SceneModel.learn`), in one numba
     pass (:func:`_learn_shares`; ~25 numpy calls a frame before, the same expressions
     elementwise and the same pairwise sum, so the same floats).  Returns ``out`` (5, N_z) and
@@ -715,7 +722,9 @@ def learn_shares(won: np.ndarray, log_used: np.ndarray, log_shadow: np.ndarray,
     ``share · (1 − r_n − r_d) · chain``, out[2] κ_r's shares ``share · r_r · chain``, out[3]
     κ_n's ``share · r_n`` (``r_x = κ_x / κ_s``, NaN -> 0) and out[4] ``chain · (1 − won)``,
     ``chain`` the last learnt frame's ``chain_clutter`` at ``prev_link`` (1 where a link is
-    -1 or past its end, or without them)."""
+    -1 or past its end, or without them).  ``sums`` (3,): also ``Σ share · κ_u / κ_s``,
+    ``np.sum(out[2])`` and ``np.sum(out[3])`` written there (numpy's pairwise order, the same
+    floats)."""
     won = np.ascontiguousarray(won, dtype=np.float64)
     log_used = np.ascontiguousarray(log_used, dtype=np.float64)
     log_shadow = np.ascontiguousarray(log_shadow, dtype=np.float64)
@@ -724,17 +733,19 @@ def learn_shares(won: np.ndarray, log_used: np.ndarray, log_shadow: np.ndarray,
     use_chain = (prev_link is not None and chain_clutter is not None
                  and len(prev_link) == n_z and len(chain_clutter) > 0)
     out = np.empty((5, n_z))
+    if sums is None:
+        sums = np.empty(3)
     total = _learn_shares(won, log_used, log_shadow, log_rep, log_near, log_dup,
                           prev_link if use_chain else _NO_I,
-                          chain_clutter if use_chain else _NO_F, out)
+                          chain_clutter if use_chain else _NO_F, out, sums)
     return out, total
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
 def _learn_shares(won, log_used, log_shadow, log_rep, log_near, log_dup, prev_link,
-                  chain_clutter, out):
-    """:func:`learn_shares` into ``out`` (5, N_z); returns the random share's sum (0 without
-    the parts)."""
+                  chain_clutter, out, sums):
+    """:func:`learn_shares` into ``out`` (5, N_z) and ``sums`` (3,); returns the random
+    share's sum (0 without the parts)."""
     n_z = won.shape[0]
     random = np.empty(n_z)
     n_c = chain_clutter.shape[0]
@@ -766,7 +777,12 @@ def _learn_shares(won, log_used, log_shadow, log_rep, log_near, log_dup, prev_li
         else:
             random[j] = 0.0
             out[1, j] = out[2, j] = out[3, j] = out[4, j] = 0.0
-    return _pairwise(random, n_z)
+    total = _pairwise(random, n_z)
+    sums[0] = total
+    # (+ 0.0: numpy's sum of -0.0s is 0.0, the pairwise order's alone -0.0)
+    sums[1] = _pairwise(out[2], n_z) + 0.0
+    sums[2] = _pairwise(out[3], n_z) + 0.0
+    return total
 
 
 def scene_density(Z: np.ndarray, std: np.ndarray, m1: np.ndarray, m2: np.ndarray,
@@ -790,6 +806,57 @@ def scene_density(Z: np.ndarray, std: np.ndarray, m1: np.ndarray, m2: np.ndarray
                    bool(see), float(log_rate), float(area), float(log_v0), float(floor),
                    math.log(near_rate) if near_rate > 0 else 0.0, near_rate > 0, out)
     return out[0], out[1]
+
+
+def scene_terms(density: tuple, mem_z: np.ndarray, mem_w: np.ndarray, mem_e: np.ndarray,
+                r2: float, beta: float, near: Optional[tuple] = None,
+                dup: Optional[tuple] = None) -> np.ndarray:
+    """:func:`scene_density` of the arguments ``density`` (its in-place updates included),
+    the place memory's ``S(z)``, ``E(z)`` in each detection's clutter gate (``r2``; the
+    memory ``mem_z``, ``mem_w``, ``mem_e``: :meth:`PlaceClutter._weight_in_gates`, by
+    :func:`.gating.gate_sums`' grid pass) and :func:`kappa_terms` of them with ``place`` =
+    (S, E, ``beta``), ``near``, ``dup`` and ``log_u`` = log κ_u, in one call
+    (:func:`_scene_terms`) for what were three kernels and their wrappers: the same floats.
+    Returns (7, N_z): log κ_u, log V, then kappa_terms' five rows.  Where gate_sums' one-pass
+    grid declines (non-finite values, a sparse grid), its GridIndex path and kappa_terms
+    follow in Python."""
+    Z, std, m1, m2, extent, a, see, log_rate, area, log_v0, floor, near_rate = density
+    f = np.ascontiguousarray
+    Z, std = f(Z, dtype=np.float64), f(std, dtype=np.float64)
+    mem_z, mem_w, mem_e = (f(mem_z, dtype=np.float64), f(mem_w, dtype=np.float64),
+                           f(mem_e, dtype=np.float64))
+    m, nu, chained = near if near is not None else (_NO_F, 0.0, None)
+    n, q = dup if dup is not None else (_NO_I, 0.0)
+    chained = _NO_B if chained is None else chained
+    out = np.empty((7, len(Z)))
+    if _scene_terms(Z, std, m1, m2, extent, float(a), bool(see), float(log_rate), float(area),
+                    float(log_v0), float(floor),
+                    math.log(near_rate) if near_rate > 0 else 0.0, near_rate > 0,
+                    mem_z, mem_w, mem_e, float(r2), PRIOR_FRAMES * beta, m, float(nu),
+                    chained, n, float(q), out):
+        return out
+    S, E, _ = gate_sums(mem_z, Z, r2, std, mem_w, mem_e)
+    _kappa_terms(out[1], S, E, PRIOR_FRAMES * beta, m, float(nu), chained, n, float(q),
+                 out[0], out[2:])
+    return out
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def _scene_terms(Z, std, m1, m2, extent, a, see, log_rate, area, log_v0, floor, log_near_rate,
+                 near_on, mem_z, mem_w, mem_e, r2, n0_beta, m, nu, chained, n, q, out):
+    """:func:`scene_terms` into ``out`` (7, N_z); False (the density written, the rest not)
+    where gate_sums' one-pass grid declines."""
+    nz = Z.shape[0]
+    _scene_density(Z, std, m1, m2, extent, a, see, log_rate, area, log_v0, floor,
+                   log_near_rate, near_on, out[0:2])
+    S = np.zeros(nz)
+    E = np.zeros(nz)
+    if mem_z.shape[0] and nz:
+        C = np.zeros(nz, np.int64)
+        if not _gate_sums_cells(mem_z, mem_w, mem_e, Z, std, r2, S, E, C):
+            return False
+    _kappa_terms(out[1], S, E, n0_beta, m, nu, chained, n, q, out[0], out[2:7])
+    return True
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
@@ -840,3 +907,8 @@ def _scene_density(Z, std, m1, m2, extent, a, see, log_rate, area, log_v0, floor
         u = -0.5 * quad + const - (l0 + l1)
         out[0, j] = np.logaddexp(u, log_near_rate - lv) if near_on else u
         out[1, j] = lv
+
+
+# the filter module (observation stds, gate radii), bound here once: filter imports this module
+# at its top, so either is loaded first; read at call time (no import statement per call)
+from . import filter as _filter  # noqa: E402

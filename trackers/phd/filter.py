@@ -90,7 +90,7 @@ from ..params import param, part, with_options
 from . import _kernels, motion
 from .clutter import PlaceClutter
 from .clutter import (DuplicateBoxes, NearClutter, kappa_terms, learn_shares, neighbour_counts,
-                      scene_density,
+                      scene_density, scene_terms,
                       neighbours)
 from .scene_motion import Chains
 from .gating import DEFAULT_BUDGET, LogGPairs, gate_pairs, tail_radius2
@@ -587,6 +587,9 @@ class SceneModel:
         self.people = NearClutter(self.cl, self.lk) if learn else None
         self.dups = DuplicateBoxes(self.cl, self.lk) if learn else None
         self._parts: Optional[tuple] = None
+        #: the birth gate's r² (:func:`birth`'s M(z)): where it is the clutter gate's, κ_n's
+        #: M'(z) and the birth's M(z) come from one pass (:meth:`_near_mass`)
+        self._birth_r2 = gate_threshold(params.birth.gate, OBS_DIM)
 
     def set_likelihood(self, lk: LikelihoodParams) -> None:
         """New observation-noise widths for the clutter volumes (PHDFilter.set_params)."""
@@ -612,8 +615,9 @@ class SceneModel:
     def _image_area(self, frame: Optional[Frame]) -> float:
         """The frame's pixel area when it has an image, else 0 (the density takes the area of
         the detections' extent then: :func:`.clutter.scene_density`)."""
-        if frame is not None and getattr(frame, "image", None) is not None \
-                and np.ndim(frame.image) >= 2 and frame.image.size:
+        im = None if frame is None else getattr(frame, "image", None)
+        if im is not None and (im.ndim if isinstance(im, np.ndarray) else np.ndim(im)) >= 2 \
+                and im.size:
             return float(frame.width * frame.height)
         return 0.0
 
@@ -655,32 +659,39 @@ class SceneModel:
                 self.extent = _no_extent()
             # the size moments, the extent, log κ_u (with near_rate points spread as the 'gate'
             # model when > 0) and the clutter gates' log V(z) (log V is −log of one clutter
-            # point spread as the 'gate' model, log_gate_volume) in one pass
+            # point spread as the 'gate' model, log_gate_volume) in one pass: scene_density's
+            # arguments (with 'learn', scene_terms below takes them)
             a = 1.0 / min(self.size_frames + 1, self.cl.clutter_memory)
             log_rate = math.log(self.rate) if self.rate > 0 else -math.inf
-            log_kappa, log_v = scene_density(
-                Z, std, self.size_m1, self.size_m2,
-                _no_extent() if self.extent is None else self.extent, a, len(Z) > 0, log_rate,
-                self._image_area(frame), log_gate_volume0(self.cl), self._LOG_SIZE_FLOOR,
-                self.near)
-            if len(Z):
-                self.size_frames += 1
-            if self.place is not None:
+            density = (Z, std, self.size_m1, self.size_m2,
+                       _no_extent() if self.extent is None else self.extent, a, len(Z) > 0,
+                       log_rate, self._image_area(frame), log_gate_volume0(self.cl),
+                       self._LOG_SIZE_FLOOR, self.near)
+            if self.place is None:
+                log_kappa, log_v = scene_density(*density)
+                if len(Z):
+                    self.size_frames += 1
+            else:
                 model = self.cl.learn_update == "model"
-                S, E = self.place._weight_in_gates(Z, watched=True, std=std)
                 # a detection that continues a chain of mutually nearest detections is a
                 # person's or a spot's, not a box beside a person (those do not chain): κ_n
                 # is 0 there, so it takes no share of it in the EM (the update alike with
                 # learn_update 'model')
                 self._chained = self.chains.length >= 1
-                m = self.people.mass(Z, predicted, self._chained, std_wide)
+                m = self._near_mass(Z, predicted, std, std_wide)
                 # a second box on a person already boxed, which a Poisson κ cannot express:
                 # the duplicate term (.clutter.DuplicateBoxes) joins the mixture ('model')
                 n = self.dups.counts(Z, std_wide, n_dup) if model else None
-                log_rep, log_near, log_dup, shadow, no_place = kappa_terms(
-                    log_v, place=(S, E, self.place.beta),
-                    near=None if m is None else (m, self.people.nu, self._chained),
-                    dup=None if n is None else (n, self.dups.q), log_u=log_kappa)
+                # scene_density, the place memory's sums in each detection's gate
+                # (PlaceClutter._weight_in_gates) and the parts of κ (kappa_terms) in one call
+                place = self.place
+                log_kappa, log_v, log_rep, log_near, log_dup, shadow, no_place = scene_terms(
+                    density, place.mem_z, place.mem_w, place.mem_e,
+                    gate_threshold(self.cl.clutter_gate, OBS_DIM), place.beta,
+                    None if m is None else (m, self.people.nu, self._chained),
+                    None if n is None else (n, self.dups.q))
+                if len(Z):
+                    self.size_frames += 1
                 if model:
                     log_used = shadow
                 else:
@@ -700,6 +711,21 @@ class SceneModel:
         if self.uses_scores and scores is not None and len(Z):
             return birth, log_kappa - self.log_score_ratio(scores)
         return birth, log_kappa
+
+    def _near_mass(self, Z: np.ndarray, predicted: Optional[ParticleSet], std: np.ndarray,
+                   std_wide: Optional[np.ndarray]) -> Optional[np.ndarray]:
+        """κ_n's ``M'(z)`` (:meth:`.clutter.NearClutter.mass`, 0 where chained).  Where the birth
+        gate is the clutter gate (the presets), the birth's M(z) of this frame comes from the
+        same pass over the predicted particles (:func:`mass_near_two`) and waits for
+        :func:`birth`'s :func:`_mass_near` of the same ``predicted``, ``Z`` and ``std``."""
+        people = self.people
+        if predicted is None or not len(Z) or not len(predicted) or std_wide is None:
+            return people.mass(Z, predicted, self._chained, std_wide)
+        r2 = gate_threshold(self.cl.clutter_gate, OBS_DIM)
+        if r2 != self._birth_r2:
+            return people.mass(Z, predicted, self._chained, std_wide)
+        people.record(predicted)
+        return mass_near_two(predicted, Z, std, r2, std_wide, self._chained)
 
     def _neighbours(self, Z: np.ndarray, std: Optional[np.ndarray] = None) -> float:
         """Mean number of other detections inside each detection's ``clutter_gate`` ellipsoid
@@ -756,9 +782,10 @@ class SceneModel:
             Z, std, log_rep, log_near, log_dup, total, log_used = self._parts
             spot = self.cl.spot_places and self.cl.learn_update == "model"
             # the clutter shares and their split between the parts (in one pass)
+            sums = np.empty(3)
             out, random = learn_shares(won, log_used, total, (log_rep, log_near, log_dup),
                                        self.chains.prev_link if spot else None,
-                                       self._chain_clutter if spot else None)
+                                       self._chain_clutter if spot else None, sums)
             self.rate = (1 - a) * self.rate + a * random
             # a duplicate box is the person's, not a place's: it leaves no place memory;
             # with spot_places a place's memory counts a detection that continues a chain by
@@ -768,8 +795,9 @@ class SceneModel:
             # clutter), the last learnt frame's value at its link, 1 where it continues none)
             if spot:
                 self._chain_clutter = out[4]
-            self.place.learn(Z, out[1], out[2], a, std)
-            self.people.learn(out[3], a)
+            # (the sums of out[2], out[3] from the same pass: np.sum's floats)
+            self.place.learn(Z, out[1], out[2], a, std, float(sums[1]))
+            self.people.learn(out[3], a, float(sums[2]))
             if self.cl.learn_update == "model":
                 self.dups.learn(won, a)
             self._parts = None
@@ -917,7 +945,15 @@ def mass_near(predicted: ParticleSet, Z: np.ndarray, bp: BirthParams = BirthPara
 def _mass_near(predicted: ParticleSet, Z: np.ndarray, bp: BirthParams, lk: LikelihoodParams,
                std_z: Optional[np.ndarray]) -> tuple[np.ndarray, Optional[tuple]]:
     """:func:`mass_near` and the grid its kernel bucketed the predicted particles on (None
-    when it made none), which the update reuses (:class:`GatedGaussian` ``persistent``)."""
+    when it made none), which the update reuses (:class:`GatedGaussian` ``persistent``).
+    The result :func:`mass_near_two` computed ahead for these very ``predicted``, ``Z`` and
+    ``std_z`` objects and this gate, when there is one (taken once)."""
+    ahead = _AHEAD[0]
+    if ahead is not None:
+        _AHEAD[0] = None
+        if ahead[0] is predicted and ahead[1] is Z and ahead[2] is std_z \
+                and ahead[3] == gate_threshold(bp.gate, OBS_DIM):
+            return ahead[4], ahead[5]
     Z = np.asarray(Z, dtype=np.float64).reshape(-1, OBS_DIM)
     if len(predicted) == 0 or len(Z) == 0:
         return np.zeros(len(Z)), None
@@ -925,6 +961,32 @@ def _mass_near(predicted: ParticleSet, Z: np.ndarray, bp: BirthParams, lk: Likel
         std_z = obs_std(Z[:, 2:4], lk)
     r2 = gate_threshold(bp.gate, OBS_DIM)
     return mass_near_at(predicted, Z, std_z, r2, _grid_cell(std_z, r2))
+
+
+#: M(z) computed ahead by :func:`mass_near_two`: ``(predicted, Z, std_z, r², M(z), grid)``
+#: for the next :func:`_mass_near` (the birth's, :meth:`PHDFilter.step`), or None.  Matched by
+#: identity and taken once: the arrays are not written between the two calls.
+_AHEAD: list = [None]
+
+
+def mass_near_two(predicted: ParticleSet, Z: np.ndarray, std_z: np.ndarray, r2: float,
+                  std_wide: np.ndarray, skip: np.ndarray) -> np.ndarray:
+    """:func:`mass_near` with the stds ``std_wide`` (``2 std_z``: κ_n's, :data:`.clutter.
+    NEAR_SCALE`) and ``skip``, returned, and the birth's M(z) with the stds ``std_z`` and its
+    grid (``_mass_near(predicted, Z, bp, lk, std_z)`` where ``bp.gate`` gives ``r2``), kept
+    for :func:`_mass_near` (:data:`_AHEAD`): one pass over the predicted particles
+    (:func:`._kernels.mass_near_two`), the very floats of both calls.  ``predicted``: not
+    empty; ``Z``: (N_z >= 1, 4) float64."""
+    Zc = np.asarray(Z, dtype=np.float64).reshape(-1, OBS_DIM)
+    cell = _grid_cell(std_z, r2)
+    code, m, grid, near = _kernels.mass_near_two(
+        predicted.states, predicted.weights, Zc, std_z, float(r2), cell[0], cell[1],
+        np.ascontiguousarray(std_wide, dtype=np.float64),
+        np.ascontiguousarray(skip, dtype=np.bool_))
+    if not code:
+        raise ValueError("mass_near: non-finite particle positions")
+    _AHEAD[0] = (predicted, Z, std_z, r2, m, grid)
+    return near
 
 
 def mass_near_at(predicted: ParticleSet, Z: np.ndarray, std_z: np.ndarray, r2: float,
