@@ -414,10 +414,8 @@ def test_scene_model_hands_the_birth_its_mass_near():
     seen = []
     orig = F._mass_near
 
-    def spy(predicted, Z, bp, lk, std_z):
-        ahead = F._AHEAD[0]
-        got = orig(predicted, Z, bp, lk, std_z)
-        F._AHEAD[0] = None
+    def spy(predicted, Z, bp, lk, std_z, ahead=None):
+        got = orig(predicted, Z, bp, lk, std_z, ahead)
         want = orig(predicted, Z, bp, lk, std_z)
         seen.append(ahead is not None and ahead[0] is predicted)
         assert np.array_equal(got[0], want[0])
@@ -432,8 +430,8 @@ def test_scene_model_hands_the_birth_its_mass_near():
                                  np.full(6, 30.0), np.full(6, 70.0)])
             Z = np.vstack([Z, rng.uniform(0, 600, (3, 4)) * [1, 1, 0.1, 0.1] + [0, 0, 20, 50]])
             f.step(Z)
+            assert f.scene.take_birth_mass() is None          # taken once, by the birth
     finally:
-        F._AHEAD[0] = None
         F._mass_near = orig
     assert not seen[0] and all(seen[1:]), seen
     # other detections (the same stds), other stds, other particles: computed again
@@ -444,11 +442,10 @@ def test_scene_model_hands_the_birth_its_mass_near():
     r2 = F.gate_threshold(p.birth.gate)
     want = F.mass_near_at(ps, Z2, std, r2, _grid_cell(std, r2))[0]
     assert not np.array_equal(want, F.mass_near_at(ps, Z, std, r2, _grid_cell(std, r2))[0])
+    near, ahead = F.mass_near_two(ps, Z, std, r2, 2.0 * std, np.zeros(2, bool))
+    assert np.array_equal(F._mass_near(ps, Z, p.birth, p.likelihood, std, ahead)[0], ahead[4])
     for other in ((ps, Z2, std), (ps, Z2, std.copy()), (ps.concat(ps), Z2, std)):
-        F.mass_near_two(ps, Z, std, r2, 2.0 * std, np.zeros(2, bool))
-        assert F._AHEAD[0] is not None
-        got = F._mass_near(other[0], other[1], p.birth, p.likelihood, other[2])[0]
-        assert F._AHEAD[0] is None
+        got = F._mass_near(other[0], other[1], p.birth, p.likelihood, other[2], ahead)[0]
         assert np.array_equal(got, F.mass_near_at(other[0], Z2, std, r2,
                                                   _grid_cell(std, r2))[0])
 

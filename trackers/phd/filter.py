@@ -590,6 +590,7 @@ class SceneModel:
         #: the birth gate's r² (:func:`birth`'s M(z)): where it is the clutter gate's, κ_n's
         #: M'(z) and the birth's M(z) come from one pass (:meth:`_near_mass`)
         self._birth_r2 = gate_threshold(params.birth.gate, OBS_DIM)
+        self._birth_mass: Optional[tuple] = None
 
     def set_likelihood(self, lk: LikelihoodParams) -> None:
         """New observation-noise widths for the clutter volumes (PHDFilter.set_params)."""
@@ -717,7 +718,7 @@ class SceneModel:
         """κ_n's ``M'(z)`` (:meth:`.clutter.NearClutter.mass`, 0 where chained).  Where the birth
         gate is the clutter gate (the presets), the birth's M(z) of this frame comes from the
         same pass over the predicted particles (:func:`mass_near_two`) and waits for
-        :func:`birth`'s :func:`_mass_near` of the same ``predicted``, ``Z`` and ``std``."""
+        :func:`birth` (:meth:`take_birth_mass`)."""
         people = self.people
         if predicted is None or not len(Z) or not len(predicted) or std_wide is None:
             return people.mass(Z, predicted, self._chained, std_wide)
@@ -725,7 +726,14 @@ class SceneModel:
         if r2 != self._birth_r2:
             return people.mass(Z, predicted, self._chained, std_wide)
         people.record(predicted)
-        return mass_near_two(predicted, Z, std, r2, std_wide, self._chained)
+        near, self._birth_mass = mass_near_two(predicted, Z, std, r2, std_wide, self._chained)
+        return near
+
+    def take_birth_mass(self) -> Optional[tuple]:
+        """The birth's M(z) computed by this frame's :meth:`log_kappa` (:meth:`_near_mass`),
+        once, for :func:`birth`'s ``ahead`` (None when it made none)."""
+        ahead, self._birth_mass = self._birth_mass, None
+        return ahead
 
     def _neighbours(self, Z: np.ndarray, std: Optional[np.ndarray] = None) -> float:
         """Mean number of other detections inside each detection's ``clutter_gate`` ellipsoid
@@ -943,14 +951,14 @@ def mass_near(predicted: ParticleSet, Z: np.ndarray, bp: BirthParams = BirthPara
 
 
 def _mass_near(predicted: ParticleSet, Z: np.ndarray, bp: BirthParams, lk: LikelihoodParams,
-               std_z: Optional[np.ndarray]) -> tuple[np.ndarray, Optional[tuple]]:
+               std_z: Optional[np.ndarray],
+               ahead: Optional[tuple] = None) -> tuple[np.ndarray, Optional[tuple]]:
     """:func:`mass_near` and the grid its kernel bucketed the predicted particles on (None
     when it made none), which the update reuses (:class:`GatedGaussian` ``persistent``).
-    The result :func:`mass_near_two` computed ahead for these very ``predicted``, ``Z`` and
-    ``std_z`` objects and this gate, when there is one (taken once)."""
-    ahead = _AHEAD[0]
+    ``ahead``: what :func:`mass_near_two` computed ahead (``(predicted, Z, std_z, r², M(z),
+    grid)``), used when it is for these very ``predicted``, ``Z`` and ``std_z`` objects and
+    this gate."""
     if ahead is not None:
-        _AHEAD[0] = None
         if ahead[0] is predicted and ahead[1] is Z and ahead[2] is std_z \
                 and ahead[3] == gate_threshold(bp.gate, OBS_DIM):
             return ahead[4], ahead[5]
@@ -963,18 +971,13 @@ def _mass_near(predicted: ParticleSet, Z: np.ndarray, bp: BirthParams, lk: Likel
     return mass_near_at(predicted, Z, std_z, r2, _grid_cell(std_z, r2))
 
 
-#: M(z) computed ahead by :func:`mass_near_two`: ``(predicted, Z, std_z, r², M(z), grid)``
-#: for the next :func:`_mass_near` (the birth's, :meth:`PHDFilter.step`), or None.  Matched by
-#: identity and taken once: the arrays are not written between the two calls.
-_AHEAD: list = [None]
-
-
 def mass_near_two(predicted: ParticleSet, Z: np.ndarray, std_z: np.ndarray, r2: float,
-                  std_wide: np.ndarray, skip: np.ndarray) -> np.ndarray:
+                  std_wide: np.ndarray, skip: np.ndarray) -> tuple[np.ndarray, tuple]:
     """:func:`mass_near` with the stds ``std_wide`` (``2 std_z``: κ_n's, :data:`.clutter.
-    NEAR_SCALE`) and ``skip``, returned, and the birth's M(z) with the stds ``std_z`` and its
-    grid (``_mass_near(predicted, Z, bp, lk, std_z)`` where ``bp.gate`` gives ``r2``), kept
-    for :func:`_mass_near` (:data:`_AHEAD`): one pass over the predicted particles
+    NEAR_SCALE`) and ``skip``, and the birth's M(z) with the stds ``std_z`` and its grid
+    (``_mass_near(predicted, Z, bp, lk, std_z)`` where ``bp.gate`` gives ``r2``) as ``ahead``
+    = ``(predicted, Z, std_z, r2, M(z), grid)`` for :func:`_mass_near`, returned as
+    ``(near, ahead)``: one pass over the predicted particles
     (:func:`._kernels.mass_near_two`), the very floats of both calls.  ``predicted``: not
     empty; ``Z``: (N_z >= 1, 4) float64."""
     Zc = np.asarray(Z, dtype=np.float64).reshape(-1, OBS_DIM)
@@ -985,8 +988,7 @@ def mass_near_two(predicted: ParticleSet, Z: np.ndarray, std_z: np.ndarray, r2: 
         np.ascontiguousarray(skip, dtype=np.bool_))
     if not code:
         raise ValueError("mass_near: non-finite particle positions")
-    _AHEAD[0] = (predicted, Z, std_z, r2, m, grid)
-    return near
+    return near, (predicted, Z, std_z, r2, m, grid)
 
 
 def mass_near_at(predicted: ParticleSet, Z: np.ndarray, std_z: np.ndarray, r2: float,
@@ -1085,7 +1087,8 @@ def birth(predicted: ParticleSet, Z, params: PHDParams, rng: np.random.Generator
           log_kappa: Optional[np.ndarray] = None,
           revive: Optional[np.ndarray] = None,
           out: Optional[tuple[np.ndarray, np.ndarray]] = None,
-          noise: Optional[tuple[np.ndarray, np.ndarray]] = None) -> BirthResult:
+          noise: Optional[tuple[np.ndarray, np.ndarray]] = None,
+          ahead: Optional[tuple] = None) -> BirthResult:
     """Draw J_k newborn particles around the detections (maggio2007 §2; readings in the module
     docstring): ``J_z = J_max max(0, 1 − M(z))`` (capped per frame, :func:`allocate_births`),
     each detection's newborn carrying total weight ``birth_intensity`` (or the weight set by
@@ -1095,12 +1098,13 @@ def birth(predicted: ParticleSet, Z, params: PHDParams, rng: np.random.Generator
     ``out`` = (states (M, 6), log-weights (M,)) with M >= :func:`max_births`: the newborn are
     written into their first J rows.  ``noise`` = (``obs_std(Z[:, 2:4])``, its ``Σ log σ``)
     from a caller that has them and has checked ``Z`` (:func:`detection_noise`,
-    :meth:`PHDFilter.step`)."""
+    :meth:`PHDFilter.step`); ``ahead``: the M(z) the scene model computed in its own pass
+    (:meth:`SceneModel.take_birth_mass`, :func:`_mass_near`)."""
     if noise is None:
         Z = as_observations(Z)
         noise = detection_noise(Z, params.likelihood)
     bp, lk = params.birth, params.likelihood
-    m_near, grid = _mass_near(predicted, Z, bp, lk, noise[0])
+    m_near, grid = _mass_near(predicted, Z, bp, lk, noise[0], ahead)
     st = stream(key_from(rng))
     # eq. (4), newborn branch, with γ_z ∝ p_z: every newborn of z weighs birth_intensity / J_z
     # (log_birth_weight's arithmetic, the division and the revive odds in the kernel: numpy's
@@ -1567,7 +1571,8 @@ class PHDFilter:
             Z, scores, frame, predicted,
             noise[0] if _same(self.scene.lk, p.likelihood) else None)
         born = birth(predicted, Z, p, self.rng, log_kappa_geo, revive,
-                     None if buf is None else (buf[0][n:], buf[1][n:]), noise)
+                     None if buf is None else (buf[0][n:], buf[1][n:]), noise,
+                     self.scene.take_birth_mass())
         m = n + len(born.particles)
         if fused and born.particles.states.base is buf[0]:
             candidates = ParticleSet(buf[0][:m], buf[1][:m])
