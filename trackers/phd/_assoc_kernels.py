@@ -35,11 +35,12 @@ def _var4(tail, t, b0, b1, c0, c1, i, sv, ss, so, so_min, ratio, cc, cc2, out):
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
       no_cpython_wrapper=True)
-def _tail_row(tail, t, v0, v1, b0, b1, c0, c1, i, z, depth, gate_d2, sv, ss, so, so_min,
-              ratio, cc, cc2, two_pi, var, lg, gain, d2, weight):
-    """Tail t's row of :func:`edge_scores` (velocity ``v0, v1``, error growth ``b0, b1, c0,
-    c1``, gap ``i`` frames) into ``gain``, ``d2``, ``weight`` (T, M); returns its floor (the
-    gain at the gate's edge ``depth`` frames on).  ``var``, ``lg`` (4,): scratch."""
+def _tail_gauss(tail, t, v0, v1, b0, b1, c0, c1, i, depth, gate_d2, sv, ss, so, so_min, ratio,
+                cc, cc2, two_pi, var, lg):
+    """Tail t's predicted Gaussian ``i`` frames on: ``floor`` (the gain at the gate's edge
+    ``depth`` frames on), ``log_det`` and the mean ``m0..m3``; ``var`` (4,) left holding the
+    variances at ``i`` (``lg`` (4,): scratch).  Shared by :func:`_tail_row` and
+    :func:`_tail_w0`."""
     _var4(tail, t, b0, b1, c0, c1, depth, sv, ss, so, so_min, ratio, cc, cc2, var)
     for k in range(4):
         lg[k] = math.log(two_pi * var[k])
@@ -52,6 +53,19 @@ def _tail_row(tail, t, v0, v1, b0, b1, c0, c1, i, z, depth, gate_d2, sv, ss, so,
     m1 = tail[t, 1] + i * v1
     m2 = tail[t, 4]
     m3 = tail[t, 5]
+    return floor, log_det, m0, m1, m2, m3
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
+def _tail_row(tail, t, v0, v1, b0, b1, c0, c1, i, z, depth, gate_d2, sv, ss, so, so_min,
+              ratio, cc, cc2, two_pi, var, lg, gain, d2, weight):
+    """Tail t's row of :func:`edge_scores` (velocity ``v0, v1``, error growth ``b0, b1, c0,
+    c1``, gap ``i`` frames) into ``gain``, ``d2``, ``weight`` (T, M); returns its floor (the
+    gain at the gate's edge ``depth`` frames on).  ``var``, ``lg`` (4,): scratch."""
+    floor, log_det, m0, m1, m2, m3 = _tail_gauss(tail, t, v0, v1, b0, b1, c0, c1, i, depth,
+                                                 gate_d2, sv, ss, so, so_min, ratio, cc, cc2,
+                                                 two_pi, var, lg)
     for j in range(z.shape[0]):
         r0 = z[j, 0] - m0
         r1 = z[j, 1] - m1
@@ -504,18 +518,9 @@ def _tail_w0(tail, t, v0, v1, b0, b1, c0, c1, i, new, depth, gate_d2, sv, ss, so
              ratio, cc, cc2, two_pi, var, lg, w0):
     """Tail t's row of :func:`frame_edges`' ``w0`` (the admissible weights, else 0.0) against
     the states ``new`` (M, 6) -- :func:`_tail_row`'s floats, without its gain and d² rows."""
-    _var4(tail, t, b0, b1, c0, c1, depth, sv, ss, so, so_min, ratio, cc, cc2, var)
-    for k in range(4):
-        lg[k] = math.log(two_pi * var[k])
-    floor = -0.5 * gate_d2 - 0.5 * (((lg[0] + lg[1]) + lg[2]) + lg[3])
-    _var4(tail, t, b0, b1, c0, c1, i, sv, ss, so, so_min, ratio, cc, cc2, var)
-    for k in range(4):
-        lg[k] = math.log(two_pi * var[k])
-    log_det = ((lg[0] + lg[1]) + lg[2]) + lg[3]
-    m0 = tail[t, 0] + i * v0
-    m1 = tail[t, 1] + i * v1
-    m2 = tail[t, 4]
-    m3 = tail[t, 5]
+    floor, log_det, m0, m1, m2, m3 = _tail_gauss(tail, t, v0, v1, b0, b1, c0, c1, i, depth,
+                                                 gate_d2, sv, ss, so, so_min, ratio, cc, cc2,
+                                                 two_pi, var, lg)
     for j in range(new.shape[0]):
         r0 = new[j, 0] - m0
         r1 = new[j, 1] - m1

@@ -288,6 +288,23 @@ def _gate_d2(states, i, Z, j, std, k, r2):
     return d2 if d2 <= r2 else np.inf
 
 
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
+def _weight_in_gate(states, w, Z, j, std, r, r2, x0, cx, ni, y0, cy, nj, order, starts):
+    """The weight ``w`` of the particles ``states`` (bucketed on the grid ``x0 .. starts``)
+    inside detection j's gate ``d² <= r2`` under the stds ``std[j]`` (``r`` = sqrt(r2)), summed
+    in the grid's order."""
+    i0, i1, j0, j1 = gate_cells(Z[j, 0], Z[j, 1], std[j, 0], std[j, 1], r,
+                                x0, cx, ni, y0, cy, nj)
+    s = 0.0
+    for ci in range(i0, i1 + 1):
+        for p in range(starts[ci * nj + j0], starts[ci * nj + j1 + 1]):
+            i = order[p]
+            if _gate_d2(states, i, Z, j, std, j, r2) <= r2:
+                s += w[i]
+    return s
+
+
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
 def mass_near_kernel(states, w, Z, std_z, r2, cell_x, cell_y):
     """M(z) (N_z,): ``Σ w_i`` over the particles with ``Σ_d ((x_id − z_d)/σ_zd)² <= r2``
@@ -309,15 +326,8 @@ def mass_near_kernel(states, w, Z, std_z, r2, cell_x, cell_y):
         return False, out, grid
     r = math.sqrt(r2)
     for j in range(nz):
-        i0, i1, j0, j1 = gate_cells(Z[j, 0], Z[j, 1], std_z[j, 0], std_z[j, 1], r,
-                                    x0, cx, ni, y0, cy, nj)
-        s = 0.0
-        for ci in range(i0, i1 + 1):
-            for p in range(starts[ci * nj + j0], starts[ci * nj + j1 + 1]):
-                i = order[p]
-                if _gate_d2(states, i, Z, j, std_z, j, r2) <= r2:
-                    s += w[i]
-        out[j] = s
+        out[j] = _weight_in_gate(states, w, Z, j, std_z, r, r2, x0, cx, ni, y0, cy, nj, order,
+                                 starts)
     return True, out, grid
 
 
@@ -541,17 +551,9 @@ def mass_near_two(states, w, Z, std_z, r2, cell_x, cell_y, std_wide, skip):
     if cx != cell_x or cy != cell_y:
         # the grid grew: M'(z)'s grid is this one
         for j in range(nz):
-            if skip[j]:
-                continue
-            i0, i1, j0, j1 = gate_cells(Z[j, 0], Z[j, 1], std_wide[j, 0], std_wide[j, 1], r,
-                                        x0, cx, ni, y0, cy, nj)
-            s = 0.0
-            for ci in range(i0, i1 + 1):
-                for p in range(starts[ci * nj + j0], starts[ci * nj + j1 + 1]):
-                    i = order[p]
-                    if _gate_d2(states, i, Z, j, std_wide, j, r2) <= r2:
-                        s += w[i]
-            near[j] = s
+            if not skip[j]:
+                near[j] = _weight_in_gate(states, w, Z, j, std_wide, r, r2, x0, cx, ni, y0, cy,
+                                          nj, order, starts)
         return 1, out, grid, near
     # M'(z)'s grid: these cells merged 2 x 2 (its cell of a particle is ours // 2)
     wx, wy = 2.0 * cx, 2.0 * cy

@@ -919,6 +919,20 @@ class GraphAssociator:
         return f
 
     # ---- one frame
+    def _append_tracks(self, new_ids: np.ndarray, states: np.ndarray, frame: int) -> None:
+        """New tracks ``new_ids`` (the largest ids yet: ``_ids`` stays sorted) on their first
+        vertices ``states`` (n, 6) at ``frame``: length 1, no previous vertex (their colour
+        models are the caller's)."""
+        n = len(new_ids)
+        self._ids = np.concatenate([self._ids, new_ids])
+        self._tail = np.concatenate([self._tail, states])
+        self._tail_frame = np.concatenate([self._tail_frame, np.full(n, frame, dtype=np.int64)])
+        self._prev = np.concatenate([self._prev, np.full((n, STATE_DIM), np.nan)])
+        self._prev_frame = np.concatenate([self._prev_frame, np.full(n, -1, dtype=np.int64)])
+        self._length = np.concatenate([self._length, np.ones(n, dtype=np.int64)])
+        self._first = np.concatenate([self._first, states])
+        self._first_frame = np.concatenate([self._first_frame, np.full(n, frame, dtype=np.int64)])
+
     def step(self, frame: int, states, features=None, detections=None, *,
              edges: bool = True) -> AssocResult:
         """Extend the path cover with the estimates of ``frame``; ``states (M, 6)``, NaN velocity
@@ -1011,18 +1025,7 @@ class GraphAssociator:
         self._next_id += n_new
         if n_new:   # (most frames of a steady scene start no track: nothing to append)
             unmatched = ~matched
-            new_ids = ids[unmatched]
-            self._ids = np.concatenate([self._ids, new_ids])  # stays sorted: new ids are the largest
-            self._tail = np.concatenate([self._tail, new[unmatched]])
-            self._tail_frame = np.concatenate([self._tail_frame,
-                                               np.full(n_new, frame, dtype=np.int64)])
-            self._prev = np.concatenate([self._prev, np.full((n_new, STATE_DIM), np.nan)])
-            self._prev_frame = np.concatenate([self._prev_frame,
-                                               np.full(n_new, -1, dtype=np.int64)])
-            self._length = np.concatenate([self._length, np.ones(n_new, dtype=np.int64)])
-            self._first = np.concatenate([self._first, new[unmatched]])
-            self._first_frame = np.concatenate([self._first_frame,
-                                                np.full(n_new, frame, dtype=np.int64)])
+            self._append_tracks(ids[unmatched], new[unmatched], frame)
         if use_app and len(rows):
             one = gaps[rows] == 1  # consecutive vertices of one track: the same target
             if _any(one):
@@ -1106,17 +1109,7 @@ class GraphAssociator:
         n_new = M - P
         if n_new:
             unmatched = ids >= self._next_id      # (new tracks' ids: from _next_id on)
-            self._ids = np.concatenate([self._ids, ids[unmatched]])
-            self._tail = np.concatenate([self._tail, new[unmatched]])
-            self._tail_frame = np.concatenate([self._tail_frame,
-                                               np.full(n_new, frame, dtype=np.int64)])
-            self._prev = np.concatenate([self._prev, np.full((n_new, STATE_DIM), np.nan)])
-            self._prev_frame = np.concatenate([self._prev_frame,
-                                               np.full(n_new, -1, dtype=np.int64)])
-            self._length = np.concatenate([self._length, np.ones(n_new, dtype=np.int64)])
-            self._first = np.concatenate([self._first, new[unmatched]])
-            self._first_frame = np.concatenate([self._first_frame,
-                                                np.full(n_new, frame, dtype=np.int64)])
+            self._append_tracks(ids[unmatched], new[unmatched], frame)
             self._app = np.concatenate([self._app, np.full((n_new, APP_DIM), np.nan)])
             self._app_n = np.concatenate([self._app_n, np.zeros(n_new)])
             self._next_id += n_new
