@@ -919,6 +919,15 @@ class GraphAssociator:
         return f
 
     # ---- one frame
+    def _forget_lost(self, frame: int) -> None:
+        """Drop the lost tracks older than ``relink_depth`` frames at ``frame``."""
+        keep = frame - self._lost_frame <= self.params.relink_depth
+        if not _all(keep):
+            self._lost_ids, self._lost, self._lost_frame = (
+                self._lost_ids[keep], self._lost[keep], self._lost_frame[keep])
+            self._lost_vbc, self._lost_len = self._lost_vbc[keep], self._lost_len[keep]
+            self._lost_app, self._lost_app_n = self._lost_app[keep], self._lost_app_n[keep]
+
     def _append_tracks(self, new_ids: np.ndarray, states: np.ndarray, frame: int) -> None:
         """New tracks ``new_ids`` (the largest ids yet: ``_ids`` stays sorted) on their first
         vertices ``states`` (n, 6) at ``frame``: length 1, no previous vertex (their colour
@@ -970,12 +979,7 @@ class GraphAssociator:
             self._app, self._app_n = self._app[keep], self._app_n[keep]
             gaps = gaps[keep]
         if len(self._lost_ids):
-            keep = frame - self._lost_frame <= p.relink_depth
-            if not _all(keep):
-                self._lost_ids, self._lost, self._lost_frame = (
-                    self._lost_ids[keep], self._lost[keep], self._lost_frame[keep])
-                self._lost_vbc, self._lost_len = self._lost_vbc[keep], self._lost_len[keep]
-                self._lost_app, self._lost_app_n = self._lost_app[keep], self._lost_app_n[keep]
+            self._forget_lost(frame)
         use_app = features is not None and p.app_weight > 0
         feats = self._check_features(features, M) if use_app else None  # (None: all NaN)
         if use_app:
@@ -1099,12 +1103,7 @@ class GraphAssociator:
         M = len(new)
         ids, lengths = out[3:3 + M], out[3 + M:3 + 2 * M]
         if len(self._lost_ids):
-            keep = frame - self._lost_frame <= p.relink_depth
-            if not _all(keep):
-                self._lost_ids, self._lost, self._lost_frame = (
-                    self._lost_ids[keep], self._lost[keep], self._lost_frame[keep])
-                self._lost_vbc, self._lost_len = self._lost_vbc[keep], self._lost_len[keep]
-                self._lost_app, self._lost_app_n = self._lost_app[keep], self._lost_app_n[keep]
+            self._forget_lost(frame)
         self._unseen = (bool(flags & 1), p.min_length)
         n_new = M - P
         if n_new:
