@@ -1251,3 +1251,32 @@ def test_output_kernels_are_the_numpy_spelling():
         b = st[:, :4]
         np.testing.assert_array_equal(AK.centre_boxes(np.ascontiguousarray(b)),
                                       xywh_to_cxcywh(b))
+
+
+def test_general_step_advances_with_one_kernel_specialisation(monkeypatch):
+    """The general path hands the track advance C-contiguous matched pairs whatever layout the
+    matching returns (a strided view would compile a second specialisation of
+    ``_assoc_kernels.advance`` in the middle of a run: ~0.35 s on one frame of a DBN-PHD
+    run): the kernel sees only 'C' arrays."""
+    import pfscope.trackers.phd.association as A
+    from pfscope.trackers.phd import _assoc_kernels as AK
+
+    seen = []
+    orig_match, orig_adv = A._match_admissible, AK.advance
+
+    def strided(*a):
+        r, c = orig_match(*a)
+        return np.repeat(r, 2)[::2], np.repeat(c, 2)[::2]      # same values, stride 2
+
+    def spy(*a):
+        seen.append(all(x.flags.c_contiguous for x in a[7:9]))
+        return orig_adv(*a)
+
+    monkeypatch.setattr(A, "_match_admissible", strided)
+    monkeypatch.setattr(AK, "advance", spy)
+    rng = np.random.default_rng(5)
+    g = GraphAssociator(AssocParams(depth=4, min_length=3))
+    g.area = 640.0 * 480.0
+    for k, s in enumerate(_walker_frames(rng, 20, 4, 120.0), start=1):
+        g.step(k, s, detections=s[:, [0, 1, 4, 5]], edges=True)
+    assert len(seen) == 20 and all(seen), seen

@@ -1020,10 +1020,12 @@ class GraphAssociator:
             rows = cols = np.zeros(0, dtype=np.int64)
 
         # 3. matched vertices continue their track; the others start new tracks (input order)
-        # (one kernel pass over the matched pairs, in place)
+        # (one kernel pass over the matched pairs, in place; rows and cols made C-contiguous: a
+        # matching can return strided views, whose own specialisation would compile mid-run)
         ids, matched, unseen = _assoc_kernels.advance(
             self._ids, self._tail, self._tail_frame, self._prev, self._prev_frame, self._length,
-            new, rows, cols, frame, self._next_id, int(p.min_length))
+            new, np.ascontiguousarray(rows), np.ascontiguousarray(cols), frame, self._next_id,
+            int(p.min_length))
         self._unseen = (unseen, p.min_length)
         n_new = M - len(rows)
         self._next_id += n_new
