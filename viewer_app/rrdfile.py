@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import atexit
 import os
+import shutil
 import struct
 import sys
 import tempfile
@@ -110,29 +111,16 @@ def _remove(p: str) -> None:
 
 def trimmed_copy(path, length: int) -> str:
     """The first ``length`` bytes of ``path`` in a temporary file (removed by :func:`release`
-    or at exit).  In-kernel copy where the system has it."""
+    or at exit): a copy of the file cut to ``length``."""
     fd, tmp = tempfile.mkstemp(prefix="pfscope-whole-", suffix=".rrd")
     _copies.add(tmp)
+    os.close(fd)
     try:
-        with open(path, "rb") as src, os.fdopen(fd, "wb") as dst:
-            left = length
-            try:
-                while left > 0:
-                    n = os.copy_file_range(src.fileno(), dst.fileno(), left)
-                    if n <= 0:
-                        break
-                    left -= n
-            except (AttributeError, OSError):
-                src.seek(length - left)
-                dst.seek(length - left)
-                while left > 0:
-                    buf = src.read(min(left, 1 << 22))
-                    if not buf:
-                        break
-                    dst.write(buf)
-                    left -= len(buf)
-            if left:
-                raise OSError(f"the file shrank while it was read ({left} bytes short)")
+        shutil.copyfile(path, tmp)         # (the kernel's copy where the system has one)
+        short = length - os.path.getsize(tmp)
+        if short > 0:
+            raise OSError(f"the file shrank while it was read ({short} bytes short)")
+        os.truncate(tmp, length)
     except OSError as e:
         _remove(tmp)
         raise InputError(f"{path}: cut inside an entry, and no room for a trimmed copy to "

@@ -438,25 +438,36 @@ class CameraMotion:
         self.H *= lam
         self.b *= lam
         if th_r is not None:
-            if significant and self.since == 0:
-                # two frames in a row whose own links beat a still camera (one such frame on a
-                # still camera is the test's 1 % false alarm) and this one contradicts the
-                # level: the camera changed its motion beyond what the level's drift allows,
-                # so the level's information shrinks until this frame is consistent with it
-                a = self._consistent(th_r, H_r)
-                self.H *= a
-                self.b *= a
-            self.H += H_r
-            self.b += H_r @ th_r
-            if significant:
-                self.since = 0
-            elif self.since is not None:
-                self.since += 1
-        elif self.since is not None:
-            self.since += 1
-        if self.since is None or self.since > memory:
+            # two frames in a row whose own links beat a still camera (one such frame on a
+            # still camera is the test's 1 % false alarm) and this one contradicts the
+            # level: the camera changed its motion beyond what the level's drift allows,
+            # so the level's information shrinks until this frame is consistent with it
+            self.absorb(th_r, H_r, significant and self.since == 0)
+        self.count(th_r is not None and significant)
+        if self.still(memory):
             return None
         return self.level()
+
+    def absorb(self, th: np.ndarray, H: np.ndarray, shrink: bool) -> None:
+        """Add a frame's fit ``th`` (information ``H``) to the level, its information first
+        shrunk until the fit is consistent with it when ``shrink`` (:meth:`_consistent`)."""
+        if shrink:
+            a = self._consistent(th, H)
+            self.H *= a
+            self.b *= a
+        self.H += H
+        self.b += H @ th
+
+    def count(self, significant: bool) -> None:
+        """Frames since the last significant fit: 0 on one, +1 otherwise (None: none yet)."""
+        if significant:
+            self.since = 0
+        elif self.since is not None:
+            self.since += 1
+
+    def still(self, memory: float) -> bool:
+        """No significant fit within ``memory`` frames: the camera is taken as still."""
+        return self.since is None or self.since > memory
 
     def level(self) -> Optional[np.ndarray]:
         """The level's motion (2×3), None where it does not differ from a still camera (χ²₃

@@ -615,22 +615,11 @@ class SceneMotion:
             self._sp = (sx, sy, one, two)
         if cam:
             # CameraMotion.advance after the kernel's part of it (forgetting, H; b queued)
-            if found > 0:
-                if found == 2:
-                    th, H = self._fit_th, self._fit_H
-                    self._flush()
-                    f = c._consistent(th, H)
-                    c.H *= f
-                    c.b *= f
-                    c.H += H
-                    c.b += H @ th
-                if found > 1:                       # significant
-                    c.since = 0
-                elif c.since is not None:
-                    c.since += 1
-            elif c.since is not None:
-                c.since += 1
-            if c.since is None or c.since > memory:
+            if found == 2:                          # significant, contradicting the level
+                self._flush()
+                c.absorb(self._fit_th, self._fit_H, True)
+            c.count(found > 1)                      # 2, 3: significant
+            if c.still(memory):
                 self.camera = None
                 if pend >= PENDING:
                     self._flush()
