@@ -658,3 +658,93 @@ def test_scene_terms_is_the_three_calls_bit_for_bit(seed):
         assert np.array_equal(got[2:], want, equal_nan=True), t
         for a, b in zip(args[2:5], want_args[2:5]):
             assert np.array_equal(a, b)
+
+
+def _scene_state(f):
+    """Everything the scene model carries from frame to frame (and the filter's particles)."""
+    sc = f.scene
+    pl, pe, du = sc.place, sc.people, sc.dups
+    arrays = [f.particles.states, f.particles.log_weights, sc.size_m1, sc.size_m2, sc.extent,
+              sc.score_sums, sc.persist_sums, sc._chain_clutter, pl.mem_z, pl.mem_s, pl.mem_w,
+              pl.mem_e, sc._persist]
+    if pl._sums is not None:
+        arrays += [pl._sums[2], np.array([pl._sums[3]])]
+    floats = [sc.rate, sc.near, sc.frames, sc.size_frames, sc.score_floor, pl.beta, pl.num,
+              pl.den, pl._a, pl.frames, pe.nu, pe.num, pe.den, pe._a, pe._exposure, du.q,
+              du.num, du.den]
+    return [None if a is None else (np.asarray(a).dtype.str, np.asarray(a).shape,
+                                    np.asarray(a).tobytes()) for a in arrays], floats
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_fused_scene_model_is_the_calls_one_by_one(seed, monkeypatch):
+    """The practical settings' SceneModel.log_kappa and learn in one kernel call each
+    (``SceneModel.fused``: :func:`.clutter.scene_frame`, :func:`.filter.scene_learn`) give the
+    very floats and state of the calls one by one (the reference), frame after frame: people
+    walking, second boxes beside some, a spot firing on and off, random clutter, scores, a
+    far box (the memory's one-pass grid declines after it: the caller finishes), a frame of
+    one detection (no duplicate term) and an empty one (the reference path there); and the
+    fused path was taken."""
+    import pfscope.trackers.phd.filter as F
+    from pfscope.trackers.phd.tracker import PHD_PRACTICAL
+    from pfscope.trackers.types import Detections
+
+    calls = {"frame": 0, "learn": 0}
+    frame_k, learn_k = F.scene_frame, F.scene_learn
+
+    def count_frame(*a):
+        calls["frame"] += 1
+        return frame_k(*a)
+
+    def count_learn(*a):
+        calls["learn"] += 1
+        return learn_k(*a)
+
+    monkeypatch.setattr(F, "scene_frame", count_frame)
+    monkeypatch.setattr(F, "scene_learn", count_learn)
+    declined = []
+    sums_k = F.gate_sums
+
+    def count_sums(*a, **kw):
+        declined.append(1)
+        return sums_k(*a, **kw)
+
+    monkeypatch.setattr(F, "gate_sums", count_sums)
+    p = PHD_PRACTICAL.filter
+    fused = F.PHDFilter(p, rng=np.random.default_rng(seed))
+    ref = F.PHDFilter(p, rng=np.random.default_rng(seed))
+    ref.scene.fused = False
+    rng = np.random.default_rng(100 + seed)
+    frames = 40
+    for k in range(frames):
+        x = np.linspace(60, 560, 6) + 4.0 * k
+        boxes = np.column_stack([x, np.full(6, 150.0) + k, np.full(6, 30.0), np.full(6, 70.0)])
+        boxes = boxes[rng.random(6) < 0.9]
+        extra = [boxes[:2] + [9.0, 4.0, 3.0, -6.0]]                    # second boxes
+        if k % 2:
+            extra.append(np.array([[300.0, 400.0, 25.0, 60.0]]))        # a spot
+        extra.append(rng.uniform(0, 600, (3, 4)) * [1, 1, 0.1, 0.1] + [0, 0, 20, 50])
+        boxes = np.vstack([boxes] + extra)
+        if k == 10:
+            # clutter remembered far away: the place memory's grid is then too sparse for
+            # the one-pass kernel (the GridIndex path after it)
+            for f in (fused, ref):
+                pl = f.scene.place
+                far = np.array([[3e7, 3e7, 30.0, 70.0]])
+                pl.mem_z = np.vstack([pl.mem_z, far])
+                pl.mem_s = np.vstack([pl.mem_s, F.obs_std(far[:, 2:4], p.likelihood)])
+                pl.mem_w = np.append(pl.mem_w, 0.9)
+                pl.mem_e = np.append(pl.mem_e, 1.0)
+                pl._sums = None
+        if k == 20:
+            boxes = boxes[:1]
+        elif k == 21:
+            boxes = boxes[:0]
+        det = Detections(boxes, rng.uniform(0.2, 1.0, len(boxes)))
+        a, b = fused.step(det), ref.step(det)
+        assert a.updated.per_det_mass.tobytes() == b.updated.per_det_mass.tobytes(), k
+        assert _scene_state(fused) == _scene_state(ref), k
+    # the fused path on every frame with particles and detections (not the first, nor frame
+    # 21 (none)), never on the reference filter's
+    assert calls["frame"] == calls["learn"] == frames - 2, calls
+    assert 0 < len(declined) < calls["frame"], len(declined)

@@ -367,8 +367,9 @@ def test_first_run_compiles_each_kernel_once_in_one_process(tmp_path):
     assert sorted(top) == ["_observe", "_robust_stds", "centre_boxes", "check_states",
                            "edge_scores", "fill_rows", "final_rows", "frame_edges",
                            "frame_step", "gap_rows",
-                           "head_pick", "mass_near_kernel", "mass_near_two", "peaks",
-                           "revive_hits", "row_boxes", "track_boxes"], top
+                           "head_pick", "mass_near_kernel", "peaks",
+                           "revive_hits", "row_boxes", "scene_frame", "scene_learn",
+                           "track_boxes"], top
 
 
 def test_early_helper_only_for_the_phd_kernels(monkeypatch):

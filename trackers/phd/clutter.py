@@ -65,6 +65,7 @@ from typing import TYPE_CHECKING, Optional
 import numpy as np
 from numba import njit
 
+from . import _kernels
 from .camera_motion import _pairwise
 from .gating import BRUTE_PAIRS, _gate_sums, _gate_sums_cells, gate_sums
 
@@ -379,7 +380,19 @@ class NearClutter:
 
     def record(self, predicted) -> None:
         """Records the predicted mass of this frame for :meth:`learn` (:meth:`mass` does)."""
-        self._exposure = float(predicted.mass) if predicted is not None else 0.0
+        if predicted is None:
+            self._exposure = 0.0
+            return
+        d = predicted.__dict__
+        if "_mass" not in d and "log_mass" not in d and predicted.is_known_equal():
+            lw = predicted.log_weights
+            lw0 = float(lw[0])
+            if math.isfinite(lw0):
+                # ParticleSet.mass of equal weights without its cached properties: the same
+                # numpy calls (log n of a 1-element array, np.exp of the float), log n kept
+                self._exposure = float(np.exp(_log_count(len(lw)) + lw0))
+                return
+        self._exposure = float(predicted.mass)
 
     def learn(self, near_share: np.ndarray, a: float, near_sum: Optional[float] = None) -> None:
         """After the update: ``near_share`` (N_z,) the clutter share the EM gives to κ_n (none
@@ -395,6 +408,20 @@ class NearClutter:
     def count(self) -> float:
         """Near-people clutter per frame, the prior's pseudo-counts included."""
         return self.num + PRIOR_FRAMES * self._a * NEAR_PRIOR
+
+
+_LOG_COUNTS: dict = {}
+
+
+def _log_count(n: int) -> float:
+    """``np.log(np.array([float(n)]))[0]`` (numpy's log: :attr:`.smc.weights.ParticleSet.
+    log_mass`' float of equal weights), kept for each n seen."""
+    v = _LOG_COUNTS.get(n)
+    if v is None:
+        if len(_LOG_COUNTS) > 4096:
+            _LOG_COUNTS.clear()
+        v = _LOG_COUNTS[n] = float(np.log(np.array([float(n)]))[0])
+    return v
 
 
 class DuplicateBoxes:
@@ -857,6 +884,97 @@ def _scene_terms(Z, std, m1, m2, extent, a, see, log_rate, area, log_v0, floor, 
             return False
     _kappa_terms(out[1], S, E, n0_beta, m, nu, chained, n, q, out[0], out[2:7])
     return True
+
+
+#: :func:`scene_frame`'s scalars (``par``): their places
+(P_R2, P_A_NEAR, P_NEAR, P_A, P_SEE, P_LOG_RATE, P_AREA, P_LOG_V0, P_FLOOR, P_N0_BETA, P_NU, P_Q,
+ P_RATIO, P_SCORE_FLOOR, P_USE_PSUMS, P_CLIP, P_PERSIST) = range(17)
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def _two_class_fit(S, floor):
+    """:meth:`.filter.SceneModel._two_class_fit` of the sums ``S`` (2, 3) (the same
+    operations on the same float64 values: the same floats): ``(ok, d'², slope, midpoint)``,
+    ok False where it gives None."""
+    a0, a1, a2, b0, b1, b2 = S[0, 0], S[0, 1], S[0, 2], S[1, 0], S[1, 1], S[1, 2]
+    m0, m1 = a1 / a0, b1 / b0
+    if not m0 > m1:
+        return False, 0.0, 0.0, 0.0
+    var = ((a2 - a1 * a1 / a0) + (b2 - b1 * b1 / b0)) / (a0 + b0)
+    var = floor if floor > var else var          # Python's max(var, floor)
+    gap = m0 - m1
+    return True, gap * gap / var, gap / var, 0.5 * (m0 + m1)
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def scene_frame(states, w, Z, std, length, scores, par, m1, m2, extent, mem_z, mem_w, mem_e,
+                score_sums, persist_sums):
+    """:meth:`.filter.SceneModel.log_kappa` of the ``learn`` / ``model`` mixture after the
+    chains, in one call (what were ~8 kernel and numpy calls a frame): the wide stds ``std ·``
+    :data:`NEAR_SCALE` (:meth:`NearClutter.wide_std_of`), ``chained`` / ``persist`` (the chain
+    ``length`` >= 1 / >= ``par[P_PERSIST]``), :func:`neighbour_counts`' brute pass
+    (:func:`_count_two`; N_z² < BRUTE_PAIRS; a lone detection counts 0), the near-rate
+    average, κ_n's M'(z) and the birth's M(z) (:func:`._kernels.mass_near_two` on :func:`._kernels.grid_cell`'s
+    cells; N_z <= GRID_CELL_MAX), :func:`_scene_terms` and, with ``par[P_RATIO]``, the score
+    fit of ``score_sums`` (and ``persist_sums`` with ``par[P_USE_PSUMS]``) and its ratio
+    ``clip(slope (s − mid), ±c)`` taken off the mixture (:meth:`.filter.SceneModel.
+    log_score_ratio`).  The same operations in the same order: the same floats.  Returns
+    ``(code, near, wide, chained, persist, n_dup, m, grid, m_near, out, final)``: code 0 non-finite
+    particle positions (nothing after M(z) computed), 2 gate_sums' one-pass grid declined
+    (``out`` holds the density only: the caller finishes), 1 done; ``out`` (7, N_z) as
+    :func:`scene_terms`' and ``final`` the mixture minus the score ratio."""
+    nz = Z.shape[0]
+    r2 = par[P_R2]
+    wide = np.empty((nz, 4))
+    chained = np.empty(nz, np.bool_)
+    persist = np.empty(nz, np.bool_)
+    for j in range(nz):
+        for c in range(4):
+            wide[j, c] = std[j, c] * NEAR_SCALE
+        chained[j] = length[j] >= 1
+        persist[j] = length[j] >= par[P_PERSIST]
+    cnt = np.empty((2, nz), np.int64)
+    _count_two(Z, std, wide, r2, cnt)
+    tot = np.int64(0)
+    for j in range(nz):
+        tot += cnt[0, j]
+    a = par[P_A_NEAR]
+    near = (1 - a) * par[P_NEAR] + a * (tot / nz)
+    cell = _kernels.grid_cell(std, r2)
+    code, m, grid, m_near = _kernels.mass_near_two(states, w, Z, std, r2, cell[0], cell[1],
+                                                   wide, chained)
+    out = np.empty((7, nz))
+    final = np.empty(nz)
+    if not code:
+        return 0, near, wide, chained, persist, cnt[1], m, grid, m_near, out, final
+    near_on = near > 0
+    if not _scene_terms(Z, std, m1, m2, extent, par[P_A], par[P_SEE] != 0.0, par[P_LOG_RATE],
+                        par[P_AREA], par[P_LOG_V0], par[P_FLOOR],
+                        np.log(near) if near_on else 0.0, near_on, mem_z, mem_w, mem_e, r2,
+                        par[P_N0_BETA], m_near, par[P_NU], chained, cnt[1], par[P_Q], out):
+        return 2, near, wide, chained, persist, cnt[1], m, grid, m_near, out, final
+    ok = False
+    slope = mid = 0.0
+    if par[P_RATIO] != 0.0:
+        # SceneModel._score_fit: the fit on the mass, or on persistence where that one
+        # separates the classes more
+        ok, d2, slope, mid = _two_class_fit(score_sums, par[P_SCORE_FLOOR])
+        if par[P_USE_PSUMS] != 0.0:
+            ok_p, d2_p, slope_p, mid_p = _two_class_fit(persist_sums, par[P_SCORE_FLOOR])
+            if not ok or (ok_p and d2_p > d2):
+                ok, slope, mid = ok_p, slope_p, mid_p
+    if ok:
+        c = par[P_CLIP]
+        for j in range(nz):
+            v = slope * (scores[j] - mid)
+            # np.clip(v, -c, c) (NaN stays NaN)
+            v = -c if v < -c else v
+            v = c if v > c else v
+            final[j] = out[5, j] - v
+    else:
+        for j in range(nz):
+            final[j] = out[5, j] - 0.0
+    return 1, near, wide, chained, persist, cnt[1], m, grid, m_near, out, final
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)

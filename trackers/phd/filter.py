@@ -90,10 +90,11 @@ from ..params import param, part, with_options
 from . import _kernels, motion
 from .clutter import PlaceClutter
 from .clutter import (DuplicateBoxes, NearClutter, kappa_terms, learn_shares, neighbour_counts,
-                      scene_density, scene_terms,
-                      neighbours)
+                      scene_density, scene_terms, scene_frame, neighbours, _kappa_terms,
+                      PRIOR_FRAMES, MIN_WEIGHT, INCREMENT_PAIRS, em_rate, _learn_shares,
+                      _memory_step, _dup_sums_brute, _NO_I, _NO_F)
 from .scene_motion import Chains
-from .gating import DEFAULT_BUDGET, LogGPairs, gate_pairs, tail_radius2
+from .gating import BRUTE_PAIRS, DEFAULT_BUDGET, LogGPairs, gate_pairs, gate_sums, tail_radius2
 from ..smc.resampling import SCHEMES
 from ..smc.resampling import resample as _resample_set
 from ..smc.random import key_from, stream
@@ -560,6 +561,9 @@ class SceneModel:
     Averages are over about ``clutter_memory`` frames."""
 
     _LOG_SIZE_FLOOR = 0.05 ** 2    # log-size variance floor (5 % of the size)
+    #: the practical settings' log_kappa / learn in one kernel call each (False: the calls
+    #: one by one, the reference the tests compare with)
+    fused = True
 
     def __init__(self, params: "PHDParams"):
         self.cl, self.sp = params.clutter, params.score
@@ -587,6 +591,9 @@ class SceneModel:
         self.people = NearClutter(self.cl, self.lk) if learn else None
         self.dups = DuplicateBoxes(self.cl, self.lk) if learn else None
         self._parts: Optional[tuple] = None
+        #: what :meth:`_log_kappa_fused` leaves for :meth:`_learn_fused` (None: the calls one
+        #: by one)
+        self._fused: Optional[tuple] = None
         #: the birth gate's r² (:func:`birth`'s M(z)): where it is the clutter gate's, κ_n's
         #: M'(z) and the birth's M(z) come from one pass (:meth:`_near_mass`)
         self._birth_r2 = gate_threshold(params.birth.gate, OBS_DIM)
@@ -630,10 +637,15 @@ class SceneModel:
         update's (with the scores).  ``std``: the detections' :func:`obs_std` under this
         model's likelihood when the caller has them (:func:`detection_noise`)."""
         log_birth = None
+        self._fused = None
         persist = self.uses_scores and self.sp.persist_frames > 0
         if persist or self.place is not None:
             # a no-op when the frame was linked already (PHD-MT shares its scene learner's)
             self.chains.observe(Z, None if frame is None else frame.index)
+            if self.fused and self.place is not None:
+                done = self._log_kappa_fused(Z, scores, frame, predicted, std, persist)
+                if done is not None:
+                    return done
         if self.scene_clutter:
             # the detections' observation stds, once a frame for every part that reads them
             if std is None:
@@ -713,6 +725,80 @@ class SceneModel:
             return birth, log_kappa - self.log_score_ratio(scores)
         return birth, log_kappa
 
+    def _log_kappa_fused(self, Z: np.ndarray, scores: Optional[np.ndarray],
+                         frame: Optional[Frame], predicted: Optional[ParticleSet],
+                         std: Optional[np.ndarray], persist: bool) -> Optional[tuple]:
+        """:meth:`log_kappa` after the chains in one kernel call (:func:`.clutter.scene_frame`)
+        where the settings are the ``practical`` preset's (``learn`` clutter, ``learn_update``
+        'model', ``near_learn``, the duplicate term on, the birth gate the clutter gate) and
+        the frame has 1 <= N_z, N_z² < BRUTE_PAIRS detections (float64, C-contiguous) and
+        predicted particles: the same floats and the same state after it as the calls one by
+        one (the reference, ``fused`` False).  None (nothing done) elsewhere."""
+        cl = self.cl
+        nz = len(Z)
+        if not (cl.learn_update == "model" and cl.near_learn and nz >= 1
+                and nz * nz < BRUTE_PAIRS and cl.duplicate_prior > 0
+                and predicted is not None and len(predicted)
+                and type(Z) is np.ndarray and Z.dtype == np.float64 and Z.ndim == 2
+                and Z.shape[1] == OBS_DIM and Z.flags.c_contiguous
+                and len(self.chains.length) == nz):
+            return None
+        r2 = gate_threshold(cl.clutter_gate, OBS_DIM)
+        if r2 != self._birth_r2:
+            return None
+        if std is None:
+            std = obs_std(Z[:, 2:4], self.lk)
+        if not (type(std) is np.ndarray and std.dtype == np.float64 and std.flags.c_contiguous):
+            return None
+        ratio = self.uses_scores and scores is not None
+        if ratio:
+            scores = np.ascontiguousarray(scores, dtype=np.float64)
+            if scores.shape != (nz,):
+                return None
+            self._score_init(scores)
+        place, people, dups = self.place, self.people, self.dups
+        place.cl = people.cl = dups.cl = cl
+        if self.extent is None:
+            self.extent = _no_extent()
+        people.record(predicted)
+        par = np.array((r2, 1.0 / min(self.frames + 5, cl.clutter_memory), self.near,
+                        1.0 / min(self.size_frames + 1, cl.clutter_memory), 1.0,
+                        math.log(self.rate) if self.rate > 0 else -math.inf,
+                        self._image_area(frame), log_gate_volume0(cl), self._LOG_SIZE_FLOOR,
+                        PRIOR_FRAMES * place.beta, people.nu, dups.q,
+                        1.0 if ratio else 0.0, self.score_floor,
+                        0.0 if self.persist_sums is None else 1.0, self.sp.max_log_ratio,
+                        self.sp.persist_frames))
+        ss = self.score_sums if ratio else _NO_SUMS
+        code, near, wide, chained, persist_now, n_dup, m, grid, m_near, out, final = scene_frame(
+            predicted.states, _weights_of(predicted), Z, std, self.chains.length,
+            scores if ratio else _NO_SCORES, par, self.size_m1, self.size_m2, self.extent,
+            place.mem_z, place.mem_w, place.mem_e, ss,
+            self.persist_sums if ratio and self.persist_sums is not None else ss)
+        if not code:
+            raise ValueError("mass_near: non-finite particle positions")
+        self.near = near
+        self._chained = chained
+        self._birth_mass = (predicted, Z, std, r2, m, grid)
+        # (DuplicateBoxes.counts: off for a lone detection, whose count 0 gives the same
+        # log κ_d = -inf as the term left out)
+        dups._pairs = (Z, wide, r2, n_dup) if nz >= 2 else None
+        self.size_frames += 1
+        if code == 2:
+            # gate_sums' one-pass grid declined: its GridIndex path and kappa_terms, as
+            # scene_terms does
+            S, E, _ = gate_sums(place.mem_z, Z, r2, std, place.mem_w, place.mem_e)
+            _kappa_terms(out[1], S, E, PRIOR_FRAMES * place.beta, m_near,
+                         people.nu, chained, n_dup, dups.q, out[0], out[2:])
+            final = out[5] - (self.log_score_ratio(scores) if ratio else 0.0)
+        shadow = out[5]
+        self._parts = (Z, std, out[2], out[3], out[4], shadow, shadow)
+        self._fused = (out, wide, n_dup, r2)
+        if persist:
+            self._persist = persist_now
+        birth = out[6] if cl.spot_places else shadow
+        return birth, (final if ratio else shadow)
+
     def _near_mass(self, Z: np.ndarray, predicted: Optional[ParticleSet], std: np.ndarray,
                    std_wide: Optional[np.ndarray]) -> Optional[np.ndarray]:
         """κ_n's ``M'(z)`` (:meth:`.clutter.NearClutter.mass`, 0 where chained).  Where the birth
@@ -746,19 +832,7 @@ class SceneModel:
         mass, or the fit on persistence when that one separates the classes more
         (:class:`ScoreParams`)."""
         s = np.asarray(scores, dtype=np.float64)
-        if self.score_sums is None:
-            mu, var = float(s.mean()), float(s.var())
-            self.score_floor = max(1e-12, 1e-3 * var)
-            var = max(var, self.score_floor)
-            n0 = self.sp.score_prior
-            self.score_sums = np.array([[n0, n0 * mu, n0 * (mu * mu + var)]] * 2)
-            if self.sp.persist_frames > 0:
-                self.persist_sums = self.score_sums.copy()
-        best = self._two_class_fit(self.score_sums)
-        if self.persist_sums is not None:
-            other = self._two_class_fit(self.persist_sums)
-            if best is None or (other is not None and other[0] > best[0]):
-                best = other
+        best = self._score_fit(s)
         # used only while targets score higher than clutter on average (a higher score means a
         # more likely target, the detector's convention); otherwise the scores carry no
         # information yet (e.g. no target seen) and the ratio is 1.
@@ -767,6 +841,28 @@ class SceneModel:
         _, slope, mid = best
         c = self.sp.max_log_ratio
         return np.clip(slope * (s - mid), -c, c)
+
+    def _score_fit(self, s: np.ndarray) -> Optional[tuple[float, float, float]]:
+        """:meth:`log_score_ratio`'s fit ``(d'², slope, midpoint)`` or None (the sums set up
+        from the scores ``s`` (float64) on the first call)."""
+        self._score_init(s)
+        best = self._two_class_fit(self.score_sums)
+        if self.persist_sums is not None:
+            other = self._two_class_fit(self.persist_sums)
+            if best is None or (other is not None and other[0] > best[0]):
+                best = other
+        return best
+
+    def _score_init(self, s: np.ndarray) -> None:
+        """The score sums' prior from the first frame's scores ``s`` (float64)."""
+        if self.score_sums is None:
+            mu, var = float(s.mean()), float(s.var())
+            self.score_floor = max(1e-12, 1e-3 * var)
+            var = max(var, self.score_floor)
+            n0 = self.sp.score_prior
+            self.score_sums = np.array([[n0, n0 * mu, n0 * (mu * mu + var)]] * 2)
+            if self.sp.persist_frames > 0:
+                self.persist_sums = self.score_sums.copy()
 
     def _two_class_fit(self, S: np.ndarray) -> Optional[tuple[float, float, float]]:
         """Two Gaussians of one pooled within-class variance from the sums ``S`` (class ×
@@ -785,6 +881,10 @@ class SceneModel:
 
     def learn(self, scores: Optional[np.ndarray], won: np.ndarray) -> None:
         """After the update: ``won`` (N_z,) = C/(κ + C), each detection's target share."""
+        fused, self._fused = self._fused, None
+        if fused is not None and self.fused and self._parts is not None \
+                and self._learn_fused(scores, won, fused):
+            return
         a = 1.0 / min(self.frames + 5, self.cl.clutter_memory)
         if self.place is not None and self._parts is not None:
             Z, std, log_rep, log_near, log_dup, total, log_used = self._parts
@@ -824,7 +924,77 @@ class SceneModel:
                         self.score_sums, self.persist_sums if persist else self.score_sums)
 
 
+    def _learn_fused(self, scores: Optional[np.ndarray], won: np.ndarray,
+                     fused: tuple) -> bool:
+        """:meth:`learn` after :meth:`_log_kappa_fused` in one kernel call (:func:`scene_learn`):
+        the same floats and state as the calls one by one.  False (nothing done) where the
+        frame does not fit (``won`` or the scores not of the frame's length)."""
+        out, wide, n_dup, r2_dup = fused
+        cl, place, people, dups = self.cl, self.place, self.people, self.dups
+        Z, std = self._parts[0], self._parts[1]
+        nz = len(Z)
+        won = np.ascontiguousarray(won, dtype=np.float64)
+        if won.shape != (nz,) or cl.learn_update != "model" or cl.duplicate_prior <= 0:
+            return False
+        use_s = self.uses_scores and scores is not None and self.score_sums is not None
+        s = _NO_SCORES
+        use_p = False
+        if use_s:
+            s = np.ascontiguousarray(scores, dtype=np.float64)
+            if s.shape != (nz,):
+                return False
+            use_p = self.persist_sums is not None and self._persist is not None \
+                and len(self._persist) == nz
+        spot = cl.spot_places
+        prev_link, chain_c = self.chains.prev_link, self._chain_clutter
+        use_chain = (spot and prev_link is not None and chain_c is not None
+                     and len(prev_link) == nz and len(chain_c) > 0)
+        lk, r2, S, exposure = place._sums_of()
+        a = 1.0 / min(self.frames + 5, cl.clutter_memory)
+        par = np.array((place.fade, MIN_WEIGHT, r2, INCREMENT_PAIRS,
+                        0.0 if dups._pairs is None else 1.0, r2_dup,
+                        1.0 if use_s else 0.0, 1.0 if use_p else 0.0,
+                        1.0 - 1.0 / cl.clutter_memory))
+        sh, ssum, mem, num, den = scene_learn(
+            won, out, prev_link if use_chain else _NO_I, chain_c if use_chain else _NO_F,
+            place.mem_z, place.mem_s, place.mem_w, place.mem_e, S, Z, std, wide, n_dup, s,
+            self._persist if use_p else _NO_PERSIST,
+            self.score_sums if use_s else _NO_SUMS,
+            self.persist_sums if use_p else _NO_SUMS, par)
+        self.rate = (1 - a) * self.rate + a * float(ssum[0])
+        if spot:
+            self._chain_clutter = sh[4]
+        # PlaceClutter.learn's EM and memory
+        place.num = (1 - a) * place.num + a * float(ssum[1])
+        place.den = (1 - a) * place.den + a * exposure
+        place.beta = em_rate(place.num, place.den, cl.repeat_prior, a)
+        place._a = a
+        place.frames += 1
+        place.mem_z, place.mem_s, place.mem_w, place.mem_e, S, exposure, ok = mem
+        place._sums = (lk, r2, S, exposure) if ok else None
+        people.learn(sh[3], a, float(ssum[2]))
+        # DuplicateBoxes.learn's EM
+        dups.num = (1 - a) * dups.num + a * num
+        dups.den = (1 - a) * dups.den + a * den
+        dups.q = em_rate(dups.num, dups.den, cl.duplicate_prior, a)
+        self._parts = None
+        self.frames += 1
+        return True
+
+
+def _weights_of(ps: ParticleSet) -> np.ndarray:
+    """``ps.weights``' floats for a kernel that reads them once each: where the set's weights
+    are known equal and not made yet, their one value ``np.exp(lw[:1])`` (the property's
+    float) broadcast (stride 0), without writing the (N,) array."""
+    if ps.is_known_equal() and "weights" not in ps.__dict__:
+        w0 = np.exp(ps.log_weights[:1])
+        return np.ndarray(ps.log_weights.shape, np.float64, w0, 0, (0,))
+    return ps.weights
+
+
 _NO_PERSIST = np.zeros(0, dtype=np.bool_)
+_NO_SUMS = np.zeros((2, 3))
+_NO_SCORES = np.zeros(0)
 
 
 def _no_extent() -> np.ndarray:
@@ -863,6 +1033,39 @@ def _score_sums(won, s, persist, use_p, d, sums, psums):
         for c in range(2):
             for m in range(3):
                 psums[c, m] = d * psums[c, m] + p[3 * c + m]
+
+
+#: :func:`scene_learn`'s scalars (``par``): their places
+_L_FADE, _L_MIN_W, _L_R2, _L_BUDGET, _L_DUP, _L_DUP_R2, _L_SCORES, _L_PERSIST, _L_D = range(9)
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def scene_learn(won, parts, prev_link, chain_clutter, mem_z, mem_s, mem_w, mem_e, mem_S, Z, std,
+                wide, n_dup, scores, persist, sums, psums, par):
+    """:meth:`SceneModel.learn`'s kernels in one call (``learn`` / ``model`` clutter, the
+    frame :meth:`SceneModel._log_kappa_fused` made): :func:`.clutter._learn_shares` of
+    ``parts`` (scene_frame's (7, N_z): its mixture row as κ_used and κ_s, the parts' rows),
+    the place memory's step (:func:`.clutter._memory_step` of the memory, its S, ``Z``,
+    ``std`` and the shares' place weights), with ``par[_L_DUP]`` the duplicate term's sums
+    (:func:`.clutter._dup_sums_brute` of ``wide``, ``n_dup``) and with ``par[_L_SCORES]``
+    :func:`_score_sums` into ``sums`` / ``psums`` (in place).  Returns ``(shares (5, N_z),
+    share sums (3,), (z, s, w, e, S, exposure, ok), dup num, dup den)``: the same floats as
+    the calls one by one."""
+    nz = won.shape[0]
+    sh = np.empty((5, nz))
+    ssum = np.empty(3)
+    _learn_shares(won, parts[5], parts[5], parts[2], parts[3], parts[4], prev_link,
+                  chain_clutter, sh, ssum)
+    mem = _memory_step(mem_z, mem_s, mem_w, mem_e, mem_S, Z, std, sh[1], par[_L_FADE],
+                       par[_L_MIN_W], par[_L_R2], np.int64(par[_L_BUDGET]))
+    num = den = 0.0
+    if par[_L_DUP] != 0.0:
+        num, den = _dup_sums_brute(won, Z, wide, par[_L_DUP_R2], n_dup, np.empty(nz),
+                                   np.empty((2, nz)))
+    if par[_L_SCORES] != 0.0:
+        use_p = par[_L_PERSIST] != 0.0
+        _score_sums(won, scores, persist, use_p, par[_L_D], sums, psums if use_p else sums)
+    return sh, ssum, mem, num, den
 
 
 # ----------------------------------------------------------------------------- the four stages
