@@ -771,7 +771,7 @@ class SceneModel:
                         self.sp.persist_frames))
         ss = self.score_sums if ratio else _NO_SUMS
         code, near, wide, chained, persist_now, n_dup, m, grid, m_near, out, final = scene_frame(
-            predicted.states, _weights_of(predicted), Z, std, self.chains.length,
+            predicted.states, predicted.weights, Z, std, self.chains.length,
             scores if ratio else _NO_SCORES, par, self.size_m1, self.size_m2, self.extent,
             place.mem_z, place.mem_w, place.mem_e, ss,
             self.persist_sums if ratio and self.persist_sums is not None else ss)
@@ -980,16 +980,6 @@ class SceneModel:
         self._parts = None
         self.frames += 1
         return True
-
-
-def _weights_of(ps: ParticleSet) -> np.ndarray:
-    """``ps.weights``' floats for a kernel that reads them once each: where the set's weights
-    are known equal and not made yet, their one value ``np.exp(lw[:1])`` (the property's
-    float) broadcast (stride 0), without writing the (N,) array."""
-    if ps.is_known_equal() and "weights" not in ps.__dict__:
-        w0 = np.exp(ps.log_weights[:1])
-        return np.ndarray(ps.log_weights.shape, np.float64, w0, 0, (0,))
-    return ps.weights
 
 
 _NO_PERSIST = np.zeros(0, dtype=np.bool_)
