@@ -914,14 +914,14 @@ def scene_frame(states, w, Z, std, length, scores, par, m1, m2, extent, mem_z, m
     :data:`NEAR_SCALE` (:meth:`NearClutter.wide_std_of`), ``chained`` / ``persist`` (the chain
     ``length`` >= 1 / >= ``par[P_PERSIST]``), :func:`neighbour_counts`' brute pass
     (:func:`_count_two`; N_z² < BRUTE_PAIRS; a lone detection counts 0), the near-rate
-    average, κ_n's M'(z) and the birth's M(z) (:func:`._kernels.mass_near_two` on :func:`._kernels.grid_cell`'s
-    cells; N_z <= GRID_CELL_MAX), :func:`_scene_terms` and, with ``par[P_RATIO]``, the score
-    fit of ``score_sums`` (and ``persist_sums`` with ``par[P_USE_PSUMS]``) and its ratio
+    average, κ_n's M'(z) and the birth's M(z) (:func:`._kernels.mass_near_two` on
+    :func:`._kernels.grid_cell`'s cells), :func:`_scene_terms` and, with ``par[P_RATIO]``, the
+    score fit of ``score_sums`` (and ``persist_sums`` with ``par[P_USE_PSUMS]``) and its ratio
     ``clip(slope (s − mid), ±c)`` taken off the mixture (:meth:`.filter.SceneModel.
     log_score_ratio`).  The same operations in the same order: the same floats.  Returns
-    ``(code, near, wide, chained, persist, n_dup, m, grid, m_near, out, final)``: code 0 non-finite
-    particle positions (nothing after M(z) computed), 2 gate_sums' one-pass grid declined
-    (``out`` holds the density only: the caller finishes), 1 done; ``out`` (7, N_z) as
+    ``(code, near, wide, chained, persist, n_dup, m, grid, m_near, out, final)``: code 0
+    non-finite particle positions (nothing after M(z) computed), 2 gate_sums' one-pass grid
+    declined (``out`` holds the density only: the caller finishes), 1 done; ``out`` (7, N_z) as
     :func:`scene_terms`' and ``final`` the mixture minus the score ratio."""
     nz = Z.shape[0]
     r2 = par[P_R2]
