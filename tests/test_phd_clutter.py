@@ -682,11 +682,13 @@ def test_fused_scene_model_is_the_calls_one_by_one(seed, monkeypatch):
     (``SceneModel.fused``: :func:`.clutter.scene_frame`, :func:`.filter.scene_learn`) give the
     very floats and state of the calls one by one (the reference), frame after frame: people
     walking, second boxes beside some, a spot firing on and off, random clutter, scores, a
-    far box (the memory's one-pass grid declines after it: the caller finishes), a frame of
+    far box (the memory's one-pass grid declines after it: the caller finishes), unequal
+    particle weights once (equal ones pass as their one value), a frame of
     one detection (no duplicate term) and an empty one (the reference path there); and the
     fused path was taken."""
     import pfscope.trackers.phd.filter as F
     from pfscope.trackers.phd.tracker import PHD_PRACTICAL
+    from pfscope.trackers.smc.weights import ParticleSet
     from pfscope.trackers.types import Detections
 
     calls = {"frame": 0, "learn": 0}
@@ -710,6 +712,15 @@ def test_fused_scene_model_is_the_calls_one_by_one(seed, monkeypatch):
         return sums_k(*a, **kw)
 
     monkeypatch.setattr(F, "gate_sums", count_sums)
+    weights = []
+    weights_of = F._weights_of
+
+    def spy_weights(ps):
+        w = weights_of(ps)
+        weights.append(len(w) == len(ps))
+        return w
+
+    monkeypatch.setattr(F, "_weights_of", spy_weights)
     p = PHD_PRACTICAL.filter
     fused = F.PHDFilter(p, rng=np.random.default_rng(seed))
     ref = F.PHDFilter(p, rng=np.random.default_rng(seed))
@@ -725,6 +736,12 @@ def test_fused_scene_model_is_the_calls_one_by_one(seed, monkeypatch):
             extra.append(np.array([[300.0, 400.0, 25.0, 60.0]]))        # a spot
         extra.append(rng.uniform(0, 600, (3, 4)) * [1, 1, 0.1, 0.1] + [0, 0, 20, 50])
         boxes = np.vstack([boxes] + extra)
+        if k == 15:
+            # unequal weights (the kernel reads the (N,) array, not the one equal value)
+            for f in (fused, ref):
+                ps = f.particles
+                f.particles = ParticleSet(ps.states.copy(),
+                                          ps.log_weights + np.linspace(-0.1, 0.1, len(ps)))
         if k == 10:
             # clutter remembered far away: the place memory's grid is then too sparse for
             # the one-pass kernel (the GridIndex path after it)
@@ -748,3 +765,4 @@ def test_fused_scene_model_is_the_calls_one_by_one(seed, monkeypatch):
     # 21 (none)), never on the reference filter's
     assert calls["frame"] == calls["learn"] == frames - 2, calls
     assert 0 < len(declined) < calls["frame"], len(declined)
+    assert any(weights) and not all(weights), weights       # the array, and the one value

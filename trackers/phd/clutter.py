@@ -912,7 +912,8 @@ def scene_frame(states, w, Z, std, length, scores, par, m1, m2, extent, mem_z, m
     """:meth:`.filter.SceneModel.log_kappa` of the ``learn`` / ``model`` mixture after the
     chains, in one call (what were ~8 kernel and numpy calls a frame): the wide stds ``std ·``
     :data:`NEAR_SCALE` (:meth:`NearClutter.wide_std_of`), ``chained`` / ``persist`` (the chain
-    ``length`` >= 1 / >= ``par[P_PERSIST]``), :func:`neighbour_counts`' brute pass
+    ``length`` >= 1 / >= ``par[P_PERSIST]``; ``w`` the particles' weights, or their one value
+    (1,) when they are all equal), :func:`neighbour_counts`' brute pass
     (:func:`_count_two`; N_z² < BRUTE_PAIRS; a lone detection counts 0), the near-rate
     average, κ_n's M'(z) and the birth's M(z) (:func:`._kernels.mass_near_two` on
     :func:`._kernels.grid_cell`'s cells), :func:`_scene_terms` and, with ``par[P_RATIO]``, the
@@ -940,6 +941,12 @@ def scene_frame(states, w, Z, std, length, scores, par, m1, m2, extent, mem_z, m
         tot += cnt[0, j]
     a = par[P_A_NEAR]
     near = (1 - a) * par[P_NEAR] + a * (tot / nz)
+    if w.shape[0] != states.shape[0]:
+        # the predicted set's equal weights: their one value (numpy's exp) written out here
+        w0 = w[0]
+        w = np.empty(states.shape[0])
+        for i in range(states.shape[0]):
+            w[i] = w0
     cell = _kernels.grid_cell(std, r2)
     code, m, grid, m_near = _kernels.mass_near_two(states, w, Z, std, r2, cell[0], cell[1],
                                                    wide, chained)

@@ -771,7 +771,7 @@ class SceneModel:
                         self.sp.persist_frames))
         ss = self.score_sums if ratio else _NO_SUMS
         code, near, wide, chained, persist_now, n_dup, m, grid, m_near, out, final = scene_frame(
-            predicted.states, predicted.weights, Z, std, self.chains.length,
+            predicted.states, _weights_of(predicted), Z, std, self.chains.length,
             scores if ratio else _NO_SCORES, par, self.size_m1, self.size_m2, self.extent,
             place.mem_z, place.mem_w, place.mem_e, ss,
             self.persist_sums if ratio and self.persist_sums is not None else ss)
@@ -980,6 +980,17 @@ class SceneModel:
         self._parts = None
         self.frames += 1
         return True
+
+
+def _weights_of(ps: ParticleSet) -> np.ndarray:
+    """``ps.weights`` for :func:`.clutter.scene_frame`, or, where the set's weights are known
+    equal and not made yet, their one value ``np.exp(lw[:1])`` (1,) (the property's float; the
+    kernel writes the (N,) array itself)."""
+    if len(ps) > 1 and ps.is_known_equal() and "weights" not in ps.__dict__:
+        w = np.exp(ps.log_weights[:1])
+        w.setflags(write=False)         # (the property's type: one specialisation)
+        return w
+    return ps.weights
 
 
 _NO_PERSIST = np.zeros(0, dtype=np.bool_)
