@@ -262,6 +262,28 @@ def frame_rate(frame: Frame) -> Optional[float]:
     return None
 
 
+#: the association's and the step's kernels are loaded in this process (:func:`_load_kernels`)
+_kernels_loaded = False
+
+
+def _load_kernels() -> None:
+    """The association's kernels and the step's own (input centres, output boxes), called
+    once with a run's argument types on made-up data (:func:`.association.compile_step_kernels`
+    and the gap filling's IoU), in a tracker's first frame.  numba loads a cached kernel on
+    its first call (~3-5 ms each, ~35 ms for these): without this, each loads in the first
+    frame that reaches it -- a returning track, a track's first final rows, a walk back, an
+    expiry -- a hiccup of a few ms in the middle of a run.  (The app's warm-up calls them
+    already; this covers a tracker stepped without it, e.g. ``pipeline.run``.)  On a first
+    run after an install, with an empty cache, this is where they compile."""
+    global _kernels_loaded
+    from .association import OBS_INDEX, _iou, compile_step_kernels
+
+    compile_step_kernels()
+    s = np.array([[100.0, 100.0, 1.0, 0.0, 30.0, 70.0]])[:, OBS_INDEX]
+    _iou(s, s)
+    _kernels_loaded = True
+
+
 def _rows(finalised: tuple[FinalRows, ...], flagged: bool) -> Rows:
     # (the association's arrays are in TrackSet's final form already: int64 ids, float64 boxes;
     # a frame's top-left boxes and conf flags in one kernel pass, boxes_xywh's floats)
@@ -506,6 +528,8 @@ class PHDTracker(_AssociatingTracker):
     def step(self, frame: Frame, detections: Optional[Detections],
              level: Optional[str] = None) -> StepResult:
         dets = detections if detections is not None else Detections.empty()
+        if not _kernels_loaded:
+            _load_kernels()
         self._retime(frame)
         # read-only below: one conversion a frame (xywh_to_cxcywh's floats, one kernel pass)
         z = _assoc_kernels.centre_boxes(np.ascontiguousarray(dets.boxes))
