@@ -336,9 +336,19 @@ def test_edges_report_the_tails_before_the_update():
     (1, [state(1, 2), state(1, 2, h=-5.0)], "positive"),
     (1, [state(1, 2, w=0.0), state(1, 2, w=NAN)], "non-finite"),   # the finite test first
 ])
-def test_bad_input_is_rejected(frame, states, msg):
+@pytest.mark.parametrize("edges", [True, False])
+def test_bad_input_is_rejected(frame, states, msg, edges):
+    """... on both paths (edges=False: the fast path's kernel checks the values), before
+    anything changes: the same frame then steps as on a fresh associator."""
+    assoc = GraphAssociator()
+    assoc.step(0, [state(1, 2)], edges=edges)
     with pytest.raises(ValueError, match=msg):
-        GraphAssociator().step(frame, states)
+        assoc.step(frame, states, edges=edges)
+    fresh = GraphAssociator()
+    fresh.step(0, [state(1, 2)], edges=edges)
+    a, b = (x.step(frame, [state(1, 2)], edges=edges) for x in (assoc, fresh))
+    assert a.ids.tolist() == b.ids.tolist() == [1]
+    assert a.lengths.tolist() == b.lengths.tolist() == [2]
 
 
 def test_frames_must_increase():
@@ -1223,7 +1233,7 @@ def test_step_fast_path_is_the_general_one():
 
 def test_output_kernels_are_the_numpy_spelling():
     """The step's output kernels give numpy's floats: final_rows (the confirmed rows of a
-    held-back frame), track_boxes (the confirmed tracks' top-left boxes), row_boxes (a
+    held-back frame, their top-left boxes and conf), track_boxes (the confirmed tracks' top-left boxes), row_boxes (a
     finalised frame's boxes and conf) and centre_boxes (xywh_to_cxcywh)."""
     from pfscope.trackers.phd import _assoc_kernels as AK
     from pfscope.trackers.types import xywh_to_cxcywh
@@ -1238,8 +1248,10 @@ def test_output_kernels_are_the_numpy_spelling():
         extra = np.setdiff1d(np.arange(20), live)[:4].astype(np.int64)
         extra_len = rng.integers(1, 6, len(extra)).astype(np.int64)
         ok = AK.confirmed(live, live_len, extra, extra_len, ids, 3)
-        got = AK.final_rows(live, live_len, extra, extra_len, ids, st, keep, 3)
-        for g, w in zip(got, (ids[ok], st[ok], keep[ok])):
+        got = AK.final_rows(live, live_len, extra, extra_len, ids, st, keep, 3, 0.5, 1.0)
+        assert len(got) == 5
+        for g, w in zip(got, (ids[ok], st[ok], keep[ok], boxes_xywh(st[ok]).reshape(-1, 4),
+                              np.where(keep[ok], 0.5, 1.0))):
             np.testing.assert_array_equal(g, w)
             assert g.dtype == w.dtype
         tid, tb = AK.track_boxes(ids, st, keep)

@@ -600,7 +600,9 @@ def _star_pick(w0, rdeg, cdeg):
 def frame_step(live_ids, tail, tail_frame, prev, prev_frame, length, new, frame, kv, next_id,
                min_length, rows, cols, given):
     """:meth:`.association.GraphAssociator.step`'s steps 1-3 for a frame without colour
-    features or edge arrays, in one pass: no tail expires (else ``status`` 2, nothing done),
+    features or edge arrays, in one pass: the input check of ``new`` first
+    (:func:`check_states`; its code ``c`` > 0 gives ``status`` 2 + c, nothing done), no tail
+    expires (else ``status`` 2, nothing done),
     :func:`frame_edges`' admissible weights of the live tails against ``new`` (M, 6) (``kv``:
     ``kernel_args`` then ``speed_prior``; the same floats), the matching when it needs no
     assignment solver (:func:`_star_pick`: every group of admissible edges a star, the
@@ -617,6 +619,13 @@ def frame_step(live_ids, tail, tail_frame, prev, prev_frame, length, new, frame,
     M = new.shape[0]
     w0 = np.empty((0, 0), np.float64)
     if not given:
+        bad = check_states(new)
+        if bad != 0:
+            out = np.empty(3, np.int64)
+            out[0] = 2 + bad
+            out[1] = 0
+            out[2] = 0
+            return w0, out
         depth = kv[0]
         for t in range(T):
             if frame - tail_frame[t] > depth:
@@ -693,9 +702,11 @@ def frame_step(live_ids, tail, tail_frame, prev, prev_frame, length, new, frame,
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
-def final_rows(live_ids, live_len, extra_ids, extra_len, bid, bst, bfill, min_length):
+def final_rows(live_ids, live_len, extra_ids, extra_len, bid, bst, bfill, min_length,
+               gap_conf, est_conf):
     """A held-back frame's rows ``bid`` (R,), ``bst`` (R, 6), ``bfill`` (R,) of the tracks with
-    at least ``min_length`` vertices (:func:`confirmed`), as ``a[mask]`` for each."""
+    at least ``min_length`` vertices (:func:`confirmed`), as ``a[mask]`` for each, and those
+    rows' top-left boxes and tracks-file conf (:func:`row_boxes`' floats)."""
     ok = confirmed(live_ids, live_len, extra_ids, extra_len, bid, min_length)
     n = 0
     for r in range(ok.shape[0]):
@@ -704,6 +715,8 @@ def final_rows(live_ids, live_len, extra_ids, extra_len, bid, bst, bfill, min_le
     oid = np.empty(n, np.int64)
     ost = np.empty((n, bst.shape[1]), np.float64)
     ofill = np.empty(n, np.bool_)
+    box = np.empty((n, 4), np.float64)
+    conf = np.empty(n, np.float64)
     o = 0
     for r in range(ok.shape[0]):
         if ok[r]:
@@ -711,8 +724,15 @@ def final_rows(live_ids, live_len, extra_ids, extra_len, bid, bst, bfill, min_le
             for c in range(bst.shape[1]):
                 ost[o, c] = bst[r, c]
             ofill[o] = bfill[r]
+            w = bst[r, 4]
+            h = bst[r, 5]
+            box[o, 0] = bst[r, 0] - w / 2.0
+            box[o, 1] = bst[r, 1] - h / 2.0
+            box[o, 2] = w
+            box[o, 3] = h
+            conf[o] = gap_conf if bfill[r] else est_conf
             o += 1
-    return oid, ost, ofill
+    return oid, ost, ofill, box, conf
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)

@@ -287,9 +287,15 @@ def _load_kernels() -> None:
 def _rows(finalised: tuple[FinalRows, ...], flagged: bool) -> Rows:
     # (the association's arrays are in TrackSet's final form already: int64 ids, float64 boxes;
     # a frame's top-left boxes and conf flags in one kernel pass, boxes_xywh's floats)
+    # (a step's rows come with them: GraphAssociator._finish's final_rows kernel; flush's not)
     out = []
     for r in finalised:
-        boxes, conf = _assoc_kernels.row_boxes(r.states, r.filled, GAP_CONF, EST_CONF)
+        d = r.__dict__
+        boxes = d.get("_xywh")
+        if boxes is None:
+            boxes, conf = _assoc_kernels.row_boxes(r.states, r.filled, GAP_CONF, EST_CONF)
+        else:
+            conf = d["_conf"]
         out.append((r.frame, TrackSet.of(r.ids, boxes, conf if flagged else None)))
     return out
 
