@@ -560,12 +560,15 @@ class PHDTracker(_AssociatingTracker):
                 clusters, r.resampled, r.observations, up.per_det_mass, up.kappa, up.c_z,
                 self.filter.params.likelihood.p_miss, self.filter.likelihood,
                 self.filter.params, frame)
-        self._report_filter(dets, r, clusters, log)
-        return self._associate(frame, clusters.kept_centers, log, r.observations)
+        kept = clusters.kept_centers
+        self._report_filter(dets, r, clusters, log, len(kept))
+        return self._associate(frame, kept, log, r.observations)
 
     def _report_filter(self, detections: Detections, r: PHDStepResult, clusters: Clusters,
-                       log: StageLog) -> None:
-        """The filter's and K-means' stage data (arrays the step computed anyway)."""
+                       log: StageLog, n_kept: int) -> None:
+        """The filter's and K-means' stage data (arrays the step computed anyway; ``n_kept``:
+        the kept clusters, the estimates' count -- a count of the mask would be one more
+        numpy call, ~7 us a frame on a cold cache)."""
         want_p, want_c = log.wants("particles"), log.wants("clusters")
         log.stage("predict")
         if self.params.rate.camera_motion and self.scene_motion is not None:
@@ -603,7 +606,7 @@ class PHDTracker(_AssociatingTracker):
                            weights=r.resampled.weights))
 
         log.stage("cluster")
-        log.scalar("phd/clusters/kept", int(np.count_nonzero(clusters.kept)))
+        log.scalar("phd/clusters/kept", n_kept)
         if want_p:
             log.add(Points("phd/clusters/members", r.resampled.states[:, :2],
                            ids=clusters.labels, id_kind="cluster"))
