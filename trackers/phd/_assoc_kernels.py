@@ -596,6 +596,121 @@ def _star_pick(w0, rdeg, cdeg):
     return pick
 
 
+#: :func:`_group_pick`: the most matchings a group of admissible edges may have (the product
+#: of its tails' edge counts + 1) for the kernel to enumerate them; more: the solver decides
+GROUP_MAX_MATCHINGS = 4096
+#: :func:`_group_pick`: the heaviest matching of a group must beat every other by this much
+#: (relative to 1 + its weight) -- far above the solver's float error (~1e-14 on these
+#: sizes) -- else the solver decides (a tie, or so near one that float rounding could)
+GROUP_MARGIN = 1e-9
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def _group_pick(w0, rdeg):
+    """:func:`_star_pick` for any shape of small groups: the admissible edges (``w0`` != 0,
+    positive; ``rdeg`` their count per tail) split into connected groups, and each group's
+    matchings are enumerated (every tail of the group takes one of its edges or none, no
+    vertex twice).  When every group has at most :data:`GROUP_MAX_MATCHINGS` candidates and
+    its heaviest matching beats all others by :data:`GROUP_MARGIN`, that maximum-weight
+    matching is unique, so it is the assignment solver's (:func:`.association.
+    _match_admissible` keeps its positive pairs: a maximum-weight matching).  Returns ``pick``
+    (T,): each tail's vertex, −1 none; empty (T > 0): the solver is needed."""
+    T = w0.shape[0]
+    M = w0.shape[1]
+    none = np.empty(0, np.int64)
+    # groups: union-find over tails 0..T-1 and vertices T..T+M-1
+    par = np.empty(T + M, np.int64)
+    for a in range(T + M):
+        par[a] = a
+    for t in range(T):
+        for j in range(M):
+            if w0[t, j] != 0.0:
+                a = t
+                while par[a] != a:
+                    a = par[a]
+                b = T + j
+                while par[b] != b:
+                    b = par[b]
+                if a != b:
+                    par[max(a, b)] = min(a, b)
+    root = np.empty(T, np.int64)
+    for t in range(T):
+        a = t
+        while par[a] != a:
+            a = par[a]
+        root[t] = a
+    pick = np.empty(T, np.int64)
+    for t in range(T):
+        pick[t] = -1
+    done = np.zeros(T, np.bool_)
+    rows = np.empty(T, np.int64)
+    choice = np.empty(T, np.int64)
+    best_choice = np.empty(T, np.int64)
+    cand = np.empty((T, M), np.int64)
+    used = np.zeros(M, np.bool_)
+    for t0 in range(T):
+        if done[t0] or rdeg[t0] == 0:
+            continue
+        # the group's tails (in order) and their vertices
+        k = 0
+        n = 1
+        for t in range(t0, T):
+            if root[t] == root[t0] and rdeg[t] > 0:
+                done[t] = True
+                rows[k] = t
+                d = 0
+                for j in range(M):
+                    if w0[t, j] != 0.0:
+                        cand[k, d] = j
+                        d += 1
+                k += 1
+                n *= rdeg[t] + 1
+                if n > GROUP_MAX_MATCHINGS:
+                    return none
+        # every matching of the group: an odometer over each tail's choice (-1: none)
+        for i in range(k):
+            choice[i] = -1
+        best = -1.0
+        second = -1.0
+        while True:
+            ok = True
+            total = 0.0
+            for i in range(k):
+                c = choice[i]
+                if c >= 0:
+                    j = cand[i, c]
+                    if used[j]:
+                        ok = False
+                    used[j] = True
+                    total += w0[rows[i], j]
+            for i in range(k):
+                if choice[i] >= 0:
+                    used[cand[i, choice[i]]] = False
+            if ok:
+                if total > best:
+                    second = best
+                    best = total
+                    for i in range(k):
+                        best_choice[i] = choice[i]
+                elif total > second:
+                    second = total
+            i = 0
+            while i < k:
+                choice[i] += 1
+                if choice[i] < rdeg[rows[i]]:
+                    break
+                choice[i] = -1
+                i += 1
+            if i == k:
+                break
+        if not best - second > GROUP_MARGIN * (1.0 + best):
+            return none
+        for i in range(k):
+            if best_choice[i] >= 0:
+                pick[rows[i]] = cand[i, best_choice[i]]
+    return pick
+
+
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
 def frame_step(live_ids, tail, tail_frame, prev, prev_frame, length, new, frame, kv, next_id,
                min_length, rows, cols, given):
@@ -657,6 +772,9 @@ def frame_step(live_ids, tail, tail_frame, prev, prev_frame, length, new, frame,
                     rdeg[t] += 1
                     cdeg[j] += 1
         pick = _star_pick(w0, rdeg, cdeg)
+        if pick.shape[0] == 0 and T > 0:
+            # (not every group a star with a single heaviest edge: small groups enumerated)
+            pick = _group_pick(w0, rdeg)
         if pick.shape[0] == 0 and T > 0:
             out = np.empty(3, np.int64)
             out[0] = 1
