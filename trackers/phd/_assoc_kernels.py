@@ -726,8 +726,9 @@ def frame_step(live_ids, tail, tail_frame, prev, prev_frame, length, new, frame,
     admissible weights, else 0.0), nothing done; called again with the solver's ``rows``,
     ``cols`` and ``given`` true, it advances with them.  Returns ``w0`` (empty unless status
     1) and one int64 array: ``status, flags, P``, then the vertices' track ``ids`` (M,),
-    their tracks' ``lengths`` (M,) after the frame (a new track's 1) and the ``P`` matched
-    pairs' ``rows``, ``cols``.  ``flags``: 1 some tail of ``min_length`` vertices unseen at
+    their tracks' ``lengths`` (M,) after the frame (a new track's 1) and the ``rows``,
+    ``cols`` of the ``L`` matched pairs whose tail had a gap of more than one frame (gap
+    filling's edges, in pair order; ``L`` = (len − 3 − 2 M) / 2).  ``flags``: 1 some tail of ``min_length`` vertices unseen at
     ``frame`` (:func:`advance`), 2 some vertex's track has ``min_length`` vertices now, 4 some
     matched tail had a gap of more than one frame."""
     T = tail.shape[0]
@@ -794,13 +795,18 @@ def frame_step(live_ids, tail, tail_frame, prev, prev_frame, length, new, frame,
                 cols[n] = pick[t]
                 n += 1
     P = rows.shape[0]
-    out = np.empty(3 + 2 * M + 2 * P, np.int64)
-    flags = 0
+    L = 0
     for p in range(P):
         if frame - tail_frame[rows[p]] > 1:
-            flags |= 4
-        out[3 + 2 * M + p] = rows[p]
-        out[3 + 2 * M + P + p] = cols[p]
+            L += 1
+    out = np.empty(3 + 2 * M + 2 * L, np.int64)
+    flags = 4 if L else 0
+    q = 0
+    for p in range(P):
+        if frame - tail_frame[rows[p]] > 1:
+            out[3 + 2 * M + q] = rows[p]
+            out[3 + 2 * M + L + q] = cols[p]
+            q += 1
     ids, matched, unseen = advance(live_ids, tail, tail_frame, prev, prev_frame, length, new,
                                    rows, cols, frame, next_id, min_length)
     if unseen:

@@ -1130,10 +1130,10 @@ class GraphAssociator:
             self._app_n = np.concatenate([self._app_n, np.zeros(n_new)])
             self._next_id += n_new
         if p.fill_gaps and flags & 4:
-            # (a matched tail's previous frame is now in _prev_frame: its gap was frame − that)
-            rows, cols = out[3 + 2 * M:3 + 2 * M + P], out[3 + 2 * M + P:]
-            long = frame - self._prev_frame[rows] > 1
-            r, c = rows[long], cols[long]
+            # (the pairs whose tail had a gap of more than one frame, from the kernel; a
+            # matched tail's previous vertex and frame are now in _prev, _prev_frame)
+            L = (len(out) - 3 - 2 * M) // 2
+            r, c = out[3 + 2 * M:3 + 2 * M + L], out[3 + 2 * M + L:]
             self._fill_gaps(self._prev[r], self._prev_frame[r], new[c], frame, self._ids[r])
         return self._finish(frame, new, ids, lengths, bool(flags & 2), _NO_IDS, _NO_IDS,
                             detections, _NO_EDGES)
@@ -1276,7 +1276,9 @@ class GraphAssociator:
         had estimates in at least ``revive_rate`` of its frames so far (a person who was just
         missed, not clutter that fires now and then in one place)."""
         p = self.params
-        Z = np.ascontiguousarray(np.asarray(Z, dtype=np.float64).reshape(-1, 4))
+        if not (type(Z) is np.ndarray and Z.dtype == np.float64 and Z.ndim == 2
+                and Z.shape[1] == 4 and Z.flags.c_contiguous):   # (the tracker's: as is)
+            Z = np.ascontiguousarray(np.asarray(Z, dtype=np.float64).reshape(-1, 4))
         unseen, at_length = self._unseen
         if not len(self._ids) or not len(Z) or (not unseen and p.min_length >= at_length):
             return np.zeros(len(Z), dtype=bool)
