@@ -468,15 +468,18 @@ class PHDTracker(_AssociatingTracker):
         #: (preset settings, learnt values, filter settings) of the last _learn_scene
         self._scene_last: Optional[tuple] = None
 
-    def _learn_scene(self, frame: Frame, boxes: np.ndarray) -> None:
+    def _learn_scene(self, frame: Frame, xywh: np.ndarray) -> np.ndarray:
         """What the scene's detections teach the filter, on top of the preset at this frame
         rate: the likelihood width the detector's jitter calls for (``noise.learn_width``,
         :mod:`.scene_noise`) and the motion noise raised to what the scene measures
-        (``rate.learn_motion``, :mod:`.scene_motion`).  ``boxes``: the frame's detections
-        ``(cx, cy, w, h)``."""
+        (``rate.learn_motion``, :mod:`.scene_motion`).  ``xywh``: the frame's detections'
+        top-left boxes; returns their centre boxes ``(cx, cy, w, h)`` (without the jitter's
+        model, from the scene motion's kernel pass: :meth:`.SceneMotion.observe_boxes`)."""
         fp = self.active.filter
         want = fp
+        boxes = None
         if self.jitter is not None:
+            boxes = _assoc_kernels.centre_boxes(xywh)
             self.jitter.see(frame.index, boxes, fp.clutter.clutter_memory)
             width = learnt_width(fp.likelihood.sigma_obs, self.jitter.jitter,
                                  self.params.noise.learn_width)
@@ -488,7 +491,10 @@ class PHDTracker(_AssociatingTracker):
             sm.speed_var = (bp.birth_speed_std ** 2 + bp.birth_speed_mean ** 2) / 2.0
             sm.size_std = want.likelihood.sigma_obs
             sm.camera_memory = CAMERA_MEMORY_S * (self.fps or self.params.rate.fallback_fps)
-            sm.observe(boxes, frame.index)
+            if boxes is None:
+                boxes = sm.observe_boxes(xywh, frame.index)
+            else:
+                sm.observe(boxes, frame.index)
             # the residuals the likelihood explains: the learnt width's when there is one
             sm.pos_std = want.likelihood.sigma_obs * want.likelihood.sigma_obs_pos_ratio
             sv, ss = sm.sigmas()
@@ -500,13 +506,14 @@ class PHDTracker(_AssociatingTracker):
             last = self._scene_last
             if last is not None and last[0] is fp and last[1] == key \
                     and last[2] is self.filter.params:
-                return
+                return boxes
             want = replace(want, motion=replace(fp.motion, sigma_v=sv, sigma_size=ss))
         else:
             key = (want.likelihood.sigma_obs,)
         if want != self.filter.params:
             self.filter.set_params(want)
         self._scene_last = (fp, key, self.filter.params)
+        return boxes
 
     def _follow_camera(self, index: int, cam: np.ndarray) -> None:
         """The camera moved (``rate.camera_motion``; ``cam`` the similarity frame k−1 → k,
@@ -537,14 +544,17 @@ class PHDTracker(_AssociatingTracker):
         if not _kernels_loaded:
             _load_kernels()
         self._retime(frame)
-        # read-only below: one conversion a frame (xywh_to_cxcywh's floats, one kernel pass)
-        z = _assoc_kernels.centre_boxes(np.ascontiguousarray(dets.boxes))
+        # the detections' centre boxes, read-only below: one conversion a frame
+        # (xywh_to_cxcywh's floats, in a kernel pass: the scene motion's when it learns)
+        xywh = np.ascontiguousarray(dets.boxes)
         cam = None
         if self.jitter is not None or self.scene_motion is not None:
-            self._learn_scene(frame, z)
+            z = self._learn_scene(frame, xywh)
             cam = self.scene_motion.camera if self.scene_motion is not None else None
             if cam is not None:
                 self._follow_camera(frame.index, cam)
+        else:
+            z = _assoc_kernels.centre_boxes(xywh)
         log = StageLog(self.stages, level)
         self._camera = cam
         revive = None
