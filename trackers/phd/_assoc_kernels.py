@@ -728,9 +728,9 @@ def frame_step(live_ids, tail, tail_frame, prev, prev_frame, length, new, frame,
     1) and one int64 array: ``status, flags, P``, then the vertices' track ``ids`` (M,),
     their tracks' ``lengths`` (M,) after the frame (a new track's 1) and the ``rows``,
     ``cols`` of the ``L`` matched pairs whose tail had a gap of more than one frame (gap
-    filling's edges, in pair order; ``L`` = (len − 3 − 2 M) / 2).  ``flags``: 1 some tail of ``min_length`` vertices unseen at
-    ``frame`` (:func:`advance`), 2 some vertex's track has ``min_length`` vertices now, 4 some
-    matched tail had a gap of more than one frame."""
+    filling's edges, in pair order; ``L`` = (len − 3 − 2 M) / 2).  ``flags``: 1 some tail
+    of ``min_length`` vertices unseen at ``frame`` (:func:`advance`), 2 some vertex's track
+    has ``min_length`` vertices now, 4 some matched tail had a gap of more than one frame."""
     T = tail.shape[0]
     M = new.shape[0]
     w0 = np.empty((0, 0), np.float64)
