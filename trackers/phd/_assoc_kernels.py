@@ -631,8 +631,10 @@ def _group_pick(w0, rdeg):
                 b = T + j
                 while par[b] != b:
                     b = par[b]
-                if a != b:
-                    par[max(a, b)] = min(a, b)
+                if a < b:
+                    par[b] = a
+                elif b < a:
+                    par[a] = b
     root = np.empty(T, np.int64)
     for t in range(T):
         a = t
@@ -642,12 +644,17 @@ def _group_pick(w0, rdeg):
     pick = np.empty(T, np.int64)
     for t in range(T):
         pick[t] = -1
-    done = np.zeros(T, np.bool_)
+    # (np.empty and loops: no np.zeros overload to compile, as the other kernels here)
+    done = np.empty(T, np.bool_)
+    for t in range(T):
+        done[t] = False
     rows = np.empty(T, np.int64)
     choice = np.empty(T, np.int64)
     best_choice = np.empty(T, np.int64)
     cand = np.empty((T, M), np.int64)
-    used = np.zeros(M, np.bool_)
+    used = np.empty(M, np.bool_)
+    for j in range(M):
+        used[j] = False
     for t0 in range(T):
         if done[t0] or rdeg[t0] == 0:
             continue
