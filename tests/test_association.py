@@ -336,9 +336,19 @@ def test_edges_report_the_tails_before_the_update():
     (1, [state(1, 2), state(1, 2, h=-5.0)], "positive"),
     (1, [state(1, 2, w=0.0), state(1, 2, w=NAN)], "non-finite"),   # the finite test first
 ])
-def test_bad_input_is_rejected(frame, states, msg):
+@pytest.mark.parametrize("edges", [True, False])
+def test_bad_input_is_rejected(frame, states, msg, edges):
+    """... on both paths (edges=False: the fast path's kernel checks the values), before
+    anything changes: the same frame then steps as on a fresh associator."""
+    assoc = GraphAssociator()
+    assoc.step(0, [state(1, 2)], edges=edges)
     with pytest.raises(ValueError, match=msg):
-        GraphAssociator().step(frame, states)
+        assoc.step(frame, states, edges=edges)
+    fresh = GraphAssociator()
+    fresh.step(0, [state(1, 2)], edges=edges)
+    a, b = (x.step(frame, [state(1, 2)], edges=edges) for x in (assoc, fresh))
+    assert a.ids.tolist() == b.ids.tolist() == [1]
+    assert a.lengths.tolist() == b.lengths.tolist() == [2]
 
 
 def test_frames_must_increase():
@@ -1223,7 +1233,7 @@ def test_step_fast_path_is_the_general_one():
 
 def test_output_kernels_are_the_numpy_spelling():
     """The step's output kernels give numpy's floats: final_rows (the confirmed rows of a
-    held-back frame), track_boxes (the confirmed tracks' top-left boxes), row_boxes (a
+    held-back frame, their top-left boxes and conf), track_boxes (the confirmed tracks' top-left boxes), row_boxes (a
     finalised frame's boxes and conf) and centre_boxes (xywh_to_cxcywh)."""
     from pfscope.trackers.phd import _assoc_kernels as AK
     from pfscope.trackers.types import xywh_to_cxcywh
@@ -1238,8 +1248,10 @@ def test_output_kernels_are_the_numpy_spelling():
         extra = np.setdiff1d(np.arange(20), live)[:4].astype(np.int64)
         extra_len = rng.integers(1, 6, len(extra)).astype(np.int64)
         ok = AK.confirmed(live, live_len, extra, extra_len, ids, 3)
-        got = AK.final_rows(live, live_len, extra, extra_len, ids, st, keep, 3)
-        for g, w in zip(got, (ids[ok], st[ok], keep[ok])):
+        got = AK.final_rows(live, live_len, extra, extra_len, ids, st, keep, 3, 0.5, 1.0)
+        assert len(got) == 5
+        for g, w in zip(got, (ids[ok], st[ok], keep[ok], boxes_xywh(st[ok]).reshape(-1, 4),
+                              np.where(keep[ok], 0.5, 1.0))):
             np.testing.assert_array_equal(g, w)
             assert g.dtype == w.dtype
         tid, tb = AK.track_boxes(ids, st, keep)
@@ -1280,3 +1292,46 @@ def test_general_step_advances_with_one_kernel_specialisation(monkeypatch):
     for k, s in enumerate(_walker_frames(rng, 20, 4, 120.0), start=1):
         g.step(k, s, detections=s[:, [0, 1, 4, 5]], edges=True)
     assert len(seen) == 20 and all(seen), seen
+
+
+def test_group_pick_is_the_solvers_matching():
+    """The fast path's matching of small groups that are not stars (_group_pick: every
+    matching of each connected group enumerated) is the assignment solver's
+    (_match_admissible) whenever it answers; ties and near-ties (within float rounding of
+    the solver) are left to the solver, as are groups with too many matchings."""
+    from pfscope.trackers.phd import _assoc_kernels as AK
+    from pfscope.trackers.phd.association import _match_admissible
+
+    rng = np.random.default_rng(5)
+    answered = declined = 0
+    for trial in range(3000):
+        T, M = rng.integers(1, 7, 2)
+        w0 = np.where(rng.random((T, M)) < rng.uniform(0.2, 0.7),
+                      rng.uniform(0.01, 20.0, (T, M)), 0.0)
+        kind = trial % 4
+        nz = np.flatnonzero(w0)
+        if kind == 1 and len(nz) > 1:      # an exact tie between two edges
+            a, b = rng.choice(nz, 2, replace=False)
+            w0.flat[b] = w0.flat[a]
+        elif kind == 2 and len(nz) > 1:    # a near-tie (within rounding)
+            a, b = rng.choice(nz, 2, replace=False)
+            w0.flat[b] = w0.flat[a] * (1.0 + 1e-14)
+        elif kind == 3 and T >= 2 and M >= 2:   # two sums equal: w00 + w11 == w01 + w10
+            w0[:2, :2] = [[1.0, 2.0], [3.0, 4.0]]
+        rdeg = np.count_nonzero(w0, axis=1).astype(np.int64)
+        pick = AK._group_pick(w0, rdeg)
+        if not len(pick):
+            declined += 1
+            continue
+        answered += 1
+        rows, cols = _match_admissible(w0, int(np.count_nonzero(w0)))
+        want = np.full(T, -1)
+        want[rows] = cols
+        np.testing.assert_array_equal(pick, want, f"trial {trial}")
+    assert answered > 1500 and declined > 100, (answered, declined)
+    # a tie the solver decides: two matchings of equal weight
+    w0 = np.array([[1.0, 2.0], [3.0, 4.0]])
+    assert len(AK._group_pick(w0, np.array([2, 2]))) == 0
+    # more matchings than GROUP_MAX_MATCHINGS: the solver
+    w0 = np.ones((7, 7)) + np.arange(49).reshape(7, 7) * 1e-3
+    assert len(AK._group_pick(w0, np.full(7, 7))) == 0

@@ -396,3 +396,45 @@ def test_observe_kernel_pass_is_its_parts_bit_for_bit(seed):
         assert got == (parts.sigma_v(), parts.sigma_size()) or np.isnan(got).any(), k
         assert got == (fused.sigma_v(), fused.sigma_size()) or np.isnan(got).any(), k
     assert moved > 50 and consistent > 5 and flushed > 50 and fused.sigma_v() is not None
+
+
+def test_observe_boxes_is_observe_of_the_centre_boxes():
+    """SceneMotion.observe_boxes (the tracker's: top-left boxes in, their centre boxes
+    computed in the same kernel pass and returned) gives xywh_to_cxcywh's floats and leaves
+    every state as observe of those centre boxes does -- also on a frame its Chains has seen
+    (the piece-by-piece form)."""
+    from pfscope.trackers.phd import scene_motion as S
+    from pfscope.trackers.types import xywh_to_cxcywh
+
+    rng = np.random.default_rng(7)
+    a, b = S.SceneMotion(0.075, camera=True), S.SceneMotion(0.075, camera=True)
+    pos = rng.uniform([100, 100], [900, 300], (6, 2))
+    size = np.c_[rng.uniform(20, 40, 6), rng.uniform(60, 110, 6)]
+    for k in range(150):
+        burst = (k // 30) % 2 == 1
+        pos = pos + rng.normal(0, 1.5, pos.shape) + (12.0 if burst else 0.0)
+        keep = rng.random(6) < 0.85
+        B = np.c_[pos + rng.normal(0, 1, pos.shape), size * (1 + rng.normal(0, 0.03, size.shape))]
+        B = np.vstack([B[keep], np.c_[rng.uniform(0, 1000, (2, 2)), rng.uniform(15, 100, (2, 2))]])
+        if k % 47 == 20:
+            B = B[:0]
+        for sm in (a, b):
+            sm.speed_var = 0.02
+            sm.camera_memory = 10.0
+        Z = xywh_to_cxcywh(B)
+        a.observe(Z, k)
+        z = b.observe_boxes(np.ascontiguousarray(B), k)
+        np.testing.assert_array_equal(z, Z)
+        if k % 10 == 3:     # the same frame again (a second reader: the parts)
+            a.observe(Z, k)
+            np.testing.assert_array_equal(b.observe_boxes(np.ascontiguousarray(B), k), Z)
+        np.testing.assert_array_equal(a._F, b._F)
+        np.testing.assert_array_equal(a._I, b._I)
+        np.testing.assert_array_equal(a.chains.prev, b.chains.prev)
+        np.testing.assert_array_equal(a.chains.prev_link, b.chains.prev_link)
+        np.testing.assert_array_equal(a.chains.length, b.chains.length)
+        assert (a.camera is None) == (b.camera is None)
+        if a.camera is not None:
+            np.testing.assert_array_equal(a.camera, b.camera)
+        assert a.sigmas() == b.sigmas()
+    assert a.sigma_v() is not None

@@ -183,3 +183,24 @@ def test_appearance_reads_real_pixels_only():
     assert all(f is None for f in seen) and area == 240 * 320
     seen, _ = features_seen(img, **{"assoc.app_weight": "0"})
     assert all(f is None for f in seen)
+
+
+def test_first_step_loads_the_association_kernels(monkeypatch):
+    """A PHD-MT tracker's first frame loads the association's kernels (compile_step_kernels
+    and the IoU of gap filling) once per process, so none loads -- a few ms each -- in a
+    later frame of a run stepped without the app's warm-up; later frames and trackers do not
+    call it again."""
+    from pfscope.trackers.phd import association as A
+    from pfscope.trackers.phd import tracker as TR
+    from pfscope.trackers.types import Frame, blank_image
+
+    calls = []
+    orig = A.compile_step_kernels
+    monkeypatch.setattr(A, "compile_step_kernels", lambda *a: calls.append(a) or orig(*a))
+    monkeypatch.setattr(TR, "_kernels_loaded", False)
+    image = blank_image(120, 160)
+    for _ in range(2):
+        tr = make_tracker("phd", 0, preset="practical")
+        for k in (1, 2):
+            tr.step(Frame(k, (k - 1) / 25.0, image), None)
+    assert len(calls) == 1 and TR._kernels_loaded

@@ -362,9 +362,9 @@ def test_first_run_compiles_each_kernel_once_in_one_process(tmp_path):
     # ... and, in the warm-up's tracker frames, the scene motion's one pass a frame (links,
     # camera fit, triplets, spreads: _observe; the helper's one filter step reaches none of
     # it) and its robust spreads (the warm-up calls them: four frames do not fill the rings)
-    # (the association's frame_step compiles advance inside it, final_rows the confirmed
-    # test; frame_edges is the general path's: colour cue, edge data)
-    assert sorted(top) == ["_observe", "_robust_stds", "centre_boxes", "check_states",
+    # (the association's frame_step compiles advance and the input check inside it,
+    # final_rows the confirmed test; frame_edges is the general path's: colour cue, edge data)
+    assert sorted(top) == ["_observe", "_robust_stds", "centre_boxes",
                            "edge_scores", "fill_rows", "final_rows", "frame_edges",
                            "frame_step", "gap_rows",
                            "head_pick", "mass_near_kernel", "peaks",

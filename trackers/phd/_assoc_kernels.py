@@ -596,11 +596,135 @@ def _star_pick(w0, rdeg, cdeg):
     return pick
 
 
+#: :func:`_group_pick`: the most matchings a group of admissible edges may have (the product
+#: of its tails' edge counts + 1) for the kernel to enumerate them; more: the solver decides
+GROUP_MAX_MATCHINGS = 4096
+#: :func:`_group_pick`: the heaviest matching of a group must beat every other by this much
+#: (relative to 1 + its weight) -- far above the solver's float error (~1e-14 on these
+#: sizes) -- else the solver decides (a tie, or so near one that float rounding could)
+GROUP_MARGIN = 1e-9
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def _group_pick(w0, rdeg):
+    """:func:`_star_pick` for any shape of small groups: the admissible edges (``w0`` != 0,
+    positive; ``rdeg`` their count per tail) split into connected groups, and each group's
+    matchings are enumerated (every tail of the group takes one of its edges or none, no
+    vertex twice).  When every group has at most :data:`GROUP_MAX_MATCHINGS` candidates and
+    its heaviest matching beats all others by :data:`GROUP_MARGIN`, that maximum-weight
+    matching is unique, so it is the assignment solver's (:func:`.association.
+    _match_admissible` keeps its positive pairs: a maximum-weight matching).  Returns ``pick``
+    (T,): each tail's vertex, −1 none; empty (T > 0): the solver is needed."""
+    T = w0.shape[0]
+    M = w0.shape[1]
+    none = np.empty(0, np.int64)
+    # groups: union-find over tails 0..T-1 and vertices T..T+M-1
+    par = np.empty(T + M, np.int64)
+    for a in range(T + M):
+        par[a] = a
+    for t in range(T):
+        for j in range(M):
+            if w0[t, j] != 0.0:
+                a = t
+                while par[a] != a:
+                    a = par[a]
+                b = T + j
+                while par[b] != b:
+                    b = par[b]
+                if a < b:
+                    par[b] = a
+                elif b < a:
+                    par[a] = b
+    root = np.empty(T, np.int64)
+    for t in range(T):
+        a = t
+        while par[a] != a:
+            a = par[a]
+        root[t] = a
+    pick = np.empty(T, np.int64)
+    for t in range(T):
+        pick[t] = -1
+    # (np.empty and loops: no np.zeros overload to compile, as the other kernels here)
+    done = np.empty(T, np.bool_)
+    for t in range(T):
+        done[t] = False
+    rows = np.empty(T, np.int64)
+    choice = np.empty(T, np.int64)
+    best_choice = np.empty(T, np.int64)
+    cand = np.empty((T, M), np.int64)
+    used = np.empty(M, np.bool_)
+    for j in range(M):
+        used[j] = False
+    for t0 in range(T):
+        if done[t0] or rdeg[t0] == 0:
+            continue
+        # the group's tails (in order) and their vertices
+        k = 0
+        n = 1
+        for t in range(t0, T):
+            if root[t] == root[t0] and rdeg[t] > 0:
+                done[t] = True
+                rows[k] = t
+                d = 0
+                for j in range(M):
+                    if w0[t, j] != 0.0:
+                        cand[k, d] = j
+                        d += 1
+                k += 1
+                n *= rdeg[t] + 1
+                if n > GROUP_MAX_MATCHINGS:
+                    return none
+        # every matching of the group: an odometer over each tail's choice (-1: none)
+        for i in range(k):
+            choice[i] = -1
+        best = -1.0
+        second = -1.0
+        while True:
+            ok = True
+            total = 0.0
+            for i in range(k):
+                c = choice[i]
+                if c >= 0:
+                    j = cand[i, c]
+                    if used[j]:
+                        ok = False
+                    used[j] = True
+                    total += w0[rows[i], j]
+            for i in range(k):
+                if choice[i] >= 0:
+                    used[cand[i, choice[i]]] = False
+            if ok:
+                if total > best:
+                    second = best
+                    best = total
+                    for i in range(k):
+                        best_choice[i] = choice[i]
+                elif total > second:
+                    second = total
+            i = 0
+            while i < k:
+                choice[i] += 1
+                if choice[i] < rdeg[rows[i]]:
+                    break
+                choice[i] = -1
+                i += 1
+            if i == k:
+                break
+        if not best - second > GROUP_MARGIN * (1.0 + best):
+            return none
+        for i in range(k):
+            if best_choice[i] >= 0:
+                pick[rows[i]] = cand[i, best_choice[i]]
+    return pick
+
+
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
 def frame_step(live_ids, tail, tail_frame, prev, prev_frame, length, new, frame, kv, next_id,
                min_length, rows, cols, given):
     """:meth:`.association.GraphAssociator.step`'s steps 1-3 for a frame without colour
-    features or edge arrays, in one pass: no tail expires (else ``status`` 2, nothing done),
+    features or edge arrays, in one pass: the input check of ``new`` first
+    (:func:`check_states`; its code ``c`` > 0 gives ``status`` 2 + c, nothing done), no tail
+    expires (else ``status`` 2, nothing done),
     :func:`frame_edges`' admissible weights of the live tails against ``new`` (M, 6) (``kv``:
     ``kernel_args`` then ``speed_prior``; the same floats), the matching when it needs no
     assignment solver (:func:`_star_pick`: every group of admissible edges a star, the
@@ -609,14 +733,22 @@ def frame_step(live_ids, tail, tail_frame, prev, prev_frame, length, new, frame,
     admissible weights, else 0.0), nothing done; called again with the solver's ``rows``,
     ``cols`` and ``given`` true, it advances with them.  Returns ``w0`` (empty unless status
     1) and one int64 array: ``status, flags, P``, then the vertices' track ``ids`` (M,),
-    their tracks' ``lengths`` (M,) after the frame (a new track's 1) and the ``P`` matched
-    pairs' ``rows``, ``cols``.  ``flags``: 1 some tail of ``min_length`` vertices unseen at
-    ``frame`` (:func:`advance`), 2 some vertex's track has ``min_length`` vertices now, 4 some
-    matched tail had a gap of more than one frame."""
+    their tracks' ``lengths`` (M,) after the frame (a new track's 1) and the ``rows``,
+    ``cols`` of the ``L`` matched pairs whose tail had a gap of more than one frame (gap
+    filling's edges, in pair order; ``L`` = (len − 3 − 2 M) / 2).  ``flags``: 1 some tail
+    of ``min_length`` vertices unseen at ``frame`` (:func:`advance`), 2 some vertex's track
+    has ``min_length`` vertices now, 4 some matched tail had a gap of more than one frame."""
     T = tail.shape[0]
     M = new.shape[0]
     w0 = np.empty((0, 0), np.float64)
     if not given:
+        bad = check_states(new)
+        if bad != 0:
+            out = np.empty(3, np.int64)
+            out[0] = 2 + bad
+            out[1] = 0
+            out[2] = 0
+            return w0, out
         depth = kv[0]
         for t in range(T):
             if frame - tail_frame[t] > depth:
@@ -649,6 +781,9 @@ def frame_step(live_ids, tail, tail_frame, prev, prev_frame, length, new, frame,
                     cdeg[j] += 1
         pick = _star_pick(w0, rdeg, cdeg)
         if pick.shape[0] == 0 and T > 0:
+            # (not every group a star with a single heaviest edge: small groups enumerated)
+            pick = _group_pick(w0, rdeg)
+        if pick.shape[0] == 0 and T > 0:
             out = np.empty(3, np.int64)
             out[0] = 1
             out[1] = 0
@@ -667,13 +802,18 @@ def frame_step(live_ids, tail, tail_frame, prev, prev_frame, length, new, frame,
                 cols[n] = pick[t]
                 n += 1
     P = rows.shape[0]
-    out = np.empty(3 + 2 * M + 2 * P, np.int64)
-    flags = 0
+    L = 0
     for p in range(P):
         if frame - tail_frame[rows[p]] > 1:
-            flags |= 4
-        out[3 + 2 * M + p] = rows[p]
-        out[3 + 2 * M + P + p] = cols[p]
+            L += 1
+    out = np.empty(3 + 2 * M + 2 * L, np.int64)
+    flags = 4 if L else 0
+    q = 0
+    for p in range(P):
+        if frame - tail_frame[rows[p]] > 1:
+            out[3 + 2 * M + q] = rows[p]
+            out[3 + 2 * M + L + q] = cols[p]
+            q += 1
     ids, matched, unseen = advance(live_ids, tail, tail_frame, prev, prev_frame, length, new,
                                    rows, cols, frame, next_id, min_length)
     if unseen:
@@ -693,9 +833,11 @@ def frame_step(live_ids, tail, tail_frame, prev, prev_frame, length, new, frame,
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
-def final_rows(live_ids, live_len, extra_ids, extra_len, bid, bst, bfill, min_length):
+def final_rows(live_ids, live_len, extra_ids, extra_len, bid, bst, bfill, min_length,
+               gap_conf, est_conf):
     """A held-back frame's rows ``bid`` (R,), ``bst`` (R, 6), ``bfill`` (R,) of the tracks with
-    at least ``min_length`` vertices (:func:`confirmed`), as ``a[mask]`` for each."""
+    at least ``min_length`` vertices (:func:`confirmed`), as ``a[mask]`` for each, and those
+    rows' top-left boxes and tracks-file conf (:func:`row_boxes`' floats)."""
     ok = confirmed(live_ids, live_len, extra_ids, extra_len, bid, min_length)
     n = 0
     for r in range(ok.shape[0]):
@@ -704,6 +846,8 @@ def final_rows(live_ids, live_len, extra_ids, extra_len, bid, bst, bfill, min_le
     oid = np.empty(n, np.int64)
     ost = np.empty((n, bst.shape[1]), np.float64)
     ofill = np.empty(n, np.bool_)
+    box = np.empty((n, 4), np.float64)
+    conf = np.empty(n, np.float64)
     o = 0
     for r in range(ok.shape[0]):
         if ok[r]:
@@ -711,8 +855,15 @@ def final_rows(live_ids, live_len, extra_ids, extra_len, bid, bst, bfill, min_le
             for c in range(bst.shape[1]):
                 ost[o, c] = bst[r, c]
             ofill[o] = bfill[r]
+            w = bst[r, 4]
+            h = bst[r, 5]
+            box[o, 0] = bst[r, 0] - w / 2.0
+            box[o, 1] = bst[r, 1] - h / 2.0
+            box[o, 2] = w
+            box[o, 3] = h
+            conf[o] = gap_conf if bfill[r] else est_conf
             o += 1
-    return oid, ost, ofill
+    return oid, ost, ofill, box, conf
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)

@@ -893,7 +893,10 @@ class GraphAssociator:
         return out
 
     # ---- input checking
-    def _check(self, frame, states) -> np.ndarray:
+    def _check(self, frame, states, values: bool = True) -> np.ndarray:
+        """``states`` as a C-contiguous (M, 6) float64 array after the frame number's and the
+        shape's checks; ``values``: also the positions' and sizes' (else the caller's, as
+        :func:`._assoc_kernels.frame_step`'s status 3 and 4: :meth:`_bad_values`)."""
         if int(frame) != frame:
             raise ValueError(f"frame {frame!r}: frame numbers must be integers")
         if self._last_frame is not None and frame <= self._last_frame:
@@ -904,12 +907,17 @@ class GraphAssociator:
         if s.ndim != 2 or s.shape[1] != STATE_DIM:
             raise ValueError(f"frame {frame}: expected states of shape (M, 6), got {s.shape}")
         s = np.ascontiguousarray(s)
-        bad = _assoc_kernels.check_states(s)    # (one pass: ~10 small numpy calls' time)
+        if values:
+            self._bad_values(frame, _assoc_kernels.check_states(s))  # (one pass)
+        return s
+
+    @staticmethod
+    def _bad_values(frame, bad: int) -> None:
+        """Raise for :func:`._assoc_kernels.check_states`' code ``bad`` (0: nothing)."""
         if bad == 1:
             raise ValueError(f"frame {frame}: non-finite position or size in the estimates")
         if bad == 2:
             raise ValueError(f"frame {frame}: estimates need positive width and height")
-        return s
 
     def _check_features(self, features, M: int) -> np.ndarray:
         f = np.asarray(features, dtype=np.float64)
@@ -951,18 +959,24 @@ class GraphAssociator:
         ``extend_heads`` (PHD-MT, whose estimates are not the detections).  ``edges=False``:
         the result's edge arrays are left empty (a caller that does not show them saves
         building them; the tracks are the same)."""
-        new = self._check(frame, states)
+        p = self.params
+        use_app = features is not None and p.app_weight > 0
+        fast = not (use_app or edges)
+        # (the fast path's kernel checks the values itself, before it changes anything)
+        new = self._check(frame, states, values=not fast)
+        M = len(new)
+        if fast:
+            if len(self._ids) * M <= DENSE_MAX_PAIRS:
+                # no colour features and no edge arrays (the unrecorded run): steps 1-3 in one
+                # kernel pass (the same floats and pairs) unless a tail expires
+                res = self._step_fast(int(frame), new, detections)
+                self._last_frame = int(frame)
+                if res is not None:
+                    return res
+            else:
+                self._bad_values(frame, _assoc_kernels.check_states(new))
         frame = int(frame)
         self._last_frame = frame
-        p = self.params
-        M = len(new)
-        use_app = features is not None and p.app_weight > 0
-        if not (use_app or edges) and len(self._ids) * M <= DENSE_MAX_PAIRS:
-            # no colour features and no edge arrays (the unrecorded run): steps 1-3 in one
-            # kernel pass (the same floats and pairs) unless a tail expires
-            res = self._step_fast(frame, new, detections)
-            if res is not None:
-                return res
 
         # 1. forget tails older than K frames: their tracks end (bounded memory)
         gaps = frame - self._tail_frame
@@ -1095,7 +1109,8 @@ class GraphAssociator:
                 self._length, new, frame, kv, self._next_id, min_length)
         w0, out = _assoc_kernels.frame_step(*args, _NO_IDS, _NO_IDS, False)
         status, flags, P = out[:3].tolist()
-        if status == 2:
+        if status >= 2:
+            self._bad_values(frame, status - 2)     # (3, 4: the values' check; 2: none)
             return None
         if status == 1:
             # (the assignment solver on the admissible weights, then the advance)
@@ -1115,10 +1130,10 @@ class GraphAssociator:
             self._app_n = np.concatenate([self._app_n, np.zeros(n_new)])
             self._next_id += n_new
         if p.fill_gaps and flags & 4:
-            # (a matched tail's previous frame is now in _prev_frame: its gap was frame − that)
-            rows, cols = out[3 + 2 * M:3 + 2 * M + P], out[3 + 2 * M + P:]
-            long = frame - self._prev_frame[rows] > 1
-            r, c = rows[long], cols[long]
+            # (the pairs whose tail had a gap of more than one frame, from the kernel; a
+            # matched tail's previous vertex and frame are now in _prev, _prev_frame)
+            L = (len(out) - 3 - 2 * M) // 2
+            r, c = out[3 + 2 * M:3 + 2 * M + L], out[3 + 2 * M + L:]
             self._fill_gaps(self._prev[r], self._prev_frame[r], new[c], frame, self._ids[r])
         return self._finish(frame, new, ids, lengths, bool(flags & 2), _NO_IDS, _NO_IDS,
                             detections, _NO_EDGES)
@@ -1167,10 +1182,12 @@ class GraphAssociator:
                 self._dets.popleft()
             f, bid, bst, bfill = self._buffer.popleft()
             # (the confirmed test and the three masks in one kernel pass)
-            fid, fst, ffill = _assoc_kernels.final_rows(self._ids, self._length, ended_ids,
-                                                        ended_len, bid, bst, bfill,
-                                                        int(p.min_length))
-            finalised.append(_made(FinalRows, frame=f, ids=fid, states=fst, filled=ffill))
+            # (and their top-left boxes and conf, the tracker's rows: row_boxes' floats)
+            fid, fst, ffill, box, conf = _assoc_kernels.final_rows(
+                self._ids, self._length, ended_ids, ended_len, bid, bst, bfill,
+                int(p.min_length), GAP_CONF, EST_CONF)
+            finalised.append(_made(FinalRows, frame=f, ids=fid, states=fst, filled=ffill,
+                                   _xywh=box, _conf=conf))
 
         return _made(AssocResult, frame=frame, states=new, ids=ids, lengths=lengths,
                      confirmed=confirmed, ended=ended_ids, finalised=tuple(finalised),
@@ -1259,7 +1276,9 @@ class GraphAssociator:
         had estimates in at least ``revive_rate`` of its frames so far (a person who was just
         missed, not clutter that fires now and then in one place)."""
         p = self.params
-        Z = np.ascontiguousarray(np.asarray(Z, dtype=np.float64).reshape(-1, 4))
+        if not (type(Z) is np.ndarray and Z.dtype == np.float64 and Z.ndim == 2
+                and Z.shape[1] == 4 and Z.flags.c_contiguous):   # (the tracker's: as is)
+            Z = np.ascontiguousarray(np.asarray(Z, dtype=np.float64).reshape(-1, 4))
         unseen, at_length = self._unseen
         if not len(self._ids) or not len(Z) or (not unseen and p.min_length >= at_length):
             return np.zeros(len(Z), dtype=bool)

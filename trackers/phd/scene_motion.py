@@ -350,9 +350,11 @@ _I_LEN = _I_PFLAG + PENDING
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
-def _observe(Z, prev, pp, prev_link, prev_length, F, I, a_n, s_n, camera, base, speed_var,
-             memory, since0):
-    """:meth:`SceneMotion.observe`'s per-frame work in one pass, the same floats as its parts
+def _observe(B, xywh, prev, pp, prev_link, prev_length, F, I, a_n, s_n, camera, base,
+             speed_var, memory, since0):
+    """:meth:`SceneMotion.observe`'s per-frame work in one pass on the detections ``Z`` =
+    ``B`` (``xywh`` false) or the centre boxes of the top-left boxes ``B`` (``xywh``:
+    :meth:`SceneMotion.observe_boxes`, ``xywh_to_cxcywh``'s floats), the same floats as its parts
     (kept as the reference, :meth:`SceneMotion._observe_parts`: :func:`_links`,
     :meth:`.camera_motion.CameraMotion.step`, :func:`_triplets`, :meth:`_Ring.spreads`):
     this frame's links into ``prev`` and chain lengths (from ``prev_length``); with
@@ -367,7 +369,18 @@ def _observe(Z, prev, pp, prev_link, prev_length, F, I, a_n, s_n, camera, base, 
     ``(links, lengths, samples into the acceleration ring, into the size ring, fit: −1 none
     tried / 0 no inlier / 1 found / 3 found, significant / 2 found, significant after a
     significant frame (H not added), spreads: 0 not computed / 1 computed / −1 a non-finite
-    value, pending updates, the four spreads)``."""
+    value, pending updates, the four spreads, Z)``."""
+    if xywh:
+        Z = np.empty((B.shape[0], 4), np.float64)
+        for a in range(B.shape[0]):
+            w = B[a, 2]
+            h = B[a, 3]
+            Z[a, 0] = B[a, 0] + w / 2.0
+            Z[a, 1] = B[a, 1] + h / 2.0
+            Z[a, 2] = w
+            Z[a, 3] = h
+    else:
+        Z = B
     nc = Z.shape[0]
     npv = prev.shape[0]
     j = np.full(nc, -1, dtype=np.int64)
@@ -430,7 +443,7 @@ def _observe(Z, prev, pp, prev_link, prev_length, F, I, a_n, s_n, camera, base, 
                                F[_F_SPREAD + 2:_F_SPREAD + 4]):
             done = -1
     return (j, length, na, ns, found, done, pend, F[_F_SPREAD], F[_F_SPREAD + 1],
-            F[_F_SPREAD + 2], F[_F_SPREAD + 3])
+            F[_F_SPREAD + 2], F[_F_SPREAD + 3], Z)
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
@@ -597,15 +610,39 @@ class SceneMotion:
         Z = np.ascontiguousarray(Z, dtype=np.float64)
         if Z.ndim != 2:
             Z = Z.reshape(-1, 4)
+        self._observe_pass(Z, False, key)
+
+    def observe_boxes(self, boxes: np.ndarray, key=None) -> np.ndarray:
+        """:meth:`observe` of the detections given as top-left boxes ``(x, y, w, h)`` (N, 4)
+        (C-contiguous float64: a frame's ``Detections.boxes``): their centre boxes
+        ``(cx, cy, w, h)`` -- ``xywh_to_cxcywh``'s floats -- are computed in the same kernel
+        call and returned (one kernel call a frame fewer for the tracker, which needs them
+        too)."""
+        ch = self.chains
+        if key is not None and key == ch.key:
+            from ._assoc_kernels import centre_boxes
+
+            Z = centre_boxes(np.ascontiguousarray(boxes, dtype=np.float64).reshape(-1, 4))
+            self._observe_parts(Z, key)
+            return Z
+        boxes = np.ascontiguousarray(boxes, dtype=np.float64)
+        if boxes.ndim != 2:
+            boxes = boxes.reshape(-1, 4)
+        return self._observe_pass(boxes, True, key)
+
+    def _observe_pass(self, B: np.ndarray, xywh: bool, key) -> np.ndarray:
+        """:func:`_observe` on ``B`` (its ``xywh``) and the state it hands back; returns the
+        frame's detections ``(cx, cy, w, h)``."""
+        ch = self.chains
         prev = ch.prev
         a, s = self.accel, self.size
         cam = self.camera_on
         c = self._camera
         memory = self.camera_memory
-        j, length, na, ns, found, done, pend, sx, sy, one, two = _observe(
-            Z, prev, self._prev_prev, ch.prev_link, ch.length, self._F, self._I, a.n, s.n, cam,
-            2.0 * (self.pos_std ** 2 + self.size_std ** 2 / 4), float(self.speed_var),
-            float(memory), c.since == 0)
+        j, length, na, ns, found, done, pend, sx, sy, one, two, Z = _observe(
+            B, xywh, prev, self._prev_prev, ch.prev_link, ch.length, self._F, self._I, a.n,
+            s.n, cam, 2.0 * (self.pos_std ** 2 + self.size_std ** 2 / 4),
+            float(self.speed_var), float(memory), c.since == 0)
         ch.key = key
         ch.prev, ch.prev_link, ch.length = Z, j, length
         a.n += na
@@ -627,6 +664,7 @@ class SceneMotion:
                 self._flush()
                 self.camera = c.level()
         self._prev_prev = prev
+        return Z
 
     def _flush(self) -> None:
         """The camera level's queued updates of ``b`` (:func:`_observe`) applied in order: their

@@ -262,12 +262,40 @@ def frame_rate(frame: Frame) -> Optional[float]:
     return None
 
 
+#: the association's and the step's kernels are loaded in this process (:func:`_load_kernels`)
+_kernels_loaded = False
+
+
+def _load_kernels() -> None:
+    """The association's kernels and the step's own (input centres, output boxes), called
+    once with a run's argument types on made-up data (:func:`.association.compile_step_kernels`
+    and the gap filling's IoU), in a tracker's first frame.  numba loads a cached kernel on
+    its first call (~3-5 ms each, ~35 ms for these): without this, each loads in the first
+    frame that reaches it -- a returning track, a track's first final rows, a walk back, an
+    expiry -- a hiccup of a few ms in the middle of a run.  (The app's warm-up calls them
+    already; this covers a tracker stepped without it, e.g. ``pipeline.run``.)  On a first
+    run after an install, with an empty cache, this is where they compile."""
+    global _kernels_loaded
+    from .association import OBS_INDEX, _iou, compile_step_kernels
+
+    compile_step_kernels()
+    s = np.array([[100.0, 100.0, 1.0, 0.0, 30.0, 70.0]])[:, OBS_INDEX]
+    _iou(s, s)
+    _kernels_loaded = True
+
+
 def _rows(finalised: tuple[FinalRows, ...], flagged: bool) -> Rows:
     # (the association's arrays are in TrackSet's final form already: int64 ids, float64 boxes;
     # a frame's top-left boxes and conf flags in one kernel pass, boxes_xywh's floats)
+    # (a step's rows come with them: GraphAssociator._finish's final_rows kernel; flush's not)
     out = []
     for r in finalised:
-        boxes, conf = _assoc_kernels.row_boxes(r.states, r.filled, GAP_CONF, EST_CONF)
+        d = r.__dict__
+        boxes = d.get("_xywh")
+        if boxes is None:
+            boxes, conf = _assoc_kernels.row_boxes(r.states, r.filled, GAP_CONF, EST_CONF)
+        else:
+            conf = d["_conf"]
         out.append((r.frame, TrackSet.of(r.ids, boxes, conf if flagged else None)))
     return out
 
@@ -440,15 +468,18 @@ class PHDTracker(_AssociatingTracker):
         #: (preset settings, learnt values, filter settings) of the last _learn_scene
         self._scene_last: Optional[tuple] = None
 
-    def _learn_scene(self, frame: Frame, boxes: np.ndarray) -> None:
+    def _learn_scene(self, frame: Frame, xywh: np.ndarray) -> np.ndarray:
         """What the scene's detections teach the filter, on top of the preset at this frame
         rate: the likelihood width the detector's jitter calls for (``noise.learn_width``,
         :mod:`.scene_noise`) and the motion noise raised to what the scene measures
-        (``rate.learn_motion``, :mod:`.scene_motion`).  ``boxes``: the frame's detections
-        ``(cx, cy, w, h)``."""
+        (``rate.learn_motion``, :mod:`.scene_motion`).  ``xywh``: the frame's detections'
+        top-left boxes; returns their centre boxes ``(cx, cy, w, h)`` (without the jitter's
+        model, from the scene motion's kernel pass: :meth:`.SceneMotion.observe_boxes`)."""
         fp = self.active.filter
         want = fp
+        boxes = None
         if self.jitter is not None:
+            boxes = _assoc_kernels.centre_boxes(xywh)
             self.jitter.see(frame.index, boxes, fp.clutter.clutter_memory)
             width = learnt_width(fp.likelihood.sigma_obs, self.jitter.jitter,
                                  self.params.noise.learn_width)
@@ -460,7 +491,10 @@ class PHDTracker(_AssociatingTracker):
             sm.speed_var = (bp.birth_speed_std ** 2 + bp.birth_speed_mean ** 2) / 2.0
             sm.size_std = want.likelihood.sigma_obs
             sm.camera_memory = CAMERA_MEMORY_S * (self.fps or self.params.rate.fallback_fps)
-            sm.observe(boxes, frame.index)
+            if boxes is None:
+                boxes = sm.observe_boxes(xywh, frame.index)
+            else:
+                sm.observe(boxes, frame.index)
             # the residuals the likelihood explains: the learnt width's when there is one
             sm.pos_std = want.likelihood.sigma_obs * want.likelihood.sigma_obs_pos_ratio
             sv, ss = sm.sigmas()
@@ -472,13 +506,14 @@ class PHDTracker(_AssociatingTracker):
             last = self._scene_last
             if last is not None and last[0] is fp and last[1] == key \
                     and last[2] is self.filter.params:
-                return
+                return boxes
             want = replace(want, motion=replace(fp.motion, sigma_v=sv, sigma_size=ss))
         else:
             key = (want.likelihood.sigma_obs,)
         if want != self.filter.params:
             self.filter.set_params(want)
         self._scene_last = (fp, key, self.filter.params)
+        return boxes
 
     def _follow_camera(self, index: int, cam: np.ndarray) -> None:
         """The camera moved (``rate.camera_motion``; ``cam`` the similarity frame k−1 → k,
@@ -506,15 +541,20 @@ class PHDTracker(_AssociatingTracker):
     def step(self, frame: Frame, detections: Optional[Detections],
              level: Optional[str] = None) -> StepResult:
         dets = detections if detections is not None else Detections.empty()
+        if not _kernels_loaded:
+            _load_kernels()
         self._retime(frame)
-        # read-only below: one conversion a frame (xywh_to_cxcywh's floats, one kernel pass)
-        z = _assoc_kernels.centre_boxes(np.ascontiguousarray(dets.boxes))
+        # the detections' centre boxes, read-only below: one conversion a frame
+        # (xywh_to_cxcywh's floats, in a kernel pass: the scene motion's when it learns)
+        xywh = np.ascontiguousarray(dets.boxes)
         cam = None
         if self.jitter is not None or self.scene_motion is not None:
-            self._learn_scene(frame, z)
+            z = self._learn_scene(frame, xywh)
             cam = self.scene_motion.camera if self.scene_motion is not None else None
             if cam is not None:
                 self._follow_camera(frame.index, cam)
+        else:
+            z = _assoc_kernels.centre_boxes(xywh)
         log = StageLog(self.stages, level)
         self._camera = cam
         revive = None
@@ -530,12 +570,15 @@ class PHDTracker(_AssociatingTracker):
                 clusters, r.resampled, r.observations, up.per_det_mass, up.kappa, up.c_z,
                 self.filter.params.likelihood.p_miss, self.filter.likelihood,
                 self.filter.params, frame)
-        self._report_filter(dets, r, clusters, log)
-        return self._associate(frame, clusters.kept_centers, log, r.observations)
+        kept = clusters.kept_centers
+        self._report_filter(dets, r, clusters, log, len(kept))
+        return self._associate(frame, kept, log, r.observations)
 
     def _report_filter(self, detections: Detections, r: PHDStepResult, clusters: Clusters,
-                       log: StageLog) -> None:
-        """The filter's and K-means' stage data (arrays the step computed anyway)."""
+                       log: StageLog, n_kept: int) -> None:
+        """The filter's and K-means' stage data (arrays the step computed anyway; ``n_kept``:
+        the kept clusters, the estimates' count -- a count of the mask would be one more
+        numpy call, ~7 us a frame on a cold cache)."""
         want_p, want_c = log.wants("particles"), log.wants("clusters")
         log.stage("predict")
         if self.params.rate.camera_motion and self.scene_motion is not None:
@@ -573,7 +616,7 @@ class PHDTracker(_AssociatingTracker):
                            weights=r.resampled.weights))
 
         log.stage("cluster")
-        log.scalar("phd/clusters/kept", int(np.count_nonzero(clusters.kept)))
+        log.scalar("phd/clusters/kept", n_kept)
         if want_p:
             log.add(Points("phd/clusters/members", r.resampled.states[:, :2],
                            ids=clusters.labels, id_kind="cluster"))
