@@ -581,6 +581,14 @@ def test_update_on_the_birth_grid_and_newborn_blocks_is_the_one_grid_update(seed
     assert (b[n:] != b[n:].min()).sum() > 100         # newborn did meet gates
     k = n + s0 + j[4] - 1                              # the straggler won at detection 5
     assert b[k] > lw[k] + np.log(0.05) + 1
+    # told that the predicted weigh the same (they do): no pass bounds their weights, and
+    # the very floats (C(z), the masses, the normalised weights the resampling walks)
+    eq = update(ps, GatedGaussian(Z, lk, r2, persistent=(n, grid, j, True)), log_kappa, 0.05)
+    np.testing.assert_array_equal(eq.particles.log_weights, a)
+    np.testing.assert_array_equal(eq.c_z, got.c_z)
+    np.testing.assert_array_equal(eq.per_det_mass, got.per_det_mass)
+    assert eq.miss_mass == got.miss_mass and eq.particles.log_mass == got.particles.log_mass
+    np.testing.assert_array_equal(eq.particles.weights, got.particles.weights)
     with pytest.raises(ValueError, match="non-finite"):   # the blocks must cover the rows
         update(ps, GatedGaussian(Z, lk, r2, persistent=(n, grid, j[:-1])), log_kappa, 0.05)
 
@@ -603,7 +611,7 @@ def test_update_kernels_log_den_is_numpys_logaddexp(p_miss):
     args = (x, lw, Z, std, log_norm)
     first = K.gauss_update_linear(*args, rng.normal(-14, 1, len(Z)), log_pd, log_pm,
                                   tail_radius2(1e-12), 30.0, 30.0, len(x), _NO_GRID,
-                                  np.empty(0, np.int64))
+                                  np.empty(0, np.int64), False)
     log_c = first[3]
     log_kappa = log_c + rng.choice([-3.0, 0.0, 2.0, -0.5], len(Z))
     log_kappa[6] = log_c[6]                            # κ = C exactly
@@ -612,7 +620,7 @@ def test_update_kernels_log_den_is_numpys_logaddexp(p_miss):
     log_kappa[3] = -13.5
     ok, done, *_, den = K.gauss_update_linear(*args, log_kappa, log_pd, log_pm,
                                               tail_radius2(1e-12), 30.0, 30.0, len(x),
-                                              _NO_GRID, np.empty(0, np.int64))
+                                              _NO_GRID, np.empty(0, np.int64), False)
     assert ok and done
     got_c = _[1]
     want = np.logaddexp(log_kappa, got_c)

@@ -1179,7 +1179,8 @@ class GatedGaussian:
     ``persistent`` = ``(n, grid, j)`` when the particles are ``n`` predicted ones followed by
     the newborn, ``j`` (N_z,) of each detection in turn, and ``grid`` is the one M(z)'s
     kernel bucketed the predicted on (:attr:`BirthResult.grid`): the update then buckets no
-    particle again (read only with per-detection stds)."""
+    particle again (read only with per-detection stds); a fourth item True says the ``n``
+    predicted weigh the same (the update then reads none of their weights to bound them)."""
 
     Z: np.ndarray
     params: LikelihoodParams
@@ -1303,14 +1304,16 @@ def _update_gaussian(particles: ParticleSet, g: GatedGaussian, log_kappa: np.nda
         log_norm = np.log(std).sum(-1)
     done = False
     if by_det:      # the linear route alone (weights within e^600: every PHD frame)
+        equal = False
         if g.persistent is not None:            # its grid is built: no cell to size
-            (n_grid, grid, j_born), cell = g.persistent, (1.0, 1.0)
+            n_grid, grid, j_born = g.persistent[:3]
+            equal, cell = len(g.persistent) > 3 and bool(g.persistent[3]), (1.0, 1.0)
         else:
             n_grid, grid, j_born, cell = n, _NO_GRID, _NO_BLOCKS, _grid_cell(std, g.r2)
         ok, done, bracket, log_c, log_mass, log_pred, lin, scale, log_den = (
             _kernels.gauss_update_linear(particles.states, lw, Z, std, log_norm, log_kappa,
                                          log_pd, log_pm, float(g.r2), cell[0], cell[1],
-                                         n_grid, grid, j_born))
+                                         n_grid, grid, j_born, equal))
     if not done:
         cell = _grid_cell(std if by_det else np.max(std[:, :2], axis=0, keepdims=True), g.r2)
         ok, new_lw, log_c, log_mass, log_pred = _kernels.gauss_update(
@@ -1585,7 +1588,8 @@ class PHDFilter:
                                         noise if _same(self.likelihood.params,
                                                        p.likelihood) else None,
                                         None if born.grid is None
-                                        else (n, born.grid, born.j_per_det))
+                                        else (n, born.grid, born.j_per_det,
+                                              predicted.is_known_equal()))
         else:
             log_g = gated_log_g(self.likelihood, candidates.states, Z, frame, p)
         updated = update(candidates, log_g, log_kappa, p.likelihood.p_miss)
