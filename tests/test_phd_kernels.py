@@ -1018,3 +1018,31 @@ def test_prepare_is_numpys_spelling_with_runs_of_equal_weights():
         np.testing.assert_array_equal(S, (states - want_shift)[starts])
         np.testing.assert_array_equal(X, (states - want_shift)[starts][:, [0, 1, 4, 5]])
         assert (trial % 2 == 0) == (len(w) == n)
+
+
+_LIBC = __import__("platform").libc_ver()[0]
+
+
+@pytest.mark.skipif(_LIBC != "glibc", reason="the C library's exp is glibc's here")
+def test_inline_exp_is_the_c_librarys_in_the_gate():
+    """The update's inline exp (:func:`_kernels._exp_gate`) gives libm's ``exp`` (what
+    ``math.exp`` calls in a kernel) bit for bit on the gate's arguments -r2/2 <= x <= 0: a
+    spread of them, both ends, zero, the tiny ones (1 + x) and the table's break points.
+    (glibc >= 2.28 with FMA; a CPU without FMA runs the C library's other build, which this
+    test would catch.)"""
+    from numba import njit
+
+    @njit(cache=False)
+    def many(x, out):
+        for i in range(x.shape[0]):
+            out[i] = K._exp_gate(x[i])
+
+    rng = np.random.default_rng(0)
+    x = np.concatenate([-rng.random(400_000) * 40.0, -np.exp(rng.uniform(-50, 6, 100_000)),
+                        -np.arange(0, 40 * 128) / 128.0, -np.arange(1, 40 * 128) / 128.0 + 1e-17,
+                        [0.0, -0.0, -2.0 ** -54, -2.0 ** -55, -5e-324, -K.EXP_GATE_MAX + 1e-9, -500.0]])
+    got = np.empty_like(x)
+    many(x, got)
+    want = libm.exp(x)
+    bad = np.flatnonzero(got.view(np.int64) != want.view(np.int64))
+    assert len(bad) == 0, (x[bad[:5]], got[bad[:5]], want[bad[:5]])
