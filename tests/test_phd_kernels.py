@@ -538,6 +538,14 @@ def test_updated_log_weights_made_on_read_are_the_kernels(p_miss):
     for _ in range(3):
         r = f.step(Z)
     assert "_log_weights" not in r.updated.particles.__dict__       # a step reads none
+    # ... nor C(z) and κ (made on their first read: numpy's exp of the logs)
+    assert "c_z" not in r.updated.__dict__ and "kappa" not in r.updated.__dict__
+    c_z, kappa = r.updated.c_z, r.updated.kappa
+    assert r.updated.c_z is c_z and r.updated.kappa is kappa and len(kappa) == len(Z)
+    assert np.all(c_z >= 0) and c_z.max() > 0 and np.all(kappa >= 0)
+    ok = kappa + c_z > 0
+    np.testing.assert_allclose(r.updated.per_det_mass[ok], (c_z / (kappa + c_z))[ok],
+                               rtol=1e-12)
     np.testing.assert_array_equal(np.exp(r.updated.particles.log_weights),
                                   r.updated.particles.weights)
 
