@@ -827,23 +827,9 @@ def _lse_add(m, s, a):
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
       no_cpython_wrapper=True)
-def _gate_d2_at(states, i, z0, z1, z2, z3, a0, a1, a2, a3, r2):
-    """:func:`_gate_d2_inv` of one detection ``z`` with inverse stds ``a`` (the same floats)."""
-    q0 = (states[i, 0] - z0) * a0
-    q1 = (states[i, 1] - z1) * a1
-    d2 = q0 * q0 + q1 * q1
-    if not d2 <= r2:
-        return np.inf
-    q2 = (states[i, 4] - z2) * a2
-    q3 = (states[i, 5] - z3) * a3
-    d2 = d2 + q2 * q2 + q3 * q3
-    return d2 if d2 <= r2 else np.inf
-
-
-@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
-      no_cpython_wrapper=True)
 def _d2_at(states, i, z0, z1, z2, z3, a0, a1, a2, a3):
-    """:func:`_gate_d2_at`'s sum without its tests: ``((q0² + q1²) + q2²) + q3²``."""
+    """:func:`_gate_d2_inv`'s sum of one detection ``z`` (inverse stds ``a``) without its
+    tests: ``((q0² + q1²) + q2²) + q3²``, the same float."""
     q0 = (states[i, 0] - z0) * a0
     q1 = (states[i, 1] - z1) * a1
     q2 = (states[i, 4] - z2) * a2
