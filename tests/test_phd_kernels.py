@@ -538,6 +538,14 @@ def test_updated_log_weights_made_on_read_are_the_kernels(p_miss):
     for _ in range(3):
         r = f.step(Z)
     assert "_log_weights" not in r.updated.particles.__dict__       # a step reads none
+    # ... nor C(z) and κ (made on their first read: numpy's exp of the logs)
+    assert "c_z" not in r.updated.__dict__ and "kappa" not in r.updated.__dict__
+    c_z, kappa = r.updated.c_z, r.updated.kappa
+    assert r.updated.c_z is c_z and r.updated.kappa is kappa and len(kappa) == len(Z)
+    assert np.all(c_z >= 0) and c_z.max() > 0 and np.all(kappa >= 0)
+    ok = kappa + c_z > 0
+    np.testing.assert_allclose(r.updated.per_det_mass[ok], (c_z / (kappa + c_z))[ok],
+                               rtol=1e-12)
     np.testing.assert_array_equal(np.exp(r.updated.particles.log_weights),
                                   r.updated.particles.weights)
 
@@ -581,6 +589,14 @@ def test_update_on_the_birth_grid_and_newborn_blocks_is_the_one_grid_update(seed
     assert (b[n:] != b[n:].min()).sum() > 100         # newborn did meet gates
     k = n + s0 + j[4] - 1                              # the straggler won at detection 5
     assert b[k] > lw[k] + np.log(0.05) + 1
+    # told that the predicted weigh the same (they do): no pass bounds their weights, and
+    # the very floats (C(z), the masses, the normalised weights the resampling walks)
+    eq = update(ps, GatedGaussian(Z, lk, r2, persistent=(n, grid, j, True)), log_kappa, 0.05)
+    np.testing.assert_array_equal(eq.particles.log_weights, a)
+    np.testing.assert_array_equal(eq.c_z, got.c_z)
+    np.testing.assert_array_equal(eq.per_det_mass, got.per_det_mass)
+    assert eq.miss_mass == got.miss_mass and eq.particles.log_mass == got.particles.log_mass
+    np.testing.assert_array_equal(eq.particles.weights, got.particles.weights)
     with pytest.raises(ValueError, match="non-finite"):   # the blocks must cover the rows
         update(ps, GatedGaussian(Z, lk, r2, persistent=(n, grid, j[:-1])), log_kappa, 0.05)
 
@@ -603,7 +619,7 @@ def test_update_kernels_log_den_is_numpys_logaddexp(p_miss):
     args = (x, lw, Z, std, log_norm)
     first = K.gauss_update_linear(*args, rng.normal(-14, 1, len(Z)), log_pd, log_pm,
                                   tail_radius2(1e-12), 30.0, 30.0, len(x), _NO_GRID,
-                                  np.empty(0, np.int64))
+                                  np.empty(0, np.int64), False)
     log_c = first[3]
     log_kappa = log_c + rng.choice([-3.0, 0.0, 2.0, -0.5], len(Z))
     log_kappa[6] = log_c[6]                            # κ = C exactly
@@ -612,7 +628,7 @@ def test_update_kernels_log_den_is_numpys_logaddexp(p_miss):
     log_kappa[3] = -13.5
     ok, done, *_, den = K.gauss_update_linear(*args, log_kappa, log_pd, log_pm,
                                               tail_radius2(1e-12), 30.0, 30.0, len(x),
-                                              _NO_GRID, np.empty(0, np.int64))
+                                              _NO_GRID, np.empty(0, np.int64), False)
     assert ok and done
     got_c = _[1]
     want = np.logaddexp(log_kappa, got_c)
@@ -1010,3 +1026,31 @@ def test_prepare_is_numpys_spelling_with_runs_of_equal_weights():
         np.testing.assert_array_equal(S, (states - want_shift)[starts])
         np.testing.assert_array_equal(X, (states - want_shift)[starts][:, [0, 1, 4, 5]])
         assert (trial % 2 == 0) == (len(w) == n)
+
+
+_LIBC = __import__("platform").libc_ver()[0]
+
+
+@pytest.mark.skipif(_LIBC != "glibc", reason="the C library's exp is glibc's here")
+def test_inline_exp_is_the_c_librarys_in_the_gate():
+    """The update's inline exp (:func:`_kernels._exp_gate`) gives libm's ``exp`` (what
+    ``math.exp`` calls in a kernel) bit for bit on the gate's arguments -r2/2 <= x <= 0: a
+    spread of them, both ends, zero, the tiny ones (1 + x) and the table's break points.
+    (glibc >= 2.28 with FMA; a CPU without FMA runs the C library's other build, which this
+    test would catch.)"""
+    from numba import njit
+
+    @njit(cache=False)
+    def many(x, out):
+        for i in range(x.shape[0]):
+            out[i] = K._exp_gate(x[i])
+
+    rng = np.random.default_rng(0)
+    x = np.concatenate([-rng.random(400_000) * 40.0, -np.exp(rng.uniform(-50, 6, 100_000)),
+                        -np.arange(0, 40 * 128) / 128.0, -np.arange(1, 40 * 128) / 128.0 + 1e-17,
+                        [0.0, -0.0, -2.0 ** -54, -2.0 ** -55, -5e-324, -K.EXP_GATE_MAX + 1e-9, -500.0]])
+    got = np.empty_like(x)
+    many(x, got)
+    want = libm.exp(x)
+    bad = np.flatnonzero(got.view(np.int64) != want.view(np.int64))
+    assert len(bad) == 0, (x[bad[:5]], got[bad[:5]], want[bad[:5]])

@@ -35,12 +35,152 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from llvmlite import ir
+from numba import njit, types
+from numba.extending import intrinsic
 
 from ..smc.random import normal, uniform
 from .gating import kth
 
 _HALF_LOG_2PI_4 = 2.0 * math.log(2.0 * math.pi)     # 0.5 · OBS_DIM · log(2π), OBS_DIM = 4
+
+
+# ----------------------------------------------------------------------------- exp, inline
+
+@intrinsic
+def _fma(typingctx, a, b, c):
+    """``a · b + c`` rounded once (LLVM's ``llvm.fma.f64``)."""
+    sig = types.float64(types.float64, types.float64, types.float64)
+
+    def codegen(context, builder, signature, args):
+        return builder.fma(*args)
+    return sig, codegen
+
+
+@intrinsic
+def _bits(typingctx, a):
+    """The IEEE bits of a float64, as uint64."""
+    def codegen(context, builder, signature, args):
+        return builder.bitcast(args[0], ir.IntType(64))
+    return types.uint64(types.float64), codegen
+
+
+@intrinsic
+def _from_bits(typingctx, a):
+    """The float64 of IEEE bits (uint64)."""
+    def codegen(context, builder, signature, args):
+        return builder.bitcast(args[0], ir.DoubleType())
+    return types.float64(types.uint64), codegen
+
+
+#: exp's table: 2^(k/128) for k = 0 .. 127 as (tail, bits − (k << 45)) pairs (Szabolcs Nagy's
+#: exp of ARM's optimized-routines, the C library's since glibc 2.28: ``__exp_data.tab``)
+_EXP_TAB = np.array([
+    0x0000000000000000, 0x3ff0000000000000, 0x3c9b3b4f1a88bf6e, 0x3feff63da9fb3335,
+    0xbc7160139cd8dc5d, 0x3fefec9a3e778061, 0xbc905e7a108766d1, 0x3fefe315e86e7f85,
+    0x3c8cd2523567f613, 0x3fefd9b0d3158574, 0xbc8bce8023f98efa, 0x3fefd06b29ddf6de,
+    0x3c60f74e61e6c861, 0x3fefc74518759bc8, 0x3c90a3e45b33d399, 0x3fefbe3ecac6f383,
+    0x3c979aa65d837b6d, 0x3fefb5586cf9890f, 0x3c8eb51a92fdeffc, 0x3fefac922b7247f7,
+    0x3c3ebe3d702f9cd1, 0x3fefa3ec32d3d1a2, 0xbc6a033489906e0b, 0x3fef9b66affed31b,
+    0xbc9556522a2fbd0e, 0x3fef9301d0125b51, 0xbc5080ef8c4eea55, 0x3fef8abdc06c31cc,
+    0xbc91c923b9d5f416, 0x3fef829aaea92de0, 0x3c80d3e3e95c55af, 0x3fef7a98c8a58e51,
+    0xbc801b15eaa59348, 0x3fef72b83c7d517b, 0xbc8f1ff055de323d, 0x3fef6af9388c8dea,
+    0x3c8b898c3f1353bf, 0x3fef635beb6fcb75, 0xbc96d99c7611eb26, 0x3fef5be084045cd4,
+    0x3c9aecf73e3a2f60, 0x3fef54873168b9aa, 0xbc8fe782cb86389d, 0x3fef4d5022fcd91d,
+    0x3c8a6f4144a6c38d, 0x3fef463b88628cd6, 0x3c807a05b0e4047d, 0x3fef3f49917ddc96,
+    0x3c968efde3a8a894, 0x3fef387a6e756238, 0x3c875e18f274487d, 0x3fef31ce4fb2a63f,
+    0x3c80472b981fe7f2, 0x3fef2b4565e27cdd, 0xbc96b87b3f71085e, 0x3fef24dfe1f56381,
+    0x3c82f7e16d09ab31, 0x3fef1e9df51fdee1, 0xbc3d219b1a6fbffa, 0x3fef187fd0dad990,
+    0x3c8b3782720c0ab4, 0x3fef1285a6e4030b, 0x3c6e149289cecb8f, 0x3fef0cafa93e2f56,
+    0x3c834d754db0abb6, 0x3fef06fe0a31b715, 0x3c864201e2ac744c, 0x3fef0170fc4cd831,
+    0x3c8fdd395dd3f84a, 0x3feefc08b26416ff, 0xbc86a3803b8e5b04, 0x3feef6c55f929ff1,
+    0xbc924aedcc4b5068, 0x3feef1a7373aa9cb, 0xbc9907f81b512d8e, 0x3feeecae6d05d866,
+    0xbc71d1e83e9436d2, 0x3feee7db34e59ff7, 0xbc991919b3ce1b15, 0x3feee32dc313a8e5,
+    0x3c859f48a72a4c6d, 0x3feedea64c123422, 0xbc9312607a28698a, 0x3feeda4504ac801c,
+    0xbc58a78f4817895b, 0x3feed60a21f72e2a, 0xbc7c2c9b67499a1b, 0x3feed1f5d950a897,
+    0x3c4363ed60c2ac11, 0x3feece086061892d, 0x3c9666093b0664ef, 0x3feeca41ed1d0057,
+    0x3c6ecce1daa10379, 0x3feec6a2b5c13cd0, 0x3c93ff8e3f0f1230, 0x3feec32af0d7d3de,
+    0x3c7690cebb7aafb0, 0x3feebfdad5362a27, 0x3c931dbdeb54e077, 0x3feebcb299fddd0d,
+    0xbc8f94340071a38e, 0x3feeb9b2769d2ca7, 0xbc87deccdc93a349, 0x3feeb6daa2cf6642,
+    0xbc78dec6bd0f385f, 0x3feeb42b569d4f82, 0xbc861246ec7b5cf6, 0x3feeb1a4ca5d920f,
+    0x3c93350518fdd78e, 0x3feeaf4736b527da, 0x3c7b98b72f8a9b05, 0x3feead12d497c7fd,
+    0x3c9063e1e21c5409, 0x3feeab07dd485429, 0x3c34c7855019c6ea, 0x3feea9268a5946b7,
+    0x3c9432e62b64c035, 0x3feea76f15ad2148, 0xbc8ce44a6199769f, 0x3feea5e1b976dc09,
+    0xbc8c33c53bef4da8, 0x3feea47eb03a5585, 0xbc845378892be9ae, 0x3feea34634ccc320,
+    0xbc93cedd78565858, 0x3feea23882552225, 0x3c5710aa807e1964, 0x3feea155d44ca973,
+    0xbc93b3efbf5e2228, 0x3feea09e667f3bcd, 0xbc6a12ad8734b982, 0x3feea012750bdabf,
+    0xbc6367efb86da9ee, 0x3fee9fb23c651a2f, 0xbc80dc3d54e08851, 0x3fee9f7df9519484,
+    0xbc781f647e5a3ecf, 0x3fee9f75e8ec5f74, 0xbc86ee4ac08b7db0, 0x3fee9f9a48a58174,
+    0xbc8619321e55e68a, 0x3fee9feb564267c9, 0x3c909ccb5e09d4d3, 0x3feea0694fde5d3f,
+    0xbc7b32dcb94da51d, 0x3feea11473eb0187, 0x3c94ecfd5467c06b, 0x3feea1ed0130c132,
+    0x3c65ebe1abd66c55, 0x3feea2f336cf4e62, 0xbc88a1c52fb3cf42, 0x3feea427543e1a12,
+    0xbc9369b6f13b3734, 0x3feea589994cce13, 0xbc805e843a19ff1e, 0x3feea71a4623c7ad,
+    0xbc94d450d872576e, 0x3feea8d99b4492ed, 0x3c90ad675b0e8a00, 0x3feeaac7d98a6699,
+    0x3c8db72fc1f0eab4, 0x3feeace5422aa0db, 0xbc65b6609cc5e7ff, 0x3feeaf3216b5448c,
+    0x3c7bf68359f35f44, 0x3feeb1ae99157736, 0xbc93091fa71e3d83, 0x3feeb45b0b91ffc6,
+    0xbc5da9b88b6c1e29, 0x3feeb737b0cdc5e5, 0xbc6c23f97c90b959, 0x3feeba44cbc8520f,
+    0xbc92434322f4f9aa, 0x3feebd829fde4e50, 0xbc85ca6cd7668e4b, 0x3feec0f170ca07ba,
+    0x3c71affc2b91ce27, 0x3feec49182a3f090, 0x3c6dd235e10a73bb, 0x3feec86319e32323,
+    0xbc87c50422622263, 0x3feecc667b5de565, 0x3c8b1c86e3e231d5, 0x3feed09bec4a2d33,
+    0xbc91bbd1d3bcbb15, 0x3feed503b23e255d, 0x3c90cc319cee31d2, 0x3feed99e1330b358,
+    0x3c8469846e735ab3, 0x3feede6b5579fdbf, 0xbc82dfcd978e9db4, 0x3feee36bbfd3f37a,
+    0x3c8c1a7792cb3387, 0x3feee89f995ad3ad, 0xbc907b8f4ad1d9fa, 0x3feeee07298db666,
+    0xbc55c3d956dcaeba, 0x3feef3a2b84f15fb, 0xbc90a40e3da6f640, 0x3feef9728de5593a,
+    0xbc68d6f438ad9334, 0x3feeff76f2fb5e47, 0xbc91eee26b588a35, 0x3fef05b030a1064a,
+    0x3c74ffd70a5fddcd, 0x3fef0c1e904bc1d2, 0xbc91bdfbfa9298ac, 0x3fef12c25bd71e09,
+    0x3c736eae30af0cb3, 0x3fef199bdd85529c, 0x3c8ee3325c9ffd94, 0x3fef20ab5fffd07a,
+    0x3c84e08fd10959ac, 0x3fef27f12e57d14b, 0x3c63cdaf384e1a67, 0x3fef2f6d9406e7b5,
+    0x3c676b2c6c921968, 0x3fef3720dcef9069, 0xbc808a1883ccb5d2, 0x3fef3f0b555dc3fa,
+    0xbc8fad5d3ffffa6f, 0x3fef472d4a07897c, 0xbc900dae3875a949, 0x3fef4f87080d89f2,
+    0x3c74a385a63d07a7, 0x3fef5818dcfba487, 0xbc82919e2040220f, 0x3fef60e316c98398,
+    0x3c8e5a50d5c192ac, 0x3fef69e603db3285, 0x3c843a59ac016b4b, 0x3fef7321f301b460,
+    0xbc82d52107b43e1f, 0x3fef7c97337b9b5f, 0xbc892ab93b470dc9, 0x3fef864614f5a129,
+    0x3c74b604603a88d3, 0x3fef902ee78b3ff6, 0x3c83c5ec519d7271, 0x3fef9a51fbc74c83,
+    0xbc8ff7128fd391f0, 0x3fefa4afa2a490da, 0xbc8dae98e223747d, 0x3fefaf482d8e67f1,
+    0x3c8ec3bc41aa2008, 0x3fefba1bee615a27, 0x3c842b94c3a9eb32, 0x3fefc52b376bba97,
+    0x3c8a64a931d185ee, 0x3fefd0765b6e4540, 0xbc8e37bae43be3ed, 0x3fefdbfdad9cbe14,
+    0x3c77893b4d91cd9d, 0x3fefe7c1819e90d8, 0x3c5305c14160cc89, 0x3feff3c22b8f71f1,
+], dtype=np.uint64)
+_EXP_INVLN2N = float.fromhex("0x1.71547652b82fep+7")      # 128 / ln 2
+_EXP_NEGLN2HIN = float.fromhex("-0x1.62e42fefa0000p-8")   # −ln 2 / 128, high and low parts
+_EXP_NEGLN2LON = float.fromhex("-0x1.cf79abc9e3b3ap-47")
+_EXP_C2 = float.fromhex("0x1.ffffffffffdbdp-2")
+_EXP_C3 = float.fromhex("0x1.555555555543cp-3")
+_EXP_C4 = float.fromhex("0x1.55555cf172b91p-5")
+_EXP_C5 = float.fromhex("0x1.1111167a4d017p-7")
+_EXP_SHIFT = float.fromhex("0x1.8p52")
+_EXP_TINY = 2.0 ** -54
+_U127 = np.uint64(127)
+_U1 = np.uint64(1)
+_U45 = np.uint64(45)
+#: the arguments :func:`_exp_gate` takes: ``-EXP_GATE_MAX < x <= 0``
+EXP_GATE_MAX = 512.0
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
+def _exp_gate(x):
+    """``exp(x)`` for ``-512 < x <= 0`` (a Gaussian inside its gate), the C library's floats
+    (glibc >= 2.28 on a CPU with FMA, whose ``exp`` numba's ``math.exp`` calls: the same
+    operations -- table look-up, a degree-5 polynomial, its fused multiply-adds where that
+    build has them -- checked bit for bit against it on 1.2e8 arguments), inline and branch
+    free: a loop of them vectorises (4x faster than a call a value)."""
+    kd = _fma(x, _EXP_INVLN2N, _EXP_SHIFT)
+    ki = _bits(kd)
+    kd = kd - _EXP_SHIFT
+    r = _fma(kd, _EXP_NEGLN2HIN, x)
+    r = _fma(kd, _EXP_NEGLN2LON, r)
+    idx = (ki & _U127) << _U1
+    tail = _from_bits(_EXP_TAB[idx])
+    sbits = _EXP_TAB[idx + _U1] + (ki << _U45)
+    p23 = _fma(r, _EXP_C3, _EXP_C2)
+    tr = r + tail
+    r2 = r * r
+    p45 = _fma(r, _EXP_C5, _EXP_C4)
+    tmp = _fma(r2 * r2, p45, _fma(p23, r2, tr))
+    scale = _from_bits(sbits)
+    v = _fma(scale, tmp, scale)
+    return v if -x >= _EXP_TINY else 1.0 + x          # |x| < 2^-54: the C library's 1 + x
 
 
 # ----------------------------------------------------------------------------- predict
@@ -685,6 +825,18 @@ def _lse_add(m, s, a):
     return a, s * math.exp(m - a) + 1.0
 
 
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
+def _d2_at(states, i, z0, z1, z2, z3, a0, a1, a2, a3):
+    """:func:`_gate_d2_inv`'s sum of one detection ``z`` (inverse stds ``a``) without its
+    tests: ``((q0² + q1²) + q2²) + q3²``, the same float."""
+    q0 = (states[i, 0] - z0) * a0
+    q1 = (states[i, 1] - z1) * a1
+    q2 = (states[i, 4] - z2) * a2
+    q3 = (states[i, 5] - z3) * a3
+    return q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3
+
+
 #: the linear-domain route of :func:`gauss_update` needs every finite weight within e^-600 of
 #: the largest (no underflow) and every factor ψ/(κ + C) / g below e^600 (no overflow)
 _LIN_RANGE = 600.0
@@ -692,7 +844,7 @@ _LIN_RANGE = 600.0
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
 def gauss_update_linear(states, lw, Z, std, log_norm, log_kappa, log_pd, log_pm, r2,
-                        cell_x, cell_y, n_grid, grid, j_born):
+                        cell_x, cell_y, n_grid, grid, j_born, equal):
     """:func:`gauss_update`'s linear route alone (per-detection stds), the same floats:
     ``(ok, done, bracket, log_c, log_mass, log_pred, lin, scale, log_den)``, ``bracket`` (N,) each
     particle's ``p_M + Σ_z ψ_z/(κ_z + C_z)`` (:func:`bracket_log_weights` makes the new
@@ -711,19 +863,61 @@ def gauss_update_linear(states, lw, Z, std, log_norm, log_kappa, log_pd, log_pm,
     newborn of each detection, rows ``n_grid ...``, which must end at ``N``), a block looked at
     only when the bounding box of its positions meets the detection's gate box.  So the
     filter buckets its particles once a frame; with ``n_grid = N`` and no block this is the
-    one grid on every particle."""
+    one grid on every particle.  ``equal``: the caller knows the first ``n_grid`` log-weights
+    equal (the persistent particles after an equal-weights resampling and the prediction's
+    common factor): their largest and smallest is the first, not a pass over them.  The
+    weights' largest and smallest otherwise come with the blocks' boxes (the newborn's in the
+    pass that reads their positions)."""
     n = states.shape[0]
     nz = Z.shape[0]
     log_c = np.empty(nz, np.float64)
     for j in range(nz):
         log_c[j] = -np.inf
+    # the blocks' ends (each detection's newborn after the grid's n_grid rows)
+    n_blk = j_born.shape[0]
+    b_end = np.empty(n_blk + 1, np.int64)
+    b_end[0] = n_grid
+    for z in range(n_blk):
+        b_end[z + 1] = b_end[z] + j_born[z]
+    fits = b_end[n_blk] == n and n_grid >= 0
     top = -np.inf
     low = np.inf
-    for i in range(n):
+    scan_from = 0
+    if equal and fits and n_grid > 0:
+        scan_from = n_grid
+        if lw[0] > -np.inf:
+            top = lw[0]
+            low = lw[0]
+    for i in range(scan_from, n_grid if fits else n):
         if lw[i] > -np.inf:
             v = lw[i]                     # max(top, v), min(low, v), spelt out
             top = v if v > top else top
             low = v if v < low else low
+    # the blocks' bounding boxes (y1 lo, hi, y2 lo, hi; an empty block's never meets a gate)
+    # and the newborn's largest and smallest weights in the same pass
+    box = np.empty((n_blk, 4), np.float64)
+    finite = True
+    for z in range(n_blk if fits else 0):
+        lo0 = np.inf
+        hi0 = -np.inf
+        lo1 = np.inf
+        hi1 = -np.inf
+        for i in range(b_end[z], b_end[z + 1]):
+            a = states[i, 0]
+            c = states[i, 1]
+            finite = finite and math.isfinite(a) and math.isfinite(c)
+            lo0 = a if a < lo0 else lo0
+            hi0 = a if a > hi0 else hi0
+            lo1 = c if c < lo1 else lo1
+            hi1 = c if c > hi1 else hi1
+            if lw[i] > -np.inf:
+                v = lw[i]
+                top = v if v > top else top
+                low = v if v < low else low
+        box[z, 0] = lo0
+        box[z, 1] = hi0
+        box[z, 2] = lo1
+        box[z, 3] = hi1
     if not (top > -np.inf and top - low <= _LIN_RANGE and top < np.inf):
         return True, False, lw, log_c, -np.inf, -np.inf, lw, 0.0, log_c
     x0, y0, cx, cy, ni, nj, order, starts = grid
@@ -733,31 +927,7 @@ def gauss_update_linear(states, lw, Z, std, log_norm, log_kappa, log_pd, log_pm,
                                                                cell_x, cell_y)
         if not ok:
             return False, True, lw, log_c, -np.inf, -np.inf, lw, 0.0, log_c
-    # the blocks' bounding boxes (y1 lo, hi, y2 lo, hi): an empty block's never meets a gate
-    n_blk = j_born.shape[0]
-    b_end = np.empty(n_blk + 1, np.int64)
-    box = np.empty((n_blk, 4), np.float64)
-    b_end[0] = n_grid
-    for z in range(n_blk):
-        b_end[z + 1] = b_end[z] + j_born[z]
-        lo0 = np.inf
-        hi0 = -np.inf
-        lo1 = np.inf
-        hi1 = -np.inf
-        for i in range(b_end[z], b_end[z + 1]):
-            a = states[i, 0]
-            c = states[i, 1]
-            if not (math.isfinite(a) and math.isfinite(c)):
-                return False, True, lw, log_c, -np.inf, -np.inf, lw, 0.0, log_c
-            lo0 = a if a < lo0 else lo0
-            hi0 = a if a > hi0 else hi0
-            lo1 = c if c < lo1 else lo1
-            hi1 = c if c > hi1 else hi1
-        box[z, 0] = lo0
-        box[z, 1] = hi0
-        box[z, 2] = lo1
-        box[z, 3] = hi1
-    if b_end[n_blk] != n:
+    if not (finite and fits):
         return False, True, lw, log_c, -np.inf, -np.inf, lw, 0.0, log_c
     inv = np.empty((std.shape[0], 4), np.float64)
     for k in range(std.shape[0]):
@@ -767,17 +937,22 @@ def gauss_update_linear(states, lw, Z, std, log_norm, log_kappa, log_pd, log_pm,
     e = np.empty(n, np.float64)
     b = np.empty(n, np.float64)
     pm = math.exp(log_pm)
-    tot_pred = 0.0
     prev = np.nan                         # e^{lw - top} once per run of equal weights (the
     ev = 0.0                              # persistent particles share one, each detection's
-    for i in range(n):                    # newborn another): the same floats, ~N_z + 1 exps
+    i_from = 0                            # newborn another): the same floats, ~N_z + 1 exps
+    if equal and n_grid > 0:
+        prev = lw[0]
+        ev = math.exp(prev - top)
+        for i in range(n_grid):           # (known equal: no compare a particle)
+            e[i] = ev
+            b[i] = pm
+        i_from = n_grid
+    for i in range(i_from, n):
         if lw[i] != prev:
             prev = lw[i]
             ev = math.exp(prev - top)
         e[i] = ev
         b[i] = pm
-        tot_pred += ev
-    log_pred = top + math.log(tot_pred) if tot_pred > 0.0 else -np.inf
     buf_i = np.empty(n, np.int64)
     buf_v = np.empty(n, np.float64)
     den = np.empty(nz, np.float64)
@@ -791,6 +966,8 @@ def gauss_update_linear(states, lw, Z, std, log_norm, log_kappa, log_pd, log_pm,
         hy = r * std[j, 1] * (1.0 + 1e-6) + 1e-9
         s = 0.0
         nb = 0
+        z0, z1, z2, z3 = Z[j, 0], Z[j, 1], Z[j, 2], Z[j, 3]
+        a0, a1, a2, a3 = inv[j, 0], inv[j, 1], inv[j, 2], inv[j, 3]
         n_col = i1 - i0 + 1 if i1 >= i0 else 0
         for seg in range(n_col + n_blk):  # the grid's columns of cells, then the blocks
             if seg < n_col:
@@ -806,25 +983,33 @@ def gauss_update_linear(states, lw, Z, std, log_norm, log_kappa, log_pd, log_pm,
                 p1 = b_end[z + 1]
             # the gate test alone first (its d² kept), then the exps and C(z)'s sum over
             # the kept pairs in the same order: the same floats, and tight loops (-20 %)
+            # (z and 1/σ in locals: the buffers' stores could alias them for the compiler)
+            # branch free: every pair written, kept (nb advanced) when d² <= r2 -- the
+            # position terms' own test is implied (adding squares never lowers a float
+            # sum) and a NaN is not kept; a detection tests each row once, so nb < N
             if seg < n_col:
                 for p in range(p0, p1):
                     i = order[p]
-                    d2 = _gate_d2_inv(states, i, Z, j, inv, j, r2)
-                    if d2 <= r2:
-                        buf_i[nb] = i
-                        buf_v[nb] = d2
-                        nb += 1
+                    d2 = _d2_at(states, i, z0, z1, z2, z3, a0, a1, a2, a3)
+                    buf_i[nb] = i
+                    buf_v[nb] = d2
+                    nb += d2 <= r2
             else:
                 for p in range(p0, p1):
-                    d2 = _gate_d2_inv(states, p, Z, j, inv, j, r2)
-                    if d2 <= r2:
-                        buf_i[nb] = p
-                        buf_v[nb] = d2
-                        nb += 1
+                    d2 = _d2_at(states, p, z0, z1, z2, z3, a0, a1, a2, a3)
+                    buf_i[nb] = p
+                    buf_v[nb] = d2
+                    nb += d2 <= r2
+        # g = e^{−d²/2} of every kept pair (inline exp, vectorised: d² <= r2 keeps its
+        # argument in _exp_gate's range), then C(z)'s sum in the pairs' order
+        if r2 < 2.0 * EXP_GATE_MAX:
+            for q in range(nb):
+                buf_v[q] = _exp_gate(-0.5 * buf_v[q])
+        else:
+            for q in range(nb):
+                buf_v[q] = math.exp(-0.5 * buf_v[q])
         for q in range(nb):
-            g = math.exp(-0.5 * buf_v[q])
-            buf_v[q] = g
-            s += g * e[buf_i[q]]
+            s += buf_v[q] * e[buf_i[q]]
         if not (s > 0.0 and log_pd > -np.inf):
             continue                      # C = 0: ψ = 0 on every pair of z
         log_scale = log_pd - log_norm[j] - _HALF_LOG_2PI_4    # log ψ = log_scale − d²/2
@@ -843,11 +1028,17 @@ def gauss_update_linear(states, lw, Z, std, log_norm, log_kappa, log_pd, log_pm,
         else:
             for q in range(nb):
                 b[buf_i[q]] += math.exp(math.log(buf_v[q]) + log_f)
+    # the predicted mass's sum and the updated one's in one pass (two independent chains of
+    # adds: each in index order, as two passes would make them)
+    tot_pred = 0.0
     tot = 0.0
     for i in range(n):
-        v = e[i] * b[i]
+        ei = e[i]
+        tot_pred += ei
+        v = ei * b[i]
         tot += v
         e[i] = v                          # the linear weight, e^{new_lw − top}
+    log_pred = top + math.log(tot_pred) if tot_pred > 0.0 else -np.inf
     return (True, True, b, log_c, (top + math.log(tot)) if tot > 0.0 else -np.inf,
             log_pred, e, 1.0 / tot if tot > 0.0 else 0.0, den)
 
@@ -905,7 +1096,7 @@ def gauss_update(states, lw, Z, std, log_norm, by_det, log_kappa, log_pd, log_pm
         ok, done, b, log_c, log_mass, log_pred, _, _, _ = gauss_update_linear(
             states, lw, Z, std, log_norm, log_kappa, log_pd, log_pm, r2, cell_x, cell_y,
             states.shape[0], (0.0, 0.0, cell_x, cell_y, 0, 0, np.empty(0, np.int64),
-                              _zero_start()), np.empty(0, np.int64))
+                              _zero_start()), np.empty(0, np.int64), False)
         if done:
             return ok, _bracket_logs(lw, b, log_pm) if ok else b, log_c, log_mass, log_pred
     n = states.shape[0]

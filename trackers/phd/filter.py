@@ -1081,7 +1081,18 @@ def predict(ps: ParticleSet, mp: MotionParams, rng: np.random.Generator,
     S, L = out if out is not None else (None, np.empty(n))
     log_e = math.log(mp.p_survival) if mp.p_survival > 0 else -np.inf
     lw0 = ps.log_weights
-    if n and type(lw0) is np.ndarray and lw0.dtype == np.float64 and L.dtype == np.float64:
+    x = ps.states
+    if n and S is not None and type(lw0) is np.ndarray and lw0.dtype == np.float64 \
+            and L.dtype == np.float64 and len(L) >= n and x.dtype == np.float64 \
+            and x.shape[1] == STATE_DIM and S.dtype == np.float64 and len(S) >= n \
+            and S.shape[1] == STATE_DIM:
+        # the filter's buffers (PHDFilter.step): motion.propagate's kernel call without its
+        # checks and views (the same call: every argument of the same type)
+        _kernels.propagate_into(x, stream(key_from(rng)), float(mp.sigma_v),
+                                float(mp.sigma_size), float(mp.accel_to_position),
+                                float(mp.min_size), S, lw0, float(log_e), L)
+        states, lw = S[:n], L[:n]
+    elif n and type(lw0) is np.ndarray and lw0.dtype == np.float64 and L.dtype == np.float64:
         # ω · e written by the motion kernel's pass (numpy's add, the same floats)
         states = motion.propagate(ps.states, rng, sigma_v=mp.sigma_v, sigma_size=mp.sigma_size,
                                   accel_to_position=mp.accel_to_position,
@@ -1371,6 +1382,28 @@ class UpdateResult:
         d["per_det_mass"], d["miss_mass"] = per_det_mass, miss_mass
 
 
+class _UpdateResultLogs(UpdateResult):
+    """:class:`UpdateResult` whose ``c_z`` and ``kappa`` are made (numpy's ``exp`` of ``log C``
+    and ``log κ``, the same arrays) on their first read: a run reads only ``per_det_mass``
+    (the 'measurement' estimates and particle-level stage data read them)."""
+
+    def __init__(self, particles: ParticleSet, log_c: np.ndarray, log_kappa: np.ndarray,
+                 per_det_mass: np.ndarray, miss_mass: float):
+        d = self.__dict__
+        d["particles"], d["_log_c"], d["_log_kappa"] = particles, log_c, log_kappa
+        d["per_det_mass"], d["miss_mass"] = per_det_mass, miss_mass
+
+    def __getattr__(self, name):
+        d = self.__dict__
+        if name == "c_z" and "_log_c" in d:
+            d["c_z"] = v = np.exp(d["_log_c"])
+            return v
+        if name == "kappa" and "_log_kappa" in d:
+            d["kappa"] = v = np.exp(d["_log_kappa"])
+            return v
+        raise AttributeError(name)
+
+
 @dataclass(frozen=True, init=False)
 class GatedGaussian:
     """``log g`` of :class:`GaussianLikelihood` on the pairs inside the update gate, left for
@@ -1383,7 +1416,8 @@ class GatedGaussian:
     ``persistent`` = ``(n, grid, j)`` when the particles are ``n`` predicted ones followed by
     the newborn, ``j`` (N_z,) of each detection in turn, and ``grid`` is the one M(z)'s
     kernel bucketed the predicted on (:attr:`BirthResult.grid`): the update then buckets no
-    particle again (read only with per-detection stds)."""
+    particle again (read only with per-detection stds); a fourth item True says the ``n``
+    predicted weigh the same (the update then reads none of their weights to bound them)."""
 
     Z: np.ndarray
     params: LikelihoodParams
@@ -1497,7 +1531,6 @@ def _update_gaussian(particles: ParticleSet, g: GatedGaussian, log_kappa: np.nda
     if n_z == 0 or n == 0:
         return _missed_only(particles, log_kappa, p_miss)
     log_pm, log_pd = _log_probs(p_miss)
-    kappa = np.exp(log_kappa)
     lk = g.params
     by_det = lk.obs_std_source == "detection"
     if by_det and g.noise is not None:
@@ -1507,14 +1540,16 @@ def _update_gaussian(particles: ParticleSet, g: GatedGaussian, log_kappa: np.nda
         log_norm = np.log(std).sum(-1)
     done = False
     if by_det:      # the linear route alone (weights within e^600: every PHD frame)
+        equal = False
         if g.persistent is not None:            # its grid is built: no cell to size
-            (n_grid, grid, j_born), cell = g.persistent, (1.0, 1.0)
+            n_grid, grid, j_born = g.persistent[:3]
+            equal, cell = len(g.persistent) > 3 and bool(g.persistent[3]), (1.0, 1.0)
         else:
             n_grid, grid, j_born, cell = n, _NO_GRID, _NO_BLOCKS, _grid_cell(std, g.r2)
         ok, done, bracket, log_c, log_mass, log_pred, lin, scale, log_den = (
             _kernels.gauss_update_linear(particles.states, lw, Z, std, log_norm, log_kappa,
                                          log_pd, log_pm, float(g.r2), cell[0], cell[1],
-                                         n_grid, grid, j_born))
+                                         n_grid, grid, j_born, equal))
     if not done:
         cell = _grid_cell(std if by_det else np.max(std[:, :2], axis=0, keepdims=True), g.r2)
         ok, new_lw, log_c, log_mass, log_pred = _kernels.gauss_update(
@@ -1535,8 +1570,9 @@ def _update_gaussian(particles: ParticleSet, g: GatedGaussian, log_kappa: np.nda
         out = ParticleSet(particles.states, new_lw, particles.labels, particles.extra)
     out.known_log_mass(log_mass)                                        # the kernel summed it
     particles.known_log_mass(log_pred)
-    return UpdateResult(out, np.exp(log_c), kappa, np.exp(log_c - log_den),
-                        p_miss * math.exp(log_pred))
+    # (C(z) and κ made if read: _UpdateResultLogs)
+    return _UpdateResultLogs(out, log_c, log_kappa, np.exp(log_c - log_den),
+                             p_miss * math.exp(log_pred))
 
 
 #: "no grid yet" and "no newborn block" for :func:`._kernels.gauss_update_linear`
@@ -1789,7 +1825,8 @@ class PHDFilter:
                                         noise if _same(self.likelihood.params,
                                                        p.likelihood) else None,
                                         None if born.grid is None
-                                        else (n, born.grid, born.j_per_det))
+                                        else (n, born.grid, born.j_per_det,
+                                              predicted.is_known_equal()))
         else:
             log_g = gated_log_g(self.likelihood, candidates.states, Z, frame, p)
         updated = update(candidates, log_g, log_kappa, p.likelihood.p_miss)
