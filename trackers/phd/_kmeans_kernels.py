@@ -66,6 +66,59 @@ def _nearest_dense(X, i, centers, inv):
     return lab, best
 
 
+#: From this many centres on, the dense assignment takes the particles in blocks of
+#: :data:`_BLOCK` and looks, for a block, only at the centres that could beat the previous
+#: particle's centre somewhere in the block's box (:func:`_assign_dense`).
+_BLOCKS_MIN = 6
+#: Particles per block of :func:`_assign_dense`.
+_BLOCK = 32
+#: The blocks' coordinates (particles and centres) stay within this many pixels: their
+#: differences' squares are then finite, so no d² is NaN (an inf square times a zero inverse
+#: variance); a block with a particle beyond it gets the serial look.
+_BLOCK_MAX_ABS = 1e150
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
+def _dense_row(cc, x0, x1, x2, x3, g):
+    """One particle's nearest centre and d² by the serial rule (centre 0, then ``g``, then the
+    others, lowest index among equal d²; a NaN d² at centre 0 is the answer), ``cc`` (K, 8)
+    the centres' (y1, y2, w, h) and inverse variances (:func:`_assign_dense`)."""
+    K = cc.shape[0]
+    a0 = x0 - cc[0, 0]
+    a1 = x1 - cc[0, 1]
+    a2 = x2 - cc[0, 2]
+    a3 = x3 - cc[0, 3]
+    best = (((a0 * a0) * cc[0, 4] + (a1 * a1) * cc[0, 5]) + (a2 * a2) * cc[0, 6]) \
+        + (a3 * a3) * cc[0, 7]
+    lab = 0
+    if best != best:                               # NaN at centre 0: argmin's centre 0
+        return lab, best
+    if g != 0:
+        a0 = x0 - cc[g, 0]
+        a1 = x1 - cc[g, 1]
+        a2 = x2 - cc[g, 2]
+        a3 = x3 - cc[g, 3]
+        d = (((a0 * a0) * cc[g, 4] + (a1 * a1) * cc[g, 5]) + (a2 * a2) * cc[g, 6]) \
+            + (a3 * a3) * cc[g, 7]
+        if d < best:
+            best = d
+            lab = g
+    for c in range(1, K):
+        a0 = x0 - cc[c, 0]
+        a1 = x1 - cc[c, 1]
+        p = (a0 * a0) * cc[c, 4] + (a1 * a1) * cc[c, 5]
+        if p > best or c == g:                     # (a NaN part goes on: it never wins)
+            continue
+        a2 = x2 - cc[c, 2]
+        a3 = x3 - cc[c, 3]
+        d = (p + (a2 * a2) * cc[c, 6]) + (a3 * a3) * cc[c, 7]
+        if d < best or (d == best and c < lab):
+            best = d
+            lab = c
+    return lab, best
+
+
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
 def _assign_dense(X, centers, inv, labels, dmin):
     """:func:`_nearest_dense` of every particle: the same labels and d² floats.  A particle
@@ -75,7 +128,19 @@ def _assign_dense(X, centers, inv, labels, dmin):
     a centre whose (y1, y2) part of the sum alone exceeds the best d² is passed over without
     its size terms (the full sum adds non-negative terms to that part: it could only be
     larger).  Each d² is summed in :func:`_d2`'s order.  The centres and their inverse
-    variances are one row per centre, hoisted."""
+    variances are one row per centre, hoisted.
+
+    From :data:`_BLOCKS_MIN` centres on (all finite, within :data:`_BLOCK_MAX_ABS`), the
+    particles go in blocks of :data:`_BLOCK` consecutive ones: the block's box (the range of
+    each coordinate) gives an upper bound ``ub`` of every particle's d² to the previous
+    block's last centre g (each term at the box's far side) and a lower bound ``lb_c`` for
+    each centre (each term at the near side; rounding is monotone and the terms are
+    non-negative, so the bounds hold for the float d²).  A centre with ``lb_c > ub`` can
+    neither beat nor tie g for any particle of the block and is not looked at; the others
+    (g among them) are, in index order, the first of the smallest d² winning -- the serial
+    rule's answer, as no d² is NaN there (a particle with a NaN coordinate makes its block
+    take the serial look).  Resampling lays a target's particles side by side: on the bench
+    scene ~95 % of the blocks have g alone, one d² a particle."""
     K = centers.shape[0]
     if K == 0:
         return
@@ -89,48 +154,140 @@ def _assign_dense(X, centers, inv, labels, dmin):
         cc[c, 5] = inv[c, 1]
         cc[c, 6] = inv[c, 2]
         cc[c, 7] = inv[c, 3]
+    lim = _BLOCK_MAX_ABS
+    blocks = K >= _BLOCKS_MIN
+    for c in range(K):
+        for d in range(8):
+            v = cc[c, d]
+            if not (v - v == 0.0 and -lim <= v <= lim):   # (not finite, or huge)
+                blocks = False
+    n = X.shape[0]
+    B = _BLOCK
+    cand = np.empty(K, np.int64)
     g = 0
-    for i in range(X.shape[0]):
-        x0 = X[i, 0]
-        x1 = X[i, 1]
-        x2 = X[i, 2]
-        x3 = X[i, 3]
-        a0 = x0 - cc[0, 0]
-        a1 = x1 - cc[0, 1]
-        a2 = x2 - cc[0, 2]
-        a3 = x3 - cc[0, 3]
-        best = (((a0 * a0) * cc[0, 4] + (a1 * a1) * cc[0, 5]) + (a2 * a2) * cc[0, 6]) \
-            + (a3 * a3) * cc[0, 7]
-        lab = 0
-        if best != best:                           # NaN at centre 0: argmin's centre 0
-            labels[i] = 0
-            dmin[i] = best
-            continue
-        if g != 0:
-            a0 = x0 - cc[g, 0]
-            a1 = x1 - cc[g, 1]
-            a2 = x2 - cc[g, 2]
-            a3 = x3 - cc[g, 3]
-            d = (((a0 * a0) * cc[g, 4] + (a1 * a1) * cc[g, 5]) + (a2 * a2) * cc[g, 6]) \
-                + (a3 * a3) * cc[g, 7]
-            if d < best:
-                best = d
-                lab = g
-        for c in range(1, K):
-            a0 = x0 - cc[c, 0]
-            a1 = x1 - cc[c, 1]
-            p = (a0 * a0) * cc[c, 4] + (a1 * a1) * cc[c, 5]
-            if p > best or c == g:                 # (a NaN part goes on: it never wins)
-                continue
-            a2 = x2 - cc[c, 2]
-            a3 = x3 - cc[c, 3]
-            d = (p + (a2 * a2) * cc[c, 6]) + (a3 * a3) * cc[c, 7]
-            if d < best or (d == best and c < lab):
-                best = d
-                lab = c
-        labels[i] = lab
-        dmin[i] = best
-        g = lab
+    for b0 in range(0, n, B):
+        b1 = b0 + B if b0 + B < n else n
+        ok = blocks
+        if ok:
+            # the block's box (a NaN coordinate is passed over here: its d² is NaN, below)
+            l0 = X[b0, 0]
+            l1 = X[b0, 1]
+            l2 = X[b0, 2]
+            l3 = X[b0, 3]
+            h0 = l0
+            h1 = l1
+            h2 = l2
+            h3 = l3
+            for i in range(b0 + 1, b1):
+                v = X[i, 0]
+                l0 = v if v < l0 else l0
+                h0 = v if v > h0 else h0
+                v = X[i, 1]
+                l1 = v if v < l1 else l1
+                h1 = v if v > h1 else h1
+                v = X[i, 2]
+                l2 = v if v < l2 else l2
+                h2 = v if v > h2 else h2
+                v = X[i, 3]
+                l3 = v if v < l3 else l3
+                h3 = v if v > h3 else h3
+            ok = (-lim <= l0 and h0 <= lim and -lim <= l1 and h1 <= lim and -lim <= l2
+                  and h2 <= lim and -lim <= l3 and h3 <= lim)
+        if ok:
+            # an upper bound of every row's d² to g: each term at the box's far side
+            a = l0 - cc[g, 0]
+            e = h0 - cc[g, 0]
+            a = a * a
+            e = e * e
+            ub = (a if a > e else e) * cc[g, 4]
+            a = l1 - cc[g, 1]
+            e = h1 - cc[g, 1]
+            a = a * a
+            e = e * e
+            ub = ub + (a if a > e else e) * cc[g, 5]
+            a = l2 - cc[g, 2]
+            e = h2 - cc[g, 2]
+            a = a * a
+            e = e * e
+            ub = ub + (a if a > e else e) * cc[g, 6]
+            a = l3 - cc[g, 3]
+            e = h3 - cc[g, 3]
+            a = a * a
+            e = e * e
+            ub = ub + (a if a > e else e) * cc[g, 7]
+            # the centres whose lower bound (each term at the box's near side) is not above it
+            nc = 0
+            for c in range(K):
+                v = cc[c, 0]
+                a = l0 - v if v < l0 else (h0 - v if v > h0 else 0.0)
+                lb = (a * a) * cc[c, 4]
+                if lb > ub:
+                    continue
+                v = cc[c, 1]
+                a = l1 - v if v < l1 else (h1 - v if v > h1 else 0.0)
+                lb = lb + (a * a) * cc[c, 5]
+                if lb > ub:
+                    continue
+                v = cc[c, 2]
+                a = l2 - v if v < l2 else (h2 - v if v > h2 else 0.0)
+                lb = lb + (a * a) * cc[c, 6]
+                v = cc[c, 3]
+                a = l3 - v if v < l3 else (h3 - v if v > h3 else 0.0)
+                lb = lb + (a * a) * cc[c, 7]
+                if lb > ub:
+                    continue
+                cand[nc] = c
+                nc += 1
+            nan = False
+            if nc == 1:
+                c = cand[0]
+                for i in range(b0, b1):
+                    a0 = X[i, 0] - cc[c, 0]
+                    a1 = X[i, 1] - cc[c, 1]
+                    a2 = X[i, 2] - cc[c, 2]
+                    a3 = X[i, 3] - cc[c, 3]
+                    d = (((a0 * a0) * cc[c, 4] + (a1 * a1) * cc[c, 5]) + (a2 * a2) * cc[c, 6]) \
+                        + (a3 * a3) * cc[c, 7]
+                    labels[i] = c
+                    dmin[i] = d
+                    nan = nan or d != d
+            else:
+                for i in range(b0, b1):
+                    x0 = X[i, 0]
+                    x1 = X[i, 1]
+                    x2 = X[i, 2]
+                    x3 = X[i, 3]
+                    lab = cand[0]
+                    a0 = x0 - cc[lab, 0]
+                    a1 = x1 - cc[lab, 1]
+                    a2 = x2 - cc[lab, 2]
+                    a3 = x3 - cc[lab, 3]
+                    best = (((a0 * a0) * cc[lab, 4] + (a1 * a1) * cc[lab, 5])
+                            + (a2 * a2) * cc[lab, 6]) + (a3 * a3) * cc[lab, 7]
+                    nan = nan or best != best
+                    for k in range(1, nc):
+                        c = cand[k]
+                        a0 = x0 - cc[c, 0]
+                        a1 = x1 - cc[c, 1]
+                        p = (a0 * a0) * cc[c, 4] + (a1 * a1) * cc[c, 5]
+                        if p > best:
+                            continue
+                        a2 = x2 - cc[c, 2]
+                        a3 = x3 - cc[c, 3]
+                        d = (p + (a2 * a2) * cc[c, 6]) + (a3 * a3) * cc[c, 7]
+                        if d < best:
+                            best = d
+                            lab = c
+                    labels[i] = lab
+                    dmin[i] = best
+            ok = not nan
+        if not ok:
+            for i in range(b0, b1):
+                lab, best = _dense_row(cc, X[i, 0], X[i, 1], X[i, 2], X[i, 3], g)
+                labels[i] = lab
+                dmin[i] = best
+                g = lab
+        g = labels[b1 - 1]
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
@@ -676,6 +833,64 @@ def prepare(states, log_w):
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def prepare_copies(states, log_w, copies):
+    """:func:`prepare` for particles that are runs of consecutive copies of a row, ``copies``
+    (R,) their lengths (systematic resampling's record, :data:`~..smc.resampling.COPIES`),
+    every log-weight equal: the same floats with no comparison of every row with the one
+    before.  ``exp(log_w − lmax)`` is exp(0) = 1 for each particle, so a merged row weighs
+    its particle count (a sum of ones, exact); the shift sums every particle's position in
+    particle order (a run's row added once per copy, the very additions of :func:`prepare`);
+    a run whose row equals the previous run's (two ancestors with identical rows) is merged
+    into it, as :func:`prepare` would.  ``states`` (N, 6) with ``N = sum(copies)``."""
+    n = states.shape[0]
+    R = copies.shape[0]
+    lmax = log_w[0] if n > 0 else -np.inf
+    shift = np.empty(6, np.float64)
+    for d in range(6):
+        shift[d] = 0.0
+    w = np.empty(R, np.float64)
+    S = np.empty((R, 6), np.float64)
+    X = np.empty((R, 4), np.float64)
+    runs = np.empty(R, np.int64)
+    if n == 0 or not lmax - lmax == 0.0:          # (not finite; no np.isfinite to compile)
+        return lmax, w[:0], shift, S[:0], X[:0], runs[:0]
+    a0 = 0.0
+    a1 = 0.0
+    i = 0
+    for r in range(R):
+        v0 = states[i, 0]
+        v1 = states[i, 1]
+        for t in range(copies[r]):
+            a0 += v0
+            a1 += v1
+        i += copies[r]
+    shift[0] = a0 / n
+    shift[1] = a1 / n
+    m = 0
+    i = 0
+    for r in range(R):
+        c = copies[r]
+        if i > 0 and states[i, 0] == states[i - 1, 0] and states[i, 1] == states[i - 1, 1] \
+                and states[i, 2] == states[i - 1, 2] and states[i, 3] == states[i - 1, 3] \
+                and states[i, 4] == states[i - 1, 4] and states[i, 5] == states[i - 1, 5]:
+            w[m - 1] += c                          # the previous run's row again: merged
+            runs[m - 1] += c
+            i += c
+            continue
+        w[m] = c
+        runs[m] = c
+        for d in range(6):
+            S[m, d] = states[i, d] - shift[d]
+        X[m, 0] = S[m, 0]
+        X[m, 1] = S[m, 1]
+        X[m, 2] = S[m, 4]
+        X[m, 3] = S[m, 5]
+        m += 1
+        i += c
+    return lmax, w[:m], shift, S[:m], X[:m], runs[:m]
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
 def lloyd(X, S, w, centers, max_iter, tol, sigma_obs, sigma_min, pos_ratio, grid_min):
     """Weighted Lloyd iterations (maggio2007 §3) from ``centers`` (K, 6) until the labels are
     stable, no centre's (y1, y2, w, h) moved more than ``tol`` (> 0), or ``max_iter``
@@ -1003,15 +1218,18 @@ ORIGIN_EXTRA = -2
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
-def peaks(states, log_w, Z, extra, scale, T, split_above, need, min_split_mass, guarded,
-          max_splits, n_near, max_iter, tol, sigma_obs, sigma_min, pos_ratio, grid_min):
+def peaks(states, log_w, copies, Z, extra, scale, T, split_above, need, min_split_mass,
+          guarded, max_splits, n_near, max_iter, tol, sigma_obs, sigma_min, pos_ratio,
+          grid_min):
     """:func:`~.clustering.kmeans_peaks` after its argument checks, in one call (each numpy or
     Python operation of a frame costs 2-3 times more when the caches are cold, as between two
     frames of a real run): the observations' check, :func:`prepare`, the initial centres
     (§3: on the observations ``Z`` (N_z, 4) with zero velocity, then the ``extra`` (E, 6)
     ones; with neither, the particles' weighted mean), :func:`lloyd`, :func:`split_clusters`
     and the kept test ``mass >= T``.  ``scale`` is ``exp(max log_w)`` (numpy's exp, taken by
-    the caller; the largest log-weight must be finite).
+    the caller; the largest log-weight must be finite).  ``copies`` (R,): the particles are
+    runs of copies of R rows, every log-weight equal (:func:`prepare_copies`), or empty
+    (:func:`prepare`).
 
     Returns ``(bad, centers, masses, labels, runs, kept, origin, n_splits, n_iter)``:
     ``bad`` 1 for a non-finite observation, 2 for a width or height <= 0 (nothing else
@@ -1034,7 +1252,10 @@ def peaks(states, log_w, Z, extra, scale, T, split_above, need, min_split_mass, 
         return (bad, np.empty((0, 6), np.float64), np.empty(0, np.float64),
                 np.empty(0, np.int64), np.empty(0, np.int64), np.empty(0, np.bool_),
                 np.empty(0, np.int64), 0, 0)
-    lmax, w, shift, S, X, runs = prepare(states, log_w)
+    if copies.shape[0] > 0:
+        lmax, w, shift, S, X, runs = prepare_copies(states, log_w, copies)
+    else:
+        lmax, w, shift, S, X, runs = prepare(states, log_w)
     m = w.shape[0]
     # the centres in the shifted coordinates: the same floats as numpy's ``init - shift``
     init = np.empty((k0, 6), np.float64)

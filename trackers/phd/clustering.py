@@ -104,6 +104,7 @@ from typing import Callable, Optional
 
 import numpy as np
 
+from ..smc.resampling import COPIES
 from ..smc.weights import ParticleSet
 from ..types import cxcywh_to_xywh
 from . import _kmeans_kernels
@@ -250,9 +251,13 @@ def kmeans_peaks(ps: ParticleSet, Z, T: float = 0.6, *, params: PHDParams | None
     # split loop (guarded or literal rule, local trials: _kmeans_kernels.split_clusters).
     lk = params.likelihood
     K0 = len(Z) + len(extra)
+    # systematic resampling's runs of copies (equal weights): each run's row taken once
+    copies = ps.__dict__.get(COPIES) if full is None else None
+    if copies is None or not ps.is_known_equal():
+        copies = _NO_COPIES
     bad, centers, masses, labels, runs, kept, origin, n_splits, n_iter = _kmeans_kernels.peaks(
         np.ascontiguousarray(states, dtype=np.float64),
-        np.ascontiguousarray(log_w, dtype=np.float64), Z, extra, np.exp(lmax), float(T),
+        np.ascontiguousarray(log_w, dtype=np.float64), copies, Z, extra, np.exp(lmax), float(T),
         float(split_above), float(2.0 * min_split_mass if guarded else -np.inf),
         float(min_split_mass), guarded, int(max_splits), int(SPLIT_NEIGHBOURS), int(max_iter),
         float(tol), lk.sigma_obs, lk.sigma_obs_min, lk.sigma_obs_pos_ratio,
@@ -269,6 +274,7 @@ def kmeans_peaks(ps: ParticleSet, Z, T: float = 0.6, *, params: PHDParams | None
 
 
 _NO_OBS = np.zeros((0, OBS_DIM))
+_NO_COPIES = np.zeros(0, dtype=np.int64)
 _NO_EXTRA = np.zeros((0, STATE_DIM))
 
 
