@@ -973,7 +973,7 @@ def test_dense_lloyd_compiles_none_of_the_grid_search(tmp_path):
             "S = rng.uniform(10, 60, (200, 6)); X = np.ascontiguousarray(S[:, [0, 1, 4, 5]])\n"
             "KM.lloyd(X, S, np.ones(200), S[:3].copy(), 10, 0.01, 0.15, 1.0, 0.5, None)\n"
             "print(len(KM._assign.signatures), len(KM._unstable_near_moved.signatures),\n"
-            "      len(KM._assign_dense.signatures))\n")
+            "      len(KM._assign_blocks.signatures))\n")
     env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)}
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
                          timeout=600, check=True).stdout.split()

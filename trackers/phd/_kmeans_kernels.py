@@ -119,31 +119,13 @@ def _dense_row(cc, x0, x1, x2, x3, g):
     return lab, best
 
 
-@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
-def _assign_dense(X, centers, inv, labels, dmin):
-    """:func:`_nearest_dense` of every particle: the same labels and d² floats.  A particle
-    starts from centre 0 (a NaN d² there is the answer, as argmin's rule above) and the
-    previous particle's centre (resampling lays a target's particles side by side, so it is
-    usually the nearest), then looks at the others taking the lowest index among equal d²;
-    a centre whose (y1, y2) part of the sum alone exceeds the best d² is passed over without
-    its size terms (the full sum adds non-negative terms to that part: it could only be
-    larger).  Each d² is summed in :func:`_d2`'s order.  The centres and their inverse
-    variances are one row per centre, hoisted.
-
-    From :data:`_BLOCKS_MIN` centres on (all finite, within :data:`_BLOCK_MAX_ABS`), the
-    particles go in blocks of :data:`_BLOCK` consecutive ones: the block's box (the range of
-    each coordinate) gives an upper bound ``ub`` of every particle's d² to the previous
-    block's last centre g (each term at the box's far side) and a lower bound ``lb_c`` for
-    each centre (each term at the near side; rounding is monotone and the terms are
-    non-negative, so the bounds hold for the float d²).  A centre with ``lb_c > ub`` can
-    neither beat nor tie g for any particle of the block and is not looked at; the others
-    (g among them) are, in index order, the first of the smallest d² winning -- the serial
-    rule's answer, as no d² is NaN there (a particle with a NaN coordinate makes its block
-    take the serial look).  Resampling lays a target's particles side by side: on the bench
-    scene ~95 % of the blocks have g alone, one d² a particle."""
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
+def _centre_rows(centers, inv, k_min):
+    """(K, 8) the centres' (y1, y2, w, h) and inverse variances, one row per centre, and
+    whether the blocks may be used: at least ``k_min`` centres, every value finite and within
+    :data:`_BLOCK_MAX_ABS`."""
     K = centers.shape[0]
-    if K == 0:
-        return
     cc = np.empty((K, 8), np.float64)
     for c in range(K):
         cc[c, 0] = centers[c, 0]
@@ -155,45 +137,155 @@ def _assign_dense(X, centers, inv, labels, dmin):
         cc[c, 6] = inv[c, 2]
         cc[c, 7] = inv[c, 3]
     lim = _BLOCK_MAX_ABS
-    blocks = K >= _BLOCKS_MIN
+    blocks = K >= k_min
     for c in range(K):
         for d in range(8):
             v = cc[c, d]
             if not (v - v == 0.0 and -lim <= v <= lim):   # (not finite, or huge)
                 blocks = False
+    return cc, blocks
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
+def _box(X, b0, b1, lim):
+    """The box of particles ``b0:b1`` (each coordinate's range) and whether it lies within
+    ``lim`` (a NaN coordinate but the first row's is passed over: its d² is NaN)."""
+    l0 = X[b0, 0]
+    l1 = X[b0, 1]
+    l2 = X[b0, 2]
+    l3 = X[b0, 3]
+    h0 = l0
+    h1 = l1
+    h2 = l2
+    h3 = l3
+    for i in range(b0 + 1, b1):
+        v = X[i, 0]
+        l0 = v if v < l0 else l0
+        h0 = v if v > h0 else h0
+        v = X[i, 1]
+        l1 = v if v < l1 else l1
+        h1 = v if v > h1 else h1
+        v = X[i, 2]
+        l2 = v if v < l2 else l2
+        h2 = v if v > h2 else h2
+        v = X[i, 3]
+        l3 = v if v < l3 else l3
+        h3 = v if v > h3 else h3
+    ok = (-lim <= l0 and h0 <= lim and -lim <= l1 and h1 <= lim and -lim <= l2
+          and h2 <= lim and -lim <= l3 and h3 <= lim)
+    return ok, l0, l1, l2, l3, h0, h1, h2, h3
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
+def _lower(cc, c, l0, l1, l2, l3, h0, h1, h2, h3, ub):
+    """A lower bound of the d² of every particle in the box ``(l, h)`` to centre c (each
+    term at the box's near side), summed in :func:`_d2`'s order; stops early (with a value
+    above ``ub``) once a partial sum exceeds ``ub``."""
+    v = cc[c, 0]
+    a = l0 - v if v < l0 else (h0 - v if v > h0 else 0.0)
+    lb = (a * a) * cc[c, 4]
+    if lb > ub:
+        return lb
+    v = cc[c, 1]
+    a = l1 - v if v < l1 else (h1 - v if v > h1 else 0.0)
+    lb = lb + (a * a) * cc[c, 5]
+    if lb > ub:
+        return lb
+    v = cc[c, 2]
+    a = l2 - v if v < l2 else (h2 - v if v > h2 else 0.0)
+    lb = lb + (a * a) * cc[c, 6]
+    v = cc[c, 3]
+    a = l3 - v if v < l3 else (h3 - v if v > h3 else 0.0)
+    return lb + (a * a) * cc[c, 7]
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
+def _boxes(X):
+    """(B, 9) the box of each block of :data:`_BLOCK` particles (:func:`_box`: the lows and
+    highs of (y1, y2, w, h), then 1.0 if it lies within :data:`_BLOCK_MAX_ABS`, else 0.0):
+    taken once for every assignment of a Lloyd run (the particles do not change)."""
+    n = X.shape[0]
+    nb = (n + _BLOCK - 1) // _BLOCK
+    out = np.empty((nb, 9), np.float64)
+    for b in range(nb):
+        b0 = b * _BLOCK
+        b1 = b0 + _BLOCK if b0 + _BLOCK < n else n
+        ok, l0, l1, l2, l3, h0, h1, h2, h3 = _box(X, b0, b1, _BLOCK_MAX_ABS)
+        out[b, 0] = l0
+        out[b, 1] = l1
+        out[b, 2] = l2
+        out[b, 3] = l3
+        out[b, 4] = h0
+        out[b, 5] = h1
+        out[b, 6] = h2
+        out[b, 7] = h3
+        out[b, 8] = 1.0 if ok else 0.0
+    return out
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def _assign_dense(X, centers, inv, labels, dmin):
+    """:func:`_nearest_dense` of every particle: the same labels and d² floats
+    (:func:`_assign_blocks`, the blocks' boxes taken here)."""
+    _assign_blocks(X, centers, inv, labels, dmin,
+                   _boxes(X) if centers.shape[0] >= _BLOCKS_MIN else np.empty((0, 9), np.float64))
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
+def _assign_blocks(X, centers, inv, labels, dmin, boxes):
+    """:func:`_nearest_dense` of every particle: the same labels and d² floats; ``boxes``
+    those of the particles' blocks (:func:`_boxes`; empty: no blocks).  A particle
+    starts from centre 0 (a NaN d² there is the answer, as argmin's rule above) and the
+    previous particle's centre (resampling lays a target's particles side by side, so it is
+    usually the nearest), then looks at the others taking the lowest index among equal d²;
+    a centre whose (y1, y2) part of the sum alone exceeds the best d² is passed over without
+    its size terms (the full sum adds non-negative terms to that part: it could only be
+    larger).  Each d² is summed in :func:`_d2`'s order.  The centres and their inverse
+    variances are one row per centre, hoisted.
+
+    From :data:`_BLOCKS_MIN` centres on (all finite, within :data:`_BLOCK_MAX_ABS`), the
+    particles go in blocks of :data:`_BLOCK` consecutive ones (a block reaching beyond it:
+    the serial look): the block's box (the range of each coordinate) gives an upper bound ``ub`` of every particle's d² to the previous
+    block's last centre g (each term at the box's far side) and a lower bound ``lb_c`` for
+    each centre (each term at the near side; rounding is monotone and the terms are
+    non-negative, so the bounds hold for the float d²).  A centre with ``lb_c > ub`` can
+    neither beat nor tie g for any particle of the block and is not looked at; the others
+    (g among them) are, in index order, the first of the smallest d² winning -- the serial
+    rule's answer, as no d² is NaN there (a particle with a NaN coordinate makes its block
+    take the serial look).  Resampling lays a target's particles side by side: on the bench
+    scene ~95 % of the blocks have g alone, one d² a particle."""
+    K = centers.shape[0]
+    if K == 0:
+        return
+    cc, blocks = _centre_rows(centers, inv, _BLOCKS_MIN)
     n = X.shape[0]
     B = _BLOCK
-    cand = np.empty(K, np.int64)
     g = 0
-    for b0 in range(0, n, B):
+    if not blocks or boxes.shape[0] == 0:
+        for i in range(n):
+            lab, best = _dense_row(cc, X[i, 0], X[i, 1], X[i, 2], X[i, 3], g)
+            labels[i] = lab
+            dmin[i] = best
+            g = lab
+        return
+    cand = np.empty(K, np.int64)
+    for b in range(boxes.shape[0]):
+        b0 = b * B
         b1 = b0 + B if b0 + B < n else n
-        ok = blocks
+        ok = boxes[b, 8] != 0.0
         if ok:
-            # the block's box (a NaN coordinate is passed over here: its d² is NaN, below)
-            l0 = X[b0, 0]
-            l1 = X[b0, 1]
-            l2 = X[b0, 2]
-            l3 = X[b0, 3]
-            h0 = l0
-            h1 = l1
-            h2 = l2
-            h3 = l3
-            for i in range(b0 + 1, b1):
-                v = X[i, 0]
-                l0 = v if v < l0 else l0
-                h0 = v if v > h0 else h0
-                v = X[i, 1]
-                l1 = v if v < l1 else l1
-                h1 = v if v > h1 else h1
-                v = X[i, 2]
-                l2 = v if v < l2 else l2
-                h2 = v if v > h2 else h2
-                v = X[i, 3]
-                l3 = v if v < l3 else l3
-                h3 = v if v > h3 else h3
-            ok = (-lim <= l0 and h0 <= lim and -lim <= l1 and h1 <= lim and -lim <= l2
-                  and h2 <= lim and -lim <= l3 and h3 <= lim)
-        if ok:
+            l0 = boxes[b, 0]
+            l1 = boxes[b, 1]
+            l2 = boxes[b, 2]
+            l3 = boxes[b, 3]
+            h0 = boxes[b, 4]
+            h1 = boxes[b, 5]
+            h2 = boxes[b, 6]
+            h3 = boxes[b, 7]
             # an upper bound of every row's d² to g: each term at the box's far side
             a = l0 - cc[g, 0]
             e = h0 - cc[g, 0]
@@ -218,26 +310,9 @@ def _assign_dense(X, centers, inv, labels, dmin):
             # the centres whose lower bound (each term at the box's near side) is not above it
             nc = 0
             for c in range(K):
-                v = cc[c, 0]
-                a = l0 - v if v < l0 else (h0 - v if v > h0 else 0.0)
-                lb = (a * a) * cc[c, 4]
-                if lb > ub:
-                    continue
-                v = cc[c, 1]
-                a = l1 - v if v < l1 else (h1 - v if v > h1 else 0.0)
-                lb = lb + (a * a) * cc[c, 5]
-                if lb > ub:
-                    continue
-                v = cc[c, 2]
-                a = l2 - v if v < l2 else (h2 - v if v > h2 else 0.0)
-                lb = lb + (a * a) * cc[c, 6]
-                v = cc[c, 3]
-                a = l3 - v if v < l3 else (h3 - v if v > h3 else 0.0)
-                lb = lb + (a * a) * cc[c, 7]
-                if lb > ub:
-                    continue
-                cand[nc] = c
-                nc += 1
+                if not _lower(cc, c, l0, l1, l2, l3, h0, h1, h2, h3, ub) > ub:
+                    cand[nc] = c
+                    nc += 1
             nan = False
             if nc == 1:
                 c = cand[0]
@@ -305,26 +380,16 @@ def _moved_list(moved):
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
       no_cpython_wrapper=True)
-def _assign_moved(X, centers, inv, prev, labels, dmin, moved):
-    """:func:`_assign_dense`'s labels and d² when only the ``moved`` (K,) centres changed
-    since ``prev`` (N,) -- each particle's nearest centre, the lowest index among equal d² --
-    and ``dmin`` (its d², overwritten) were taken: a particle whose centre did not move looks
-    at the moved centres only (an unmoved centre other than its own was no nearer then, nor
-    of a lower index at the same d², and is the same now), the others at every centre.
-    A NaN d² (argmin's centre 0 rule) gets the full look too.  When most centres moved, the
-    vector loop over every centre."""
-    K = centers.shape[0]
-    idx = _moved_list(moved)
-    nm = idx.shape[0]
-    if 2 * nm > K:
-        _assign_dense(X, centers, inv, labels, dmin)
-        return
-    for i in range(X.shape[0]):
+def _moved_rows(X, b0, b1, centers, inv, prev, labels, dmin, moved, idx):
+    """:func:`_assign_moved`'s answer for particles ``b0:b1``, each on its own: its previous
+    centre and d² against the moved centres ``idx``, or every centre when its own moved (or
+    its d² is NaN)."""
+    for i in range(b0, b1):
         lab = prev[i]
         best = dmin[i]
         full = moved[lab] or best != best
         if not full:
-            for k in range(nm):
+            for k in range(idx.shape[0]):
                 c = idx[k]
                 d = _d2(X, i, centers, inv, c)
                 if d < best or (d == best and c < lab):
@@ -337,6 +402,89 @@ def _assign_moved(X, centers, inv, prev, labels, dmin, moved):
             lab, best = _nearest_dense(X, i, centers, inv)
         labels[i] = lab
         dmin[i] = best
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
+def _assign_moved(X, centers, inv, prev, labels, dmin, moved, boxes):
+    """:func:`_assign_dense`'s labels and d² when only the ``moved`` (K,) centres changed
+    since ``prev`` (N,) -- each particle's nearest centre, the lowest index among equal d² --
+    and ``dmin`` (its d², overwritten) were taken: a particle whose centre did not move looks
+    at the moved centres only (an unmoved centre other than its own was no nearer then, nor
+    of a lower index at the same d², and is the same now), the others at every centre.
+    A NaN d² (argmin's centre 0 rule) gets the full look too.  When most centres moved, the
+    vector loop over every centre.
+
+    From :data:`_BLOCKS_MIN` centres on (finite, as :func:`_assign_blocks`'s blocks; ``boxes``
+    from :func:`_boxes`, empty: none), in blocks of :data:`_BLOCK` particles: a block whose particles' centres all stayed put looks
+    only at the moved centres whose lower bound over the block's box is not above the
+    block's largest d² (the others can neither beat nor tie any particle's own centre), often
+    none; a block with a particle whose centre moved, each particle as above."""
+    K = centers.shape[0]
+    idx = _moved_list(moved)
+    nm = idx.shape[0]
+    if 2 * nm > K:
+        _assign_blocks(X, centers, inv, labels, dmin, boxes)
+        return
+    n = X.shape[0]
+    cc, blocks = _centre_rows(centers, inv, _BLOCKS_MIN)
+    if not blocks or boxes.shape[0] == 0:
+        _moved_rows(X, 0, n, centers, inv, prev, labels, dmin, moved, idx)
+        return
+    cand = np.empty(K, np.int64)
+    for b in range(boxes.shape[0]):
+        b0 = b * _BLOCK
+        b1 = b0 + _BLOCK if b0 + _BLOCK < n else n
+        ok = boxes[b, 8] != 0.0
+        l0 = boxes[b, 0]
+        l1 = boxes[b, 1]
+        l2 = boxes[b, 2]
+        l3 = boxes[b, 3]
+        h0 = boxes[b, 4]
+        h1 = boxes[b, 5]
+        h2 = boxes[b, 6]
+        h3 = boxes[b, 7]
+        ub = -np.inf
+        if ok:
+            for i in range(b0, b1):
+                v = dmin[i]
+                if moved[prev[i]] or not v - v == 0.0:     # (a moved centre; NaN or inf)
+                    ok = False
+                    break
+                ub = v if v > ub else ub
+        if not ok:
+            _moved_rows(X, b0, b1, centers, inv, prev, labels, dmin, moved, idx)
+            continue
+        nc = 0
+        for k in range(nm):
+            c = idx[k]
+            if not _lower(cc, c, l0, l1, l2, l3, h0, h1, h2, h3, ub) > ub:
+                cand[nc] = c
+                nc += 1
+        if nc == 0:
+            for i in range(b0, b1):
+                labels[i] = prev[i]
+            continue
+        for i in range(b0, b1):
+            x0 = X[i, 0]
+            x1 = X[i, 1]
+            x2 = X[i, 2]
+            x3 = X[i, 3]
+            lab = prev[i]
+            best = dmin[i]
+            for k in range(nc):
+                c = cand[k]
+                a0 = x0 - cc[c, 0]
+                a1 = x1 - cc[c, 1]
+                a2 = x2 - cc[c, 2]
+                a3 = x3 - cc[c, 3]
+                d = (((a0 * a0) * cc[c, 4] + (a1 * a1) * cc[c, 5]) + (a2 * a2) * cc[c, 6]) \
+                    + (a3 * a3) * cc[c, 7]
+                if d < best or (d == best and c < lab):
+                    best = d
+                    lab = c
+            labels[i] = lab
+            dmin[i] = best
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
@@ -946,15 +1094,17 @@ def lloyd(X, S, w, centers, max_iter, tol, sigma_obs, sigma_min, pos_ratio, grid
     space = np.empty(4, np.float64)
     for d in range(4):
         space[d] = 0.0
+    # the dense look's blocks of particles (their boxes, once for every assignment)
+    boxes = _boxes(X) if grid_min is None and K >= _BLOCKS_MIN else np.empty((0, 9), np.float64)
     it = 0
     done = False
     for it in range(1, max_iter + 1):
         inv = _inv_var(centers, sigma_obs, sigma_min, pos_ratio)
         if grid_min is None:
             if it == 1:
-                _assign_dense(X, centers, inv, new, dmin)
+                _assign_blocks(X, centers, inv, new, dmin, boxes)
             else:
-                _assign_moved(X, centers, inv, labels, new, dmin, moved)
+                _assign_moved(X, centers, inv, labels, new, dmin, moved, boxes)
         else:
             if K >= grid_min:
                 # the scaled space: a little below the smallest inverse variances, kept while
@@ -1025,9 +1175,9 @@ def lloyd(X, S, w, centers, max_iter, tol, sigma_obs, sigma_min, pos_ratio, grid
         inv = _inv_var(centers, sigma_obs, sigma_min, pos_ratio)
         if grid_min is None:
             if it == 0:
-                _assign_dense(X, centers, inv, new, dmin)
+                _assign_blocks(X, centers, inv, new, dmin, boxes)
             else:
-                _assign_moved(X, centers, inv, labels, new, dmin, moved)
+                _assign_moved(X, centers, inv, labels, new, dmin, moved, boxes)
         else:
             for c in range(K):
                 stable[c] = False
