@@ -1368,9 +1368,7 @@ ORIGIN_EXTRA = -2
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
-def peaks(states, log_w, copies, Z, extra, scale, T, split_above, need, min_split_mass,
-          guarded, max_splits, n_near, max_iter, tol, sigma_obs, sigma_min, pos_ratio,
-          grid_min):
+def peaks(states, log_w, copies, Z, extra, scale, cfg, grid_min):
     """:func:`~.clustering.kmeans_peaks` after its argument checks, in one call (each numpy or
     Python operation of a frame costs 2-3 times more when the caches are cold, as between two
     frames of a real run): the observations' check, :func:`prepare`, the initial centres
@@ -1379,11 +1377,25 @@ def peaks(states, log_w, copies, Z, extra, scale, T, split_above, need, min_spli
     and the kept test ``mass >= T``.  ``scale`` is ``exp(max log_w)`` (numpy's exp, taken by
     the caller; the largest log-weight must be finite).  ``copies`` (R,): the particles are
     runs of copies of R rows, every log-weight equal (:func:`prepare_copies`), or empty
-    (:func:`prepare`).
+    (:func:`prepare`).  ``cfg`` (12,) the settings ``T, split_above, need, min_split_mass,
+    guarded (1.0 / 0.0), max_splits, n_near, max_iter, tol, sigma_obs, sigma_min, pos_ratio``
+    (:func:`split_clusters`, :func:`lloyd`: integers as floats).
 
     Returns ``(bad, centers, masses, labels, runs, kept, origin, n_splits, n_iter)``:
     ``bad`` 1 for a non-finite observation, 2 for a width or height <= 0 (nothing else
     computed), else 0; ``labels`` (M,) of the merged rows, ``runs`` (M,) their lengths."""
+    T = cfg[0]
+    split_above = cfg[1]
+    need = cfg[2]
+    min_split_mass = cfg[3]
+    guarded = cfg[4] != 0.0
+    max_splits = int(cfg[5])
+    n_near = int(cfg[6])
+    max_iter = int(cfg[7])
+    tol = cfg[8]
+    sigma_obs = cfg[9]
+    sigma_min = cfg[10]
+    pos_ratio = cfg[11]
     nz = Z.shape[0]
     bad = 0
     for c in range(nz):

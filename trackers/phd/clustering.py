@@ -124,7 +124,7 @@ INDEX_MIN_CENTERS = 32
 SPLIT_NEIGHBOURS = 4
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, init=False)
 class Clusters:
     """Result of :func:`kmeans_peaks`.
 
@@ -143,6 +143,16 @@ class Clusters:
     n_iter: int = 0
     _labeller: Optional[Callable[[], np.ndarray]] = field(default=None, repr=False,
                                                           compare=False)
+
+    def __init__(self, centers: np.ndarray, masses: np.ndarray, _labels: Optional[np.ndarray],
+                 kept: np.ndarray, origin: np.ndarray, n_splits: int = 0, n_iter: int = 0,
+                 _labeller: Optional[Callable[[], np.ndarray]] = None):
+        # (the frozen dataclass's generated __init__ sets each field by object.__setattr__:
+        # the instance dict directly costs a fraction; made every frame)
+        d = self.__dict__
+        d["centers"], d["masses"], d["_labels"], d["kept"] = centers, masses, _labels, kept
+        d["origin"], d["n_splits"], d["n_iter"], d["_labeller"] = (origin, n_splits, n_iter,
+                                                                   _labeller)
 
     def __len__(self) -> int:
         return len(self.masses)
@@ -236,7 +246,9 @@ def kmeans_peaks(ps: ParticleSet, Z, T: float = 0.6, *, params: PHDParams | None
         full = states
         states = states[::subsample]
         log_w = np.full(len(states), log_w[0] + math.log(n / len(states)))
-    lmax = log_w.max() if n else -math.inf
+    # (systematic resampling's equal weights: the max is any of them, no pass)
+    equal = full is None and ps.is_known_equal()
+    lmax = (log_w[0] if equal else log_w.max()) if n else -math.inf
     if not math.isfinite(lmax):         # no particle, or no finite weight: nothing to cluster
         Z = as_observations(Z)
         init, origin = _initial_centers(Z, extra)
@@ -252,15 +264,24 @@ def kmeans_peaks(ps: ParticleSet, Z, T: float = 0.6, *, params: PHDParams | None
     lk = params.likelihood
     K0 = len(Z) + len(extra)
     # systematic resampling's runs of copies (equal weights): each run's row taken once
-    copies = ps.__dict__.get(COPIES) if full is None else None
-    if copies is None or not ps.is_known_equal():
+    copies = ps.__dict__.get(COPIES) if equal else None
+    if copies is None:
         copies = _NO_COPIES
+    # the run's settings as one array (one kernel argument instead of twelve: each costs the
+    # call ~2 us when the caches are cold), made once per distinct settings
+    key = (T, split_above, min_split_mass, guarded, max_splits, max_iter, tol, lk.sigma_obs,
+           lk.sigma_obs_min, lk.sigma_obs_pos_ratio)
+    cfg = _CFG.get(key)
+    if cfg is None:
+        if len(_CFG) > 64:
+            _CFG.clear()
+        cfg = _CFG[key] = np.array(
+            [T, split_above, 2.0 * min_split_mass if guarded else -np.inf, min_split_mass,
+             1.0 if guarded else 0.0, int(max_splits), int(SPLIT_NEIGHBOURS), int(max_iter),
+             tol, lk.sigma_obs, lk.sigma_obs_min, lk.sigma_obs_pos_ratio], dtype=np.float64)
     bad, centers, masses, labels, runs, kept, origin, n_splits, n_iter = _kmeans_kernels.peaks(
         np.ascontiguousarray(states, dtype=np.float64),
-        np.ascontiguousarray(log_w, dtype=np.float64), copies, Z, extra, np.exp(lmax), float(T),
-        float(split_above), float(2.0 * min_split_mass if guarded else -np.inf),
-        float(min_split_mass), guarded, int(max_splits), int(SPLIT_NEIGHBOURS), int(max_iter),
-        float(tol), lk.sigma_obs, lk.sigma_obs_min, lk.sigma_obs_pos_ratio,
+        np.ascontiguousarray(log_w, dtype=np.float64), copies, Z, extra, np.exp(lmax), cfg,
         int(INDEX_MIN_CENTERS) if K0 >= INDEX_MIN_CENTERS else None)
     if bad:
         as_observations(Z)              # (raises its message)
@@ -274,6 +295,7 @@ def kmeans_peaks(ps: ParticleSet, Z, T: float = 0.6, *, params: PHDParams | None
 
 
 _NO_OBS = np.zeros((0, OBS_DIM))
+_CFG: dict = {}                         # kmeans_peaks' settings arrays (_kmeans_kernels.peaks)
 _NO_COPIES = np.zeros(0, dtype=np.int64)
 _NO_EXTRA = np.zeros((0, STATE_DIM))
 
