@@ -1282,12 +1282,15 @@ def split_clusters(X, S, w, centers, masses, labels, dmin, scale, split_above, n
             C[c, d] = centers[c, d]
         M[c] = masses[c]
         final[c] = False
-    lab = labels.copy()
-    dm = dmin.copy()
-    far_of = farthest(lab, dm, K)
+    # (made on first need: most frames try no split -- no candidate, or each one lighter
+    # than ``need`` -- and then copy, scan and allocate nothing per particle)
+    lab = labels
+    dm = dmin
+    copied = False
+    far_of = np.empty(0, np.int64)
+    pick = np.empty(0, np.int64)
     near = np.empty(n_near, np.int64)
     is_local = np.empty(cap, np.bool_)
-    pick = np.empty(n, np.int64)
     n_splits = 0
     n_iter = 0
     budget = max_splits
@@ -1302,6 +1305,9 @@ def split_clusters(X, S, w, centers, masses, labels, dmin, scale, split_above, n
         if M[j] < need:                    # guarded: j's own mass cannot give both halves
             final[j] = True                # min_split_mass (a single target, no trial)
             continue
+        if far_of.shape[0] == 0:
+            far_of = farthest(lab, dm, K)
+            pick = np.empty(n, np.int64)
         far = far_of[j]
         if far < 0 or dm[far] <= 0.0:      # no member / all on the centre
             final[j] = True
@@ -1350,6 +1356,10 @@ def split_clusters(X, S, w, centers, masses, labels, dmin, scale, split_above, n
         for d in range(6):
             C[K, d] = t_c[nn, d]
         M[K] = t_m[nn] * scale
+        if not copied:                     # (the caller's arrays stay as they were)
+            lab = labels.copy()
+            dm = dmin.copy()
+            copied = True
         final[K] = False
         for q in range(m):
             t = t_lab[q]
