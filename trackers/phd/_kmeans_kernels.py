@@ -1184,12 +1184,15 @@ def lloyd(X, S, w, centers, max_iter, tol, sigma_obs, sigma_min, pos_ratio, grid
             _assign(X, centers, inv, labels, new, dmin, grid_min, _min_inv(inv), stable, reach)
         for i in range(n):
             labels[i] = new[i]
-    masses = np.empty(K, np.float64)
-    for c in range(K):
-        masses[c] = 0.0
-    for i in range(n):
-        masses[labels[i]] += w[i]
-    return centers, labels, masses, dmin, it
+        masses = np.empty(K, np.float64)
+        for c in range(K):
+            masses[c] = 0.0
+        for i in range(n):
+            masses[labels[i]] += w[i]
+        return centers, labels, masses, dmin, it
+    # converged: the returned labels are those of the last sums, and each cluster's m is the
+    # sum of its members' weights in particle order -- the very floats of a masses pass
+    return centers, labels, m, dmin, it
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
