@@ -55,13 +55,17 @@ Readings (each a parameter of :func:`kmeans_peaks`):
 Cost (DESIGN.md, linear in the number of targets): systematic resampling lays the copies of
 an ancestor side by side as identical rows (on the bench scene only ~2/3 of the resampled rows
 are distinct), so each run of consecutive identical rows enters K-means as one row weighing
-their sum (:func:`._kmeans_kernels.prepare`): the same labels, the same centres and masses up
+their sum (:func:`._kmeans_kernels.prepare`; for a set systematic resampling made, from the
+runs it recorded, :data:`~..smc.resampling.COPIES`, with no comparison of every row:
+:func:`._kmeans_kernels.prepare_copies`): the same labels, the same centres and masses up
 to summation round-off, a third fewer rows in every Lloyd pass and split trial; ``labels`` of
 every particle (its row's) are taken when first read.  The split loop (candidates, pre-checks,
 local trials) is one numba kernel (:func:`._kmeans_kernels.split_clusters`), the Lloyd
 iterations another (:func:`._kmeans_kernels.lloyd`: assignment, then the weighted sums in
-one pass, no (N × K) temporaries).  With fewer than :data:`INDEX_MIN_CENTERS` centres the assignment looks at every
-centre, as plain K-means does; with more, each particle looks only at the centres near it (a
+one pass, no (N × K) temporaries).  With fewer than :data:`INDEX_MIN_CENTERS` centres the
+assignment has plain K-means' answer from a look at every centre -- by blocks of consecutive
+particles, each looking only at the centres that could beat the previous block's centre
+somewhere in its box (:func:`._kmeans_kernels._assign_blocks`; exact); with more, each particle looks only at the centres near it (a
 grid of the centres, :func:`._kmeans_kernels.assign`), and the result is still *exact* — the same
 labels, ties to the lowest index included, the same d² floats: every centre's inverse variances
 are at least m (their minimum), so a centre at Euclidean distance e in the position plane scaled
