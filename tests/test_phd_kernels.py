@@ -685,13 +685,18 @@ def test_systematic_take_copies_the_searchsorted_ancestors_rows(N, n, D):
             cdf = np.cumsum(terms)
             cdf[-1] = 1.0
             want = np.minimum(np.searchsorted(cdf, (u0 + np.arange(n)) / n, side="right"), N - 1)
-            idx, rows = _systematic_take(states, *args, True)
+            idx, rows, runs = _systematic_take(states, *args, True)
             np.testing.assert_array_equal(idx, want)
             assert rows.shape == (n, D)
             np.testing.assert_array_equal(rows, states[want])
-            no_idx, rows2 = _systematic_take(states, *args, False)   # the rows alone
+            # the runs of copies of one ancestor, in order
+            anc, first = np.unique(want, return_index=True)
+            np.testing.assert_array_equal(runs, np.diff(np.append(first, n)))
+            np.testing.assert_array_equal(np.repeat(anc, runs), want)
+            no_idx, rows2, runs2 = _systematic_take(states, *args, False)   # the rows alone
             assert no_idx.shape == (0,)
             np.testing.assert_array_equal(rows2, rows)
+            np.testing.assert_array_equal(runs2, runs)
             assert np.all(w[idx[idx < N - 1]] > 0)     # zero-weight bins never picked (but
             #                                            the last, its CDF forced to 1)
 
@@ -781,6 +786,49 @@ def test_dense_assign_is_the_serial_scan_bit_for_bit(k):
             want[d[np.arange(n), c] < d[np.arange(n), want]] = c
         np.testing.assert_array_equal(lab, want)
         assert d2.tobytes() == d[np.arange(n), want].tobytes()
+
+
+@pytest.mark.parametrize("k", [KM._BLOCKS_MIN, 9, 19, 31])
+def test_dense_assign_blocks_are_the_serial_scan_bit_for_bit(k):
+    """Finite centres (from ``_BLOCKS_MIN`` on): the blocks of particles with their box's
+    bounds (a centre whose d² lower bound over the box exceeds the previous centre's upper
+    bound is not looked at) give the serial scan's labels and d² bytes -- particles of a
+    centre side by side (a block usually has one candidate), shuffled (many), particles far
+    from every centre, exact ties between two centres of the same size (the lower index),
+    particles on a centre, and NaN, inf and huge coordinates (their block: the serial look)."""
+    rng = np.random.default_rng(5 + k)
+    lk = LikelihoodParams()
+    centers = _centers(rng, k)                     # (centres 1 and k // 2 equal: ties)
+    centers[2, :2] = (2000.0, 2000.0)
+    centers[k - 1] = centers[2]
+    centers[k - 1, 0] += 40.0                      # 2 and k - 1 mirrored about y1 + 20
+    n = 5000
+    src = np.sort(rng.integers(0, k, n))
+    X = centers[src][:, OBS] + rng.normal(0, 6, (n, 4)) * rng.uniform(0.2, 3, (n, 1))
+    X[400:440] = centers[2, OBS] + (20.0, 0.0, 0.0, 0.0)        # on the tie of 2 and k - 1
+    X[500:530] = centers[1, OBS]                                # on the tied centres 1, k // 2
+    X[600:640, :2] = rng.uniform(-5e3, 5e3, (40, 2))            # far from every centre
+    X[700, 1] = np.nan
+    X[740, 3] = np.inf
+    X[780, 0] = -1e200
+    inv = KM._inv_var(centers, lk.sigma_obs, lk.sigma_obs_min, lk.sigma_obs_pos_ratio)
+    C = centers[:, OBS]
+    for order in (np.arange(n), rng.permutation(n)):
+        Xo = np.ascontiguousarray(X[order])
+        lab, d2 = np.empty(n, dtype=np.int64), np.empty(n)
+        KM._assign_dense(Xo, centers, inv, lab, d2)
+        with np.errstate(over="ignore", invalid="ignore"):
+            a = Xo[:, None, :] - C[None, :, :]
+            d = (((a[..., 0] * a[..., 0]) * inv[:, 0] + (a[..., 1] * a[..., 1]) * inv[:, 1])
+                 + (a[..., 2] * a[..., 2]) * inv[:, 2]) + (a[..., 3] * a[..., 3]) * inv[:, 3]
+        want = np.zeros(n, dtype=np.int64)
+        for c in range(1, k):
+            want[d[np.arange(n), c] < d[np.arange(n), want]] = c
+        np.testing.assert_array_equal(lab, want)
+        assert d2.tobytes() == d[np.arange(n), want].tobytes()
+        if order[0] == 0:
+            assert np.all(want[np.arange(400, 440)] == 2)       # the ties were there
+            assert np.all(want[np.arange(500, 530)] == 1)
 
 
 @pytest.mark.parametrize("layout", ["many", "line", "same", "cluster+far"])
@@ -941,7 +989,7 @@ def test_dense_lloyd_compiles_none_of_the_grid_search(tmp_path):
             "S = rng.uniform(10, 60, (200, 6)); X = np.ascontiguousarray(S[:, [0, 1, 4, 5]])\n"
             "KM.lloyd(X, S, np.ones(200), S[:3].copy(), 10, 0.01, 0.15, 1.0, 0.5, None)\n"
             "print(len(KM._assign.signatures), len(KM._unstable_near_moved.signatures),\n"
-            "      len(KM._assign_dense.signatures))\n")
+            "      len(KM._assign_blocks.signatures))\n")
     env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)}
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
                          timeout=600, check=True).stdout.split()
@@ -990,6 +1038,36 @@ def test_farthest_member_is_numpys_per_cluster_argmax():
             members = np.flatnonzero(labels == j)
             want = members[np.argmax(dmin[members])] if len(members) else -1
             assert got[j] == want
+
+
+def test_prepare_copies_is_prepare_for_resampled_runs():
+    """``prepare_copies`` (the runs of copies recorded by systematic resampling, equal
+    weights) gives ``prepare``'s very floats and runs: the merged weights, the shift summed
+    over every particle in order, the shifted rows -- also when two runs (two ancestors) have
+    identical rows side by side (merged, as ``prepare`` does) and for a non-finite weight."""
+    rng = np.random.default_rng(8)
+    for trial in range(60):
+        R = int(rng.integers(1, 400))
+        rows = rng.normal(300.0, 80.0, (R, 6))
+        if trial % 3 == 0 and R > 3:                 # two ancestors with identical rows
+            for a in rng.integers(1, R, 3):
+                rows[a] = rows[a - 1]
+        copies = rng.integers(1, 5, R)
+        states = np.repeat(rows, copies, axis=0)
+        n = len(states)
+        log_w = np.full(n, rng.normal(-5.0, 2.0))
+        if trial == 7:
+            log_w[:] = -np.inf
+        want = KM.prepare(states, log_w)
+        got = KM.prepare_copies(states, log_w, copies.astype(np.int64))
+        assert got[0] == want[0] or (np.isnan(got[0]) and np.isnan(want[0]))
+        if not np.isfinite(want[0]):
+            assert len(got[1]) == 0
+            continue
+        for a, b in zip(got[1:], want[1:]):
+            assert a.dtype == b.dtype and a.tobytes() == b.tobytes()
+        if trial % 3 == 0 and R > 3:
+            assert len(got[5]) < R
 
 
 def test_prepare_is_numpys_spelling_with_runs_of_equal_weights():

@@ -55,13 +55,17 @@ Readings (each a parameter of :func:`kmeans_peaks`):
 Cost (DESIGN.md, linear in the number of targets): systematic resampling lays the copies of
 an ancestor side by side as identical rows (on the bench scene only ~2/3 of the resampled rows
 are distinct), so each run of consecutive identical rows enters K-means as one row weighing
-their sum (:func:`._kmeans_kernels.prepare`): the same labels, the same centres and masses up
+their sum (:func:`._kmeans_kernels.prepare`; for a set systematic resampling made, from the
+runs it recorded, :data:`~..smc.resampling.COPIES`, with no comparison of every row:
+:func:`._kmeans_kernels.prepare_copies`): the same labels, the same centres and masses up
 to summation round-off, a third fewer rows in every Lloyd pass and split trial; ``labels`` of
 every particle (its row's) are taken when first read.  The split loop (candidates, pre-checks,
 local trials) is one numba kernel (:func:`._kmeans_kernels.split_clusters`), the Lloyd
 iterations another (:func:`._kmeans_kernels.lloyd`: assignment, then the weighted sums in
-one pass, no (N × K) temporaries).  With fewer than :data:`INDEX_MIN_CENTERS` centres the assignment looks at every
-centre, as plain K-means does; with more, each particle looks only at the centres near it (a
+one pass, no (N × K) temporaries).  With fewer than :data:`INDEX_MIN_CENTERS` centres the
+assignment has plain K-means' answer from a look at every centre -- by blocks of consecutive
+particles, each looking only at the centres that could beat the previous block's centre
+somewhere in its box (:func:`._kmeans_kernels._assign_blocks`; exact); with more, each particle looks only at the centres near it (a
 grid of the centres, :func:`._kmeans_kernels.assign`), and the result is still *exact* — the same
 labels, ties to the lowest index included, the same d² floats: every centre's inverse variances
 are at least m (their minimum), so a centre at Euclidean distance e in the position plane scaled
@@ -104,6 +108,7 @@ from typing import Callable, Optional
 
 import numpy as np
 
+from ..smc.resampling import COPIES
 from ..smc.weights import ParticleSet
 from ..types import cxcywh_to_xywh
 from . import _kmeans_kernels
@@ -123,7 +128,7 @@ INDEX_MIN_CENTERS = 32
 SPLIT_NEIGHBOURS = 4
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, init=False)
 class Clusters:
     """Result of :func:`kmeans_peaks`.
 
@@ -142,6 +147,16 @@ class Clusters:
     n_iter: int = 0
     _labeller: Optional[Callable[[], np.ndarray]] = field(default=None, repr=False,
                                                           compare=False)
+
+    def __init__(self, centers: np.ndarray, masses: np.ndarray, _labels: Optional[np.ndarray],
+                 kept: np.ndarray, origin: np.ndarray, n_splits: int = 0, n_iter: int = 0,
+                 _labeller: Optional[Callable[[], np.ndarray]] = None):
+        # (the frozen dataclass's generated __init__ sets each field by object.__setattr__:
+        # the instance dict directly costs a fraction; made every frame)
+        d = self.__dict__
+        d["centers"], d["masses"], d["_labels"], d["kept"] = centers, masses, _labels, kept
+        d["origin"], d["n_splits"], d["n_iter"], d["_labeller"] = (origin, n_splits, n_iter,
+                                                                   _labeller)
 
     def __len__(self) -> int:
         return len(self.masses)
@@ -235,7 +250,9 @@ def kmeans_peaks(ps: ParticleSet, Z, T: float = 0.6, *, params: PHDParams | None
         full = states
         states = states[::subsample]
         log_w = np.full(len(states), log_w[0] + math.log(n / len(states)))
-    lmax = log_w.max() if n else -math.inf
+    # (systematic resampling's equal weights: the max is any of them, no pass)
+    equal = full is None and ps.is_known_equal()
+    lmax = (log_w[0] if equal else log_w.max()) if n else -math.inf
     if not math.isfinite(lmax):         # no particle, or no finite weight: nothing to cluster
         Z = as_observations(Z)
         init, origin = _initial_centers(Z, extra)
@@ -250,12 +267,25 @@ def kmeans_peaks(ps: ParticleSet, Z, T: float = 0.6, *, params: PHDParams | None
     # split loop (guarded or literal rule, local trials: _kmeans_kernels.split_clusters).
     lk = params.likelihood
     K0 = len(Z) + len(extra)
+    # systematic resampling's runs of copies (equal weights): each run's row taken once
+    copies = ps.__dict__.get(COPIES) if equal else None
+    if copies is None:
+        copies = _NO_COPIES
+    # the run's settings as one array (one kernel argument instead of twelve: each costs the
+    # call ~2 us when the caches are cold), made once per distinct settings
+    key = (T, split_above, min_split_mass, guarded, max_splits, max_iter, tol, lk.sigma_obs,
+           lk.sigma_obs_min, lk.sigma_obs_pos_ratio)
+    cfg = _CFG.get(key)
+    if cfg is None:
+        if len(_CFG) > 64:
+            _CFG.clear()
+        cfg = _CFG[key] = np.array(
+            [T, split_above, 2.0 * min_split_mass if guarded else -np.inf, min_split_mass,
+             1.0 if guarded else 0.0, int(max_splits), int(SPLIT_NEIGHBOURS), int(max_iter),
+             tol, lk.sigma_obs, lk.sigma_obs_min, lk.sigma_obs_pos_ratio], dtype=np.float64)
     bad, centers, masses, labels, runs, kept, origin, n_splits, n_iter = _kmeans_kernels.peaks(
         np.ascontiguousarray(states, dtype=np.float64),
-        np.ascontiguousarray(log_w, dtype=np.float64), Z, extra, np.exp(lmax), float(T),
-        float(split_above), float(2.0 * min_split_mass if guarded else -np.inf),
-        float(min_split_mass), guarded, int(max_splits), int(SPLIT_NEIGHBOURS), int(max_iter),
-        float(tol), lk.sigma_obs, lk.sigma_obs_min, lk.sigma_obs_pos_ratio,
+        np.ascontiguousarray(log_w, dtype=np.float64), copies, Z, extra, np.exp(lmax), cfg,
         int(INDEX_MIN_CENTERS) if K0 >= INDEX_MIN_CENTERS else None)
     if bad:
         as_observations(Z)              # (raises its message)
@@ -269,6 +299,8 @@ def kmeans_peaks(ps: ParticleSet, Z, T: float = 0.6, *, params: PHDParams | None
 
 
 _NO_OBS = np.zeros((0, OBS_DIM))
+_CFG: dict = {}                         # kmeans_peaks' settings arrays (_kmeans_kernels.peaks)
+_NO_COPIES = np.zeros(0, dtype=np.int64)
 _NO_EXTRA = np.zeros((0, STATE_DIM))
 
 

@@ -22,6 +22,13 @@ from .weights import ParticleSet, logsumexp, normalised_weights
 
 SCHEMES = ("systematic", "stratified", "residual", "multinomial")
 
+#: The key, in a set's ``__dict__``, of the run lengths systematic :func:`resample` records:
+#: its rows are runs of consecutive copies of one ancestor (the walk lays them side by side),
+#: ``runs`` (M,) their lengths.  K-means (:func:`~..phd.clustering.kmeans_peaks`) reads them
+#: to take each run's row once without comparing every row with the one before.  (A set's
+#: arrays are never changed in place; a set made from this one's arrays has no record.)
+COPIES = "_copies"
+
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
 def _systematic_index(lw, log_mass, u0, n):
@@ -39,8 +46,10 @@ _NO_WEIGHTS = np.empty(0, np.float64)
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
 def _systematic_take(states, lw, log_mass, u0, n, w, scale, want_idx):
     """:func:`_systematic_index` and the ancestors' rows of ``states`` (N, D) in the same walk:
-    returns ``(idx (n,), states[idx] (n, D))`` with no exp or gather pass of its own (``idx``
-    empty unless ``want_idx``: a set without labels or extra needs only the rows).  With
+    returns ``(idx (n,), states[idx] (n, D), runs (M,))`` with no exp or gather pass of its own
+    (``idx`` empty unless ``want_idx``: a set without labels or extra needs only the rows);
+    ``runs`` the lengths of the runs of consecutive copies of one ancestor (the walk lays an
+    ancestor's copies side by side: ``np.repeat(np.unique(idx), runs)`` is ``idx``).  With
     ``w`` (N,) given (else empty), the normalised weights are ``w · scale`` instead of
     ``exp(lw − log_mass)`` (:meth:`~.weights.ParticleSet.known_normalised`): no exp at all,
     and ``lw`` is not read (may be empty)."""
@@ -48,9 +57,13 @@ def _systematic_take(states, lw, log_mass, u0, n, w, scale, want_idx):
     D = states.shape[1]
     idx = np.empty(n if want_idx else 0, np.int64)
     out = np.empty((n, D), np.float64)
+    runs = np.empty(n, np.int64)
     lin = w.shape[0] == N
     j = 0
     c = (w[0] * scale if lin else math.exp(lw[0] - log_mass)) if N > 1 else 1.0
+    m = -1
+    jp = -1
+    cnt = 0
     for k in range(n):
         u = (u0 + k) / n
         while j < N - 1 and c <= u:
@@ -58,9 +71,14 @@ def _systematic_take(states, lw, log_mass, u0, n, w, scale, want_idx):
             c = c + (w[j] * scale if lin else math.exp(lw[j] - log_mass)) if j < N - 1 else 1.0
         if want_idx:
             idx[k] = j
+        new = np.int64(j != jp)            # (arithmetic, no branch: copies come 1 or 2 at
+        m += new                           # random, a branch would be mispredicted often)
+        cnt = cnt * (1 - new) + 1
+        runs[m] = cnt
+        jp = j
         for d in range(D):
             out[k, d] = states[j, d]
-    return idx, out
+    return idx, out, runs[:m + 1]
 
 
 def _cdf(w: np.ndarray) -> np.ndarray:
@@ -143,7 +161,8 @@ def resample(ps: ParticleSet, n: int, rng: np.random.Generator,
              scheme: str = "systematic") -> ParticleSet:
     """Draw ``n`` particles from ``ps`` and give each weight ``ps.mass / n`` (mass preserved).
 
-    An empty or zero-mass input, or ``n == 0``, gives an empty set."""
+    An empty or zero-mass input, or ``n == 0``, gives an empty set.  ``"systematic"`` records
+    the lengths of the runs of copies of one ancestor in the new set (:data:`COPIES`)."""
     n = int(n)
     if len(ps) == 0 or n == 0 or not math.isfinite(ps.log_mass):
         return ps.take(np.zeros(0, dtype=np.int64))
@@ -152,12 +171,13 @@ def resample(ps: ParticleSet, n: int, rng: np.random.Generator,
     if scheme == "systematic":      # the log-mass is known: one walk that also copies the rows
         known = ps.normalised        # the walk reads these or the log-weights, not both
         w, scale = known or (_NO_WEIGHTS, 0.0)
-        idx, states = _systematic_take(ps.states, _NO_WEIGHTS if known else ps.log_weights,
-                                       ps.log_mass, float(rng.random()), n, w, scale,
-                                       ps.labels is not None or ps.extra is not None)
+        idx, states, runs = _systematic_take(ps.states, _NO_WEIGHTS if known else ps.log_weights,
+                                             ps.log_mass, float(rng.random()), n, w, scale,
+                                             ps.labels is not None or ps.extra is not None)
         out = ParticleSet(states, lw, None if ps.labels is None else ps.labels[idx],
                           None if ps.extra is None else ps.extra[idx])
         out.known_equal()                                   # (np.full)
+        out.__dict__[COPIES] = runs
         return out
     idx = resample_indices(ps.log_weights, n, rng, scheme)
     return ps.take(idx).with_log_weights(lw)
