@@ -832,6 +832,33 @@ def frame_step(live_ids, tail, tail_frame, prev, prev_frame, length, new, frame,
     return np.empty((0, 0), np.float64), out
 
 
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True, inline="always")
+def corner_box(states, j, out, o):
+    """``out[o]`` = the top-left box ``(x − w / 2, y − h / 2, w, h)`` of state row
+    ``states[j]`` (:func:`.association.boxes_xywh`'s floats): the one spelling of the
+    conversion for every kernel that writes boxes."""
+    w = states[j, 4]
+    h = states[j, 5]
+    out[o, 0] = states[j, 0] - w / 2.0
+    out[o, 1] = states[j, 1] - h / 2.0
+    out[o, 2] = w
+    out[o, 3] = h
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True, inline="always")
+def centre_box(boxes, j, out):
+    """``out[j]`` = the centre box ``(x + w / 2, y + h / 2, w, h)`` of top-left box
+    ``boxes[j]`` (:func:`pfscope.trackers.types.xywh_to_cxcywh`'s floats)."""
+    w = boxes[j, 2]
+    h = boxes[j, 3]
+    out[j, 0] = boxes[j, 0] + w / 2.0
+    out[j, 1] = boxes[j, 1] + h / 2.0
+    out[j, 2] = w
+    out[j, 3] = h
+
+
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
 def final_rows(live_ids, live_len, extra_ids, extra_len, bid, bst, bfill, min_length,
                gap_conf, est_conf):
@@ -855,12 +882,7 @@ def final_rows(live_ids, live_len, extra_ids, extra_len, bid, bst, bfill, min_le
             for c in range(bst.shape[1]):
                 ost[o, c] = bst[r, c]
             ofill[o] = bfill[r]
-            w = bst[r, 4]
-            h = bst[r, 5]
-            box[o, 0] = bst[r, 0] - w / 2.0
-            box[o, 1] = bst[r, 1] - h / 2.0
-            box[o, 2] = w
-            box[o, 3] = h
+            corner_box(bst, r, box, o)
             conf[o] = gap_conf if bfill[r] else est_conf
             o += 1
     return oid, ost, ofill, box, conf
@@ -881,12 +903,7 @@ def track_boxes(ids, states, keep):
     for j in range(keep.shape[0]):
         if keep[j]:
             oid[o] = ids[j]
-            w = states[j, 4]
-            h = states[j, 5]
-            out[o, 0] = states[j, 0] - w / 2.0
-            out[o, 1] = states[j, 1] - h / 2.0
-            out[o, 2] = w
-            out[o, 3] = h
+            corner_box(states, j, out, o)
             o += 1
     return oid, out
 
@@ -899,12 +916,7 @@ def row_boxes(states, filled, gap_conf, est_conf):
     out = np.empty((R, 4), np.float64)
     conf = np.empty(R, np.float64)
     for j in range(R):
-        w = states[j, 4]
-        h = states[j, 5]
-        out[j, 0] = states[j, 0] - w / 2.0
-        out[j, 1] = states[j, 1] - h / 2.0
-        out[j, 2] = w
-        out[j, 3] = h
+        corner_box(states, j, out, j)
         conf[j] = gap_conf if filled[j] else est_conf
     return out, conf
 
@@ -916,10 +928,5 @@ def centre_boxes(boxes):
     N = boxes.shape[0]
     out = np.empty((N, 4), np.float64)
     for j in range(N):
-        w = boxes[j, 2]
-        h = boxes[j, 3]
-        out[j, 0] = boxes[j, 0] + w / 2.0
-        out[j, 1] = boxes[j, 1] + h / 2.0
-        out[j, 2] = w
-        out[j, 3] = h
+        centre_box(boxes, j, out)
     return out

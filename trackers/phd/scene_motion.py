@@ -57,6 +57,7 @@ import numpy as np
 from numba import njit
 
 from . import camera_motion
+from ._assoc_kernels import centre_box
 from .camera_motion import _fit_kernel, _pairwise
 from .gating import kth
 
@@ -373,12 +374,7 @@ def _observe(B, xywh, prev, pp, prev_link, prev_length, F, I, a_n, s_n, camera, 
     if xywh:
         Z = np.empty((B.shape[0], 4), np.float64)
         for a in range(B.shape[0]):
-            w = B[a, 2]
-            h = B[a, 3]
-            Z[a, 0] = B[a, 0] + w / 2.0
-            Z[a, 1] = B[a, 1] + h / 2.0
-            Z[a, 2] = w
-            Z[a, 3] = h
+            centre_box(B, a, Z)
     else:
         Z = B
     nc = Z.shape[0]
