@@ -983,7 +983,7 @@ def prepare(states, log_w):
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
 def prepare_copies(states, log_w, copies):
     """:func:`prepare` for particles that are runs of consecutive copies of a row, ``copies``
-    (R,) their lengths (systematic resampling's record, :data:`~..smc.resampling.COPIES`),
+    (R,) their lengths (systematic resampling's record, :meth:`~..smc.weights.ParticleSet.known_copies`),
     every log-weight equal: the same floats with no comparison of every row with the one
     before.  ``exp(log_w − lmax)`` is exp(0) = 1 for each particle, so a merged row weighs
     its particle count (a sum of ones, exact); the shift sums every particle's position in

@@ -56,7 +56,7 @@ Cost (DESIGN.md, linear in the number of targets): systematic resampling lays th
 an ancestor side by side as identical rows (on the bench scene only ~2/3 of the resampled rows
 are distinct), so each run of consecutive identical rows enters K-means as one row weighing
 their sum (:func:`._kmeans_kernels.prepare`; for a set systematic resampling made, from the
-runs it recorded, :data:`~..smc.resampling.COPIES`, with no comparison of every row:
+runs it recorded, :meth:`~..smc.weights.ParticleSet.known_copies`, with no comparison of every row:
 :func:`._kmeans_kernels.prepare_copies`): the same labels, the same centres and masses up
 to summation round-off, a third fewer rows in every Lloyd pass and split trial; ``labels`` of
 every particle (its row's) are taken when first read.  The split loop (candidates, pre-checks,
@@ -108,7 +108,6 @@ from typing import Callable, Optional
 
 import numpy as np
 
-from ..smc.resampling import COPIES
 from ..smc.weights import ParticleSet
 from ..types import cxcywh_to_xywh
 from . import _kmeans_kernels
@@ -268,7 +267,7 @@ def kmeans_peaks(ps: ParticleSet, Z, T: float = 0.6, *, params: PHDParams | None
     lk = params.likelihood
     K0 = len(Z) + len(extra)
     # systematic resampling's runs of copies (equal weights): each run's row taken once
-    copies = ps.__dict__.get(COPIES) if equal else None
+    copies = ps.copies() if equal else None
     if copies is None:
         copies = _NO_COPIES
     # the run's settings as one array (one kernel argument instead of twelve: each costs the

@@ -22,13 +22,6 @@ from .weights import ParticleSet, logsumexp, normalised_weights
 
 SCHEMES = ("systematic", "stratified", "residual", "multinomial")
 
-#: The key, in a set's ``__dict__``, of the run lengths systematic :func:`resample` records:
-#: its rows are runs of consecutive copies of one ancestor (the walk lays them side by side),
-#: ``runs`` (M,) their lengths.  K-means (:func:`~..phd.clustering.kmeans_peaks`) reads them
-#: to take each run's row once without comparing every row with the one before.  (A set's
-#: arrays are never changed in place; a set made from this one's arrays has no record.)
-COPIES = "_copies"
-
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
 def _systematic_index(lw, log_mass, u0, n):
@@ -162,7 +155,8 @@ def resample(ps: ParticleSet, n: int, rng: np.random.Generator,
     """Draw ``n`` particles from ``ps`` and give each weight ``ps.mass / n`` (mass preserved).
 
     An empty or zero-mass input, or ``n == 0``, gives an empty set.  ``"systematic"`` records
-    the lengths of the runs of copies of one ancestor in the new set (:data:`COPIES`)."""
+    the lengths of the runs of copies of one ancestor in the new set
+    (:meth:`ParticleSet.known_copies`)."""
     n = int(n)
     if len(ps) == 0 or n == 0 or not math.isfinite(ps.log_mass):
         return ps.take(np.zeros(0, dtype=np.int64))
@@ -177,7 +171,7 @@ def resample(ps: ParticleSet, n: int, rng: np.random.Generator,
         out = ParticleSet(states, lw, None if ps.labels is None else ps.labels[idx],
                           None if ps.extra is None else ps.extra[idx])
         out.known_equal()                                   # (np.full)
-        out.__dict__[COPIES] = runs
+        out.known_copies(runs)
         return out
     idx = resample_indices(ps.log_weights, n, rng, scheme)
     return ps.take(idx).with_log_weights(lw)

@@ -152,6 +152,18 @@ class ParticleSet:
         :attr:`weights` and :attr:`log_mass` then skip their min / max pass."""
         self.__dict__["_equal"] = bool(len(self))
 
+    def known_copies(self, runs: np.ndarray) -> None:
+        """Record that this set's rows are runs of consecutive copies of one ancestor,
+        ``runs`` (M,) their lengths, when the maker knows it (systematic resampling lays the
+        copies side by side): K-means (:func:`~..phd.clustering.kmeans_peaks`) then takes each
+        run's row once without comparing every row with the one before.  (A set's arrays are
+        never changed in place; a set made from this one's arrays has no record.)"""
+        self.__dict__["_copies"] = runs
+
+    def copies(self) -> Optional[np.ndarray]:
+        """The run lengths :meth:`known_copies` recorded, else None."""
+        return self.__dict__.get("_copies")
+
     def is_known_equal(self) -> bool:
         """True when :meth:`known_equal` was recorded, or the equal-weights test already ran
         and found them equal (no pass over the weights here)."""
