@@ -57,6 +57,19 @@ def _tail_gauss(tail, t, v0, v1, b0, b1, c0, c1, i, depth, gate_d2, sv, ss, so, 
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True, inline="always")
+def _d2_diag(a0, a1, a2, a3, m0, m1, m2, m3, var):
+    """The squared Mahalanobis distance of ``(a0..a3)`` from ``(m0..m3)`` under the diagonal
+    variances ``var`` (4,), summed in that order: the one spelling for every gate test and edge
+    score of the association."""
+    r0 = a0 - m0
+    r1 = a1 - m1
+    r2 = a2 - m2
+    r3 = a3 - m3
+    return ((r0 * r0 / var[0] + r1 * r1 / var[1]) + r2 * r2 / var[2]) + r3 * r3 / var[3]
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
       no_cpython_wrapper=True)
 def _tail_row(tail, t, v0, v1, b0, b1, c0, c1, i, z, depth, gate_d2, sv, ss, so, so_min,
               ratio, cc, cc2, two_pi, var, lg, gain, d2, weight):
@@ -67,11 +80,7 @@ def _tail_row(tail, t, v0, v1, b0, b1, c0, c1, i, z, depth, gate_d2, sv, ss, so,
                                                  gate_d2, sv, ss, so, so_min, ratio, cc, cc2,
                                                  two_pi, var, lg)
     for j in range(z.shape[0]):
-        r0 = z[j, 0] - m0
-        r1 = z[j, 1] - m1
-        r2 = z[j, 2] - m2
-        r3 = z[j, 3] - m3
-        d = ((r0 * r0 / var[0] + r1 * r1 / var[1]) + r2 * r2 / var[2]) + r3 * r3 / var[3]
+        d = _d2_diag(z[j, 0], z[j, 1], z[j, 2], z[j, 3], m0, m1, m2, m3, var)
         d2[t, j] = d
         gn = -0.5 * d - 0.5 * log_det
         gain[t, j] = gn
@@ -286,11 +295,7 @@ def revive_hits(tail, prev, tail_frame, prev_frame, first_frame, length, frame, 
         m2 = tail[t, 4]
         m3 = tail[t, 5]
         for j in range(N):
-            r0 = z[j, 0] - m0
-            r1 = z[j, 1] - m1
-            r2 = z[j, 2] - m2
-            r3 = z[j, 3] - m3
-            dd = ((r0 * r0 / var[0] + r1 * r1 / var[1]) + r2 * r2 / var[2]) + r3 * r3 / var[3]
+            dd = _d2_diag(z[j, 0], z[j, 1], z[j, 2], z[j, 3], m0, m1, m2, m3, var)
             if dd <= gate_d2:
                 hit[j] = True
     return hit
@@ -406,11 +411,8 @@ def head_pick(d, pred, var, rows, fill_overlap, gate_d2):
     best = -1
     bv = np.inf
     for i in range(d.shape[0]):
-        r0 = d[i, 0] - pred[0]
-        r1 = d[i, 1] - pred[1]
-        r2 = d[i, 2] - pred[2]
-        r3 = d[i, 3] - pred[3]
-        dd = ((r0 * r0 / var[0] + r1 * r1 / var[1]) + r2 * r2 / var[2]) + r3 * r3 / var[3]
+        dd = _d2_diag(d[i, 0], d[i, 1], d[i, 2], d[i, 3], pred[0], pred[1], pred[2], pred[3],
+                      var)
         if rows.shape[0]:
             m = _iou1(d[i, 0], d[i, 1], d[i, 2], d[i, 3],
                       rows[0, 0], rows[0, 1], rows[0, 4], rows[0, 5])
@@ -522,11 +524,7 @@ def _tail_w0(tail, t, v0, v1, b0, b1, c0, c1, i, new, depth, gate_d2, sv, ss, so
                                                  gate_d2, sv, ss, so, so_min, ratio, cc, cc2,
                                                  two_pi, var, lg)
     for j in range(new.shape[0]):
-        r0 = new[j, 0] - m0
-        r1 = new[j, 1] - m1
-        r2 = new[j, 4] - m2
-        r3 = new[j, 5] - m3
-        d = ((r0 * r0 / var[0] + r1 * r1 / var[1]) + r2 * r2 / var[2]) + r3 * r3 / var[3]
+        d = _d2_diag(new[j, 0], new[j, 1], new[j, 4], new[j, 5], m0, m1, m2, m3, var)
         w = (-0.5 * d - 0.5 * log_det) - floor
         if d <= gate_d2 and w - w == 0.0 and w > 0.0:
             w0[t, j] = w

@@ -688,7 +688,10 @@ class FinalRows:
     """Finalised output of one past frame (bounded-lag reporting): confirmed tracks only.
 
     ids (R,) int64; states (R, 6); filled (R,) bool: the row is interpolated inside a linked gap
-    (``AssocParams.fill_gaps``), not an estimate.  ``boxes`` gives (R, 4) ``(x, y, w, h)``.
+    (``AssocParams.fill_gaps``), not an estimate.  ``xywh`` (R, 4) the rows' top-left boxes
+    ``(x, y, w, h)`` (also :attr:`boxes`) and ``conf`` (R,) their tracks-file confidence
+    (``GAP_CONF`` where filled, else ``EST_CONF``), made from the states when not given (the
+    association hands them over from its kernel pass).
     """
 
     frame: int
@@ -696,14 +699,22 @@ class FinalRows:
     states: np.ndarray
 
     filled: np.ndarray | None = None
+    xywh: np.ndarray | None = None
+    conf: np.ndarray | None = None
 
     def __post_init__(self):
         if self.filled is None:
             object.__setattr__(self, "filled", np.zeros(len(self.ids), dtype=bool))
+        if self.xywh is None or self.conf is None:
+            box, conf = _assoc_kernels.row_boxes(
+                np.ascontiguousarray(self.states, dtype=np.float64).reshape(-1, STATE_DIM),
+                np.ascontiguousarray(self.filled, dtype=np.bool_), GAP_CONF, EST_CONF)
+            object.__setattr__(self, "xywh", box)
+            object.__setattr__(self, "conf", conf)
 
     @property
     def boxes(self) -> np.ndarray:
-        return boxes_xywh(self.states)
+        return self.xywh
 
 
 @dataclass(frozen=True)
@@ -1187,7 +1198,7 @@ class GraphAssociator:
                 self._ids, self._length, ended_ids, ended_len, bid, bst, bfill,
                 int(p.min_length), GAP_CONF, EST_CONF)
             finalised.append(_made(FinalRows, frame=f, ids=fid, states=fst, filled=ffill,
-                                   _xywh=box, _conf=conf))
+                                   xywh=box, conf=conf))
 
         return _made(AssocResult, frame=frame, states=new, ids=ids, lengths=lengths,
                      confirmed=confirmed, ended=ended_ids, finalised=tuple(finalised),

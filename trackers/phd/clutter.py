@@ -206,21 +206,32 @@ class PlaceClutter:
         lk, r2, S, exposure = self._sums_of()     # (an empty memory's exposure is 0)
         if repeat_sum is None:
             repeat_sum = float(np.sum(repeat_share))
-        self.num = (1 - a) * self.num + a * repeat_sum
-        self.den = (1 - a) * self.den + a * exposure
-        self.beta = em_rate(self.num, self.den, self.cl.repeat_prior, a)
-        self._a = a
-        self.frames += 1
+        self.em_step(a, repeat_sum, exposure)
         Z = np.ascontiguousarray(np.asarray(Z, dtype=np.float64).reshape(-1, 4))
         if std is None:
             std = _filter.obs_std(Z[:, 2:4], self.lk)
         # fade the memory, add this frame's clutter, drop what has faded away, and S and the
         # exposure of the memory after it (one pass)
-        self.mem_z, self.mem_s, self.mem_w, self.mem_e, S, exposure, ok = _memory_step(
+        self.keep_memory(lk, r2, _memory_step(
             self.mem_z, self.mem_s, self.mem_w, self.mem_e, S, Z,
             np.ascontiguousarray(std, dtype=np.float64),
             np.ascontiguousarray(clutter_share, dtype=np.float64), self.fade, MIN_WEIGHT,
-            float(r2), INCREMENT_PAIRS)
+            float(r2), INCREMENT_PAIRS))
+
+    def em_step(self, a: float, repeat_sum: float, exposure: float) -> None:
+        """The EM average of the repeat rate β from this frame's repeat share ``repeat_sum``
+        and the memory's ``exposure`` before it (:meth:`learn`, and the fused
+        :meth:`.filter.SceneModel.learn`)."""
+        self.num = (1 - a) * self.num + a * repeat_sum
+        self.den = (1 - a) * self.den + a * exposure
+        self.beta = em_rate(self.num, self.den, self.cl.repeat_prior, a)
+        self._a = a
+        self.frames += 1
+
+    def keep_memory(self, lk, r2: float, step: tuple) -> None:
+        """The memory after :func:`_memory_step` (its returned ``step``: entries, S, exposure,
+        whether S is valid)."""
+        self.mem_z, self.mem_s, self.mem_w, self.mem_e, S, exposure, ok = step
         self._sums = (lk, r2, S, exposure) if ok else None
 
 
@@ -507,6 +518,11 @@ class DuplicateBoxes:
                 _lost(won, lost)
                 num, den = _dup_sums(won, lost,
                                      gate_sums(Z, Z, r2, std, lost, ordered=False)[0], n, tmp)
+        self.em_step(a, num, den)
+
+    def em_step(self, a: float, num: float, den: float) -> None:
+        """The EM average of the duplicate probability q from this frame's sums (:meth:`learn`,
+        and the fused :meth:`.filter.SceneModel.learn`)."""
         self.num = (1 - a) * self.num + a * num
         self.den = (1 - a) * self.den + a * den
         self.q = em_rate(self.num, self.den, self.cl.duplicate_prior, a)

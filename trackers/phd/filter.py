@@ -91,7 +91,7 @@ from . import _kernels, motion
 from .clutter import PlaceClutter
 from .clutter import (DuplicateBoxes, NearClutter, kappa_terms, learn_shares, neighbour_counts,
                       scene_density, scene_terms, scene_frame, neighbours, _kappa_terms,
-                      PRIOR_FRAMES, MIN_WEIGHT, INCREMENT_PAIRS, em_rate, _learn_shares,
+                      PRIOR_FRAMES, MIN_WEIGHT, INCREMENT_PAIRS, _learn_shares,
                       _memory_step, _dup_sums_brute, _NO_I, _NO_F)
 from .scene_motion import Chains
 from .gating import BRUTE_PAIRS, DEFAULT_BUDGET, LogGPairs, gate_pairs, gate_sums, tail_radius2
@@ -964,19 +964,10 @@ class SceneModel:
         self.rate = (1 - a) * self.rate + a * float(ssum[0])
         if spot:
             self._chain_clutter = sh[4]
-        # PlaceClutter.learn's EM and memory
-        place.num = (1 - a) * place.num + a * float(ssum[1])
-        place.den = (1 - a) * place.den + a * exposure
-        place.beta = em_rate(place.num, place.den, cl.repeat_prior, a)
-        place._a = a
-        place.frames += 1
-        place.mem_z, place.mem_s, place.mem_w, place.mem_e, S, exposure, ok = mem
-        place._sums = (lk, r2, S, exposure) if ok else None
+        place.em_step(a, float(ssum[1]), exposure)
+        place.keep_memory(lk, r2, mem)
         people.learn(sh[3], a, float(ssum[2]))
-        # DuplicateBoxes.learn's EM
-        dups.num = (1 - a) * dups.num + a * num
-        dups.den = (1 - a) * dups.den + a * den
-        dups.q = em_rate(dups.num, dups.den, cl.duplicate_prior, a)
+        dups.em_step(a, num, den)
         self._parts = None
         self.frames += 1
         return True

@@ -57,8 +57,7 @@ from ..api import Rows, StepResult, register
 from ..params import param, part, to_dict, with_options
 from ..report import Boxes, Points, Segments, StageLog
 from ..types import Detections, Frame, TrackSet, xywh_to_cxcywh
-from .association import (EST_CONF, GAP_CONF, AssocParams, AssocResult, FinalRows,
-                          GraphAssociator)
+from .association import AssocParams, AssocResult, FinalRows, GraphAssociator
 from . import _assoc_kernels
 from .appearance import box_features
 from .camera_motion import MEMORY_S as CAMERA_MEMORY_S, scale as camera_scale, warp_states
@@ -268,35 +267,28 @@ _kernels_loaded = False
 
 def _load_kernels() -> None:
     """The association's kernels and the step's own (input centres, output boxes), called
-    once with a run's argument types on made-up data (:func:`.association.compile_step_kernels`
-    and the gap filling's IoU), in a tracker's first frame.  numba loads a cached kernel on
+    once with a run's argument types on made-up data (the warm-up's
+    :func:`~..warmup._compile_association`: the edge scores,
+    :func:`.association.compile_step_kernels` and the gap filling's IoU), in a tracker's first
+    frame.  numba loads a cached kernel on
     its first call (~3-5 ms each, ~35 ms for these): without this, each loads in the first
     frame that reaches it -- a returning track, a track's first final rows, a walk back, an
     expiry -- a hiccup of a few ms in the middle of a run.  (The app's warm-up calls them
     already; this covers a tracker stepped without it, e.g. ``pipeline.run``.)  On a first
     run after an install, with an empty cache, this is where they compile."""
     global _kernels_loaded
-    from .association import OBS_INDEX, _iou, compile_step_kernels
+    from ..warmup import _compile_association
 
-    compile_step_kernels()
-    s = np.array([[100.0, 100.0, 1.0, 0.0, 30.0, 70.0]])[:, OBS_INDEX]
-    _iou(s, s)
+    _compile_association()
     _kernels_loaded = True
 
 
 def _rows(finalised: tuple[FinalRows, ...], flagged: bool) -> Rows:
-    # (the association's arrays are in TrackSet's final form already: int64 ids, float64 boxes;
-    # a frame's top-left boxes and conf flags in one kernel pass, boxes_xywh's floats)
-    # (a step's rows come with them: GraphAssociator._finish's final_rows kernel; flush's not)
+    # (the association's arrays are in TrackSet's final form already: int64 ids, float64 boxes
+    # and conf, made with the rows: FinalRows.xywh / conf)
     out = []
     for r in finalised:
-        d = r.__dict__
-        boxes = d.get("_xywh")
-        if boxes is None:
-            boxes, conf = _assoc_kernels.row_boxes(r.states, r.filled, GAP_CONF, EST_CONF)
-        else:
-            conf = d["_conf"]
-        out.append((r.frame, TrackSet.of(r.ids, boxes, conf if flagged else None)))
+        out.append((r.frame, TrackSet.of(r.ids, r.xywh, r.conf if flagged else None)))
     return out
 
 
