@@ -401,6 +401,82 @@ def test_mass_near_two_is_both_kernels_bit_for_bit(seed):
     assert K.mass_near_two(x, w, Z, std, 13.28, 5.0, 5.0, 2.0 * std, skip)[0] == 0
 
 
+def _quotient_sums(x, w, Z, std, r2, order):
+    """Each detection's weight in its gate summed one by one in the grid's ``order``, the gate
+    by _gate_d2's quotients (the position terms first): the reference of the fast gate."""
+    out = np.zeros(len(Z))
+    for j in range(len(Z)):
+        q = (x[:, OBS] - Z[j]) / std[j]
+        d2 = q[:, 0] * q[:, 0] + q[:, 1] * q[:, 1]
+        full = (d2 + q[:, 2] * q[:, 2]) + q[:, 3] * q[:, 3]
+        inside = (d2 <= r2) & (full <= r2)
+        s = 0.0
+        for i in order[inside[order]]:
+            s += float(w[i])
+        out[j] = s
+    return out
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_fast_gate_decides_as_the_quotients_on_the_gates_edge(seed):
+    """The gate sums test d² by products with the reciprocal stds and fall back to the
+    quotients near r2: particles placed on the gate's edge (d² within a few roundings of r2,
+    and at the fast band's own edges r2 (1 ± 1e-12)), stds of 0 / tiny / huge / NaN: the very
+    sums of the quotients' decisions, also with the one weight (1,) of equal weights."""
+    rng = np.random.default_rng(seed)
+    r2 = 13.28
+    hits = 0
+    for t in range(12):
+        nz = int(rng.integers(1, 8))
+        Z = np.c_[rng.uniform(0, 500, (nz, 2)), rng.uniform(10, 80, (nz, 2))]
+        std = obs_std(Z[:, 2:4])
+        if t % 4 == 1:
+            std[0] = [1e-160, 3.0, 1e160, 2.0]
+        if t % 4 == 2:
+            std[0, 2] = np.nan
+        if t % 4 == 3:
+            std[0, 1] = 0.0
+        rows = []
+        for j in range(nz):
+            u = rng.normal(size=(400, 4))
+            u /= np.linalg.norm(u, axis=1, keepdims=True)
+            k = rng.integers(-6, 7, 400)
+            scale = np.where(rng.random(400) < 0.3, 1.0 + np.sign(k) * 1e-12 + k * 1e-17,
+                             1.0 + k * 2.2e-16)
+            rows.append(Z[j] + u * np.sqrt(r2 * scale)[:, None] * std[j])
+        P = np.concatenate(rows)
+        P = np.nan_to_num(P, nan=0.0, posinf=0.0, neginf=0.0)
+        x = np.zeros((len(P), 6))
+        x[:, OBS] = P
+        n = len(x)
+        w = rng.exponential(1e-3, n)
+        for ww in (w, np.full(1, 1e-3)):
+            wide_w = ww if len(ww) == n else np.full(n, ww[0])
+            ok, got, grid = K.mass_near_kernel(x, ww, Z, std, r2, 7.0, 9.0)
+            assert ok
+            want = _quotient_sums(x, wide_w, Z, std, r2, grid[6])
+            assert np.array_equal(got, want), (t, got - want)
+            skip = np.zeros(nz, np.bool_)
+            code, near = K.mass_near_skip(x, ww, Z, 2.0 * std, skip, r2)
+            code2, got2, _, near2 = K.mass_near_two(x, ww, Z, std, r2, 7.0, 9.0, 2.0 * std, skip)
+            assert code == code2 == 1 and np.array_equal(got2, got)
+            cw = K.grid_cell(2.0 * std, r2)             # mass_near_skip's grid
+            _, _, wgrid = K.mass_near_kernel(x, wide_w, Z, 2.0 * std, r2, cw[0], cw[1])
+            want_near = _quotient_sums(x, wide_w, Z, 2.0 * std, r2, wgrid[6])
+            assert np.array_equal(near, near2), t
+            # (stds of 1e-160 beside 1e160: mass_near_skip's own grid keeps none of the
+            # particles at the detection's very position, as before the fast gate)
+            assert t % 4 == 1 or np.array_equal(near2, want_near), t
+            few = K.mass_near_few(x, ww, Z, std, r2, 7.0, 9.0)[1]
+            assert np.array_equal(few, got), t
+        # the edge cases were there: particles on both sides of the edge in the band
+        q = (x[:, OBS] - Z[0]) / std[0]
+        d2 = (q * q).sum(1)
+        hits += int(((d2 > r2) & (d2 < r2 * (1 + 1e-13))).sum() > 0
+                    and ((d2 <= r2) & (d2 > r2 * (1 - 1e-13))).sum() > 0)
+    assert hits >= 3          # (the frames whose first detection has ordinary stds)
+
+
 def test_scene_model_hands_the_birth_its_mass_near():
     """The practical filter's κ_n computes the birth's M(z) in the same pass; the birth takes it
     (the very floats and grid of its own call) for the same particles, detections and stds

@@ -428,20 +428,83 @@ def _gate_d2(states, i, Z, j, std, k, r2):
     return d2 if d2 <= r2 else np.inf
 
 
+#: :func:`_gate_consts`' margin: a product by the reciprocal std is within ~1.6e-15 (14
+#: roundings) of the quotient, so a distance outside ``r2 (1 ± FAST_GATE_MARGIN)`` by the
+#: products is on the same side of ``r2`` by the quotients
+FAST_GATE_MARGIN = 1e-12
+
+
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
       no_cpython_wrapper=True)
-def _weight_in_gate(states, w, Z, j, std, r, r2, x0, cx, ni, y0, cy, nj, order, starts):
+def _gate_consts(Z, j, std, r2):
+    """Detection j's values for :func:`_in_gate_fast`: ``(z0, z1, z2, z3, a0, a1, a2, a3,
+    b0, b1, b2, b3, lo, hi)`` -- its observed values, stds ``std[j]``, their reciprocals and
+    the band ``r2 (1 ± FAST_GATE_MARGIN)`` outside which the products decide.  Stds outside
+    [1e-150, 1e150] in magnitude (a reciprocal that would overflow or lose bits) or NaN, or an
+    r2 not in [1e-100, 1e100]: an empty band's opposite (lo = -inf, hi = inf): every particle
+    takes :func:`_gate_d2`'s quotients."""
+    a0, a1, a2, a3 = std[j, 0], std[j, 1], std[j, 2], std[j, 3]
+    lo = r2 * (1.0 - FAST_GATE_MARGIN)
+    hi = r2 * (1.0 + FAST_GATE_MARGIN)
+    ok = r2 >= 1e-100 and r2 <= 1e100
+    for a in (a0, a1, a2, a3):
+        ok = ok and abs(a) >= 1e-150 and abs(a) <= 1e150
+    if not ok:
+        lo, hi = -np.inf, np.inf
+    return (Z[j, 0], Z[j, 1], Z[j, 2], Z[j, 3], a0, a1, a2, a3,
+            1.0 / a0, 1.0 / a1, 1.0 / a2, 1.0 / a3, lo, hi)
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
+def _in_gate_fast(states, i, c, r2):
+    """``_gate_d2(states, i, Z, j, std, j, r2) <= r2`` -- the same answer -- with products by
+    the reciprocal stds (``c`` = :func:`_gate_consts` of detection j) instead of four
+    divisions: each q = (x - z)/σ as a product is within 3 roundings of the quotient, d² within
+    14 (~1.6e-15 relative), so a d² by the products outside ``[lo, hi]`` (a band of ±1e-12)
+    is on the side of ``r2`` the quotients put it; inside the band (or NaN) the quotients
+    decide, :func:`_gate_d2`'s operations."""
+    z0, z1, z2, z3, a0, a1, a2, a3, b0, b1, b2, b3, lo, hi = c
+    e0 = states[i, 0] - z0
+    e1 = states[i, 1] - z1
+    e2 = states[i, 4] - z2
+    e3 = states[i, 5] - z3
+    q0 = e0 * b0
+    q1 = e1 * b1
+    q2 = e2 * b2
+    q3 = e3 * b3
+    d2 = q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3
+    if d2 < lo:
+        return True
+    if d2 > hi:
+        return False
+    q0 = e0 / a0                        # _gate_d2's floats
+    q1 = e1 / a1
+    d2 = q0 * q0 + q1 * q1
+    if not d2 <= r2:
+        return False
+    q2 = e2 / a2
+    q3 = e3 / a3
+    d2 = d2 + q2 * q2 + q3 * q3
+    return d2 <= r2
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
+def _weight_in_gate(states, w, ws, Z, j, std, r, r2, x0, cx, ni, y0, cy, nj, order, starts):
     """The weight ``w`` of the particles ``states`` (bucketed on the grid ``x0 .. starts``)
     inside detection j's gate ``d² <= r2`` under the stds ``std[j]`` (``r`` = sqrt(r2)), summed
-    in the grid's order."""
+    in the grid's order; particle i's weight is ``w[i · ws]`` (``ws`` 0: one value for all).
+    Branch-free sum: adding 0.0 leaves the sum as it is (it is never -0.0: it starts at +0.0,
+    and only -0.0 + -0.0 makes -0.0)."""
     i0, i1, j0, j1 = gate_cells(Z[j, 0], Z[j, 1], std[j, 0], std[j, 1], r,
                                 x0, cx, ni, y0, cy, nj)
+    c = _gate_consts(Z, j, std, r2)
     s = 0.0
     for ci in range(i0, i1 + 1):
         for p in range(starts[ci * nj + j0], starts[ci * nj + j1 + 1]):
             i = order[p]
-            if _gate_d2(states, i, Z, j, std, j, r2) <= r2:
-                s += w[i]
+            s += w[i * ws] if _in_gate_fast(states, i, c, r2) else 0.0
     return s
 
 
@@ -449,6 +512,7 @@ def _weight_in_gate(states, w, Z, j, std, r, r2, x0, cx, ni, y0, cy, nj, order, 
 def mass_near_kernel(states, w, Z, std_z, r2, cell_x, cell_y):
     """M(z) (N_z,): ``Σ w_i`` over the particles with ``Σ_d ((x_id − z_d)/σ_zd)² <= r2``
     on the observed columns (0, 1, 4, 5) of ``states`` (N, 6), ``std_z`` (N_z, 4) per detection.
+    ``w`` (N,) the weights, or (1,) the one weight of every particle.
     Returns ``(ok, out, grid)``; ``ok`` False on non-finite positions; ``grid`` =
     ``(x0, y0, cx, cy, ni, nj, order, starts)`` of :func:`grid_build` on the particles'
     positions (no cell when there is no particle or no detection), which the update reuses
@@ -465,9 +529,10 @@ def mass_near_kernel(states, w, Z, std_z, r2, cell_x, cell_y):
     if not ok:
         return False, out, grid
     r = math.sqrt(r2)
+    ws = 1 if w.shape[0] == states.shape[0] else 0
     for j in range(nz):
-        out[j] = _weight_in_gate(states, w, Z, j, std_z, r, r2, x0, cx, ni, y0, cy, nj, order,
-                                 starts)
+        out[j] = _weight_in_gate(states, w, ws, Z, j, std_z, r, r2, x0, cx, ni, y0, cy, nj,
+                                 order, starts)
     return True, out, grid
 
 
@@ -478,7 +543,7 @@ def mass_near_few(states, w, Z, std_z, r2, cell_x, cell_y):
     particle index) -- without bucketing every particle: only those in a cell some gate box
     touches are kept (one pass), then bucketed as grid_build does (stable counting sort).
     For a few detections among many particles (κ_n's M'(z) of the unchained detections).
-    Returns ``(ok, out)``."""
+    ``w`` (N,), or (1,) the one weight of every particle.  Returns ``(ok, out)``."""
     nz = Z.shape[0]
     out = np.empty(nz, np.float64)       # np.empty and fills: no np.zeros overload to compile
     for j in range(nz):
@@ -541,17 +606,18 @@ def mass_near_few(states, w, Z, std_z, r2, cell_x, cell_y):
         c = cid[key[q]]
         order[fill[c]] = sel[q]
         fill[c] += 1
+    ws = 1 if w.shape[0] == n else 0            # (one weight for all: w[0])
     for j in range(nz):
         s = 0.0
         if box[j, 3] < box[j, 2]:               # the gate misses the grid's columns
             continue
+        c = _gate_consts(Z, j, std_z, r2)
         for ci in range(box[j, 0], box[j, 1] + 1):
             # the row's touched cells j0..j1 are consecutive in cid (all marked)
             for p in range(first[cid[ci * nj + box[j, 2]]],
                            first[cid[ci * nj + box[j, 3]] + 1]):
                 i = order[p]
-                if _gate_d2(states, i, Z, j, std_z, j, r2) <= r2:
-                    s += w[i]
+                s += w[i * ws] if _in_gate_fast(states, i, c, r2) else 0.0
         out[j] = s
     return True, out
 
@@ -688,12 +754,13 @@ def mass_near_two(states, w, Z, std_z, r2, cell_x, cell_y, std_wide, skip):
     for j in range(nz):
         near[j] = 0.0
     r = math.sqrt(r2)
+    ws = 1 if w.shape[0] == states.shape[0] else 0
     if cx != cell_x or cy != cell_y:
         # the grid grew: M'(z)'s grid is this one
         for j in range(nz):
             if not skip[j]:
-                near[j] = _weight_in_gate(states, w, Z, j, std_wide, r, r2, x0, cx, ni, y0, cy,
-                                          nj, order, starts)
+                near[j] = _weight_in_gate(states, w, ws, Z, j, std_wide, r, r2, x0, cx, ni, y0,
+                                          cy, nj, order, starts)
         return 1, out, grid, near
     # M'(z)'s grid: these cells merged 2 x 2 (its cell of a particle is ours // 2)
     wx, wy = 2.0 * cx, 2.0 * cy
@@ -703,6 +770,7 @@ def mass_near_two(states, w, Z, std_z, r2, cell_x, cell_y, std_wide, skip):
             continue
         i0, i1, j0, j1 = gate_cells(Z[j, 0], Z[j, 1], std_wide[j, 0], std_wide[j, 1], r,
                                     x0, wx, wi, y0, wy, wj)
+        c = _gate_consts(Z, j, std_wide, r2)
         s = 0.0
         for ci in range(i0, i1 + 1):
             # the two rows of our cells in this wide row
@@ -742,8 +810,7 @@ def mass_near_two(states, w, Z, std_z, r2, cell_x, cell_y, std_wide, skip):
                         p2 += 1
                     else:
                         p3 += 1
-                    if _gate_d2(states, bi, Z, j, std_wide, j, r2) <= r2:
-                        s += w[bi]
+                    s += w[bi * ws] if _in_gate_fast(states, bi, c, r2) else 0.0
         near[j] = s
     return 1, out, grid, near
 

@@ -957,12 +957,6 @@ def scene_frame(states, w, Z, std, length, scores, par, m1, m2, extent, mem_z, m
         tot += cnt[0, j]
     a = par[P_A_NEAR]
     near = (1 - a) * par[P_NEAR] + a * (tot / nz)
-    if w.shape[0] != states.shape[0]:
-        # the predicted set's equal weights: their one value (numpy's exp) written out here
-        w0 = w[0]
-        w = np.empty(states.shape[0])
-        for i in range(states.shape[0]):
-            w[i] = w0
     cell = _kernels.grid_cell(std, r2)
     code, m, grid, m_near = _kernels.mass_near_two(states, w, Z, std, r2, cell[0], cell[1],
                                                    wide, chained)
