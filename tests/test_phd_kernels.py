@@ -295,13 +295,19 @@ def test_observation_noise_is_obs_std_and_as_observations_checks():
 
 # ----------------------------------------------------------------------------- grid, M(z)
 
-@pytest.mark.parametrize("cell", [0.01, 5.0, 40.0, 1e4])
-def test_grid_puts_every_point_in_its_cell_in_index_order(cell):
+@pytest.mark.parametrize("n", [2000, 2003])
+@pytest.mark.parametrize("cell", [0.01, 5.0, 40.0, 1e4, 3e4])
+def test_grid_puts_every_point_in_its_cell_in_index_order(cell, n):
+    """(cells of 1e4 and 3e4: few beside the points, the four-chunk sort; 2003 points: a rest
+    after the four chunks; points on the cells' edges)"""
     rng = np.random.default_rng(2)
-    x = _states(rng, 2000, far=20)
+    x = _states(rng, n, far=20)
+    if cell in (40.0, 3e4):
+        x[:, :2] = np.round(x[:, :2] / cell) * cell             # points on the cells' edges
     ok, x0, y0, cx, cy, ni, nj, order, starts = K.grid_build(x[:, 0], x[:, 1], cell, cell)
-    assert ok and ni * nj <= 4 * 2000 + 64                      # cells grew when too many
-    np.testing.assert_array_equal(np.sort(order), np.arange(2000))
+    assert ok and ni * nj <= 4 * n + 64                         # cells grew when too many
+    assert (4 * ni * nj <= n) == (cell >= 1e4)                  # (both sorts are tested)
+    np.testing.assert_array_equal(np.sort(order), np.arange(n))
     key = (np.minimum(np.floor((x[:, 0] - x0) / cx), ni - 1) * nj
            + np.minimum(np.floor((x[:, 1] - y0) / cy), nj - 1)).astype(np.int64)
     np.testing.assert_array_equal(order, np.argsort(key, kind="stable"))
