@@ -713,14 +713,15 @@ def test_fused_scene_model_is_the_calls_one_by_one(seed, monkeypatch):
 
     monkeypatch.setattr(F, "gate_sums", count_sums)
     weights = []
-    weights_of = F._weights_of
+    weights_of = F._weights_exposure
 
     def spy_weights(ps):
-        w = weights_of(ps)
+        w, e = weights_of(ps)
         weights.append(len(w) == len(ps))
-        return w
+        assert (e is None) == (len(w) == len(ps))      # the exposure with the one value
+        return w, e
 
-    monkeypatch.setattr(F, "_weights_of", spy_weights)
+    monkeypatch.setattr(F, "_weights_exposure", spy_weights)
     p = PHD_PRACTICAL.filter
     fused = F.PHDFilter(p, rng=np.random.default_rng(seed))
     ref = F.PHDFilter(p, rng=np.random.default_rng(seed))

@@ -905,6 +905,7 @@ def _scene_terms(Z, std, m1, m2, extent, a, see, log_rate, area, log_v0, floor, 
 #: :func:`scene_frame`'s scalars (``par``): their places
 (P_R2, P_A_NEAR, P_NEAR, P_A, P_SEE, P_LOG_RATE, P_AREA, P_LOG_V0, P_FLOOR, P_N0_BETA, P_NU, P_Q,
  P_RATIO, P_SCORE_FLOOR, P_USE_PSUMS, P_CLIP, P_PERSIST) = range(17)
+N_SCENE_PAR = 17
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)

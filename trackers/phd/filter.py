@@ -89,10 +89,14 @@ from numba import njit
 from ..params import param, part, with_options
 from . import _kernels, motion
 from .clutter import PlaceClutter
+from .clutter import _log_count
 from .clutter import (DuplicateBoxes, NearClutter, kappa_terms, learn_shares, neighbour_counts,
                       scene_density, scene_terms, scene_frame, neighbours, _kappa_terms,
                       PRIOR_FRAMES, MIN_WEIGHT, INCREMENT_PAIRS, _learn_shares,
                       _memory_step, _dup_sums_brute, _NO_I, _NO_F)
+from .clutter import (N_SCENE_PAR, P_R2, P_A_NEAR, P_NEAR, P_A, P_SEE, P_LOG_RATE, P_AREA,
+                      P_LOG_V0, P_FLOOR, P_N0_BETA, P_NU, P_Q, P_RATIO, P_SCORE_FLOOR,
+                      P_USE_PSUMS, P_CLIP, P_PERSIST)
 from .scene_motion import Chains
 from .gating import BRUTE_PAIRS, DEFAULT_BUDGET, LogGPairs, gate_pairs, gate_sums, tail_radius2
 from ..smc.resampling import SCHEMES
@@ -598,6 +602,10 @@ class SceneModel:
         #: M'(z) and the birth's M(z) come from one pass (:meth:`_near_mass`)
         self._birth_r2 = gate_threshold(params.birth.gate, OBS_DIM)
         self._birth_mass: Optional[tuple] = None
+        #: :func:`.clutter.scene_frame`'s scalars (written each frame), the clutter gate's
+        #: log volume of unit stds with the settings it is for
+        self._par = np.zeros(N_SCENE_PAR)
+        self._lv0: Optional[tuple] = None
 
     def set_likelihood(self, lk: LikelihoodParams) -> None:
         """New observation-noise widths for the clutter volumes (PHDFilter.set_params)."""
@@ -760,18 +768,37 @@ class SceneModel:
         place.cl = people.cl = dups.cl = cl
         if self.extent is None:
             self.extent = _no_extent()
-        people.record(predicted)
-        par = np.array((r2, 1.0 / min(self.frames + 5, cl.clutter_memory), self.near,
-                        1.0 / min(self.size_frames + 1, cl.clutter_memory), 1.0,
-                        math.log(self.rate) if self.rate > 0 else -math.inf,
-                        self._image_area(frame), log_gate_volume0(cl), self._LOG_SIZE_FLOOR,
-                        PRIOR_FRAMES * place.beta, people.nu, dups.q,
-                        1.0 if ratio else 0.0, self.score_floor,
-                        0.0 if self.persist_sums is None else 1.0, self.sp.max_log_ratio,
-                        self.sp.persist_frames))
+        w, exposure = _weights_exposure(predicted)
+        if exposure is None:
+            people.record(predicted)
+        else:
+            people._exposure = exposure             # (NearClutter.record's float)
+        # scene_frame's scalars, written into this model's own array (the same floats as
+        # np.array of them; the gate's log volume kept for these settings)
+        par = self._par
+        lv0 = self._lv0
+        if lv0 is None or lv0[0] is not cl:
+            lv0 = self._lv0 = (cl, log_gate_volume0(cl))
+        par[P_R2] = r2
+        par[P_A_NEAR] = 1.0 / min(self.frames + 5, cl.clutter_memory)
+        par[P_NEAR] = self.near
+        par[P_A] = 1.0 / min(self.size_frames + 1, cl.clutter_memory)
+        par[P_SEE] = 1.0
+        par[P_LOG_RATE] = math.log(self.rate) if self.rate > 0 else -math.inf
+        par[P_AREA] = self._image_area(frame)
+        par[P_LOG_V0] = lv0[1]
+        par[P_FLOOR] = self._LOG_SIZE_FLOOR
+        par[P_N0_BETA] = PRIOR_FRAMES * place.beta
+        par[P_NU] = people.nu
+        par[P_Q] = dups.q
+        par[P_RATIO] = 1.0 if ratio else 0.0
+        par[P_SCORE_FLOOR] = self.score_floor
+        par[P_USE_PSUMS] = 0.0 if self.persist_sums is None else 1.0
+        par[P_CLIP] = self.sp.max_log_ratio
+        par[P_PERSIST] = self.sp.persist_frames
         ss = self.score_sums if ratio else _NO_SUMS
         code, near, wide, chained, persist_now, n_dup, m, grid, m_near, out, final = scene_frame(
-            predicted.states, _weights_of(predicted), Z, std, self.chains.length,
+            predicted.states, w, Z, std, self.chains.length,
             scores if ratio else _NO_SCORES, par, self.size_m1, self.size_m2, self.extent,
             place.mem_z, place.mem_w, place.mem_e, ss,
             self.persist_sums if ratio and self.persist_sums is not None else ss)
@@ -982,6 +1009,25 @@ def _weights_of(ps: ParticleSet) -> np.ndarray:
         w.setflags(write=False)         # (the property's type: one specialisation)
         return w
     return ps.weights
+
+
+def _weights_exposure(ps: ParticleSet) -> tuple:
+    """``(_weights_of(ps), exposure)``: where the set's weights are known equal and neither
+    they nor its mass are made yet, their one value and :meth:`.clutter.NearClutter.record`'s
+    exposure (the set's mass) from ONE np.exp of the two arguments ``(lw_0, log n + lw_0)``
+    (numpy's exp of an element does not depend on its neighbours or the array's length: the
+    two calls' floats); else ``(_weights_of(ps), None)`` (record computes the exposure)."""
+    n = len(ps)
+    d = ps.__dict__
+    if n > 1 and "weights" not in d and "_mass" not in d and "log_mass" not in d \
+            and ps.is_known_equal():
+        lw0 = float(ps.log_weights[0])
+        if math.isfinite(lw0):
+            e = np.exp(np.array((lw0, _log_count(n) + lw0)))
+            w = e[:1]
+            w.setflags(write=False)         # (the property's type: one specialisation)
+            return w, float(e[1])
+    return _weights_of(ps), None
 
 
 _NO_PERSIST = np.zeros(0, dtype=np.bool_)
