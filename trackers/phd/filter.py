@@ -606,6 +606,7 @@ class SceneModel:
         #: log volume of unit stds with the settings it is for
         self._par = np.zeros(N_SCENE_PAR)
         self._lv0: Optional[tuple] = None
+        self._lpar = np.zeros(_N_L)
 
     def set_likelihood(self, lk: LikelihoodParams) -> None:
         """New observation-noise widths for the clutter volumes (PHDFilter.set_params)."""
@@ -978,10 +979,16 @@ class SceneModel:
                      and len(prev_link) == nz and len(chain_c) > 0)
         lk, r2, S, exposure = place._sums_of()
         a = 1.0 / min(self.frames + 5, cl.clutter_memory)
-        par = np.array((place.fade, MIN_WEIGHT, r2, INCREMENT_PAIRS,
-                        0.0 if dups._pairs is None else 1.0, r2_dup,
-                        1.0 if use_s else 0.0, 1.0 if use_p else 0.0,
-                        1.0 - 1.0 / cl.clutter_memory))
+        par = self._lpar                    # (scene_learn's scalars, as _log_kappa_fused's)
+        par[_L_FADE] = place.fade
+        par[_L_MIN_W] = MIN_WEIGHT
+        par[_L_R2] = r2
+        par[_L_BUDGET] = INCREMENT_PAIRS
+        par[_L_DUP] = 0.0 if dups._pairs is None else 1.0
+        par[_L_DUP_R2] = r2_dup
+        par[_L_SCORES] = 1.0 if use_s else 0.0
+        par[_L_PERSIST] = 1.0 if use_p else 0.0
+        par[_L_D] = 1.0 - 1.0 / cl.clutter_memory
         sh, ssum, mem, num, den = scene_learn(
             won, out, prev_link if use_chain else _NO_I, chain_c if use_chain else _NO_F,
             place.mem_z, place.mem_s, place.mem_w, place.mem_e, S, Z, std, wide, n_dup, s,
@@ -1075,6 +1082,7 @@ def _score_sums(won, s, persist, use_p, d, sums, psums):
 
 #: :func:`scene_learn`'s scalars (``par``): their places
 _L_FADE, _L_MIN_W, _L_R2, _L_BUDGET, _L_DUP, _L_DUP_R2, _L_SCORES, _L_PERSIST, _L_D = range(9)
+_N_L = 9
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
