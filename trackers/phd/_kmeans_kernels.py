@@ -1050,7 +1050,7 @@ def prepare(states, log_w):
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
-def prepare_copies(states, log_w, copies):
+def prepare_copies(states, log_w, copies, pos):
     """:func:`prepare` for particles that are runs of consecutive copies of a row, ``copies``
     (R,) their lengths (systematic resampling's record, :meth:`~..smc.weights.ParticleSet.known_copies`),
     every log-weight equal: the same floats with no comparison of every row with the one
@@ -1058,7 +1058,10 @@ def prepare_copies(states, log_w, copies):
     its particle count (a sum of ones, exact); the shift sums every particle's position in
     particle order (a run's row added once per copy, the very additions of :func:`prepare`);
     a run whose row equals the previous run's (two ancestors with identical rows) is merged
-    into it, as :func:`prepare` would.  ``states`` (N, 6) with ``N = sum(copies)``."""
+    into it, as :func:`prepare` would.  ``states`` (N, 6) with ``N = sum(copies)``.  ``pos``
+    (2,): those position sums when the maker of the set took them (systematic resampling's
+    walk, :meth:`~..smc.weights.ParticleSet.copy_sums`: the same additions in the same
+    order), else empty."""
     n = states.shape[0]
     R = copies.shape[0]
     lmax = log_w[0] if n > 0 else -np.inf
@@ -1073,14 +1076,18 @@ def prepare_copies(states, log_w, copies):
         return lmax, w[:0], shift, S[:0], X[:0], runs[:0]
     a0 = 0.0
     a1 = 0.0
-    i = 0
-    for r in range(R):
-        v0 = states[i, 0]
-        v1 = states[i, 1]
-        for t in range(copies[r]):
-            a0 += v0
-            a1 += v1
-        i += copies[r]
+    if pos.shape[0] == 2:
+        a0 = pos[0]
+        a1 = pos[1]
+    else:
+        i = 0
+        for r in range(R):
+            v0 = states[i, 0]
+            v1 = states[i, 1]
+            for t in range(copies[r]):
+                a0 += v0
+                a1 += v1
+            i += copies[r]
     shift[0] = a0 / n
     shift[1] = a1 / n
     m = 0
@@ -1468,7 +1475,7 @@ ORIGIN_EXTRA = -2
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
-def peaks(states, log_w, copies, Z, extra, scale, cfg, grid_min):
+def peaks(states, log_w, copies, pos, Z, extra, scale, cfg, grid_min):
     """:func:`~.clustering.kmeans_peaks` after its argument checks, in one call (each numpy or
     Python operation of a frame costs 2-3 times more when the caches are cold, as between two
     frames of a real run): the observations' check, :func:`prepare`, the initial centres
@@ -1476,8 +1483,8 @@ def peaks(states, log_w, copies, Z, extra, scale, cfg, grid_min):
     ones; with neither, the particles' weighted mean), :func:`lloyd`, :func:`split_clusters`
     and the kept test ``mass >= T``.  ``scale`` is ``exp(max log_w)`` (numpy's exp, taken by
     the caller; the largest log-weight must be finite).  ``copies`` (R,): the particles are
-    runs of copies of R rows, every log-weight equal (:func:`prepare_copies`), or empty
-    (:func:`prepare`).  ``cfg`` (12,) the settings ``T, split_above, need, min_split_mass,
+    runs of copies of R rows, every log-weight equal (:func:`prepare_copies`, with ``pos``
+    (2,) their position sums if known, else empty), or empty (:func:`prepare`).  ``cfg`` (12,) the settings ``T, split_above, need, min_split_mass,
     guarded (1.0 / 0.0), max_splits, n_near, max_iter, tol, sigma_obs, sigma_min, pos_ratio``
     (:func:`split_clusters`, :func:`lloyd`: integers as floats).
 
@@ -1515,7 +1522,7 @@ def peaks(states, log_w, copies, Z, extra, scale, cfg, grid_min):
                 np.empty(0, np.int64), np.empty(0, np.int64), np.empty(0, np.bool_),
                 np.empty(0, np.int64), 0, 0)
     if copies.shape[0] > 0:
-        lmax, w, shift, S, X, runs = prepare_copies(states, log_w, copies)
+        lmax, w, shift, S, X, runs = prepare_copies(states, log_w, copies, pos)
     else:
         lmax, w, shift, S, X, runs = prepare(states, log_w)
     m = w.shape[0]
