@@ -768,15 +768,19 @@ def test_systematic_take_copies_the_searchsorted_ancestors_rows(N, n, D):
             cdf = np.cumsum(terms)
             cdf[-1] = 1.0
             want = np.minimum(np.searchsorted(cdf, (u0 + np.arange(n)) / n, side="right"), N - 1)
-            idx, rows, runs = _systematic_take(states, *args, True)
+            idx, rows, runs, pos = _systematic_take(states, *args, True)
             np.testing.assert_array_equal(idx, want)
             assert rows.shape == (n, D)
             np.testing.assert_array_equal(rows, states[want])
+            # the position sums, added row by row in order (np.cumsum's sequential floats)
+            want_pos = (np.array([np.cumsum(rows[:, 0])[-1], np.cumsum(rows[:, 1])[-1]])
+                        if D >= 2 else np.zeros(2))
+            assert pos.tobytes() == want_pos.tobytes()
             # the runs of copies of one ancestor, in order
             anc, first = np.unique(want, return_index=True)
             np.testing.assert_array_equal(runs, np.diff(np.append(first, n)))
             np.testing.assert_array_equal(np.repeat(anc, runs), want)
-            no_idx, rows2, runs2 = _systematic_take(states, *args, False)   # the rows alone
+            no_idx, rows2, runs2, _ = _systematic_take(states, *args, False)   # the rows alone
             assert no_idx.shape == (0,)
             np.testing.assert_array_equal(rows2, rows)
             np.testing.assert_array_equal(runs2, runs)
@@ -1142,13 +1146,19 @@ def test_prepare_copies_is_prepare_for_resampled_runs():
         if trial == 7:
             log_w[:] = -np.inf
         want = KM.prepare(states, log_w)
-        got = KM.prepare_copies(states, log_w, copies.astype(np.int64))
-        assert got[0] == want[0] or (np.isnan(got[0]) and np.isnan(want[0]))
+        # the position sums taken here, or given (as resampling's walk records them: the
+        # same additions in order, np.cumsum's sequential floats)
+        pos = np.array([np.cumsum(states[:, 0])[-1], np.cumsum(states[:, 1])[-1]])
+        for given in (np.empty(0), pos):
+            got = KM.prepare_copies(states, log_w, copies.astype(np.int64), given)
+            assert got[0] == want[0] or (np.isnan(got[0]) and np.isnan(want[0]))
+            if not np.isfinite(want[0]):
+                assert len(got[1]) == 0
+                continue
+            for a, b in zip(got[1:], want[1:]):
+                assert a.dtype == b.dtype and a.tobytes() == b.tobytes()
         if not np.isfinite(want[0]):
-            assert len(got[1]) == 0
             continue
-        for a, b in zip(got[1:], want[1:]):
-            assert a.dtype == b.dtype and a.tobytes() == b.tobytes()
         if trial % 3 == 0 and R > 3:
             assert len(got[5]) < R
 

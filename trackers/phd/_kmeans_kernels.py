@@ -231,12 +231,67 @@ def _assign_dense(X, centers, inv, labels, dmin):
     """:func:`_nearest_dense` of every particle: the same labels and d² floats
     (:func:`_assign_blocks`, the blocks' boxes taken here)."""
     _assign_blocks(X, centers, inv, labels, dmin,
-                   _boxes(X) if centers.shape[0] >= _BLOCKS_MIN else np.empty((0, 9), np.float64))
+                   _boxes(X) if centers.shape[0] >= _BLOCKS_MIN else np.empty((0, 9), np.float64),
+                   X, dmin, dmin, X, np.bool_(False))
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
       no_cpython_wrapper=True)
-def _assign_blocks(X, centers, inv, labels, dmin, boxes):
+def _add_sums(S, w, labels, m, sums, b0, b1):
+    """Particles ``b0:b1``'s weights and weighted states added to their clusters' ``m`` and
+    ``sums``, in particle order (:func:`lloyd`'s sums): each run of particles of one cluster
+    by :func:`_add_one` (6 state columns)."""
+    D = S.shape[1]
+    i = b0
+    while i < b1:
+        c = labels[i]
+        j = i + 1
+        while j < b1 and labels[j] == c:
+            j += 1
+        if D == 6:
+            _add_one(S, w, m, sums, c, i, j)
+        else:
+            for k in range(i, j):
+                wi = w[k]
+                m[c] += wi
+                for d in range(D):
+                    sums[c, d] += S[k, d] * wi
+        i = j
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
+def _add_one(S, w, m, sums, c, b0, b1):
+    """:func:`_add_sums` of particles ``b0:b1`` all of cluster c (6 state columns): the same
+    additions, in particle order, with the running sums in registers."""
+    mc = m[c]
+    s0 = sums[c, 0]
+    s1 = sums[c, 1]
+    s2 = sums[c, 2]
+    s3 = sums[c, 3]
+    s4 = sums[c, 4]
+    s5 = sums[c, 5]
+    for i in range(b0, b1):
+        wi = w[i]
+        mc += wi
+        s0 += S[i, 0] * wi
+        s1 += S[i, 1] * wi
+        s2 += S[i, 2] * wi
+        s3 += S[i, 3] * wi
+        s4 += S[i, 4] * wi
+        s5 += S[i, 5] * wi
+    m[c] = mc
+    sums[c, 0] = s0
+    sums[c, 1] = s1
+    sums[c, 2] = s2
+    sums[c, 3] = s3
+    sums[c, 4] = s4
+    sums[c, 5] = s5
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
+def _assign_blocks(X, centers, inv, labels, dmin, boxes, S, w, m, sums, acc):
     """:func:`_nearest_dense` of every particle: the same labels and d² floats; ``boxes``
     those of the particles' blocks (:func:`_boxes`; empty: no blocks).  A particle
     starts from centre 0 (a NaN d² there is the answer, as argmin's rule above) and the
@@ -257,7 +312,13 @@ def _assign_blocks(X, centers, inv, labels, dmin, boxes):
     (g among them) are, in index order, the first of the smallest d² winning -- the serial
     rule's answer, as no d² is NaN there (a particle with a NaN coordinate makes its block
     take the serial look).  Resampling lays a target's particles side by side: on the bench
-    scene ~95 % of the blocks have g alone, one d² a particle."""
+    scene ~95 % of the blocks have g alone, one d² a particle.
+
+    ``acc``: each particle's weight ``w`` and weighted state ``S`` row are also added to
+    its cluster's ``m`` (K,) and ``sums`` (K, D) as soon as its block is labelled (the
+    block still in the cache; per cluster in particle order: :func:`lloyd`'s sums pass,
+    the same floats); else ``S``, ``w``, ``m``, ``sums`` are not read (any arrays of
+    their types)."""
     K = centers.shape[0]
     if K == 0:
         return
@@ -271,12 +332,15 @@ def _assign_blocks(X, centers, inv, labels, dmin, boxes):
             labels[i] = lab
             dmin[i] = best
             g = lab
+        if acc:
+            _add_sums(S, w, labels, m, sums, 0, n)
         return
     cand = np.empty(K, np.int64)
     for b in range(boxes.shape[0]):
         b0 = b * B
         b1 = b0 + B if b0 + B < n else n
         ok = boxes[b, 8] != 0.0
+        summed = False
         if ok:
             l0 = boxes[b, 0]
             l1 = boxes[b, 1]
@@ -326,6 +390,9 @@ def _assign_blocks(X, centers, inv, labels, dmin, boxes):
                     labels[i] = c
                     dmin[i] = d
                     nan = nan or d != d
+                if acc and not nan and S.shape[1] == 6:
+                    _add_one(S, w, m, sums, c, b0, b1)
+                    summed = True
             else:
                 for i in range(b0, b1):
                     x0 = X[i, 0]
@@ -362,6 +429,8 @@ def _assign_blocks(X, centers, inv, labels, dmin, boxes):
                 labels[i] = lab
                 dmin[i] = best
                 g = lab
+        if acc and not summed:
+            _add_sums(S, w, labels, m, sums, b0, b1)
         g = labels[b1 - 1]
 
 
@@ -424,7 +493,7 @@ def _assign_moved(X, centers, inv, prev, labels, dmin, moved, boxes):
     idx = _moved_list(moved)
     nm = idx.shape[0]
     if 2 * nm > K:
-        _assign_blocks(X, centers, inv, labels, dmin, boxes)
+        _assign_blocks(X, centers, inv, labels, dmin, boxes, X, dmin, dmin, X, np.bool_(False))
         return
     n = X.shape[0]
     cc, blocks = _centre_rows(centers, inv, _BLOCKS_MIN)
@@ -981,7 +1050,7 @@ def prepare(states, log_w):
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
-def prepare_copies(states, log_w, copies):
+def prepare_copies(states, log_w, copies, pos):
     """:func:`prepare` for particles that are runs of consecutive copies of a row, ``copies``
     (R,) their lengths (systematic resampling's record, :meth:`~..smc.weights.ParticleSet.known_copies`),
     every log-weight equal: the same floats with no comparison of every row with the one
@@ -989,7 +1058,10 @@ def prepare_copies(states, log_w, copies):
     its particle count (a sum of ones, exact); the shift sums every particle's position in
     particle order (a run's row added once per copy, the very additions of :func:`prepare`);
     a run whose row equals the previous run's (two ancestors with identical rows) is merged
-    into it, as :func:`prepare` would.  ``states`` (N, 6) with ``N = sum(copies)``."""
+    into it, as :func:`prepare` would.  ``states`` (N, 6) with ``N = sum(copies)``.  ``pos``
+    (2,): those position sums when the maker of the set took them (systematic resampling's
+    walk, :meth:`~..smc.weights.ParticleSet.copy_sums`: the same additions in the same
+    order), else empty."""
     n = states.shape[0]
     R = copies.shape[0]
     lmax = log_w[0] if n > 0 else -np.inf
@@ -1004,14 +1076,18 @@ def prepare_copies(states, log_w, copies):
         return lmax, w[:0], shift, S[:0], X[:0], runs[:0]
     a0 = 0.0
     a1 = 0.0
-    i = 0
-    for r in range(R):
-        v0 = states[i, 0]
-        v1 = states[i, 1]
-        for t in range(copies[r]):
-            a0 += v0
-            a1 += v1
-        i += copies[r]
+    if pos.shape[0] == 2:
+        a0 = pos[0]
+        a1 = pos[1]
+    else:
+        i = 0
+        for r in range(R):
+            v0 = states[i, 0]
+            v1 = states[i, 1]
+            for t in range(copies[r]):
+                a0 += v0
+                a1 += v1
+            i += copies[r]
     shift[0] = a0 / n
     shift[1] = a1 / n
     m = 0
@@ -1100,9 +1176,13 @@ def lloyd(X, S, w, centers, max_iter, tol, sigma_obs, sigma_min, pos_ratio, grid
     done = False
     for it in range(1, max_iter + 1):
         inv = _inv_var(centers, sigma_obs, sigma_min, pos_ratio)
+        summed = False
         if grid_min is None:
             if it == 1:
-                _assign_blocks(X, centers, inv, new, dmin, boxes)
+                # the labels and the sums in one pass (their copy and the sums pass below
+                # are not needed: every cluster is touched, the sums start at zero)
+                _assign_blocks(X, centers, inv, labels, dmin, boxes, S, w, m, sums, np.bool_(True))
+                summed = True
             else:
                 _assign_moved(X, centers, inv, labels, new, dmin, moved, boxes)
         else:
@@ -1136,26 +1216,40 @@ def lloyd(X, S, w, centers, max_iter, tol, sigma_obs, sigma_min, pos_ratio, grid
             if not changed:
                 done = True
                 break
-        else:
+        elif not summed:
             for i in range(n):
                 labels[i] = new[i]
-        # sums of the touched clusters, over their members in particle order (and the
-        # reaches, the grid search's only, in the same pass)
-        for c in range(K):
-            if touched[c]:
-                m[c] = 0.0
-                for d in range(D):
-                    sums[c, d] = 0.0
-                reach_c[c] = 0.0
-        for i in range(n):
-            c = labels[i]
-            if touched[c]:
-                wi = w[i]
-                m[c] += wi
-                for d in range(D):
-                    sums[c, d] += S[i, d] * wi
-            if grid_min is not None:
-                reach_c[c] = max(reach_c[c], reach[i])
+        if not summed:
+            # sums of the touched clusters, over their members in particle order (and the
+            # reaches, the grid search's only, in the same pass)
+            for c in range(K):
+                if touched[c]:
+                    m[c] = 0.0
+                    for d in range(D):
+                        sums[c, d] = 0.0
+                    reach_c[c] = 0.0
+            if grid_min is None and D == 6:
+                # each run of particles of one touched cluster with its sums in registers
+                # (:func:`_add_one`: the same additions in the same order)
+                i = 0
+                while i < n:
+                    c = labels[i]
+                    j = i + 1
+                    while j < n and labels[j] == c:
+                        j += 1
+                    if touched[c]:
+                        _add_one(S, w, m, sums, c, i, j)
+                    i = j
+            else:
+                for i in range(n):
+                    c = labels[i]
+                    if touched[c]:
+                        wi = w[i]
+                        m[c] += wi
+                        for d in range(D):
+                            sums[c, d] += S[i, d] * wi
+                    if grid_min is not None:
+                        reach_c[c] = max(reach_c[c], reach[i])
         step = 0.0
         for c in range(K):
             moved[c] = False
@@ -1175,7 +1269,7 @@ def lloyd(X, S, w, centers, max_iter, tol, sigma_obs, sigma_min, pos_ratio, grid
         inv = _inv_var(centers, sigma_obs, sigma_min, pos_ratio)
         if grid_min is None:
             if it == 0:
-                _assign_blocks(X, centers, inv, new, dmin, boxes)
+                _assign_blocks(X, centers, inv, new, dmin, boxes, X, dmin, dmin, X, np.bool_(False))
             else:
                 _assign_moved(X, centers, inv, labels, new, dmin, moved, boxes)
         else:
@@ -1381,7 +1475,7 @@ ORIGIN_EXTRA = -2
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
-def peaks(states, log_w, copies, Z, extra, scale, cfg, grid_min):
+def peaks(states, log_w, copies, pos, Z, extra, scale, cfg, grid_min):
     """:func:`~.clustering.kmeans_peaks` after its argument checks, in one call (each numpy or
     Python operation of a frame costs 2-3 times more when the caches are cold, as between two
     frames of a real run): the observations' check, :func:`prepare`, the initial centres
@@ -1389,8 +1483,8 @@ def peaks(states, log_w, copies, Z, extra, scale, cfg, grid_min):
     ones; with neither, the particles' weighted mean), :func:`lloyd`, :func:`split_clusters`
     and the kept test ``mass >= T``.  ``scale`` is ``exp(max log_w)`` (numpy's exp, taken by
     the caller; the largest log-weight must be finite).  ``copies`` (R,): the particles are
-    runs of copies of R rows, every log-weight equal (:func:`prepare_copies`), or empty
-    (:func:`prepare`).  ``cfg`` (12,) the settings ``T, split_above, need, min_split_mass,
+    runs of copies of R rows, every log-weight equal (:func:`prepare_copies`, with ``pos``
+    (2,) their position sums if known, else empty), or empty (:func:`prepare`).  ``cfg`` (12,) the settings ``T, split_above, need, min_split_mass,
     guarded (1.0 / 0.0), max_splits, n_near, max_iter, tol, sigma_obs, sigma_min, pos_ratio``
     (:func:`split_clusters`, :func:`lloyd`: integers as floats).
 
@@ -1428,7 +1522,7 @@ def peaks(states, log_w, copies, Z, extra, scale, cfg, grid_min):
                 np.empty(0, np.int64), np.empty(0, np.int64), np.empty(0, np.bool_),
                 np.empty(0, np.int64), 0, 0)
     if copies.shape[0] > 0:
-        lmax, w, shift, S, X, runs = prepare_copies(states, log_w, copies)
+        lmax, w, shift, S, X, runs = prepare_copies(states, log_w, copies, pos)
     else:
         lmax, w, shift, S, X, runs = prepare(states, log_w)
     m = w.shape[0]

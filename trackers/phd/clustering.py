@@ -268,8 +268,13 @@ def kmeans_peaks(ps: ParticleSet, Z, T: float = 0.6, *, params: PHDParams | None
     K0 = len(Z) + len(extra)
     # systematic resampling's runs of copies (equal weights): each run's row taken once
     copies = ps.copies() if equal else None
+    pos = _NO_POS
     if copies is None:
         copies = _NO_COPIES
+    else:                               # (and their position sums, taken by the walk)
+        pos = ps.copy_sums()
+        if pos is None:
+            pos = _NO_POS
     # the run's settings as one array (one kernel argument instead of twelve: each costs the
     # call ~2 us when the caches are cold), made once per distinct settings
     key = (T, split_above, min_split_mass, guarded, max_splits, max_iter, tol, lk.sigma_obs,
@@ -284,7 +289,7 @@ def kmeans_peaks(ps: ParticleSet, Z, T: float = 0.6, *, params: PHDParams | None
              tol, lk.sigma_obs, lk.sigma_obs_min, lk.sigma_obs_pos_ratio], dtype=np.float64)
     bad, centers, masses, labels, runs, kept, origin, n_splits, n_iter = _kmeans_kernels.peaks(
         np.ascontiguousarray(states, dtype=np.float64),
-        np.ascontiguousarray(log_w, dtype=np.float64), copies, Z, extra, np.exp(lmax), cfg,
+        np.ascontiguousarray(log_w, dtype=np.float64), copies, pos, Z, extra, np.exp(lmax), cfg,
         int(INDEX_MIN_CENTERS) if K0 >= INDEX_MIN_CENTERS else None)
     if bad:
         as_observations(Z)              # (raises its message)
@@ -300,6 +305,7 @@ def kmeans_peaks(ps: ParticleSet, Z, T: float = 0.6, *, params: PHDParams | None
 _NO_OBS = np.zeros((0, OBS_DIM))
 _CFG: dict = {}                         # kmeans_peaks' settings arrays (_kmeans_kernels.peaks)
 _NO_COPIES = np.zeros(0, dtype=np.int64)
+_NO_POS = np.zeros(0, dtype=np.float64)
 _NO_EXTRA = np.zeros((0, STATE_DIM))
 
 

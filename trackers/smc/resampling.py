@@ -39,10 +39,13 @@ _NO_WEIGHTS = np.empty(0, np.float64)
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
 def _systematic_take(states, lw, log_mass, u0, n, w, scale, want_idx):
     """:func:`_systematic_index` and the ancestors' rows of ``states`` (N, D) in the same walk:
-    returns ``(idx (n,), states[idx] (n, D), runs (M,))`` with no exp or gather pass of its own
-    (``idx`` empty unless ``want_idx``: a set without labels or extra needs only the rows);
-    ``runs`` the lengths of the runs of consecutive copies of one ancestor (the walk lays an
-    ancestor's copies side by side: ``np.repeat(np.unique(idx), runs)`` is ``idx``).  With
+    returns ``(idx (n,), states[idx] (n, D), runs (M,), pos (2,))`` with no exp or gather pass
+    of its own (``idx`` empty unless ``want_idx``: a set without labels or extra needs only the
+    rows); ``runs`` the lengths of the runs of consecutive copies of one ancestor (the walk lays
+    an ancestor's copies side by side: ``np.repeat(np.unique(idx), runs)`` is ``idx``); ``pos``
+    the sums of the copied rows' first two columns, added row by row in order (zeros when
+    ``D < 2``): K-means' centring shift (:func:`~..phd._kmeans_kernels.prepare_copies`), taken
+    here where the walk's other work hides the chain of additions.  With
     ``w`` (N,) given (else empty), the normalised weights are ``w · scale`` instead of
     ``exp(lw − log_mass)`` (:meth:`~.weights.ParticleSet.known_normalised`): no exp at all,
     and ``lw`` is not read (may be empty)."""
@@ -57,6 +60,9 @@ def _systematic_take(states, lw, log_mass, u0, n, w, scale, want_idx):
     m = -1
     jp = -1
     cnt = 0
+    a0 = 0.0
+    a1 = 0.0
+    two = D >= 2
     for k in range(n):
         u = (u0 + k) / n
         while j < N - 1 and c <= u:
@@ -71,7 +77,13 @@ def _systematic_take(states, lw, log_mass, u0, n, w, scale, want_idx):
         jp = j
         for d in range(D):
             out[k, d] = states[j, d]
-    return idx, out, runs[:m + 1]
+        if two:
+            a0 += states[j, 0]
+            a1 += states[j, 1]
+    pos = np.empty(2, np.float64)
+    pos[0] = a0
+    pos[1] = a1
+    return idx, out, runs[:m + 1], pos
 
 
 def _cdf(w: np.ndarray) -> np.ndarray:
@@ -165,13 +177,13 @@ def resample(ps: ParticleSet, n: int, rng: np.random.Generator,
     if scheme == "systematic":      # the log-mass is known: one walk that also copies the rows
         known = ps.normalised        # the walk reads these or the log-weights, not both
         w, scale = known or (_NO_WEIGHTS, 0.0)
-        idx, states, runs = _systematic_take(ps.states, _NO_WEIGHTS if known else ps.log_weights,
+        idx, states, runs, pos = _systematic_take(ps.states, _NO_WEIGHTS if known else ps.log_weights,
                                              ps.log_mass, float(rng.random()), n, w, scale,
                                              ps.labels is not None or ps.extra is not None)
         out = ParticleSet(states, lw, None if ps.labels is None else ps.labels[idx],
                           None if ps.extra is None else ps.extra[idx])
         out.known_equal()                                   # (np.full)
-        out.known_copies(runs)
+        out.known_copies(runs, pos)
         return out
     idx = resample_indices(ps.log_weights, n, rng, scheme)
     return ps.take(idx).with_log_weights(lw)

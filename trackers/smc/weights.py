@@ -152,17 +152,26 @@ class ParticleSet:
         :attr:`weights` and :attr:`log_mass` then skip their min / max pass."""
         self.__dict__["_equal"] = bool(len(self))
 
-    def known_copies(self, runs: np.ndarray) -> None:
+    def known_copies(self, runs: np.ndarray, pos_sums: Optional[np.ndarray] = None) -> None:
         """Record that this set's rows are runs of consecutive copies of one ancestor,
         ``runs`` (M,) their lengths, when the maker knows it (systematic resampling lays the
         copies side by side): K-means (:func:`~..phd.clustering.kmeans_peaks`) then takes each
-        run's row once without comparing every row with the one before.  (A set's arrays are
-        never changed in place; a set made from this one's arrays has no record.)"""
+        run's row once without comparing every row with the one before.  ``pos_sums`` (2,),
+        if given: the sums of the states' first two columns, added row by row in order
+        (:meth:`copy_sums`).  (A set's arrays are never changed in place; a set made from this
+        one's arrays has no record.)"""
         self.__dict__["_copies"] = runs
+        if pos_sums is not None:
+            self.__dict__["_copy_sums"] = pos_sums
 
     def copies(self) -> Optional[np.ndarray]:
         """The run lengths :meth:`known_copies` recorded, else None."""
         return self.__dict__.get("_copies")
+
+    def copy_sums(self) -> Optional[np.ndarray]:
+        """The position sums :meth:`known_copies` recorded (K-means' centring shift without a
+        pass of its own), else None."""
+        return self.__dict__.get("_copy_sums")
 
     def is_known_equal(self) -> bool:
         """True when :meth:`known_equal` was recorded, or the equal-weights test already ran
