@@ -20,9 +20,10 @@ or two passes over the particles with no temporary larger than O(N + N_z + grid)
 - (systematic resampling, one walk over the CDF: ``trackers.smc.resampling._systematic_index``)
 - (the K-means kernels: :mod:`._kmeans_kernels`)
 
-The random numbers of predict and birth are drawn inside the kernels from a stream keyed by one
-word of the caller's ``numpy.random.Generator`` (:mod:`~trackers.smc.random`: SplitMix64 and a
-ziggurat), with no (N, k) temporaries; the seed still fixes every draw.  The K-means kernels
+The random numbers of predict and birth are drawn inside the kernels from a generator keyed by
+one word of the caller's ``numpy.random.Generator`` (:mod:`~trackers.smc.random`: counter-based
+SplitMix64 words, Box–Muller normals), a few hundred at a time in a vectorised loop into a
+small buffer, then used: no (N, k) temporaries; the seed still fixes every draw.  The K-means kernels
 do their arithmetic in the same order as the numpy code they replace (bit for bit the same
 floats); the update's sums run in a different order, in linear space when the weights allow
 (float reordering only).  No kernel uses ``fastmath``.  They use numpy's error model (every
@@ -39,7 +40,7 @@ from llvmlite import ir
 from numba import njit, types
 from numba.extending import intrinsic
 
-from ..smc.random import normal, uniform
+from ..smc.random import directions_into, normal_pairs_into, subkey
 from .gating import kth
 
 _HALF_LOG_2PI_4 = 2.0 * math.log(2.0 * math.pi)     # 0.5 · OBS_DIM · log(2π), OBS_DIM = 4
@@ -185,36 +186,47 @@ def _exp_gate(x):
 
 # ----------------------------------------------------------------------------- predict
 
+#: particles (predict) or newborn (birth) whose normals a kernel makes in one vectorised loop
+#: before using them (their few KB stay in L1)
+_CHUNK = 256
+
+
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
 def propagate_into(x, st, sigma_v, sigma_size, accel_to_position, min_size, out, lw, log_e,
                    lw_out):
-    """``out[:N]`` (N, 6) = f(x) with four normals ``ε`` per particle drawn in order from the
-    stream ``st`` (:mod:`~trackers.smc.random`): ``a = σ_v (w, h) ε₀₁``, ``y += v + c a``,
-    ``v += a``, ``(w, h) = max((w, h) + σ_s (w, h) ε₂₃, min_size)`` (:func:`~.motion.propagate`);
-    with ``lw`` (N,) (else empty), also ``lw_out[:N] = lw + log_e`` in the same pass (the
-    prediction's survival factor, numpy's add)."""
-    s = st[0]
-    with_lw = lw.shape[0] == x.shape[0]
-    for i in range(x.shape[0]):
-        if with_lw:
-            lw_out[i] = lw[i] + log_e
-        s, e0 = normal(s)
-        s, e1 = normal(s)
-        s, e2 = normal(s)
-        s, e3 = normal(s)
-        w = x[i, 4]
-        h = x[i, 5]
-        a0 = sigma_v * w * e0
-        a1 = sigma_v * h * e1
-        out[i, 0] = x[i, 0] + (x[i, 2] + accel_to_position * a0)
-        out[i, 1] = x[i, 1] + (x[i, 3] + accel_to_position * a1)
-        out[i, 2] = x[i, 2] + a0
-        out[i, 3] = x[i, 3] + a1
-        nw = w + sigma_size * w * e2
-        nh = h + sigma_size * h * e3
-        out[i, 4] = nw if not nw < min_size else min_size
-        out[i, 5] = nh if not nh < min_size else min_size
-    st[0] = s
+    """``out[:N]`` (N, 6) = f(x) with four normals ``ε`` per particle, particle i's normals
+    4i … 4i + 3 of the key ``st[0]`` (:mod:`~trackers.smc.random`, pairs 2i and 2i + 1):
+    ``a = σ_v (w, h) ε₀₁``, ``y += v + c a``, ``v += a``,
+    ``(w, h) = max((w, h) + σ_s (w, h) ε₂₃, min_size)`` (:func:`~.motion.propagate`); with
+    ``lw`` (N,) (else empty), also ``lw_out[:N] = lw + log_e`` in the same pass (the
+    prediction's survival factor, numpy's add).  The normals of ``_CHUNK`` particles at a time
+    are made in one vectorised loop, then used."""
+    key = st[0]
+    n = x.shape[0]
+    with_lw = lw.shape[0] == n
+    eps = np.empty((4, _CHUNK))
+    e0, e1, e2, e3 = eps[0], eps[1], eps[2], eps[3]
+    for k0 in range(0, n, _CHUNK):
+        m = min(_CHUNK, n - k0)
+        p0 = np.uint64(2 * k0)
+        normal_pairs_into(key, p0, np.uint64(2), e0, e1, m)
+        normal_pairs_into(key, p0 + np.uint64(1), np.uint64(2), e2, e3, m)
+        for c in range(m):
+            i = k0 + c
+            if with_lw:
+                lw_out[i] = lw[i] + log_e
+            w = x[i, 4]
+            h = x[i, 5]
+            a0 = sigma_v * w * e0[c]
+            a1 = sigma_v * h * e1[c]
+            out[i, 0] = x[i, 0] + (x[i, 2] + accel_to_position * a0)
+            out[i, 1] = x[i, 1] + (x[i, 3] + accel_to_position * a1)
+            out[i, 2] = x[i, 2] + a0
+            out[i, 3] = x[i, 3] + a1
+            nw = w + sigma_size * w * e2[c]
+            nh = h + sigma_size * h * e3[c]
+            out[i, 4] = nw if not nw < min_size else min_size
+            out[i, 5] = nh if not nh < min_size else min_size
 
 
 # ----------------------------------------------------------------------------- detections
@@ -754,47 +766,54 @@ def birth_fill(Z, j, lw_det, st, sigma_obs, sigma_min, pos_ratio, spread, speed_
     """The J = Σ j newborn into ``states[:J]`` (J, 6), ``log_w[:J]``, ``det[:J]``: detection
     z's ``j[z]`` rows get ``(y, w, h) = z + spread σ(z) ε``, velocity
     ``(mean + std n) sqrt(w_z h_z) (cos θ, sin θ)``, sizes clipped to ``min_size``, log-weight
-    ``lw_det[z]``.  Draws per newborn from the stream ``st``, in order: the four normals ε, a
-    point uniform in the unit disc (polar method: θ uniform without cos/sin), the normal n."""
-    s = st[0]
+    ``lw_det[z]``.  Newborn k's draws (k counts over all detections), of the key
+    ``K = st[0]`` (:mod:`~trackers.smc.random`): ε its normals 4k … 4k + 3 of K, n normal k of
+    ``subkey(K, 0)``, θ the direction of word k of ``subkey(K, 1)``.  The draws of ``_CHUNK``
+    newborn at a time are made in vectorised loops, then used."""
+    key = st[0]
+    key_n = subkey(key, 0)
+    key_d = subkey(key, 1)
+    nz = Z.shape[0]
+    par = np.empty((nz, 5))       # per detection: spread σ of (y, w, h), sqrt(w h)
     k = 0
-    for z in range(Z.shape[0]):
+    for z in range(nz):
         sw = sigma_obs * Z[z, 2]
         sw = sigma_min if sigma_min > sw else sw      # max(sw, sigma_min), spelt out
         sh = sigma_obs * Z[z, 3]
         sh = sigma_min if sigma_min > sh else sh
-        s0 = spread * (pos_ratio * sw)
-        s1 = spread * (pos_ratio * sh)
-        s2 = spread * sw
-        s3 = spread * sh
-        scale = math.sqrt(Z[z, 2] * Z[z, 3])
+        par[z, 0] = spread * (pos_ratio * sw)
+        par[z, 1] = spread * (pos_ratio * sh)
+        par[z, 2] = spread * sw
+        par[z, 3] = spread * sh
+        par[z, 4] = math.sqrt(Z[z, 2] * Z[z, 3])
         for _ in range(j[z]):
-            s, e0 = normal(s)
-            s, e1 = normal(s)
-            s, e2 = normal(s)
-            s, e3 = normal(s)
-            states[k, 0] = Z[z, 0] + s0 * e0
-            states[k, 1] = Z[z, 1] + s1 * e1
-            ww = Z[z, 2] + s2 * e2
-            hh = Z[z, 3] + s3 * e3
-            states[k, 4] = ww if not ww < min_size else min_size
-            states[k, 5] = hh if not hh < min_size else min_size
-            while True:
-                s, u = uniform(s)
-                s, v = uniform(s)
-                u = 2.0 * u - 1.0
-                v = 2.0 * v - 1.0
-                q = u * u + v * v
-                if 0.0 < q < 1.0:
-                    break
-            s, n = normal(s)
-            speed = (speed_mean + speed_std * n) * scale / math.sqrt(q)
-            states[k, 2] = speed * u
-            states[k, 3] = speed * v
             log_w[k] = lw_det[z]
             det[k] = z
             k += 1
-    st[0] = s
+    n_all = k
+    buf = np.empty((8, _CHUNK))
+    e0, e1, e2, e3, n0, n1, dc, ds = buf[0], buf[1], buf[2], buf[3], buf[4], buf[5], \
+        buf[6], buf[7]
+    for k0 in range(0, n_all, _CHUNK):             # _CHUNK even: k0 even
+        m = min(_CHUNK, n_all - k0)
+        p0 = np.uint64(2 * k0)
+        normal_pairs_into(key, p0, np.uint64(2), e0, e1, m)
+        normal_pairs_into(key, p0 + np.uint64(1), np.uint64(2), e2, e3, m)
+        normal_pairs_into(key_n, np.uint64(k0 // 2), np.uint64(1), n0, n1, (m + 1) // 2)
+        directions_into(key_d, np.uint64(k0), dc, ds, m)
+        for c in range(m):
+            k = k0 + c
+            z = det[k]
+            states[k, 0] = Z[z, 0] + par[z, 0] * e0[c]
+            states[k, 1] = Z[z, 1] + par[z, 1] * e1[c]
+            ww = Z[z, 2] + par[z, 2] * e2[c]
+            hh = Z[z, 3] + par[z, 3] * e3[c]
+            states[k, 4] = ww if not ww < min_size else min_size
+            states[k, 5] = hh if not hh < min_size else min_size
+            n = n0[c // 2] if c % 2 == 0 else n1[c // 2]
+            speed = (speed_mean + speed_std * n) * par[z, 4]
+            states[k, 2] = speed * dc[c]
+            states[k, 3] = speed * ds[c]
 
 
 # ----------------------------------------------------------------------------- update
