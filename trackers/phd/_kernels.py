@@ -809,49 +809,48 @@ def birth_fill(Z, j, lw_det, st, sigma_obs, sigma_min, pos_ratio, spread, speed_
     key = st[0]
     key_n = subkey(key, 0)
     key_d = subkey(key, 1)
-    nz = Z.shape[0]
-    par = np.empty((nz, 5))       # per detection: spread σ of (y, w, h), sqrt(w h)
+    n_all = 0
+    for z in range(Z.shape[0]):
+        n_all += j[z]
+    buf = np.empty((8, _CHUNK))
+    e0, e1, e2, e3, n0, n1, dc, ds = buf[0], buf[1], buf[2], buf[3], buf[4], buf[5], \
+        buf[6], buf[7]
     k = 0
-    for z in range(nz):
+    for z in range(Z.shape[0]):
         sw = sigma_obs * Z[z, 2]
         sw = sigma_min if sigma_min > sw else sw      # max(sw, sigma_min), spelt out
         sh = sigma_obs * Z[z, 3]
         sh = sigma_min if sigma_min > sh else sh
-        par[z, 0] = spread * (pos_ratio * sw)
-        par[z, 1] = spread * (pos_ratio * sh)
-        par[z, 2] = spread * sw
-        par[z, 3] = spread * sh
-        par[z, 4] = math.sqrt(Z[z, 2] * Z[z, 3])
+        s0 = spread * (pos_ratio * sw)
+        s1 = spread * (pos_ratio * sh)
+        s2 = spread * sw
+        s3 = spread * sh
+        scale = math.sqrt(Z[z, 2] * Z[z, 3])
+        z0, z1, z2, z3, lw = Z[z, 0], Z[z, 1], Z[z, 2], Z[z, 3], lw_det[z]
         for _ in range(j[z]):
-            log_w[k] = lw_det[z]
-            det[k] = z
-            k += 1
-    n_all = k
-    buf = np.empty((8, _CHUNK))
-    e0, e1, e2, e3, n0, n1, dc, ds = buf[0], buf[1], buf[2], buf[3], buf[4], buf[5], \
-        buf[6], buf[7]
-    for k0 in range(0, n_all, _CHUNK):             # _CHUNK even: k0 even
-        m = min(_CHUNK, n_all - k0)
-        p0 = np.uint64(2 * k0)
-        normal_pairs_into(key, p0, np.uint64(2), e0, e1, m)
-        normal_pairs_into(key, p0 + np.uint64(1), np.uint64(2), e2, e3, m)
-        normal_pairs_into(key_n, np.uint64(k0 // 2), np.uint64(1), n0, n1, (m + 1) // 2)
-        directions_into(key_d, np.uint64(k0), dc, ds, m)
-        for c in range(m):
-            k = k0 + c
+            c = k % _CHUNK
+            if c == 0:                             # the next chunk's draws (_CHUNK even)
+                m = min(_CHUNK, n_all - k)
+                p0 = np.uint64(2 * k)
+                normal_pairs_into(key, p0, np.uint64(2), e0, e1, m)
+                normal_pairs_into(key, p0 + np.uint64(1), np.uint64(2), e2, e3, m)
+                normal_pairs_into(key_n, np.uint64(k // 2), np.uint64(1), n0, n1, (m + 1) // 2)
+                directions_into(key_d, np.uint64(k), dc, ds, m)
             if k + _AHEAD < n_all:
                 _prefetch_write(states, k + _AHEAD)
-            z = det[k]
-            states[k, 0] = Z[z, 0] + par[z, 0] * e0[c]
-            states[k, 1] = Z[z, 1] + par[z, 1] * e1[c]
-            ww = Z[z, 2] + par[z, 2] * e2[c]
-            hh = Z[z, 3] + par[z, 3] * e3[c]
+            states[k, 0] = z0 + s0 * e0[c]
+            states[k, 1] = z1 + s1 * e1[c]
+            ww = z2 + s2 * e2[c]
+            hh = z3 + s3 * e3[c]
             states[k, 4] = ww if not ww < min_size else min_size
             states[k, 5] = hh if not hh < min_size else min_size
             n = n0[c // 2] if c % 2 == 0 else n1[c // 2]
-            speed = (speed_mean + speed_std * n) * par[z, 4]
+            speed = (speed_mean + speed_std * n) * scale
             states[k, 2] = speed * dc[c]
             states[k, 3] = speed * ds[c]
+            log_w[k] = lw
+            det[k] = z
+            k += 1
 
 
 # ----------------------------------------------------------------------------- update
