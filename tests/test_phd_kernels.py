@@ -5,6 +5,7 @@ brute-force numpy references on random inputs: dense matrices, every pair, every
 import _libm as libm
 import numpy as np
 import pytest
+from numba import njit
 from pfscope.trackers.phd import _kernels as K
 from pfscope.trackers.phd import _kmeans_kernels as KM
 from pfscope.trackers.phd.filter import (
@@ -126,6 +127,48 @@ def test_birth_fill_draws_the_newborn_distribution():
     small[:, 2:4] = 3.0                                # boxes below min_size get clipped
     s, _, _ = _birth(small, j, lw_det, 7)
     assert s[:, 4:6].min() == 4.0
+
+
+@njit(cache=False)
+def _subkey(key, j):
+    return R.subkey(key, j)
+
+
+def test_birth_fill_is_its_numpy_model_on_the_generators_draws():
+    """Newborn k (counted over every detection) takes normals 4k … 4k + 3 of the key for ε,
+    normal k of subkey 0 for the speed, the direction of word k of subkey 1 for θ: the kernel's
+    chunked loops (newborn counts across chunk boundaries, odd ones, an empty detection) give
+    numpy's arithmetic on those draws bit for bit."""
+    rng = np.random.default_rng(4)
+    Z = np.c_[rng.uniform(0, 600, 5), rng.uniform(0, 400, 5), rng.uniform(2, 60, 5),
+              rng.uniform(3, 150, 5)]
+    Z[4, 2:4] = 4.2, 4.5                               # some of its newborn clipped
+    j = np.array([3, 0, 301, 1, 500])
+    lw_det = rng.normal(-5, 1, 5)
+    key = 2 ** 63 + 12345
+    states, log_w, det = _birth(Z, j, lw_det, key, min_size=4.0)
+    n = int(j.sum())
+    d = np.repeat(np.arange(5), j)
+    eps = np.empty(4 * n)
+    R.fill_normal(R.stream(key), eps)
+    eps = eps.reshape(n, 4)
+    nn = np.empty(n)
+    R.fill_normal(R.stream(int(_subkey(np.uint64(key), 0))), nn)
+    dc, ds = np.empty(n), np.empty(n)
+    R.fill_direction(R.stream(int(_subkey(np.uint64(key), 1))), dc, ds)
+    lk = LikelihoodParams()
+    sig = np.maximum(lk.sigma_obs * Z[d, 2:4], lk.sigma_obs_min)
+    spread = np.c_[1.3 * (lk.sigma_obs_pos_ratio * sig), 1.3 * sig]
+    want = np.empty((n, 6))
+    want[:, [0, 1, 4, 5]] = Z[d] + spread * eps
+    want[:, 4:6] = np.where(want[:, 4:6] < 4.0, 4.0, want[:, 4:6])
+    speed = (0.05 + 0.1 * nn) * np.sqrt(Z[d, 2] * Z[d, 3])
+    want[:, 2] = speed * dc
+    want[:, 3] = speed * ds
+    np.testing.assert_array_equal(states, want)
+    np.testing.assert_array_equal(det, d)
+    np.testing.assert_array_equal(log_w, lw_det[d])
+    assert (states[:, 4:6] == 4.0).any()
 
 
 def _numpy_births(m_near, j_max, complement, cap, lw_base, revive, log_revive):

@@ -1354,7 +1354,7 @@ def birth(predicted: ParticleSet, Z, params: PHDParams, rng: np.random.Generator
     each detection's newborn carrying total weight ``birth_intensity`` (or the weight set by
     ``birth_odds`` from ``log_kappa``, :func:`log_birth_weight`); ``revive`` (N_z,) bool marks
     the detections that get ``revive_odds`` instead of ``birth_odds``.  Takes one word of
-    ``rng``, the key of the stream the kernel draws from (:func:`._kernels.birth_fill`).
+    ``rng``, the key of the generator the kernel draws from (:func:`._kernels.birth_fill`).
     ``out`` = (states (M, 6), log-weights (M,)) with M >= :func:`max_births`: the newborn are
     written into their first J rows.  ``noise`` = (``obs_std(Z[:, 2:4])``, its ``Σ log σ``)
     from a caller that has them and has checked ``Z`` (:func:`detection_noise`,

@@ -42,7 +42,7 @@ def propagate(states: np.ndarray, rng: np.random.Generator, *, sigma_v: float = 
     (or the first N rows of ``out``, an (M >= N, 6) float64 array it writes into).
 
     Noise std is proportional to each particle's own size at k-1 (maggio2007 §2, §4).
-    Takes one word of ``rng`` (the key of the stream the kernel draws its 4 N normals from,
+    Takes one word of ``rng`` (the key of the generator the kernel draws its 4 N normals from,
     :mod:`~trackers.smc.random`); none when there are no particles.  With ``log_weights`` (N,)
     float64 and ``lw_out`` (>= N,) float64, also writes ``lw_out[:N] = log_weights + log_e``
     in the same pass (the PHD prediction's survival factor)."""
