@@ -959,10 +959,17 @@ def test_returning_skip_after_a_step_is_exact():
         got = a.returning(frame, Z)
         np.testing.assert_array_equal(got, _returning_numpy(a, frame, Z))
         seen.add(("skipped" if skipped else "kernel", bool(got.any())))
+        # or_none (the tracker's): None exactly where the answer needs no kernel
+        alt = a.returning(frame, Z, or_none=True)
+        if alt is None:
+            assert (skipped or not len(a._ids)) and not got.any()
+        else:
+            np.testing.assert_array_equal(alt, got)
+        seen.add(("none", alt is None))
         hit = rng.random(4) < 0.8
         a.step(frame, np.array([state(x, 100.0, 30.0, 75.0) for x in pos[hit]]).reshape(-1, 6),
                edges=False)
-    assert {("skipped", False), ("kernel", True)} <= seen, seen
+    assert {("skipped", False), ("kernel", True), ("none", True), ("none", False)} <= seen, seen
     # a fifth target seen twice (below min_length), then missed while the four are seen:
     # the flag says no confirmed track is unseen ... which a shorter min_length undoes
     for frame in (80, 81, 82):

@@ -1280,19 +1280,22 @@ class GraphAssociator:
             self._fill_gaps(src, src_frame, dst, dst_frame, old_ids)
         return np.stack([new_ids, old_ids], axis=1).astype(np.int64)
 
-    def returning(self, frame: int, Z: np.ndarray) -> np.ndarray:
+    def returning(self, frame: int, Z: np.ndarray, *,
+                  or_none: bool = False) -> np.ndarray | None:
         """(N_z,) bool: the detections ``Z`` (N_z, 4) ``(cx, cy, w, h)`` of ``frame`` (the
         frame about to be stepped) inside the edge gate of a confirmed live track that had no
         estimate in the previous frame (its prediction over the gap, :func:`propagate`) and
         had estimates in at least ``revive_rate`` of its frames so far (a person who was just
-        missed, not clutter that fires now and then in one place)."""
+        missed, not clutter that fires now and then in one place).  ``or_none``: None instead
+        of the all-False array when no live track can be such a track (most frames; the
+        filter's birth takes None as "no flag": the tracker then makes no array)."""
         p = self.params
         if not (type(Z) is np.ndarray and Z.dtype == np.float64 and Z.ndim == 2
                 and Z.shape[1] == 4 and Z.flags.c_contiguous):   # (the tracker's: as is)
             Z = np.ascontiguousarray(np.asarray(Z, dtype=np.float64).reshape(-1, 4))
         unseen, at_length = self._unseen
         if not len(self._ids) or not len(Z) or (not unseen and p.min_length >= at_length):
-            return np.zeros(len(Z), dtype=bool)
+            return None if or_none else np.zeros(len(Z), dtype=bool)
         # the lost-track test, tail_velocity and score_edges' gate in one kernel pass (the
         # same floats): most frames have no such track, and numpy spent ~20 small calls
         return _assoc_kernels.revive_hits(

@@ -551,8 +551,8 @@ class PHDTracker(_AssociatingTracker):
         self._camera = cam
         revive = None
         if self.active.filter.birth.revive_odds > 0 and len(dets):
-            revive = self.associator.returning(frame.index, z)
-        r = self.filter.step(dets, frame, revive)
+            revive = self.associator.returning(frame.index, z, or_none=True)
+        r = self.filter.step(dets, frame, revive, z)
         cp = self.params.clusters
         clusters = kmeans_peaks(r.resampled, r.observations, cp.T, params=self.filter.params,
                                 split_rule=cp.split_rule, subsample=cp.subsample)
