@@ -730,10 +730,12 @@ def frame_step(live_ids, tail, tail_frame, prev, prev_frame, length, new, frame,
     matching needs the assignment solver: ``status`` 1 and ``w0`` (T, M) (:func:`frame_edges`'
     admissible weights, else 0.0), nothing done; called again with the solver's ``rows``,
     ``cols`` and ``given`` true, it advances with them.  Returns ``w0`` (empty unless status
-    1) and one int64 array: ``status, flags, P``, then the vertices' track ``ids`` (M,),
+    1), one int64 array: ``status, flags, P``, then the vertices' track ``ids`` (M,),
     their tracks' ``lengths`` (M,) after the frame (a new track's 1) and the ``rows``,
     ``cols`` of the ``L`` matched pairs whose tail had a gap of more than one frame (gap
-    filling's edges, in pair order; ``L`` = (len − 3 − 2 M) / 2).  ``flags``: 1 some tail
+    filling's edges, in pair order; ``L`` = (len − 3 − 2 M) / 2), and (M,) bool
+    ``lengths >= min_length`` (empty unless status 0: the step's ``confirmed``, without a
+    numpy comparison in Python).  ``flags``: 1 some tail
     of ``min_length`` vertices unseen at ``frame`` (:func:`advance`), 2 some vertex's track
     has ``min_length`` vertices now, 4 some matched tail had a gap of more than one frame."""
     T = tail.shape[0]
@@ -746,7 +748,7 @@ def frame_step(live_ids, tail, tail_frame, prev, prev_frame, length, new, frame,
             out[0] = 2 + bad
             out[1] = 0
             out[2] = 0
-            return w0, out
+            return w0, out, np.empty(0, np.bool_)
         depth = kv[0]
         for t in range(T):
             if frame - tail_frame[t] > depth:
@@ -754,7 +756,7 @@ def frame_step(live_ids, tail, tail_frame, prev, prev_frame, length, new, frame,
                 out[0] = 2
                 out[1] = 0
                 out[2] = 0
-                return w0, out
+                return w0, out, np.empty(0, np.bool_)
         w0 = np.empty((T, M), np.float64)
         var = np.empty(4, np.float64)
         lg = np.empty(4, np.float64)
@@ -786,7 +788,7 @@ def frame_step(live_ids, tail, tail_frame, prev, prev_frame, length, new, frame,
             out[0] = 1
             out[1] = 0
             out[2] = 0
-            return w0, out
+            return w0, out, np.empty(0, np.bool_)
         n = 0
         for t in range(T):
             if pick[t] >= 0:
@@ -821,13 +823,15 @@ def frame_step(live_ids, tail, tail_frame, prev, prev_frame, length, new, frame,
         out[3 + M + j] = 1
     for p in range(P):
         out[3 + M + cols[p]] = length[rows[p]]
+    ok = np.empty(M, np.bool_)
     for j in range(M):
         if out[3 + M + j] == min_length:
             flags |= 2
+        ok[j] = out[3 + M + j] >= min_length
     out[0] = 0
     out[1] = flags
     out[2] = P
-    return np.empty((0, 0), np.float64), out
+    return np.empty((0, 0), np.float64), out, ok
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,

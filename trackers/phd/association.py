@@ -1118,7 +1118,7 @@ class GraphAssociator:
         min_length = int(p.min_length)
         args = (self._ids, self._tail, self._tail_frame, self._prev, self._prev_frame,
                 self._length, new, frame, kv, self._next_id, min_length)
-        w0, out = _assoc_kernels.frame_step(*args, _NO_IDS, _NO_IDS, False)
+        w0, out, confirmed = _assoc_kernels.frame_step(*args, _NO_IDS, _NO_IDS, False)
         status, flags, P = out[:3].tolist()
         if status >= 2:
             self._bad_values(frame, status - 2)     # (3, 4: the values' check; 2: none)
@@ -1126,7 +1126,7 @@ class GraphAssociator:
         if status == 1:
             # (the assignment solver on the admissible weights, then the advance)
             rows, cols = _match_admissible(w0, 1)
-            w0, out = _assoc_kernels.frame_step(*args, rows, cols, True)
+            w0, out, confirmed = _assoc_kernels.frame_step(*args, rows, cols, True)
             status, flags, P = out[:3].tolist()
         M = len(new)
         ids, lengths = out[3:3 + M], out[3 + M:3 + 2 * M]
@@ -1147,13 +1147,14 @@ class GraphAssociator:
             r, c = out[3 + 2 * M:3 + 2 * M + L], out[3 + 2 * M + L:]
             self._fill_gaps(self._prev[r], self._prev_frame[r], new[c], frame, self._ids[r])
         return self._finish(frame, new, ids, lengths, bool(flags & 2), _NO_IDS, _NO_IDS,
-                            detections, _NO_EDGES)
+                            detections, _NO_EDGES, confirmed)
 
     def _finish(self, frame: int, new: np.ndarray, ids: np.ndarray, lengths: np.ndarray,
                 at_min, ended_ids: np.ndarray, ended_len: np.ndarray, detections,
-                edge_arrays: dict) -> "AssocResult":
+                edge_arrays: dict, confirmed: np.ndarray | None = None) -> "AssocResult":
         """:meth:`step`'s steps 5b-6 (``lengths``: of this frame's vertices' tracks;
-        ``at_min``: some is ``min_length``, None: not known yet)."""
+        ``at_min``: some is ``min_length``, None: not known yet; ``confirmed``: ``lengths >=
+        min_length`` when the caller has it, None: not known yet)."""
         p = self.params
         M = len(new)
 
@@ -1174,7 +1175,9 @@ class GraphAssociator:
             if len(relinked):
                 lengths = self._length[self._ids.searchsorted(ids)]
                 at_min = _any(lengths == p.min_length)
-        confirmed = lengths >= p.min_length
+                confirmed = None
+        if confirmed is None:
+            confirmed = lengths >= p.min_length
 
         # 6. bounded-lag output: rows of frames <= k − L, judged with the lengths known now
         self._buffer.append((frame, ids.copy(), new.copy(), np.zeros(M, dtype=bool)))
