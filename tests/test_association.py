@@ -1010,7 +1010,8 @@ def test_gap_rows_kernel_is_the_numpy_spelling():
     src_frame = rng.integers(0, 30, E)
     frame = src_frame + rng.integers(1, 12, E)
     bf = np.arange(1, 60, 2)
-    at, fi, ei, st, likely, run = AK.gap_rows(bf, src, src_frame, dst, frame, 0.05, 0.1)
+    at, fi, ei, st, likely, run, n_far, n_unlikely = AK.gap_rows(bf, src, src_frame, dst,
+                                                                 frame, 0.05, 0.1, 4.0)
     inside = (src_frame[None, :] < bf[:, None]) & (bf[:, None] < frame[None, :])
     np.testing.assert_array_equal(at, np.flatnonzero(inside.any(axis=1)))
     assert len(at) < len(bf)                               # frames without a pair left out
@@ -1028,6 +1029,9 @@ def test_gap_rows_kernel_is_the_numpy_spelling():
     std = interpolation_std(0.05, fs[fi] - src_frame[ei], gap[ei])
     np.testing.assert_array_equal(likely, std <= 0.1)
     assert 0 < likely.sum() < len(likely)                  # both kinds of rows
+    # the counts: edges missing more than fill_free frames (every edge), rows not likely
+    assert n_far == np.count_nonzero(gap - 1 > 4.0) and 0 < n_far < E
+    assert n_unlikely == np.count_nonzero(~likely)
 
 
 def test_head_pick_kernel_is_the_numpy_spelling():

@@ -341,7 +341,7 @@ def advance(live_ids, tail, tail_frame, prev, prev_frame, length, new, rows, col
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
-def gap_rows(bf, src, src_frame, dst, frame, sigma_v, fill_err):
+def gap_rows(bf, src, src_frame, dst, frame, sigma_v, fill_err, fill_free):
     """Gap filling's rows (:meth:`.association.GraphAssociator._fill_gaps`): every (buffered
     frame, edge) pair with the frame strictly inside the edge's gap
     (``src_frame[e] < f < frame[e]``; ``bf`` (B,) the buffered frames, in order).  Returns
@@ -351,9 +351,15 @@ def gap_rows(bf, src, src_frame, dst, frame, sigma_v, fill_err):
     between the edge's ends (``src``, ``dst`` (E, 6)) on (y1, y2, w, h), the mean velocity
     over the gap, NaN elsewhere; and ``likely`` (R,): the line's error std there
     (:func:`.association.interpolation_std` under ``sigma_v``) at most ``fill_err``.  The
-    same floats as the numpy spelling."""
+    same floats as the numpy spelling.  Then two counts that spare the caller its masks on
+    the usual frame: ``n_far`` the edges whose gap leaves more than ``fill_free`` frames
+    missing (``gap − 1 > fill_free``, every edge), ``n_unlikely`` the rows not ``likely``."""
     B = bf.shape[0]
     E = src.shape[0]
+    n_far = 0
+    for e in range(E):
+        if frame[e] - src_frame[e] - 1 > fill_free:
+            n_far += 1
     R = 0
     K = 0
     for k in range(B):
@@ -398,7 +404,11 @@ def gap_rows(bf, src, src_frame, dst, frame, sigma_v, fill_err):
                          <= fill_err)
             n += 1
     run[K] = n
-    return at, fi, ei, st, likely, run
+    n_unlikely = 0
+    for i in range(R):
+        if not likely[i]:
+            n_unlikely += 1
+    return at, fi, ei, st, likely, run, n_far, n_unlikely
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)

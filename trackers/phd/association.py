@@ -1367,30 +1367,34 @@ class GraphAssociator:
         fr = np.empty(np.shape(src_frame), dtype=np.int64)
         fr[...] = frame
         frame = fr
-        gap = frame - src_frame
         obs = OBS_INDEX
+        p = self.params
         # every (buffered frame, edge) pair with the frame strictly inside the edge's gap
         # (an edge of gap 1 has none), frame-major (each frame's rows in edge order): the
         # frames with rows are self._buffer[at[k]], their rows run[k]:run[k + 1]; the rows'
-        # states and the fill_err test of the straight line in the same kernel pass
+        # states and the fill_err test of the straight line in the same kernel pass, with the
+        # count of edges longer than fill_free and of the unlikely rows (none of either, the
+        # usual frame: no mask is made below)
         bf = self._buffer_frames()
-        at, fi, ei, st, likely, run = _assoc_kernels.gap_rows(
+        at, fi, ei, st, likely, run, n_far, n_unlikely = _assoc_kernels.gap_rows(
             bf, np.ascontiguousarray(src), np.ascontiguousarray(src_frame),
             np.ascontiguousarray(dst), np.ascontiguousarray(frame),
-            float(self.scene_sigma_v), float(self.params.fill_err))
+            float(self.scene_sigma_v), float(p.fill_err), float(p.fill_free))
         if not len(ei):
             return
         at, run = at.tolist(), run.tolist()
-        fs = bf[at]
+        fs = bf[at] if (self._cams or n_far or n_unlikely) else None
         if self._cams:
             box = st[:, obs]
             for k in range(len(fs)):
                 r = slice(run[k], run[k + 1])
                 box[r] = self._back(box[r], int(fs[k]), frame[ei[r]])
             st[:, obs] = box
-        if self.params.fill_support > 0:
+        if p.fill_support > 0 and n_far:
             # a gap of at most fill_free missing frames is filled anyway: the evidence is
-            # looked up for the longer ones only (one edge's support is its own)
+            # looked up for the longer ones only (one edge's support is its own; with no
+            # longer edge every row is selected)
+            gap = frame - src_frame
             ok = gap - 1 <= self.params.fill_free
             look = ~ok
             if _any(look):
@@ -1404,9 +1408,12 @@ class GraphAssociator:
                 fi, ei, st, likely = fi[sel], ei[sel], st[sel], likely[sel]
                 run = np.searchsorted(fi, np.arange(len(fs) + 1)).tolist()
         fid = ids[ei]
-        keep = self._likely_rows(fs, run, st, likely) if self.params.fill_err > 0 else None
-        if keep is None or _all(keep):
-            keep = _NO_BOOL     # (every row kept: no mask)
+        if not n_unlikely:
+            keep = _NO_BOOL     # (every row likely, hence kept: no mask)
+        else:
+            keep = self._likely_rows(fs, run, st, likely) if p.fill_err > 0 else None
+            if keep is None or _all(keep):
+                keep = _NO_BOOL     # (every row kept: no mask)
         thr = float(self.params.fill_overlap)
         for k, n in enumerate(at):
             lo, hi = run[k], run[k + 1]
