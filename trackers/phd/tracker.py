@@ -535,7 +535,8 @@ class PHDTracker(_AssociatingTracker):
         dets = detections if detections is not None else Detections.empty()
         if not _kernels_loaded:
             _load_kernels()
-        self._retime(frame)
+        if not self._fps_known:         # (known: nothing to convert again)
+            self._retime(frame)
         # the detections' centre boxes, read-only below: one conversion a frame
         # (xywh_to_cxcywh's floats, in a kernel pass: the scene motion's when it learns)
         xywh = np.ascontiguousarray(dets.boxes)
