@@ -1010,8 +1010,17 @@ def test_gap_rows_kernel_is_the_numpy_spelling():
     src_frame = rng.integers(0, 30, E)
     frame = src_frame + rng.integers(1, 12, E)
     bf = np.arange(1, 60, 2)
-    at, fi, ei, st, likely, run, n_far, n_unlikely = AK.gap_rows(bf, src, src_frame, dst,
+    at, fi, ei, st, likely, run, n_far, n_unlikely = AK.gap_rows(bf, 0, 0, src, src_frame, dst,
                                                                  frame, 0.05, 0.1, 4.0)
+    # the buffered frames given as a count from the first (consecutive), and one end frame
+    # for every edge as one element: the same as the arrays spelt out
+    for k0, B, fr in ((7, 20, frame), (3, 25, frame[:1]), (1, 1, np.array([40]))):
+        a = AK.gap_rows(np.arange(k0, k0 + B), 0, 0, src, src_frame, dst,
+                        np.broadcast_to(fr, frame.shape).copy(), 0.05, 0.1, 4.0)
+        b = AK.gap_rows(bf[:0], k0, B, src, src_frame, dst, fr, 0.05, 0.1, 4.0)
+        for x, y in zip(a, b):
+            np.testing.assert_array_equal(x, y)
+        assert len(a[2])
     inside = (src_frame[None, :] < bf[:, None]) & (bf[:, None] < frame[None, :])
     np.testing.assert_array_equal(at, np.flatnonzero(inside.any(axis=1)))
     assert len(at) < len(bf)                               # frames without a pair left out

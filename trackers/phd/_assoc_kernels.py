@@ -341,10 +341,12 @@ def advance(live_ids, tail, tail_frame, prev, prev_frame, length, new, rows, col
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
-def gap_rows(bf, src, src_frame, dst, frame, sigma_v, fill_err, fill_free):
+def gap_rows(bf, f0, n_buf, src, src_frame, dst, frame, sigma_v, fill_err, fill_free):
     """Gap filling's rows (:meth:`.association.GraphAssociator._fill_gaps`): every (buffered
     frame, edge) pair with the frame strictly inside the edge's gap
-    (``src_frame[e] < f < frame[e]``; ``bf`` (B,) the buffered frames, in order).  Returns
+    (``src_frame[e] < f < frame[e]``; ``bf`` (B,) the buffered frames, in order, or, when
+    empty, the ``n_buf`` consecutive frames from ``f0``; ``frame`` (E,) each edge's end
+    frame, or (1,) the one of every edge).  Returns
     ``at`` (K,): the buffer positions of the frames with a pair; the pairs frame-major and
     in edge order within a frame -- ``fi`` (index into ``at``), ``ei`` (R,) -- frame k's rows
     ``run[k]:run[k + 1]`` (``run`` (K + 1,)); their states ``st`` (R, 6): the straight line
@@ -354,18 +356,21 @@ def gap_rows(bf, src, src_frame, dst, frame, sigma_v, fill_err, fill_free):
     same floats as the numpy spelling.  Then two counts that spare the caller its masks on
     the usual frame: ``n_far`` the edges whose gap leaves more than ``fill_free`` frames
     missing (``gap − 1 > fill_free``, every edge), ``n_unlikely`` the rows not ``likely``."""
-    B = bf.shape[0]
+    given = bf.shape[0] > 0
+    B = bf.shape[0] if given else n_buf
     E = src.shape[0]
+    one = frame.shape[0] == 1
     n_far = 0
     for e in range(E):
-        if frame[e] - src_frame[e] - 1 > fill_free:
+        if frame[0 if one else e] - src_frame[e] - 1 > fill_free:
             n_far += 1
     R = 0
     K = 0
     for k in range(B):
+        f = bf[k] if given else f0 + k
         n = 0
         for e in range(E):
-            if src_frame[e] < bf[k] and bf[k] < frame[e]:
+            if src_frame[e] < f and f < frame[0 if one else e]:
                 n += 1
         R += n
         if n:
@@ -379,17 +384,18 @@ def gap_rows(bf, src, src_frame, dst, frame, sigma_v, fill_err, fill_free):
     n = 0
     kk = 0
     for k in range(B):
-        f = bf[k]
+        f = bf[k] if given else f0 + k
         first = True
         for e in range(E):
-            if not (src_frame[e] < f and f < frame[e]):
+            fe = frame[0 if one else e]
+            if not (src_frame[e] < f and f < fe):
                 continue
             if first:
                 at[kk] = k
                 run[kk] = n
                 kk += 1
                 first = False
-            gap = frame[e] - src_frame[e]
+            gap = fe - src_frame[e]
             ti = f - src_frame[e]
             t = ti / gap
             fi[n] = kk - 1

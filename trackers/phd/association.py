@@ -823,6 +823,8 @@ class GraphAssociator:
         #: that min_length); (False, n) with min_length still >= n: no track can be a
         #: returning one at the next frame, and returning looks no further
         self._unseen = (True, 0)
+        #: a step's end frame of the gap filling's edges (:meth:`_fill_gaps`, gap_rows)
+        self._frame1 = np.zeros(1, dtype=np.int64)
 
     # ---- introspection
     @property
@@ -1359,14 +1361,19 @@ class GraphAssociator:
         of every (buffered frame, edge) pair in one kernel pass (:func:`._assoc_kernels.
         gap_rows`), shared by the gap support and the rows; the overlap test and the buffer's
         rows one call per frame that gets rows (at most ``depth`` frames)."""
-        if not self._buffer:
+        buf = self._buffer
+        if not buf:
             return
-        # a writable copy always: a broadcast view of one element stays read-only and numba
-        # would compile gap_rows a second time for that array type (filled by assignment, which
-        # broadcasts like np.broadcast_to(...).copy() at a fraction of its Python cost)
-        fr = np.empty(np.shape(src_frame), dtype=np.int64)
-        fr[...] = frame
-        frame = fr
+        if type(frame) is int:      # (a step's: one end frame for every edge, one element)
+            fr = self._frame1
+            fr[0] = frame
+        else:
+            # a writable copy always: a broadcast view of one element stays read-only and
+            # numba would compile gap_rows a second time for that array type (filled by
+            # assignment, which broadcasts like np.broadcast_to(...).copy() at a fraction of
+            # its Python cost)
+            fr = np.empty(np.shape(src_frame), dtype=np.int64)
+            fr[...] = frame
         obs = OBS_INDEX
         p = self.params
         # every (buffered frame, edge) pair with the frame strictly inside the edge's gap
@@ -1375,15 +1382,23 @@ class GraphAssociator:
         # states and the fill_err test of the straight line in the same kernel pass, with the
         # count of edges longer than fill_free and of the unlikely rows (none of either, the
         # usual frame: no mask is made below)
-        bf = self._buffer_frames()
+        # (the buffered frames, consecutive unless frame numbers were skipped: then counted
+        # by the kernel from the first, no array made)
+        f0 = buf[0][0]
+        bf = _NO_IDS if buf[-1][0] - f0 + 1 == len(buf) else self._buffer_frames()
         at, fi, ei, st, likely, run, n_far, n_unlikely = _assoc_kernels.gap_rows(
-            bf, np.ascontiguousarray(src), np.ascontiguousarray(src_frame),
-            np.ascontiguousarray(dst), np.ascontiguousarray(frame),
-            float(self.scene_sigma_v), float(p.fill_err), float(p.fill_free))
+            bf, f0, len(buf), np.ascontiguousarray(src), np.ascontiguousarray(src_frame),
+            np.ascontiguousarray(dst), fr, float(self.scene_sigma_v), float(p.fill_err),
+            float(p.fill_free))
         if not len(ei):
             return
         at, run = at.tolist(), run.tolist()
-        fs = bf[at] if (self._cams or n_far or n_unlikely) else None
+        fs = None
+        if self._cams or n_far or n_unlikely:
+            fs = self._buffer_frames()[at]
+            # each edge's end frame
+            frame = (fr if len(fr) == len(src_frame)
+                     else np.full(len(src_frame), frame, dtype=np.int64))
         if self._cams:
             box = st[:, obs]
             for k in range(len(fs)):
