@@ -1184,8 +1184,12 @@ class GraphAssociator:
         # 6. bounded-lag output: rows of frames <= k − L, judged with the lengths known now
         self._buffer.append((frame, ids.copy(), new.copy(), np.zeros(M, dtype=bool)))
         if p.extend_heads:
-            d = (np.zeros((0, 4)) if detections is None else
-                 np.ascontiguousarray(np.asarray(detections, dtype=np.float64).reshape(-1, 4)))
+            d = detections
+            if d is None:
+                d = np.zeros((0, 4))
+            elif not (type(d) is np.ndarray and d.dtype == np.float64 and d.ndim == 2
+                      and d.shape[1] == 4 and d.flags.c_contiguous):   # (the tracker's: as is)
+                d = np.ascontiguousarray(np.asarray(d, dtype=np.float64).reshape(-1, 4))
             self._dets.append((frame, d))
             # (the tracks confirmed at this frame are those of its vertices whose length is
             # min_length now: most frames have none, and the walk back is not entered)
