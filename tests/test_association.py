@@ -959,10 +959,17 @@ def test_returning_skip_after_a_step_is_exact():
         got = a.returning(frame, Z)
         np.testing.assert_array_equal(got, _returning_numpy(a, frame, Z))
         seen.add(("skipped" if skipped else "kernel", bool(got.any())))
+        # or_none (the tracker's): None exactly where the answer needs no kernel
+        alt = a.returning(frame, Z, or_none=True)
+        if alt is None:
+            assert (skipped or not len(a._ids)) and not got.any()
+        else:
+            np.testing.assert_array_equal(alt, got)
+        seen.add(("none", alt is None))
         hit = rng.random(4) < 0.8
         a.step(frame, np.array([state(x, 100.0, 30.0, 75.0) for x in pos[hit]]).reshape(-1, 6),
                edges=False)
-    assert {("skipped", False), ("kernel", True)} <= seen, seen
+    assert {("skipped", False), ("kernel", True), ("none", True), ("none", False)} <= seen, seen
     # a fifth target seen twice (below min_length), then missed while the four are seen:
     # the flag says no confirmed track is unseen ... which a shorter min_length undoes
     for frame in (80, 81, 82):
@@ -1003,7 +1010,17 @@ def test_gap_rows_kernel_is_the_numpy_spelling():
     src_frame = rng.integers(0, 30, E)
     frame = src_frame + rng.integers(1, 12, E)
     bf = np.arange(1, 60, 2)
-    at, fi, ei, st, likely, run = AK.gap_rows(bf, src, src_frame, dst, frame, 0.05, 0.1)
+    at, fi, ei, st, likely, run, n_far, n_unlikely = AK.gap_rows(bf, 0, 0, src, src_frame, dst,
+                                                                 frame, 0.05, 0.1, 4.0)
+    # the buffered frames given as a count from the first (consecutive), and one end frame
+    # for every edge as one element: the same as the arrays spelt out
+    for k0, B, fr in ((7, 20, frame), (3, 25, frame[:1]), (1, 1, np.array([40]))):
+        a = AK.gap_rows(np.arange(k0, k0 + B), 0, 0, src, src_frame, dst,
+                        np.broadcast_to(fr, frame.shape).copy(), 0.05, 0.1, 4.0)
+        b = AK.gap_rows(bf[:0], k0, B, src, src_frame, dst, fr, 0.05, 0.1, 4.0)
+        for x, y in zip(a, b):
+            np.testing.assert_array_equal(x, y)
+        assert len(a[2])
     inside = (src_frame[None, :] < bf[:, None]) & (bf[:, None] < frame[None, :])
     np.testing.assert_array_equal(at, np.flatnonzero(inside.any(axis=1)))
     assert len(at) < len(bf)                               # frames without a pair left out
@@ -1021,6 +1038,9 @@ def test_gap_rows_kernel_is_the_numpy_spelling():
     std = interpolation_std(0.05, fs[fi] - src_frame[ei], gap[ei])
     np.testing.assert_array_equal(likely, std <= 0.1)
     assert 0 < likely.sum() < len(likely)                  # both kinds of rows
+    # the counts: edges missing more than fill_free frames (every edge), rows not likely
+    assert n_far == np.count_nonzero(gap - 1 > 4.0) and 0 < n_far < E
+    assert n_unlikely == np.count_nonzero(~likely)
 
 
 def test_head_pick_kernel_is_the_numpy_spelling():

@@ -150,6 +150,39 @@ def test_step_accepts_detections_and_checks_input():
         PHDParams.of(resampling="bogus")
 
 
+def test_step_takes_the_callers_observations_and_no_revive_flag():
+    """What PHD-MT's tracker hands the step: the detections' observation vectors it made
+    already (``observations``) and ``revive`` None on a frame with no returning track -- bit
+    for bit the step that makes them from the Detections with an all-False revive array
+    (while an all-True one changes the newborn: the flag is read)."""
+    from pfscope.trackers.params import with_options
+    from pfscope.trackers.phd.tracker import PHD_PRACTICAL
+
+    # (the practical preset's filter with newborn odds: birth reads the revive flags)
+    params = with_options(PHD_PRACTICAL.filter, {"birth_odds": 0.5, "revive_odds": 2.0})
+    rng = np.random.default_rng(5)
+    frames = []
+    for k in range(8):
+        z = detections_at(k, rng)
+        z = np.concatenate([z, rng.uniform([0, 0, 20, 40], [400, 300, 40, 80], (2, 4))])
+        xywh = z.copy()
+        xywh[:, :2] -= xywh[:, 2:] / 2.0
+        frames.append(Detections(xywh, rng.uniform(0.3, 1.0, len(z))))
+    a, b, c = (PHDFilter(params, np.random.default_rng(9)) for _ in range(3))
+    for d in frames:
+        obs = d.observations()
+        ra = a.step(d, revive=np.zeros(len(d), dtype=bool))
+        rb = b.step(d, revive=None, observations=obs)
+        rc = c.step(d, revive=np.ones(len(d), dtype=bool))
+        assert rb.observations is obs
+        np.testing.assert_array_equal(ra.observations, rb.observations)
+        for x, y in ((ra.born, rb.born), (ra.resampled, rb.resampled)):
+            np.testing.assert_array_equal(x.states, y.states)
+            np.testing.assert_array_equal(x.log_weights, y.log_weights)
+        np.testing.assert_array_equal(ra.updated.per_det_mass, rb.updated.per_det_mass)
+    assert not np.array_equal(rc.born.log_weights, ra.born.log_weights)
+
+
 def test_no_detections_decays_mass_by_survival_and_miss():
     f = PHDFilter(PHDParams(), np.random.default_rng(0))
     f.particles = cloud(np.random.default_rng(1), [100, 100, 0, 0, 30, 60], 1.0)

@@ -341,25 +341,36 @@ def advance(live_ids, tail, tail_frame, prev, prev_frame, length, new, rows, col
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
-def gap_rows(bf, src, src_frame, dst, frame, sigma_v, fill_err):
+def gap_rows(bf, f0, n_buf, src, src_frame, dst, frame, sigma_v, fill_err, fill_free):
     """Gap filling's rows (:meth:`.association.GraphAssociator._fill_gaps`): every (buffered
     frame, edge) pair with the frame strictly inside the edge's gap
-    (``src_frame[e] < f < frame[e]``; ``bf`` (B,) the buffered frames, in order).  Returns
+    (``src_frame[e] < f < frame[e]``; ``bf`` (B,) the buffered frames, in order, or, when
+    empty, the ``n_buf`` consecutive frames from ``f0``; ``frame`` (E,) each edge's end
+    frame, or (1,) the one of every edge).  Returns
     ``at`` (K,): the buffer positions of the frames with a pair; the pairs frame-major and
     in edge order within a frame -- ``fi`` (index into ``at``), ``ei`` (R,) -- frame k's rows
     ``run[k]:run[k + 1]`` (``run`` (K + 1,)); their states ``st`` (R, 6): the straight line
     between the edge's ends (``src``, ``dst`` (E, 6)) on (y1, y2, w, h), the mean velocity
     over the gap, NaN elsewhere; and ``likely`` (R,): the line's error std there
     (:func:`.association.interpolation_std` under ``sigma_v``) at most ``fill_err``.  The
-    same floats as the numpy spelling."""
-    B = bf.shape[0]
+    same floats as the numpy spelling.  Then two counts that spare the caller its masks on
+    the usual frame: ``n_far`` the edges whose gap leaves more than ``fill_free`` frames
+    missing (``gap − 1 > fill_free``, every edge), ``n_unlikely`` the rows not ``likely``."""
+    given = bf.shape[0] > 0
+    B = bf.shape[0] if given else n_buf
     E = src.shape[0]
+    one = frame.shape[0] == 1
+    n_far = 0
+    for e in range(E):
+        if frame[0 if one else e] - src_frame[e] - 1 > fill_free:
+            n_far += 1
     R = 0
     K = 0
     for k in range(B):
+        f = bf[k] if given else f0 + k
         n = 0
         for e in range(E):
-            if src_frame[e] < bf[k] and bf[k] < frame[e]:
+            if src_frame[e] < f and f < frame[0 if one else e]:
                 n += 1
         R += n
         if n:
@@ -373,17 +384,18 @@ def gap_rows(bf, src, src_frame, dst, frame, sigma_v, fill_err):
     n = 0
     kk = 0
     for k in range(B):
-        f = bf[k]
+        f = bf[k] if given else f0 + k
         first = True
         for e in range(E):
-            if not (src_frame[e] < f and f < frame[e]):
+            fe = frame[0 if one else e]
+            if not (src_frame[e] < f and f < fe):
                 continue
             if first:
                 at[kk] = k
                 run[kk] = n
                 kk += 1
                 first = False
-            gap = frame[e] - src_frame[e]
+            gap = fe - src_frame[e]
             ti = f - src_frame[e]
             t = ti / gap
             fi[n] = kk - 1
@@ -398,7 +410,11 @@ def gap_rows(bf, src, src_frame, dst, frame, sigma_v, fill_err):
                          <= fill_err)
             n += 1
     run[K] = n
-    return at, fi, ei, st, likely, run
+    n_unlikely = 0
+    for i in range(R):
+        if not likely[i]:
+            n_unlikely += 1
+    return at, fi, ei, st, likely, run, n_far, n_unlikely
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
@@ -730,10 +746,12 @@ def frame_step(live_ids, tail, tail_frame, prev, prev_frame, length, new, frame,
     matching needs the assignment solver: ``status`` 1 and ``w0`` (T, M) (:func:`frame_edges`'
     admissible weights, else 0.0), nothing done; called again with the solver's ``rows``,
     ``cols`` and ``given`` true, it advances with them.  Returns ``w0`` (empty unless status
-    1) and one int64 array: ``status, flags, P``, then the vertices' track ``ids`` (M,),
+    1), one int64 array: ``status, flags, P``, then the vertices' track ``ids`` (M,),
     their tracks' ``lengths`` (M,) after the frame (a new track's 1) and the ``rows``,
     ``cols`` of the ``L`` matched pairs whose tail had a gap of more than one frame (gap
-    filling's edges, in pair order; ``L`` = (len − 3 − 2 M) / 2).  ``flags``: 1 some tail
+    filling's edges, in pair order; ``L`` = (len − 3 − 2 M) / 2), and (M,) bool
+    ``lengths >= min_length`` (empty unless status 0: the step's ``confirmed``, without a
+    numpy comparison in Python).  ``flags``: 1 some tail
     of ``min_length`` vertices unseen at ``frame`` (:func:`advance`), 2 some vertex's track
     has ``min_length`` vertices now, 4 some matched tail had a gap of more than one frame."""
     T = tail.shape[0]
@@ -746,7 +764,7 @@ def frame_step(live_ids, tail, tail_frame, prev, prev_frame, length, new, frame,
             out[0] = 2 + bad
             out[1] = 0
             out[2] = 0
-            return w0, out
+            return w0, out, np.empty(0, np.bool_)
         depth = kv[0]
         for t in range(T):
             if frame - tail_frame[t] > depth:
@@ -754,7 +772,7 @@ def frame_step(live_ids, tail, tail_frame, prev, prev_frame, length, new, frame,
                 out[0] = 2
                 out[1] = 0
                 out[2] = 0
-                return w0, out
+                return w0, out, np.empty(0, np.bool_)
         w0 = np.empty((T, M), np.float64)
         var = np.empty(4, np.float64)
         lg = np.empty(4, np.float64)
@@ -786,7 +804,7 @@ def frame_step(live_ids, tail, tail_frame, prev, prev_frame, length, new, frame,
             out[0] = 1
             out[1] = 0
             out[2] = 0
-            return w0, out
+            return w0, out, np.empty(0, np.bool_)
         n = 0
         for t in range(T):
             if pick[t] >= 0:
@@ -821,13 +839,15 @@ def frame_step(live_ids, tail, tail_frame, prev, prev_frame, length, new, frame,
         out[3 + M + j] = 1
     for p in range(P):
         out[3 + M + cols[p]] = length[rows[p]]
+    ok = np.empty(M, np.bool_)
     for j in range(M):
         if out[3 + M + j] == min_length:
             flags |= 2
+        ok[j] = out[3 + M + j] >= min_length
     out[0] = 0
     out[1] = flags
     out[2] = P
-    return np.empty((0, 0), np.float64), out
+    return np.empty((0, 0), np.float64), out, ok
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,

@@ -823,6 +823,8 @@ class GraphAssociator:
         #: that min_length); (False, n) with min_length still >= n: no track can be a
         #: returning one at the next frame, and returning looks no further
         self._unseen = (True, 0)
+        #: a step's end frame of the gap filling's edges (:meth:`_fill_gaps`, gap_rows)
+        self._frame1 = np.zeros(1, dtype=np.int64)
 
     # ---- introspection
     @property
@@ -1118,7 +1120,7 @@ class GraphAssociator:
         min_length = int(p.min_length)
         args = (self._ids, self._tail, self._tail_frame, self._prev, self._prev_frame,
                 self._length, new, frame, kv, self._next_id, min_length)
-        w0, out = _assoc_kernels.frame_step(*args, _NO_IDS, _NO_IDS, False)
+        w0, out, confirmed = _assoc_kernels.frame_step(*args, _NO_IDS, _NO_IDS, False)
         status, flags, P = out[:3].tolist()
         if status >= 2:
             self._bad_values(frame, status - 2)     # (3, 4: the values' check; 2: none)
@@ -1126,7 +1128,7 @@ class GraphAssociator:
         if status == 1:
             # (the assignment solver on the admissible weights, then the advance)
             rows, cols = _match_admissible(w0, 1)
-            w0, out = _assoc_kernels.frame_step(*args, rows, cols, True)
+            w0, out, confirmed = _assoc_kernels.frame_step(*args, rows, cols, True)
             status, flags, P = out[:3].tolist()
         M = len(new)
         ids, lengths = out[3:3 + M], out[3 + M:3 + 2 * M]
@@ -1147,13 +1149,14 @@ class GraphAssociator:
             r, c = out[3 + 2 * M:3 + 2 * M + L], out[3 + 2 * M + L:]
             self._fill_gaps(self._prev[r], self._prev_frame[r], new[c], frame, self._ids[r])
         return self._finish(frame, new, ids, lengths, bool(flags & 2), _NO_IDS, _NO_IDS,
-                            detections, _NO_EDGES)
+                            detections, _NO_EDGES, confirmed)
 
     def _finish(self, frame: int, new: np.ndarray, ids: np.ndarray, lengths: np.ndarray,
                 at_min, ended_ids: np.ndarray, ended_len: np.ndarray, detections,
-                edge_arrays: dict) -> "AssocResult":
+                edge_arrays: dict, confirmed: np.ndarray | None = None) -> "AssocResult":
         """:meth:`step`'s steps 5b-6 (``lengths``: of this frame's vertices' tracks;
-        ``at_min``: some is ``min_length``, None: not known yet)."""
+        ``at_min``: some is ``min_length``, None: not known yet; ``confirmed``: ``lengths >=
+        min_length`` when the caller has it, None: not known yet)."""
         p = self.params
         M = len(new)
 
@@ -1174,13 +1177,19 @@ class GraphAssociator:
             if len(relinked):
                 lengths = self._length[self._ids.searchsorted(ids)]
                 at_min = _any(lengths == p.min_length)
-        confirmed = lengths >= p.min_length
+                confirmed = None
+        if confirmed is None:
+            confirmed = lengths >= p.min_length
 
         # 6. bounded-lag output: rows of frames <= k − L, judged with the lengths known now
         self._buffer.append((frame, ids.copy(), new.copy(), np.zeros(M, dtype=bool)))
         if p.extend_heads:
-            d = (np.zeros((0, 4)) if detections is None else
-                 np.ascontiguousarray(np.asarray(detections, dtype=np.float64).reshape(-1, 4)))
+            d = detections
+            if d is None:
+                d = np.zeros((0, 4))
+            elif not (type(d) is np.ndarray and d.dtype == np.float64 and d.ndim == 2
+                      and d.shape[1] == 4 and d.flags.c_contiguous):   # (the tracker's: as is)
+                d = np.ascontiguousarray(np.asarray(d, dtype=np.float64).reshape(-1, 4))
             self._dets.append((frame, d))
             # (the tracks confirmed at this frame are those of its vertices whose length is
             # min_length now: most frames have none, and the walk back is not entered)
@@ -1280,19 +1289,22 @@ class GraphAssociator:
             self._fill_gaps(src, src_frame, dst, dst_frame, old_ids)
         return np.stack([new_ids, old_ids], axis=1).astype(np.int64)
 
-    def returning(self, frame: int, Z: np.ndarray) -> np.ndarray:
+    def returning(self, frame: int, Z: np.ndarray, *,
+                  or_none: bool = False) -> np.ndarray | None:
         """(N_z,) bool: the detections ``Z`` (N_z, 4) ``(cx, cy, w, h)`` of ``frame`` (the
         frame about to be stepped) inside the edge gate of a confirmed live track that had no
         estimate in the previous frame (its prediction over the gap, :func:`propagate`) and
         had estimates in at least ``revive_rate`` of its frames so far (a person who was just
-        missed, not clutter that fires now and then in one place)."""
+        missed, not clutter that fires now and then in one place).  ``or_none``: None instead
+        of the all-False array when no live track can be such a track (most frames; the
+        filter's birth takes None as "no flag": the tracker then makes no array)."""
         p = self.params
         if not (type(Z) is np.ndarray and Z.dtype == np.float64 and Z.ndim == 2
                 and Z.shape[1] == 4 and Z.flags.c_contiguous):   # (the tracker's: as is)
             Z = np.ascontiguousarray(np.asarray(Z, dtype=np.float64).reshape(-1, 4))
         unseen, at_length = self._unseen
         if not len(self._ids) or not len(Z) or (not unseen and p.min_length >= at_length):
-            return np.zeros(len(Z), dtype=bool)
+            return None if or_none else np.zeros(len(Z), dtype=bool)
         # the lost-track test, tail_velocity and score_edges' gate in one kernel pass (the
         # same floats): most frames have no such track, and numpy spent ~20 small calls
         return _assoc_kernels.revive_hits(
@@ -1353,38 +1365,55 @@ class GraphAssociator:
         of every (buffered frame, edge) pair in one kernel pass (:func:`._assoc_kernels.
         gap_rows`), shared by the gap support and the rows; the overlap test and the buffer's
         rows one call per frame that gets rows (at most ``depth`` frames)."""
-        if not self._buffer:
+        buf = self._buffer
+        if not buf:
             return
-        # a writable copy always: a broadcast view of one element stays read-only and numba
-        # would compile gap_rows a second time for that array type (filled by assignment, which
-        # broadcasts like np.broadcast_to(...).copy() at a fraction of its Python cost)
-        fr = np.empty(np.shape(src_frame), dtype=np.int64)
-        fr[...] = frame
-        frame = fr
-        gap = frame - src_frame
+        if type(frame) is int:      # (a step's: one end frame for every edge, one element)
+            fr = self._frame1
+            fr[0] = frame
+        else:
+            # a writable copy always: a broadcast view of one element stays read-only and
+            # numba would compile gap_rows a second time for that array type (filled by
+            # assignment, which broadcasts like np.broadcast_to(...).copy() at a fraction of
+            # its Python cost)
+            fr = np.empty(np.shape(src_frame), dtype=np.int64)
+            fr[...] = frame
         obs = OBS_INDEX
+        p = self.params
         # every (buffered frame, edge) pair with the frame strictly inside the edge's gap
         # (an edge of gap 1 has none), frame-major (each frame's rows in edge order): the
         # frames with rows are self._buffer[at[k]], their rows run[k]:run[k + 1]; the rows'
-        # states and the fill_err test of the straight line in the same kernel pass
-        bf = self._buffer_frames()
-        at, fi, ei, st, likely, run = _assoc_kernels.gap_rows(
-            bf, np.ascontiguousarray(src), np.ascontiguousarray(src_frame),
-            np.ascontiguousarray(dst), np.ascontiguousarray(frame),
-            float(self.scene_sigma_v), float(self.params.fill_err))
+        # states and the fill_err test of the straight line in the same kernel pass, with the
+        # count of edges longer than fill_free and of the unlikely rows (none of either, the
+        # usual frame: no mask is made below)
+        # (the buffered frames, consecutive unless frame numbers were skipped: then counted
+        # by the kernel from the first, no array made)
+        f0 = buf[0][0]
+        bf = _NO_IDS if buf[-1][0] - f0 + 1 == len(buf) else self._buffer_frames()
+        at, fi, ei, st, likely, run, n_far, n_unlikely = _assoc_kernels.gap_rows(
+            bf, f0, len(buf), np.ascontiguousarray(src), np.ascontiguousarray(src_frame),
+            np.ascontiguousarray(dst), fr, float(self.scene_sigma_v), float(p.fill_err),
+            float(p.fill_free))
         if not len(ei):
             return
         at, run = at.tolist(), run.tolist()
-        fs = bf[at]
+        fs = None
+        if self._cams or n_far or n_unlikely:
+            fs = self._buffer_frames()[at]
+            # each edge's end frame
+            frame = (fr if len(fr) == len(src_frame)
+                     else np.full(len(src_frame), frame, dtype=np.int64))
         if self._cams:
             box = st[:, obs]
             for k in range(len(fs)):
                 r = slice(run[k], run[k + 1])
                 box[r] = self._back(box[r], int(fs[k]), frame[ei[r]])
             st[:, obs] = box
-        if self.params.fill_support > 0:
+        if p.fill_support > 0 and n_far:
             # a gap of at most fill_free missing frames is filled anyway: the evidence is
-            # looked up for the longer ones only (one edge's support is its own)
+            # looked up for the longer ones only (one edge's support is its own; with no
+            # longer edge every row is selected)
+            gap = frame - src_frame
             ok = gap - 1 <= self.params.fill_free
             look = ~ok
             if _any(look):
@@ -1398,9 +1427,12 @@ class GraphAssociator:
                 fi, ei, st, likely = fi[sel], ei[sel], st[sel], likely[sel]
                 run = np.searchsorted(fi, np.arange(len(fs) + 1)).tolist()
         fid = ids[ei]
-        keep = self._likely_rows(fs, run, st, likely) if self.params.fill_err > 0 else None
-        if keep is None or _all(keep):
-            keep = _NO_BOOL     # (every row kept: no mask)
+        if not n_unlikely:
+            keep = _NO_BOOL     # (every row likely, hence kept: no mask)
+        else:
+            keep = self._likely_rows(fs, run, st, likely) if p.fill_err > 0 else None
+            if keep is None or _all(keep):
+                keep = _NO_BOOL     # (every row kept: no mask)
         thr = float(self.params.fill_overlap)
         for k, n in enumerate(at):
             lo, hi = run[k], run[k + 1]

@@ -395,8 +395,8 @@ def observations_noise(Z, lk: LikelihoodParams) -> tuple[np.ndarray,
     """:func:`as_observations` then :func:`detection_noise` (the same arrays and errors), the
     checks and the stds of a float64 (N_z, 4) array in one kernel pass
     (:func:`._kernels.observation_noise`): what :meth:`PHDFilter.step` needs of ``Z``."""
-    if hasattr(Z, "observations"):
-        Z = Z.observations()
+    if type(Z) is not np.ndarray and hasattr(Z, "observations"):   # (no failed lookup on
+        Z = Z.observations()                                        # an array: a raise)
     if not (type(Z) is np.ndarray and Z.dtype == np.float64 and Z.ndim == 2
             and Z.shape[1] == OBS_DIM and len(Z) and Z.flags.c_contiguous):
         Z = as_observations(Z)
@@ -1832,19 +1832,24 @@ class PHDFilter:
         self.scene = SceneModel(self.params)
 
     def step(self, Z, frame: Optional[Frame] = None,
-             revive: Optional[np.ndarray] = None) -> PHDStepResult:
+             revive: Optional[np.ndarray] = None,
+             observations: Optional[np.ndarray] = None) -> PHDStepResult:
         """One frame: predict → birth → update (eq. (5) on the gated pairs:
         :class:`GatedGaussian` for the Gaussian likelihood, :func:`gated_log_g` for any other)
         → resample.  ``Z`` is (N_z, 4) ``(y1, y2, w, h)`` or a
         :class:`~pfscope.trackers.types.Detections`; ``frame`` is handed to the likelihood
         (image-based likelihoods need the pixels); ``revive`` (N_z,) bool: detections whose
-        newborn get ``revive_odds`` (:func:`birth`)."""
+        newborn get ``revive_odds`` (:func:`birth`).  ``observations``: ``Z``'s observation
+        vectors when the caller has them already (``Detections.observations()``' floats, a
+        C-contiguous float64 (N_z, 4) array the filter only reads; the tracker's centre
+        boxes): not computed again."""
         scores = getattr(Z, "scores", None)
         p = self.params
-        Z, noise = observations_noise(Z, p.likelihood)
+        Z, noise = observations_noise(Z if observations is None else observations,
+                                      p.likelihood)
         prev = self.particles
         # the persistent particles then the newborn in one pair of arrays: no concatenation
-        n = len(prev)
+        n = len(prev.log_weights)       # (len(prev): a Python call, the same count)
         fused = prev.labels is None and prev.extra is None
         buf = None
         if fused:

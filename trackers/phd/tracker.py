@@ -535,7 +535,8 @@ class PHDTracker(_AssociatingTracker):
         dets = detections if detections is not None else Detections.empty()
         if not _kernels_loaded:
             _load_kernels()
-        self._retime(frame)
+        if not self._fps_known:         # (known: nothing to convert again)
+            self._retime(frame)
         # the detections' centre boxes, read-only below: one conversion a frame
         # (xywh_to_cxcywh's floats, in a kernel pass: the scene motion's when it learns)
         xywh = np.ascontiguousarray(dets.boxes)
@@ -551,8 +552,8 @@ class PHDTracker(_AssociatingTracker):
         self._camera = cam
         revive = None
         if self.active.filter.birth.revive_odds > 0 and len(dets):
-            revive = self.associator.returning(frame.index, z)
-        r = self.filter.step(dets, frame, revive)
+            revive = self.associator.returning(frame.index, z, or_none=True)
+        r = self.filter.step(dets, frame, revive, z)
         cp = self.params.clusters
         clusters = kmeans_peaks(r.resampled, r.observations, cp.T, params=self.filter.params,
                                 split_rule=cp.split_rule, subsample=cp.subsample)
