@@ -41,6 +41,7 @@ from numba import njit, types
 from numba.core import cgutils
 from numba.extending import intrinsic
 
+from ..smc.random import _bits_f64 as _from_bits, _f64_bits as _bits, _fma  # (intrinsics)
 from ..smc.random import directions_into, normal_pairs_into, subkey
 from .gating import kth
 
@@ -48,32 +49,6 @@ _HALF_LOG_2PI_4 = 2.0 * math.log(2.0 * math.pi)     # 0.5 · OBS_DIM · log(2π)
 
 
 # ----------------------------------------------------------------------------- exp, inline
-
-@intrinsic
-def _fma(typingctx, a, b, c):
-    """``a · b + c`` rounded once (LLVM's ``llvm.fma.f64``)."""
-    sig = types.float64(types.float64, types.float64, types.float64)
-
-    def codegen(context, builder, signature, args):
-        return builder.fma(*args)
-    return sig, codegen
-
-
-@intrinsic
-def _bits(typingctx, a):
-    """The IEEE bits of a float64, as uint64."""
-    def codegen(context, builder, signature, args):
-        return builder.bitcast(args[0], ir.IntType(64))
-    return types.uint64(types.float64), codegen
-
-
-@intrinsic
-def _from_bits(typingctx, a):
-    """The float64 of IEEE bits (uint64)."""
-    def codegen(context, builder, signature, args):
-        return builder.bitcast(args[0], ir.DoubleType())
-    return types.float64(types.uint64), codegen
-
 
 #: exp's table: 2^(k/128) for k = 0 .. 127 as (tail, bits − (k << 45)) pairs (Szabolcs Nagy's
 #: exp of ARM's optimized-routines, the C library's since glibc 2.28: ``__exp_data.tab``)
