@@ -318,6 +318,18 @@ def grid_shape(px, py, cell_x, cell_y):
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True, inline="always")
+def _cell_key(x, y, x0, y0, cell_x, cell_y, ni, nj):
+    """The key ``i·nj + j`` of the grid cell holding the point ``(x, y)`` (the last row / column
+    takes what lies beyond it): :func:`grid_build`'s and :func:`_bucket_four`'s one spelling."""
+    ci = int((x - x0) / cell_x)
+    ci = ni - 1 if ni - 1 < ci else ci
+    cj = int((y - y0) / cell_y)
+    cj = nj - 1 if nj - 1 < cj else cj
+    return ci * nj + cj
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
       no_cpython_wrapper=True)
 def _bucket_four(px, py, x0, y0, cell_x, cell_y, ni, nj, n):
     """:func:`grid_build`'s counting sort (its ``order``, ``starts``: the same cells, the same
@@ -336,19 +348,11 @@ def _bucket_four(px, py, x0, y0, cell_x, cell_y, ni, nj, n):
     for t in range(q):
         for l in range(4):
             i = l * q + t
-            ci = int((px[i] - x0) / cell_x)
-            ci = ni - 1 if ni - 1 < ci else ci
-            cj = int((py[i] - y0) / cell_y)
-            cj = nj - 1 if nj - 1 < cj else cj
-            k = ci * nj + cj
+            k = _cell_key(px[i], py[i], x0, y0, cell_x, cell_y, ni, nj)
             keys[i] = k
             cnt[l, k] += 1
     for i in range(4 * q, n):                 # (the rest: the last chunk's, after it)
-        ci = int((px[i] - x0) / cell_x)
-        ci = ni - 1 if ni - 1 < ci else ci
-        cj = int((py[i] - y0) / cell_y)
-        cj = nj - 1 if nj - 1 < cj else cj
-        k = ci * nj + cj
+        k = _cell_key(px[i], py[i], x0, y0, cell_x, cell_y, ni, nj)
         keys[i] = k
         cnt[3, k] += 1
     starts = np.empty(nc + 1, np.int64)
@@ -399,11 +403,7 @@ def grid_build(px, py, cell_x, cell_y):
         starts[k] = 0
     keys = np.empty(n, np.int64)
     for i in range(n):
-        ci = int((px[i] - x0) / cell_x)
-        ci = ni - 1 if ni - 1 < ci else ci
-        cj = int((py[i] - y0) / cell_y)
-        cj = nj - 1 if nj - 1 < cj else cj
-        k = ci * nj + cj
+        k = _cell_key(px[i], py[i], x0, y0, cell_x, cell_y, ni, nj)
         keys[i] = k
         starts[k + 1] += 1
     for k in range(ni * nj):
