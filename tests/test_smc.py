@@ -270,3 +270,14 @@ def test_log_mass_of_equal_weights_is_logsumexps_float():
         assert got == want or (np.isnan(got) and np.isnan(want)), (n, v, got, want)
     assert ParticleSet(np.zeros((4, 2)), np.full(4, -np.inf)).log_mass == -np.inf
     assert ParticleSet(np.zeros((0, 2)), np.zeros(0)).log_mass == -np.inf
+
+
+def test_made_tells_which_cached_values_exist():
+    """ParticleSet.made: False until the cached value is computed, True after (what the
+    clutter model's shortcuts from known-equal weights ask before making their own floats)."""
+    ps = ParticleSet(np.zeros((3, 6)), np.log(np.full(3, 0.5)))
+    assert not ps.made("weights", "mass", "log_mass")
+    ps.weights
+    assert ps.made("weights") and not ps.made("mass")
+    ps.mass
+    assert ps.made("mass") and ps.made("log_mass")

@@ -389,13 +389,16 @@ class NearClutter:
         wide, bp = self._wide()
         return mass_near(predicted, Z, bp, wide, std_z=std, skip=chained)
 
-    def record(self, predicted) -> None:
-        """Records the predicted mass of this frame for :meth:`learn` (:meth:`mass` does)."""
+    def record(self, predicted, exposure: Optional[float] = None) -> None:
+        """Records the predicted mass of this frame for :meth:`learn` (:meth:`mass` does);
+        ``exposure``: that mass when the caller made it already (the same float)."""
+        if exposure is not None:
+            self._exposure = exposure
+            return
         if predicted is None:
             self._exposure = 0.0
             return
-        d = predicted.__dict__
-        if "_mass" not in d and "log_mass" not in d and predicted.is_known_equal():
+        if not predicted.made("mass", "log_mass") and predicted.is_known_equal():
             lw = predicted.log_weights
             lw0 = float(lw[0])
             if math.isfinite(lw0):

@@ -770,10 +770,7 @@ class SceneModel:
         if self.extent is None:
             self.extent = _no_extent()
         w, exposure = _weights_exposure(predicted)
-        if exposure is None:
-            people.record(predicted)
-        else:
-            people._exposure = exposure             # (NearClutter.record's float)
+        people.record(predicted, exposure)
         # scene_frame's scalars, written into this model's own array (the same floats as
         # np.array of them; the gate's log volume kept for these settings)
         par = self._par
@@ -1011,7 +1008,7 @@ def _weights_of(ps: ParticleSet) -> np.ndarray:
     """``ps.weights`` for :func:`.clutter.scene_frame`, or, where the set's weights are known
     equal and not made yet, their one value ``np.exp(lw[:1])`` (1,) (the property's float; the
     kernel writes the (N,) array itself)."""
-    if len(ps) > 1 and ps.is_known_equal() and "weights" not in ps.__dict__:
+    if len(ps) > 1 and ps.is_known_equal() and not ps.made("weights"):
         w = np.exp(ps.log_weights[:1])
         w.setflags(write=False)         # (the property's type: one specialisation)
         return w
@@ -1025,9 +1022,7 @@ def _weights_exposure(ps: ParticleSet) -> tuple:
     (numpy's exp of an element does not depend on its neighbours or the array's length: the
     two calls' floats); else ``(_weights_of(ps), None)`` (record computes the exposure)."""
     n = len(ps)
-    d = ps.__dict__
-    if n > 1 and "weights" not in d and "_mass" not in d and "log_mass" not in d \
-            and ps.is_known_equal():
+    if n > 1 and not ps.made("weights", "mass", "log_mass") and ps.is_known_equal():
         lw0 = float(ps.log_weights[0])
         if math.isfinite(lw0):
             e = np.exp(np.array((lw0, _log_count(n) + lw0)))

@@ -178,6 +178,16 @@ class ParticleSet:
         and found them equal (no pass over the weights here)."""
         return bool(self.__dict__.get("_equal"))
 
+    def made(self, *names: str) -> bool:
+        """True when any of the cached values ``names`` (``"weights"``, ``"log_mass"``,
+        ``"mass"``) has been computed already: a caller that could make it more cheaply from
+        the known-equal weights does so only while it has not (the cached floats win)."""
+        d = self.__dict__
+        for name in names:
+            if ("_mass" if name == "mass" else name) in d:
+                return True
+        return False
+
     def known_log_mass(self, log_mass: float) -> None:
         """Record ``log_mass`` when the code that made the weights already summed them (the
         PHD update's kernel): :attr:`log_mass` then needs no pass of its own."""
