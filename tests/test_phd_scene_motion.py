@@ -12,6 +12,7 @@ first second) where each person is covered by a track of the tracks file (IoU >=
 from __future__ import annotations
 
 from functools import cache
+import math
 
 import _libm as libm
 import numpy as np
@@ -259,6 +260,34 @@ def test_link_kernel_is_the_numpy_form(seed):
         np.testing.assert_array_equal(link(prev, cur), want)
         found += int((want >= 0).sum())
     assert found > 100
+
+
+def test_link_height_test_at_its_bound():
+    """Heights whose ratio is at e^±LINK_LOG_SIZE to within a few ulps or a few parts in a
+    million (where the kernel skips the log for ratios clearly outside: _RATIO_HI/LO) are
+    linked exactly when the C library's |log ratio| < LINK_LOG_SIZE, as the log test of every
+    pair decides it; ratios a little further out or in too."""
+    from pfscope.trackers.phd.scene_motion import LINK_LOG_SIZE, _RATIO_HI, _RATIO_LO
+
+    assert _RATIO_LO < math.exp(-LINK_LOG_SIZE) < math.exp(LINK_LOG_SIZE) < _RATIO_HI
+    prev = np.array([[100.0, 80.0, 20.0, 50.0]])
+    ratios = []
+    for edge in (math.exp(LINK_LOG_SIZE), math.exp(-LINK_LOG_SIZE)):
+        r = edge
+        for _ in range(8):                                # a few ulps either side
+            r = np.nextafter(r, 0.0)
+        for _ in range(16):
+            ratios.append(r)
+            r = np.nextafter(r, np.inf)
+        ratios += [edge * (1.0 + d) for d in np.linspace(-4e-6, 4e-6, 41)]
+        ratios += [edge * (1.0 + d) for d in (-1e-2, -1e-4, 1e-4, 1e-2)]
+    linked = {True: 0, False: 0}
+    for r in ratios:
+        cur = np.array([[100.0, 80.0, 20.0, 50.0 * r]])
+        inside = abs(float(libm.log(cur[0, 3] / prev[0, 3]))) < LINK_LOG_SIZE
+        assert link(prev, cur).tolist() == [0 if inside else -1], r
+        linked[inside] += 1
+    assert linked[True] > 20 and linked[False] > 20
 
 
 @pytest.mark.parametrize("seed", range(3))

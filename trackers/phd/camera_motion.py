@@ -297,8 +297,9 @@ def _scale_shift(src, dst, wt, sel, n, buf, H):
     (3×3) gets its information matrix over ``(s, t_x, t_y)`` (the inverse covariance).
     Sums in numpy's order of the array form (per axis over links and corners in order; the
     scalar sums pairwise, ``buf`` (>= 4 n) their terms)."""
-    ps = np.empty(2)
-    qs = np.empty(2)
+    # (the weighted means per axis in locals, not a small array: this runs once per pair
+    # hypothesis, and each array is an allocation)
+    ps0 = qs0 = ps1 = qs1 = 0.0
     for c in range(2):
         sw = 0.0
         sp = 0.0
@@ -308,28 +309,32 @@ def _scale_shift(src, dst, wt, sel, n, buf, H):
                 sw += wt[sel[j], c]
                 sp += wt[sel[j], c] * src[sel[j], e, c]
                 sq += wt[sel[j], c] * dst[sel[j], e, c]
-        ps[c] = sp / sw
-        qs[c] = sq / sw
+        if c == 0:
+            ps0, qs0 = sp / sw, sq / sw
+        else:
+            ps1, qs1 = sp / sw, sq / sw
         H[0, 1 + c] = H[1 + c, 0] = sp
         H[1 + c, 1 + c] = sw
     for j in range(n):
         for e in range(2):
-            for c in range(2):
-                dp = src[sel[j], e, c] - ps[c]
-                buf[4 * j + 2 * e + c] = wt[sel[j], c] * dp * dp
+            dp = src[sel[j], e, 0] - ps0
+            buf[4 * j + 2 * e] = wt[sel[j], 0] * dp * dp
+            dp = src[sel[j], e, 1] - ps1
+            buf[4 * j + 2 * e + 1] = wt[sel[j], 1] * dp * dp
     den = _pairwise(buf, 4 * n)
     for j in range(n):
         for e in range(2):
-            for c in range(2):
-                buf[4 * j + 2 * e + c] = (wt[sel[j], c] * (src[sel[j], e, c] - ps[c])
-                                          * (dst[sel[j], e, c] - qs[c]))
+            buf[4 * j + 2 * e] = (wt[sel[j], 0] * (src[sel[j], e, 0] - ps0)
+                                  * (dst[sel[j], e, 0] - qs0))
+            buf[4 * j + 2 * e + 1] = (wt[sel[j], 1] * (src[sel[j], e, 1] - ps1)
+                                      * (dst[sel[j], e, 1] - qs1))
     s = _pairwise(buf, 4 * n) / den if den > 0 else 1.0
     for j in range(n):
         for e in range(2):
             for c in range(2):
                 buf[4 * j + 2 * e + c] = wt[sel[j], c] * src[sel[j], e, c] * src[sel[j], e, c]
     H[0, 0] = _pairwise(buf, 4 * n)
-    return s, qs[0] - s * ps[0], qs[1] - s * ps[1]
+    return s, qs0 - s * ps0, qs1 - s * ps1
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)

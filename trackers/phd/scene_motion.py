@@ -65,6 +65,10 @@ from .gating import kth
 LINK_DIST = 1.0
 #: ... and when their heights differ by less than this (|log h_k / h_{k−1}|)
 LINK_LOG_SIZE = 0.4
+#: height ratios beyond these have |log| >= LINK_LOG_SIZE for sure (a relative margin of
+#: 1e-6, far above the log's one-ulp error): :func:`_link` skips their log and distance
+_RATIO_HI = math.exp(LINK_LOG_SIZE) * (1.0 + 1e-6)
+_RATIO_LO = math.exp(-LINK_LOG_SIZE) * (1.0 - 1e-6)
 #: two frames whose detections make more pairs than this are not linked (bounded cost)
 MAX_PAIRS = 250_000
 #: samples kept (the most recent), per statistic
@@ -111,9 +115,14 @@ def _link(prev, cur, out, prev_length, length):
     d = np.empty((nc, npv))
     for a in range(nc):
         for b in range(npv):
-            v = math.hypot((cur[a, 0] - prev[b, 0]) / cur[a, 2],
-                           (cur[a, 1] - prev[b, 1]) / cur[a, 3])
-            d[a, b] = v if abs(math.log(cur[a, 3] / prev[b, 3])) < LINK_LOG_SIZE else np.inf
+            r = cur[a, 3] / prev[b, 3]
+            # a height ratio clearly outside e^±LINK_LOG_SIZE needs no log (_RATIO_HI/LO:
+            # a margin far above log's error) nor a distance; NaN takes the log's test
+            if r > _RATIO_HI or r < _RATIO_LO or not abs(math.log(r)) < LINK_LOG_SIZE:
+                d[a, b] = np.inf
+            else:
+                d[a, b] = math.hypot((cur[a, 0] - prev[b, 0]) / cur[a, 2],
+                                     (cur[a, 1] - prev[b, 1]) / cur[a, 3])
     j = np.empty(nc, dtype=np.int64)
     for a in range(nc):
         j[a] = _first_min(d[a])
