@@ -204,3 +204,47 @@ def test_first_step_loads_the_association_kernels(monkeypatch):
         for k in (1, 2):
             tr.step(Frame(k, (k - 1) / 25.0, image), None)
     assert len(calls) == 1 and TR._kernels_loaded
+
+
+@pytest.mark.parametrize("name", ["phd", "mt"])
+def test_association_events_announce_each_confirmed_track_once(cluttered, name):
+    """The step's association events are the ones its rule gives on the associator's results:
+    per frame the re-links, then the ended tracks that were announced, then each confirmed
+    vertex's track not announced yet (in vertex order) -- the tracker's set test that skips
+    the frames confirming nothing changes none of them."""
+    from pfscope.trackers.report import Event
+
+    tr = make_tracker(name, seed=0)
+    assoc = tr.associator
+    step, results = assoc.step, []
+
+    def capture(*a, **k):
+        r = step(*a, **k)
+        results.append((a[0], r.ids.tolist(), r.confirmed.tolist(), r.ended.tolist(),
+                        r.relinked.tolist()))
+        return r
+
+    assoc.step = capture
+    keep = _Keep(tr.name)
+    run(open_source("synthetic", synthetic_config=cluttered.config), [tr], hooks=[keep],
+        score=False)
+    announced, n_confirmed = set(), 0
+    for (frame, ids, confirmed, ended, relinked), stages in zip(results, keep.stages):
+        want = []
+        for new_id, old_id in relinked:
+            want.append(f"frame {frame}: new track {new_id} re-linked to ended track {old_id}")
+            announced.add(old_id)
+        for tid in ended:
+            if tid in announced:
+                want.append(f"frame {frame}: track {tid} ended (unseen for more than "
+                            f"K={assoc.params.depth} frames)")
+                announced.discard(tid)
+        for tid, c in zip(ids, confirmed):
+            if c and tid not in announced:
+                announced.add(tid)
+                n_confirmed += 1
+                want.append(f"frame {frame}: track {tid} confirmed "
+                            f"({assoc.params.min_length} vertices)")
+        got = [e.message for e in find(stages, "assoc", Event)]
+        assert got == want, frame
+    assert len(results) == len(keep.stages) and n_confirmed >= 4

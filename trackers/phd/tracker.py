@@ -339,20 +339,26 @@ class _AssociatingTracker:
         log.stage("associate")
         feats = None
         image = frame.image
-        if image is not None and getattr(image, "ndim", 0) >= 2:
+        ndim = getattr(image, "ndim", 0) if image is not None else 0
+        if ndim >= 2:
             shape = image.shape    # (frame.width × frame.height)
             self.associator.area = float(int(shape[1]) * int(shape[0]))
-        if self.associator.params.app_weight > 0 and frame.has_pixels:
+        # (Frame.has_pixels on the image read above: real pixels, not a blank stand-in)
+        if (self.associator.params.app_weight > 0 and ndim == 3 and image.size > 0
+                and 0 not in image.strides):
             feats = box_features(image, states)
         res = self.associator.step(frame.index, states, feats, detections,
                                    edges=log.wants("clusters"))
-        self._report_association(frame, res, log)
         # (ids[confirmed] and their top-left boxes in one kernel pass: boxes_xywh's floats)
         ids, boxes = _assoc_kernels.track_boxes(res.ids, res.states, res.confirmed)
+        self._report_association(frame, res, log, ids)
         return StepResult(TrackSet.of(ids, boxes), _rows(res.finalised, self._flagged),
                           log.result())
 
-    def _report_association(self, frame: Frame, res: AssocResult, log: StageLog) -> None:
+    def _report_association(self, frame: Frame, res: AssocResult, log: StageLog,
+                            confirmed_ids: np.ndarray) -> None:
+        """The association's stage data; ``confirmed_ids``: ``res.ids[res.confirmed]`` (in
+        order: the tracks' ids the step reports)."""
         log.scalar("assoc/tracks/live", self.associator.n_live)
         for new_id, old_id in res.relinked.tolist():
             log.event("assoc", f"frame {frame.index}: new track {new_id} re-linked to ended "
@@ -363,11 +369,14 @@ class _AssociatingTracker:
                 log.event("assoc", f"frame {frame.index}: track {tid} ended "
                                    f"(unseen for more than K={self.associator.params.depth} frames)")
                 self._announced.discard(tid)
-        for tid, confirmed in zip(res.ids.tolist(), res.confirmed.tolist()):
-            if confirmed and tid not in self._announced:
-                self._announced.add(tid)
-                log.event("assoc", f"frame {frame.index}: track {tid} confirmed "
-                                   f"({self.associator.params.min_length} vertices)")
+        tids = confirmed_ids.tolist()
+        # (most frames confirm no track: one set test instead of a loop over the vertices)
+        if not self._announced.issuperset(tids):
+            for tid in tids:
+                if tid not in self._announced:
+                    self._announced.add(tid)
+                    log.event("assoc", f"frame {frame.index}: track {tid} confirmed "
+                                       f"({self.associator.params.min_length} vertices)")
         if not log.wants("clusters"):
             return
         dst = res.states[res.edges_dst_index, :2] if len(res.edges_dst_index) else np.zeros((0, 2))
