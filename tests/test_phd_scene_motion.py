@@ -366,6 +366,15 @@ def test_ring_spreads_kept_sorted_are_robust_stds_of_the_window():
         got = ring.spreads()
         want = S.robust_stds(ring.rows())
         assert np.array_equal(got, want, equal_nan=True), step
+        if ring._state[0] >= 0:
+            # the kept copy is the window sorted, each value at the sample it came from
+            rows, n = ring.rows(), len(ring)
+            first = ring.n - n
+            for r in range(2):
+                assert np.array_equal(ring._srt[r, :n], np.sort(np.abs(rows[r]))), step
+                assert sorted(ring._at[r, :n].tolist()) == list(range(first, ring.n)), step
+                assert np.array_equal(np.abs(rows[r, ring._at[r, :n] - first]),
+                                      ring._srt[r, :n]), step
         seen_sorted += int(ring._state[0] >= 0)
         if step == 200:
             assert np.isnan(got[1]) and ring._state[0] == -1

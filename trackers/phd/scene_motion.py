@@ -227,6 +227,8 @@ def _robust_stds(buf, total, width, srt, at, state, lo, hi, t, out):
     resort = not (0 <= prev <= total and total - prev <= RESORT)
     a = np.empty(m)
     tmp = np.empty(m)
+    # (the new samples' places when merged into the sorted copy: at most RESORT of them)
+    new_at = np.empty(RESORT if keep and not resort else 0, dtype=np.int64)
     for r in range(buf.shape[0]):
         for i in range(m):
             v = abs(buf[r, off + i])
@@ -247,16 +249,34 @@ def _robust_stds(buf, total, width, srt, at, state, lo, hi, t, out):
                         srt[r, k] = srt[r, i]
                         at[r, k] = at[r, i]
                         k += 1
-                for g in range(prev if prev > start else start, total):
-                    v = a[g - start]
-                    p = k
-                    while p > 0 and srt[r, p - 1] > v:
-                        srt[r, p] = srt[r, p - 1]
-                        at[r, p] = at[r, p - 1]
+                # (the new ones sorted among themselves -- after equals, so equal values in
+                # sample order -- then merged in from the back, a kept value before an equal
+                # new one: the order of inserting each after its equals, in one pass over
+                # the window instead of a shift per new sample)
+                g0 = prev if prev > start else start
+                nn = total - g0
+                for q in range(nn):
+                    v = a[g0 - start + q]
+                    p = q
+                    while p > 0 and tmp[p - 1] > v:
+                        tmp[p] = tmp[p - 1]
+                        new_at[p] = new_at[p - 1]
                         p -= 1
-                    srt[r, p] = v
-                    at[r, p] = g
-                    k += 1
+                    tmp[p] = v
+                    new_at[p] = g0 + q
+                i = k - 1
+                q = nn - 1
+                w = k + nn - 1
+                while q >= 0:
+                    if i >= 0 and srt[r, i] > tmp[q]:
+                        srt[r, w] = srt[r, i]
+                        at[r, w] = at[r, i]
+                        i -= 1
+                    else:
+                        srt[r, w] = tmp[q]
+                        at[r, w] = new_at[q]
+                        q -= 1
+                    w -= 1
             v_lo = srt[r, lo]
             v_hi = srt[r, hi]
         else:
