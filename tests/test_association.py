@@ -1355,3 +1355,57 @@ def test_group_pick_is_the_solvers_matching():
     # more matchings than GROUP_MAX_MATCHINGS: the solver
     w0 = np.ones((7, 7)) + np.arange(49).reshape(7, 7) * 1e-3
     assert len(AK._group_pick(w0, np.full(7, 7))) == 0
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_gap_fill_last_is_gap_rows_then_fill_rows(seed):
+    """Gap filling's one-call frame (gap_fill_last): with every row in the last buffered frame,
+    no edge longer than fill_free and every row likely, the last frame's rows are gap_rows'
+    rows appended by fill_rows (ids[ei], no mask, the overlap test), array for array; with
+    rows in another frame, a long edge or an unlikely row it hands back to the general path
+    (status −1, the frame's arrays as given), with no row at all it says so (status 0)."""
+    from pfscope.trackers.phd import _assoc_kernels as AK
+
+    rng = np.random.default_rng(seed)
+    seen = {0: 0, 1: 0, -1: 0}
+    for _ in range(600):
+        n_buf = int(rng.integers(1, 6))
+        f0 = int(rng.integers(1, 50))
+        frame = f0 + n_buf                       # the step's frame, after the buffered ones
+        E = int(rng.integers(1, 5))
+        src_frame = frame - rng.integers(1, 6, E)
+        src = np.column_stack([rng.uniform(0, 300, (E, 2)), rng.normal(0, 2, (E, 2)),
+                               rng.uniform(10, 60, (E, 2))])
+        dst = src + rng.normal(0, 5, src.shape)
+        ids = rng.permutation(100)[:E].astype(np.int64)
+        B = int(rng.integers(0, 5))
+        bid = rng.integers(100, 200, B).astype(np.int64)
+        bst = np.column_stack([rng.uniform(0, 300, (B, 2)), rng.normal(0, 2, (B, 2)),
+                               rng.uniform(10, 60, (B, 2))])
+        if B and rng.random() < 0.5:
+            bst[0] = src[0]                      # an estimate over a gap row: not filled
+        bfill = rng.random(B) < 0.3
+        fr = np.array([frame], dtype=np.int64)
+        if rng.random() < 0.3:
+            # per-edge end frames (a re-link's gaps), some inside the buffer: rows then in
+            # earlier frames only
+            fr = f0 + rng.integers(1, n_buf + 1, E)
+            src_frame = fr - rng.integers(1, 4, E)
+        sigma_v, fill_err = float(rng.choice([0.0, 0.05, 2.0])), 1 / 6
+        fill_free, thr = float(rng.choice([1.0, 2.0, 8.0])), 0.5
+        args = (np.zeros(0, dtype=np.int64), f0, n_buf, src, src_frame, dst, fr, sigma_v,
+                fill_err, fill_free)
+        status, nid, nst, nfill, added = AK.gap_fill_last(*args, ids, bid, bst, bfill, thr)
+        at, fi, ei, st, likely, run, n_far, n_unlikely = AK.gap_rows(*args)
+        seen[status] += 1
+        if not len(ei):
+            assert status == 0
+        elif n_far or n_unlikely or len(at) != 1 or at[0] != n_buf - 1:
+            assert status == -1 and nid is bid and nst is bst and nfill is bfill
+        else:
+            assert status == 1
+            want = AK.fill_rows(bid, bst, bfill, st, ids[ei], 0, len(ei),
+                                np.zeros(0, dtype=bool), thr)
+            for got, w in zip((nid, nst, nfill, added), want):
+                np.testing.assert_array_equal(got, w)
+    assert min(seen.values()) >= 20, seen

@@ -364,9 +364,11 @@ def test_first_run_compiles_each_kernel_once_in_one_process(tmp_path):
     # it) and its robust spreads (the warm-up calls them: four frames do not fill the rings)
     # (the association's frame_step compiles advance and the input check inside it,
     # final_rows the confirmed test; frame_edges is the general path's: colour cue, edge data)
+    # (gap filling's usual frame: gap_fill_last, which compiles gap_rows and fill_rows inside
+    # it with the types of their own calls on the general path: they do not compile again)
     assert sorted(top) == ["_observe", "_robust_stds", "centre_boxes",
-                           "edge_scores", "fill_rows", "final_rows", "frame_edges",
-                           "frame_step", "gap_rows",
+                           "edge_scores", "final_rows", "frame_edges",
+                           "frame_step", "gap_fill_last",
                            "head_pick", "mass_near_kernel", "peaks",
                            "revive_hits", "row_boxes", "scene_frame", "scene_learn",
                            "track_boxes"], top

@@ -418,6 +418,35 @@ def gap_rows(bf, f0, n_buf, src, src_frame, dst, frame, sigma_v, fill_err, fill_
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
+def gap_fill_last(bf, f0, n_buf, src, src_frame, dst, frame, sigma_v, fill_err, fill_free,
+                  ids, bid, bst, bfill, fill_overlap):
+    """Gap filling's usual frame in one call (:meth:`.association.GraphAssociator.
+    _fill_gaps` on a still camera): :func:`gap_rows` (its first ten arguments), and when
+    every row falls into the last buffered frame -- ``bid``, ``bst``, ``bfill`` (its rows, as
+    :func:`fill_rows` takes them) -- with no edge longer than ``fill_free`` and every row
+    likely, that frame's rows with the gap rows appended (:func:`fill_rows` on all of them,
+    ids ``ids[ei]``, no mask).  Returns ``(status, bid, bst, bfill, added)``: status 0 no gap
+    row (nothing to do), 1 done (the frame's rows as :func:`fill_rows` returns them), −1 the
+    caller's general path (the given arrays back)."""
+    at, fi, ei, st, likely, run, n_far, n_unlikely = gap_rows(
+        bf, f0, n_buf, src, src_frame, dst, frame, sigma_v, fill_err, fill_free)
+    R = ei.shape[0]
+    if R == 0:
+        return 0, bid, bst, bfill, 0
+    B = bf.shape[0] if bf.shape[0] > 0 else n_buf
+    if n_far or n_unlikely or at.shape[0] != 1 or at[0] != B - 1:
+        return -1, bid, bst, bfill, 0
+    fid = np.empty(R, np.int64)
+    for i in range(R):
+        fid[i] = ids[ei[i]]
+    # (no mask: every row kept; the bounds as int64, not literals, and the mask a writable
+    # array, as the caller's general path passes them: one specialisation of fill_rows)
+    nbid, nbst, nbfill, n = fill_rows(bid, bst, bfill, st, fid, np.int64(0), np.int64(R),
+                                      np.empty(0, np.bool_), fill_overlap)
+    return 1, nbid, nbst, nbfill, n
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
 def head_pick(d, pred, var, rows, fill_overlap, gate_d2):
     """One frame of ``extend_heads``' walk back (:meth:`.association.GraphAssociator.
     _extend_heads`): the detection of ``d`` (N, 4) ``(cx, cy, w, h)`` nearest ``pred`` (4,)

@@ -663,6 +663,14 @@ def compile_step_kernels(params: AssocParams | None = None) -> None:
     # the tracker's output: the confirmed tracks' and the final rows' boxes, its detections'
     # centres
     res = a.step(10 + 3 * a.lag, s, detections=z, edges=False)
+    # gap filling's general path (a camera that moved, rows in several frames, long edges or
+    # unlikely rows) with a run's argument types: the one-frame call above compiled its two
+    # kernels inside it, for these very types (no second specialisation)
+    st, fr = np.ascontiguousarray(s), np.array([3], dtype=np.int64)
+    at, fi, ei, rows, likely, run, _, _ = _assoc_kernels.gap_rows(
+        _NO_IDS, 1, 2, st, np.array([1], dtype=np.int64), st, fr, 0.1, 0.1, 2.0)
+    _assoc_kernels.fill_rows(res.ids, st, np.zeros(1, dtype=bool), rows, np.ones(1, dtype=np.int64)[ei],
+                             run.tolist()[0], run.tolist()[1], _NO_BOOL, 0.5)
     _assoc_kernels.track_boxes(res.ids, res.states, res.confirmed)
     _assoc_kernels.row_boxes(res.states, res.confirmed, GAP_CONF, EST_CONF)
     _assoc_kernels.centre_boxes(np.ascontiguousarray(z))
@@ -1390,6 +1398,19 @@ class GraphAssociator:
         # by the kernel from the first, no array made)
         f0 = buf[0][0]
         bf = _NO_IDS if buf[-1][0] - f0 + 1 == len(buf) else self._buffer_frames()
+        if not self._cams:
+            # the usual frame (every row in the last buffered frame, no long edge, every row
+            # likely): the rows and the frame's new rows in one call; else the steps below
+            lf, lid, lst, lfill = buf[-1]
+            status, lid, lst, lfill, added = _assoc_kernels.gap_fill_last(
+                bf, f0, len(buf), np.ascontiguousarray(src), np.ascontiguousarray(src_frame),
+                np.ascontiguousarray(dst), fr, float(self.scene_sigma_v), float(p.fill_err),
+                float(p.fill_free), np.ascontiguousarray(ids, dtype=np.int64), lid, lst,
+                lfill, float(p.fill_overlap))
+            if status >= 0:
+                if added:
+                    buf[-1] = (lf, lid, lst, lfill)
+                return
         at, fi, ei, st, likely, run, n_far, n_unlikely = _assoc_kernels.gap_rows(
             bf, f0, len(buf), np.ascontiguousarray(src), np.ascontiguousarray(src_frame),
             np.ascontiguousarray(dst), fr, float(self.scene_sigma_v), float(p.fill_err),
