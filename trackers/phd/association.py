@@ -667,10 +667,11 @@ def compile_step_kernels(params: AssocParams | None = None) -> None:
     # unlikely rows) with a run's argument types: the one-frame call above compiled its two
     # kernels inside it, for these very types (no second specialisation)
     st, fr = np.ascontiguousarray(s), np.array([3], dtype=np.int64)
-    at, fi, ei, rows, likely, run, _, _ = _assoc_kernels.gap_rows(
+    _, _, ei, rows, _, run, _, _ = _assoc_kernels.gap_rows(
         _NO_IDS, 1, 2, st, np.array([1], dtype=np.int64), st, fr, 0.1, 0.1, 2.0)
-    _assoc_kernels.fill_rows(res.ids, st, np.zeros(1, dtype=bool), rows, np.ones(1, dtype=np.int64)[ei],
-                             run.tolist()[0], run.tolist()[1], _NO_BOOL, 0.5)
+    lo, hi = run.tolist()
+    _assoc_kernels.fill_rows(res.ids, st, np.zeros(1, dtype=bool), rows,
+                             np.ones(1, dtype=np.int64)[ei], lo, hi, _NO_BOOL, 0.5)
     _assoc_kernels.track_boxes(res.ids, res.states, res.confirmed)
     _assoc_kernels.row_boxes(res.states, res.confirmed, GAP_CONF, EST_CONF)
     _assoc_kernels.centre_boxes(np.ascontiguousarray(z))
