@@ -799,7 +799,8 @@ class SceneModel:
             predicted.states, w, Z, std, self.chains.length,
             scores if ratio else _NO_SCORES, par, self.size_m1, self.size_m2, self.extent,
             place.mem_z, place.mem_w, place.mem_e, ss,
-            self.persist_sums if ratio and self.persist_sums is not None else ss)
+            self.persist_sums if ratio and self.persist_sums is not None else ss,
+            predicted.__dict__.get(_POS_EXT, _NO_EXT))
         if not code:
             raise ValueError("mass_near: non-finite particle positions")
         self.near = near
@@ -1035,6 +1036,7 @@ def _weights_exposure(ps: ParticleSet) -> tuple:
 _NO_PERSIST = np.zeros(0, dtype=np.bool_)
 _NO_SUMS = np.zeros((2, 3))
 _NO_SCORES = np.zeros(0)
+_NO_EXT = np.zeros(0)
 
 
 def _no_extent() -> np.ndarray:
@@ -1111,6 +1113,13 @@ def scene_learn(won, parts, prev_link, chain_clutter, mem_z, mem_s, mem_w, mem_e
 
 # ----------------------------------------------------------------------------- the four stages
 
+#: the key under which :func:`predict` leaves, in the predicted set's dict, its positions'
+#: extent ``(x0, y0, x1, y1, finite)`` (:func:`._kernels.propagate_into`) for the scene model's
+#: grid (:meth:`SceneModel._log_kappa_fused`); a set made otherwise has none (its arrays are
+#: never changed in place: the extent stays the set's)
+_POS_EXT = "_pos_extent"
+
+
 def predict(ps: ParticleSet, mp: MotionParams, rng: np.random.Generator,
             out: Optional[tuple[np.ndarray, np.ndarray]] = None) -> ParticleSet:
     """Persistent particles at k: ``x ~ f(.|x_{k-1})`` (q = f, so eq. (4) reduces to the
@@ -1128,10 +1137,16 @@ def predict(ps: ParticleSet, mp: MotionParams, rng: np.random.Generator,
             and S.shape[1] == STATE_DIM:
         # the filter's buffers (PHDFilter.step): motion.propagate's kernel call without its
         # checks and views (the same call: every argument of the same type)
+        # (and the new positions' extent: the scene model's grid skips its own pass, _POS_EXT)
+        ext = np.empty(5)
         _kernels.propagate_into(x, stream(key_from(rng)), float(mp.sigma_v),
                                 float(mp.sigma_size), float(mp.accel_to_position),
-                                float(mp.min_size), S, lw0, float(log_e), L)
-        states, lw = S[:n], L[:n]
+                                float(mp.min_size), S, lw0, float(log_e), L, ext)
+        out = ParticleSet(S[:n], L[:n], ps.labels, ps.extra)
+        out.__dict__[_POS_EXT] = ext
+        if ps.is_known_equal():
+            out.known_equal()
+        return out
     elif n and type(lw0) is np.ndarray and lw0.dtype == np.float64 and L.dtype == np.float64:
         # ω · e written by the motion kernel's pass (numpy's add, the same floats)
         states = motion.propagate(ps.states, rng, sigma_v=mp.sigma_v, sigma_size=mp.sigma_size,
