@@ -605,7 +605,12 @@ class SceneModel:
         #: :func:`.clutter.scene_frame`'s scalars (written each frame), the clutter gate's
         #: log volume of unit stds with the settings it is for
         self._par = np.zeros(N_SCENE_PAR)
-        self._lv0: Optional[tuple] = None
+        self._fset: Optional[tuple] = None     # (_fused_settings)
+        #: _weights_exposure's two exps, and the one weight as a read-only view of them
+        b = np.empty(2)
+        v = b[:1]
+        v.setflags(write=False)         # (the weights property's type: one specialisation)
+        self._wexp = (b, v)
         self._lpar = np.zeros(_N_L)
 
     def set_likelihood(self, lk: LikelihoodParams) -> None:
@@ -632,6 +637,11 @@ class SceneModel:
     def _image_area(self, frame: Optional[Frame]) -> float:
         """The frame's pixel area when it has an image, else 0 (the density takes the area of
         the detections' extent then: :func:`.clutter.scene_density`)."""
+        if type(frame) is Frame:
+            im = frame.image
+            if type(im) is np.ndarray:       # (frame.width * frame.height: its shape's)
+                sh = im.shape
+                return float(int(sh[1]) * int(sh[0])) if len(sh) >= 2 and im.size else 0.0
         im = None if frame is None else getattr(frame, "image", None)
         if im is not None and (im.ndim if isinstance(im, np.ndarray) else np.ndim(im)) >= 2 \
                 and im.size:
@@ -744,17 +754,17 @@ class SceneModel:
         predicted particles: the same floats and the same state after it as the calls one by
         one (the reference, ``fused`` False).  None (nothing done) elsewhere."""
         cl = self.cl
+        fs = self._fset
+        if fs is None or fs[0] is not cl or fs[1] is not self.sp:
+            fs = self._fset = self._fused_settings()
         nz = len(Z)
-        if not (cl.learn_update == "model" and cl.near_learn and nz >= 1
-                and nz * nz < BRUTE_PAIRS and cl.duplicate_prior > 0
+        if not (fs[2] and nz >= 1 and nz * nz < BRUTE_PAIRS
                 and predicted is not None and len(predicted)
                 and type(Z) is np.ndarray and Z.dtype == np.float64 and Z.ndim == 2
                 and Z.shape[1] == OBS_DIM and Z.flags.c_contiguous
                 and len(self.chains.length) == nz):
             return None
-        r2 = gate_threshold(cl.clutter_gate, OBS_DIM)
-        if r2 != self._birth_r2:
-            return None
+        r2 = fs[3]
         if std is None:
             std = obs_std(Z[:, 2:4], self.lk)
         if not (type(std) is np.ndarray and std.dtype == np.float64 and std.flags.c_contiguous):
@@ -769,31 +779,22 @@ class SceneModel:
         place.cl = people.cl = dups.cl = cl
         if self.extent is None:
             self.extent = _no_extent()
-        w, exposure = _weights_exposure(predicted)
+        w, exposure = _weights_exposure(predicted, self._wexp)
         people.record(predicted, exposure)
         # scene_frame's scalars, written into this model's own array (the same floats as
-        # np.array of them; the gate's log volume kept for these settings)
+        # np.array of them; those of the settings alone written by _fused_settings)
         par = self._par
-        lv0 = self._lv0
-        if lv0 is None or lv0[0] is not cl:
-            lv0 = self._lv0 = (cl, log_gate_volume0(cl))
-        par[P_R2] = r2
         par[P_A_NEAR] = 1.0 / min(self.frames + 5, cl.clutter_memory)
         par[P_NEAR] = self.near
         par[P_A] = 1.0 / min(self.size_frames + 1, cl.clutter_memory)
-        par[P_SEE] = 1.0
         par[P_LOG_RATE] = math.log(self.rate) if self.rate > 0 else -math.inf
         par[P_AREA] = self._image_area(frame)
-        par[P_LOG_V0] = lv0[1]
-        par[P_FLOOR] = self._LOG_SIZE_FLOOR
         par[P_N0_BETA] = PRIOR_FRAMES * place.beta
         par[P_NU] = people.nu
         par[P_Q] = dups.q
         par[P_RATIO] = 1.0 if ratio else 0.0
         par[P_SCORE_FLOOR] = self.score_floor
         par[P_USE_PSUMS] = 0.0 if self.persist_sums is None else 1.0
-        par[P_CLIP] = self.sp.max_log_ratio
-        par[P_PERSIST] = self.sp.persist_frames
         ss = self.score_sums if ratio else _NO_SUMS
         code, near, wide, chained, persist_now, n_dup, m, grid, m_near, out, final = scene_frame(
             predicted.states, w, Z, std, self.chains.length,
@@ -824,6 +825,25 @@ class SceneModel:
             self._persist = persist_now
         birth = out[6] if cl.spot_places else shadow
         return birth, (final if ratio else shadow)
+
+    def _fused_settings(self) -> tuple:
+        """``(cl, sp, ok, r2)`` of this model's settings (kept while they are the same objects:
+        :meth:`_log_kappa_fused`): ``ok`` whether they are the fused path's (``learn_update``
+        'model', ``near_learn``, the duplicate term on, the birth gate the clutter gate), r2
+        the clutter gate's; writes :func:`.clutter.scene_frame`'s scalars of the settings
+        alone into ``_par``."""
+        cl, sp = self.cl, self.sp
+        r2 = gate_threshold(cl.clutter_gate, OBS_DIM)
+        ok = (cl.learn_update == "model" and bool(cl.near_learn) and cl.duplicate_prior > 0
+              and r2 == self._birth_r2)
+        par = self._par
+        par[P_R2] = r2
+        par[P_SEE] = 1.0
+        par[P_LOG_V0] = log_gate_volume0(cl)
+        par[P_FLOOR] = self._LOG_SIZE_FLOOR
+        par[P_CLIP] = sp.max_log_ratio
+        par[P_PERSIST] = sp.persist_frames
+        return cl, sp, ok, r2
 
     def _near_mass(self, Z: np.ndarray, predicted: Optional[ParticleSet], std: np.ndarray,
                    std_wide: Optional[np.ndarray]) -> Optional[np.ndarray]:
@@ -1016,16 +1036,25 @@ def _weights_of(ps: ParticleSet) -> np.ndarray:
     return ps.weights
 
 
-def _weights_exposure(ps: ParticleSet) -> tuple:
+def _weights_exposure(ps: ParticleSet, buf: Optional[tuple] = None) -> tuple:
     """``(_weights_of(ps), exposure)``: where the set's weights are known equal and neither
     they nor its mass are made yet, their one value and :meth:`.clutter.NearClutter.record`'s
     exposure (the set's mass) from ONE np.exp of the two arguments ``(lw_0, log n + lw_0)``
     (numpy's exp of an element does not depend on its neighbours or the array's length: the
-    two calls' floats); else ``(_weights_of(ps), None)`` (record computes the exposure)."""
+    two calls' floats); else ``(_weights_of(ps), None)`` (record computes the exposure).
+    ``buf``: ``(b, v)``, a (2,) float64 array and a read-only view of its first element,
+    which the one value and the exposure are written into (``np.exp(b, b)``: the same floats,
+    no arrays made), the caller's to keep until the next call."""
     n = len(ps)
     if n > 1 and not ps.made("weights", "mass", "log_mass") and ps.is_known_equal():
         lw0 = float(ps.log_weights[0])
         if math.isfinite(lw0):
+            if buf is not None:
+                b = buf[0]
+                b[0] = lw0
+                b[1] = _log_count(n) + lw0
+                np.exp(b, b)
+                return buf[1], float(b[1])
             e = np.exp(np.array((lw0, _log_count(n) + lw0)))
             w = e[:1]
             w.setflags(write=False)         # (the property's type: one specialisation)
