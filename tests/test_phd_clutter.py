@@ -775,7 +775,8 @@ def test_fused_scene_model_is_the_calls_one_by_one(seed, monkeypatch):
 def test_fused_path_follows_new_settings(monkeypatch):
     """The fused κ path keeps its settings checks and the settings' scalars per settings
     object: new settings (PHDFilter.set_params) are looked at again -- a duplicate term
-    switched off leaves the fused path, a new score clip reaches scene_frame's scalars."""
+    switched off leaves the fused path, a new score clip reaches scene_frame's scalars, a
+    new memory scene_learn's."""
     from dataclasses import replace
 
     from pfscope.trackers.phd import clutter as CL
@@ -810,3 +811,7 @@ def test_fused_path_follows_new_settings(monkeypatch):
     f.set_params(p)
     step(5)
     assert len(calls) == 4 and calls[-1] == p.score.max_log_ratio
+    assert f.scene._lpar[F._L_D] == 1.0 - 1.0 / p.clutter.clutter_memory
+    f.set_params(replace(p, clutter=replace(p.clutter, clutter_memory=7)))
+    step(6)                                                 # (scene_learn's scalars too)
+    assert len(calls) == 5 and f.scene._lpar[F._L_D] == 1.0 - 1.0 / 7

@@ -176,13 +176,15 @@ class PlaceClutter:
                                        self.lk)
         return math.log(share) - log_v
 
-    def _sums_of(self) -> tuple:
+    def _sums_of(self, r2: Optional[float] = None) -> tuple:
         """``(lk, r², S, exposure)`` of the memory as it is: each entry's ``S`` and
         :meth:`exposure`, kept along the memory by :meth:`learn` (:func:`_memory_step`),
         computed again (one grid pass, :func:`.gating.gate_sums`) when missing or when the
-        likelihood (the memory's stds) or the gate changed."""
+        likelihood (the memory's stds) or the gate changed.  ``r2``: the clutter gate's r²
+        when the caller has it."""
         F = _filter
-        r2 = F.gate_threshold(self.cl.clutter_gate, F.OBS_DIM)
+        if r2 is None:
+            r2 = F.gate_threshold(self.cl.clutter_gate, F.OBS_DIM)
         sums = self._sums
         if sums is None or sums[0] is not self.lk or sums[1] != r2:
             if sums is None or sums[0] is not self.lk or len(self.mem_s) != len(self.mem_z):
@@ -408,10 +410,12 @@ class NearClutter:
                 return
         self._exposure = float(predicted.mass)
 
-    def learn(self, near_share: np.ndarray, a: float, near_sum: Optional[float] = None) -> None:
+    def learn(self, near_share: Optional[np.ndarray], a: float,
+              near_sum: Optional[float] = None) -> None:
         """After the update: ``near_share`` (N_z,) the clutter share the EM gives to κ_n (none
         for a detection that continues a chain: :meth:`.filter.SceneModel.learn`);
-        ``near_sum``: ``np.sum(near_share)`` when the caller has it (:func:`learn_shares`)."""
+        ``near_sum``: ``np.sum(near_share)`` when the caller has it (:func:`learn_shares`;
+        ``near_share`` is not read then, and may be None)."""
         if near_sum is None:
             near_sum = float(np.sum(near_share))
         self.num = (1 - a) * self.num + a * near_sum

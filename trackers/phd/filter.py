@@ -612,6 +612,7 @@ class SceneModel:
         v.setflags(write=False)         # (the weights property's type: one specialisation)
         self._wexp = (b, v)
         self._lpar = np.zeros(_N_L)
+        self._lset: Optional[tuple] = None     # (cl, r2, dup r2) _lpar's settings' scalars are of
 
     def set_likelihood(self, lk: LikelihoodParams) -> None:
         """New observation-noise widths for the clutter volumes (PHDFilter.set_params)."""
@@ -995,18 +996,23 @@ class SceneModel:
         prev_link, chain_c = self.chains.prev_link, self._chain_clutter
         use_chain = (spot and prev_link is not None and chain_c is not None
                      and len(prev_link) == nz and len(chain_c) > 0)
-        lk, r2, S, exposure = place._sums_of()
+        fs = self._fset
+        lk, r2, S, exposure = place._sums_of(fs[3] if fs is not None and fs[0] is cl else None)
         a = 1.0 / min(self.frames + 5, cl.clutter_memory)
         par = self._lpar                    # (scene_learn's scalars, as _log_kappa_fused's)
-        par[_L_FADE] = place.fade
-        par[_L_MIN_W] = MIN_WEIGHT
-        par[_L_R2] = r2
-        par[_L_BUDGET] = INCREMENT_PAIRS
+        lset = self._lset
+        if lset is None or lset[0] is not cl or lset[1] != r2 or lset[2] != r2_dup:
+            # those of the settings alone: written again when they change
+            par[_L_FADE] = place.fade
+            par[_L_MIN_W] = MIN_WEIGHT
+            par[_L_R2] = r2
+            par[_L_BUDGET] = INCREMENT_PAIRS
+            par[_L_DUP_R2] = r2_dup
+            par[_L_D] = 1.0 - 1.0 / cl.clutter_memory
+            self._lset = (cl, r2, r2_dup)
         par[_L_DUP] = 0.0 if dups._pairs is None else 1.0
-        par[_L_DUP_R2] = r2_dup
         par[_L_SCORES] = 1.0 if use_s else 0.0
         par[_L_PERSIST] = 1.0 if use_p else 0.0
-        par[_L_D] = 1.0 - 1.0 / cl.clutter_memory
         sh, ssum, mem, num, den = scene_learn(
             won, out, prev_link if use_chain else _NO_I, chain_c if use_chain else _NO_F,
             place.mem_z, place.mem_s, place.mem_w, place.mem_e, S, Z, std, wide, n_dup, s,
@@ -1018,7 +1024,7 @@ class SceneModel:
             self._chain_clutter = sh[4]
         place.em_step(a, float(ssum[1]), exposure)
         place.keep_memory(lk, r2, mem)
-        people.learn(sh[3], a, float(ssum[2]))
+        people.learn(None, a, float(ssum[2]))       # (the near shares' sum is all it reads)
         dups.em_step(a, num, den)
         self._parts = None
         self.frames += 1
