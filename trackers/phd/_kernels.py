@@ -212,8 +212,8 @@ def propagate_into(x, st, sigma_v, sigma_size, accel_to_position, min_size, out,
     minima / maxima of ``out[:N, 0]``, ``out[:N, 1]`` (its rule, in its order: the same
     floats) and 1.0 when each column's sum is finite (then every value is), else 0.0 (a value
     not finite, or a sum that overflowed: :func:`grid_build_at` then takes grid_shape's own
-    pass) -- so :func:`grid_build_at` needs no pass of its own over them.  The normals of ``_CHUNK`` particles at a time are made in one
-    vectorised loop, then used."""
+    pass) -- so :func:`grid_build_at` needs no pass of its own over them.  The normals of
+    ``_CHUNK`` particles at a time are made in one vectorised loop, then used."""
     key = st[0]
     n = x.shape[0]
     with_lw = lw.shape[0] == n
