@@ -718,8 +718,8 @@ def test_fused_scene_model_is_the_calls_one_by_one(seed, monkeypatch):
     weights = []
     weights_of = F._weights_exposure
 
-    def spy_weights(ps):
-        w, e = weights_of(ps)
+    def spy_weights(ps, *buf):
+        w, e = weights_of(ps, *buf)
         weights.append(len(w) == len(ps))
         assert (e is None) == (len(w) == len(ps))      # the exposure with the one value
         return w, e
@@ -770,3 +770,48 @@ def test_fused_scene_model_is_the_calls_one_by_one(seed, monkeypatch):
     assert calls["frame"] == calls["learn"] == frames - 2, calls
     assert 0 < len(declined) < calls["frame"], len(declined)
     assert any(weights) and not all(weights), weights       # the array, and the one value
+
+
+def test_fused_path_follows_new_settings(monkeypatch):
+    """The fused κ path keeps its settings checks and the settings' scalars per settings
+    object: new settings (PHDFilter.set_params) are looked at again -- a duplicate term
+    switched off leaves the fused path, a new score clip reaches scene_frame's scalars, a
+    new memory scene_learn's."""
+    from dataclasses import replace
+
+    from pfscope.trackers.phd import clutter as CL
+    from pfscope.trackers.phd import filter as F
+    from pfscope.trackers.phd.tracker import PHD_PRACTICAL
+    calls = []
+    frame_k = F.scene_frame
+
+    def count_frame(*a):
+        calls.append(float(a[6][CL.P_CLIP]))
+        return frame_k(*a)
+
+    monkeypatch.setattr(F, "scene_frame", count_frame)
+    p = PHD_PRACTICAL.filter
+    f = F.PHDFilter(p, rng=np.random.default_rng(0))
+    boxes = np.array([[100.0, 150.0, 30.0, 70.0], [300.0, 150.0, 30.0, 70.0]])
+
+    def step(k):
+        Z = F.as_observations(boxes + [2.0 * k, 0.0, 0.0, 0.0])
+        f.scene.chains.observe(Z, k)
+        f.step(Z)
+
+    for k in range(3):
+        step(k)
+    assert len(calls) == 2 and calls[-1] == p.score.max_log_ratio   # (frame 0: no particles)
+    f.set_params(replace(p, score=replace(p.score, max_log_ratio=1.25)))
+    step(3)
+    assert len(calls) == 3 and calls[-1] == 1.25
+    f.set_params(replace(p, clutter=replace(p.clutter, duplicate_prior=0.0)))
+    step(4)
+    assert len(calls) == 3                                  # the calls one by one
+    f.set_params(p)
+    step(5)
+    assert len(calls) == 4 and calls[-1] == p.score.max_log_ratio
+    assert f.scene._lpar[F._L_D] == 1.0 - 1.0 / p.clutter.clutter_memory
+    f.set_params(replace(p, clutter=replace(p.clutter, clutter_memory=7)))
+    step(6)                                                 # (scene_learn's scalars too)
+    assert len(calls) == 5 and f.scene._lpar[F._L_D] == 1.0 - 1.0 / 7

@@ -65,11 +65,13 @@ def test_propagate_kernel_is_the_numpy_model_bit_for_bit():
     lw = rng.normal(-7, 2, 500)
     lw[:3] = [-np.inf, 0.0, 1e-300]
     lw_out = np.full(505, np.nan)
-    K.propagate_into(x, R.stream(123), 0.03, 0.1, 0.5, 1.0, out, lw, np.log(0.99), lw_out)
+    K.propagate_into(x, R.stream(123), 0.03, 0.1, 0.5, 1.0, out, lw, np.log(0.99), lw_out,
+                      np.empty(0))
     np.testing.assert_array_equal(lw_out[:500], lw + np.log(0.99))   # numpy's add
     assert np.isnan(lw_out[500:]).all()
     out2 = np.empty_like(x)                            # without weights: the same states
-    K.propagate_into(x, R.stream(123), 0.03, 0.1, 0.5, 1.0, out2, np.empty(0), 0.0, lw_out)
+    K.propagate_into(x, R.stream(123), 0.03, 0.1, 0.5, 1.0, out2, np.empty(0), 0.0, lw_out,
+                      np.empty(0))
     np.testing.assert_array_equal(out2, out)
     eps = np.empty(500 * 4)                            # the same stream, 4 normals a particle
     R.fill_normal(R.stream(123), eps)
@@ -355,6 +357,63 @@ def test_grid_puts_every_point_in_its_cell_in_index_order(cell, n):
            + np.minimum(np.floor((x[:, 1] - y0) / cy), nj - 1)).astype(np.int64)
     np.testing.assert_array_equal(order, np.argsort(key, kind="stable"))
     np.testing.assert_array_equal(starts, np.searchsorted(key[order], np.arange(ni * nj + 1)))
+
+
+@njit(cache=False)
+def _grid_at(px, py, cx, cy, ext):
+    return K.grid_build_at(px, py, cx, cy, ext)
+
+
+@pytest.mark.parametrize("case", ["finite", "nan", "inf", "overflow", "one"])
+def test_predicted_extent_gives_grid_builds_own_grid(case):
+    """propagate_into's extent of the new positions (grid_shape's minima / maxima, in its
+    order) lets grid_build_at skip grid_shape's pass: the very grid, order and starts of
+    grid_build; a position not finite (or sums that overflow) marks the extent unknown, and
+    grid_build_at takes grid_build's own pass (the same refusal, the same grid)."""
+    rng = np.random.default_rng(5)
+    n = 1 if case == "one" else 3001
+    x = _states(rng, n, far=min(20, n))
+    if case == "nan":
+        x[n // 2, 0] = np.nan
+    elif case == "inf":
+        x[n - 1, 1] = np.inf
+    elif case == "overflow":
+        x[:, 1] = 1e308                              # finite, but their sum is not
+    out = np.empty((n + 7, 6))
+    lw_out = np.empty(n + 7)
+    ext = np.full(5, np.nan)
+    K.propagate_into(x, R.stream(9), 0.03, 0.1, 0.5, 1.0, out, np.zeros(n), -0.1, lw_out, ext)
+    px, py = out[:n, 0], out[:n, 1]
+    finite = case in ("finite", "one")
+    assert ext[4] == (1.0 if finite else 0.0)
+    if finite:
+        np.testing.assert_array_equal(ext[:4], [px.min(), py.min(), px.max(), py.max()])
+    for cell in (0.5, 7.0, 3e4):
+        want = K.grid_build(px, py, cell, 2.0 * cell)
+        got = _grid_at(px, py, cell, 2.0 * cell, ext)
+        assert got[0] == want[0] == (case != "nan" and case != "inf")
+        assert got[1:7] == want[1:7]
+        np.testing.assert_array_equal(got[7], want[7])
+        np.testing.assert_array_equal(got[8], want[8])
+        # (no extent: grid_build itself)
+        nothing = _grid_at(px, py, cell, 2.0 * cell, np.empty(0))
+        assert nothing[:7] == want[:7] or not want[0]
+
+
+def test_predict_leaves_its_positions_extent_for_the_scene_grid():
+    """predict into the filter's buffers records the extent of exactly its set's positions
+    (a set made otherwise has none: the scene model's grid makes its own)."""
+    from pfscope.trackers.phd import filter as F
+    rng = np.random.default_rng(3)
+    ps = ParticleSet(_states(rng, 900), np.full(900, -2.0))
+    buf = (np.empty((950, 6)), np.empty(950))
+    pred = F.predict(ps, F.MotionParams(), np.random.default_rng(1), buf)
+    ext = pred.__dict__[F._POS_EXT]
+    x = pred.states
+    assert x.base is buf[0] and len(x) == 900
+    np.testing.assert_array_equal(ext, [x[:, 0].min(), x[:, 1].min(), x[:, 0].max(),
+                                        x[:, 1].max(), 1.0])
+    assert F._POS_EXT not in F.predict(ps, F.MotionParams(), np.random.default_rng(1)).__dict__
 
 
 def test_grid_of_no_points_is_empty():

@@ -201,17 +201,29 @@ _CHUNK = 256
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
 def propagate_into(x, st, sigma_v, sigma_size, accel_to_position, min_size, out, lw, log_e,
-                   lw_out):
+                   lw_out, ext):
     """``out[:N]`` (N, 6) = f(x) with four normals ``ε`` per particle, particle i's normals
     4i … 4i + 3 of the key ``st[0]`` (:mod:`~trackers.smc.random`, pairs 2i and 2i + 1):
     ``a = σ_v (w, h) ε₀₁``, ``y += v + c a``, ``v += a``,
     ``(w, h) = max((w, h) + σ_s (w, h) ε₂₃, min_size)`` (:func:`~.motion.propagate`); with
     ``lw`` (N,) (else empty), also ``lw_out[:N] = lw + log_e`` in the same pass (the
-    prediction's survival factor, numpy's add).  The normals of ``_CHUNK`` particles at a time
-    are made in one vectorised loop, then used."""
+    prediction's survival factor, numpy's add).  With ``ext`` (5,) (else empty), also the new
+    positions' extent ``(x0, y0, x1, y1, finite)`` in the same pass -- :func:`grid_shape`'s
+    minima / maxima of ``out[:N, 0]``, ``out[:N, 1]`` (its rule, in its order: the same
+    floats) and 1.0 when each column's sum is finite (then every value is), else 0.0 (a value
+    not finite, or a sum that overflowed: :func:`grid_build_at` then takes grid_shape's own
+    pass) -- so :func:`grid_build_at` needs no pass of its own over them.  The normals of
+    ``_CHUNK`` particles at a time are made in one vectorised loop, then used."""
     key = st[0]
     n = x.shape[0]
     with_lw = lw.shape[0] == n
+    with_ext = ext.shape[0] >= 5
+    x0 = np.inf
+    y0 = np.inf
+    x1 = -np.inf
+    y1 = -np.inf
+    sx = 0.0
+    sy = 0.0
     eps = np.empty((4, _CHUNK))
     e0, e1, e2, e3 = eps[0], eps[1], eps[2], eps[3]
     for k0 in range(0, n, _CHUNK):
@@ -230,14 +242,29 @@ def propagate_into(x, st, sigma_v, sigma_size, accel_to_position, min_size, out,
             h = x[i, 5]
             a0 = sigma_v * w * e0[c]
             a1 = sigma_v * h * e1[c]
-            out[i, 0] = x[i, 0] + (x[i, 2] + accel_to_position * a0)
-            out[i, 1] = x[i, 1] + (x[i, 3] + accel_to_position * a1)
+            px = x[i, 0] + (x[i, 2] + accel_to_position * a0)
+            py = x[i, 1] + (x[i, 3] + accel_to_position * a1)
+            out[i, 0] = px
+            out[i, 1] = py
             out[i, 2] = x[i, 2] + a0
             out[i, 3] = x[i, 3] + a1
             nw = w + sigma_size * w * e2[c]
             nh = h + sigma_size * h * e3[c]
             out[i, 4] = nw if not nw < min_size else min_size
             out[i, 5] = nh if not nh < min_size else min_size
+            if with_ext:
+                x0 = px if px < x0 else x0     # grid_shape's rule and order
+                x1 = px if px > x1 else x1
+                y0 = py if py < y0 else y0
+                y1 = py if py > y1 else y1
+                sx += px                       # (NaN or inf stays: no branch a particle)
+                sy += py
+    if with_ext:
+        ext[0] = x0
+        ext[1] = y0
+        ext[2] = x1
+        ext[3] = y1
+        ext[4] = 1.0 if math.isfinite(sx) and math.isfinite(sy) else 0.0
 
 
 # ----------------------------------------------------------------------------- detections
@@ -304,6 +331,13 @@ def grid_shape(px, py, cell_x, cell_y):
         x1 = a if a > x1 else x1           # own rule (v if v < acc else acc): the same floats,
         y0 = b if b < y0 else y0           # and no builtin min/max overload to compile on a
         y1 = b if b > y1 else y1           # first run
+    return _grid_grow(n, x0, y0, x1, y1, cell_x, cell_y)
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
+def _grid_grow(n, x0, y0, x1, y1, cell_x, cell_y):
+    """:func:`grid_shape` after its pass: ``n`` finite points of extent ``(x0, y0, x1, y1)``."""
     if n == 0:
         return True, 0.0, 0.0, cell_x, cell_y, 0, 0
     max_cells = 4.0 * n + 64.0
@@ -388,7 +422,26 @@ def grid_build(px, py, cell_x, cell_y):
     so memory stays O(N) however far apart the points are.  ``ok`` is False when a coordinate
     is not finite (nothing else is valid then).  Where the cells are few beside the points,
     :func:`_bucket_four` sorts them (the same order and starts)."""
-    ok, x0, y0, cell_x, cell_y, ni, nj = grid_shape(px, py, cell_x, cell_y)
+    return _grid_fill(px, py, *grid_shape(px, py, cell_x, cell_y))
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
+def grid_build_at(px, py, cell_x, cell_y, ext):
+    """:func:`grid_build` where ``ext`` (5,) is the points' extent ``(x0, y0, x1, y1, finite)``
+    as :func:`propagate_into` made it (their minima / maxima by grid_shape's rule and order:
+    the same grid, order and starts without grid_shape's pass); ``ext`` empty or not known
+    finite (``ext[4]`` 0): grid_build."""
+    if ext.shape[0] < 5 or ext[4] == 0.0:
+        return grid_build(px, py, cell_x, cell_y)
+    return _grid_fill(px, py, *_grid_grow(px.shape[0], ext[0], ext[1], ext[2], ext[3],
+                                          cell_x, cell_y))
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
+def _grid_fill(px, py, ok, x0, y0, cell_x, cell_y, ni, nj):
+    """:func:`grid_build` after :func:`grid_shape` (its returns): the bucketing."""
     if not ok:
         return False, 0.0, 0.0, cell_x, cell_y, 0, 0, np.empty(0, np.int64), _zero_start()
     n = px.shape[0]
@@ -602,14 +655,22 @@ def mass_near_kernel(states, w, Z, std_z, r2, cell_x, cell_y):
     ``(x0, y0, cx, cy, ni, nj, order, starts)`` of :func:`grid_build` on the particles'
     positions (no cell when there is no particle or no detection), which the update reuses
     for the same particles (:func:`gauss_update_linear`)."""
+    return _mass_near_at(states, w, Z, std_z, r2, cell_x, cell_y, np.empty(0))
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
+def _mass_near_at(states, w, Z, std_z, r2, cell_x, cell_y, ext):
+    """:func:`mass_near_kernel` with the positions' extent ``ext`` (:func:`grid_build_at`;
+    empty: none known)."""
     nz = Z.shape[0]
     out = np.empty(nz, np.float64)
     for j in range(nz):
         out[j] = 0.0
     if states.shape[0] == 0 or nz == 0:
         return True, out, (0.0, 0.0, cell_x, cell_y, 0, 0, np.empty(0, np.int64), _zero_start())
-    ok, x0, y0, cx, cy, ni, nj, order, starts = grid_build(states[:, 0], states[:, 1],
-                                                           cell_x, cell_y)
+    ok, x0, y0, cx, cy, ni, nj, order, starts = grid_build_at(states[:, 0], states[:, 1],
+                                                              cell_x, cell_y, ext)
     grid = (x0, y0, cx, cy, ni, nj, order, starts)
     if not ok:
         return False, out, grid
@@ -825,7 +886,16 @@ def mass_near_two(states, w, Z, std_z, r2, cell_x, cell_y, std_wide, skip):
     particle index: the merged cells' runs merged by index), so the very floats of both calls
     -- without mass_near_skip's two passes over every particle.  Other wide cells (a cell
     of 1 where a median is not > 0, NaN stds): mass_near_skip itself."""
-    ok, out, grid = mass_near_kernel(states, w, Z, std_z, r2, cell_x, cell_y)
+    return mass_near_two_at(states, w, Z, std_z, r2, cell_x, cell_y, std_wide, skip,
+                            np.empty(0))
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
+def mass_near_two_at(states, w, Z, std_z, r2, cell_x, cell_y, std_wide, skip, ext):
+    """:func:`mass_near_two` with the positions' extent ``ext`` (:func:`grid_build_at`; empty:
+    none known): the same floats and grid."""
+    ok, out, grid = _mass_near_at(states, w, Z, std_z, r2, cell_x, cell_y, ext)
     if not ok:
         return 0, out, grid, out
     nz = Z.shape[0]

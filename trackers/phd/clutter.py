@@ -176,13 +176,15 @@ class PlaceClutter:
                                        self.lk)
         return math.log(share) - log_v
 
-    def _sums_of(self) -> tuple:
+    def _sums_of(self, r2: Optional[float] = None) -> tuple:
         """``(lk, r², S, exposure)`` of the memory as it is: each entry's ``S`` and
         :meth:`exposure`, kept along the memory by :meth:`learn` (:func:`_memory_step`),
         computed again (one grid pass, :func:`.gating.gate_sums`) when missing or when the
-        likelihood (the memory's stds) or the gate changed."""
+        likelihood (the memory's stds) or the gate changed.  ``r2``: the clutter gate's r²
+        when the caller has it."""
         F = _filter
-        r2 = F.gate_threshold(self.cl.clutter_gate, F.OBS_DIM)
+        if r2 is None:
+            r2 = F.gate_threshold(self.cl.clutter_gate, F.OBS_DIM)
         sums = self._sums
         if sums is None or sums[0] is not self.lk or sums[1] != r2:
             if sums is None or sums[0] is not self.lk or len(self.mem_s) != len(self.mem_z):
@@ -408,10 +410,12 @@ class NearClutter:
                 return
         self._exposure = float(predicted.mass)
 
-    def learn(self, near_share: np.ndarray, a: float, near_sum: Optional[float] = None) -> None:
+    def learn(self, near_share: Optional[np.ndarray], a: float,
+              near_sum: Optional[float] = None) -> None:
         """After the update: ``near_share`` (N_z,) the clutter share the EM gives to κ_n (none
         for a detection that continues a chain: :meth:`.filter.SceneModel.learn`);
-        ``near_sum``: ``np.sum(near_share)`` when the caller has it (:func:`learn_shares`)."""
+        ``near_sum``: ``np.sum(near_share)`` when the caller has it (:func:`learn_shares`;
+        ``near_share`` is not read then, and may be None)."""
         if near_sum is None:
             near_sum = float(np.sum(near_share))
         self.num = (1 - a) * self.num + a * near_sum
@@ -928,7 +932,7 @@ def _two_class_fit(S, floor):
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
 def scene_frame(states, w, Z, std, length, scores, par, m1, m2, extent, mem_z, mem_w, mem_e,
-                score_sums, persist_sums):
+                score_sums, persist_sums, pos_ext):
     """:meth:`.filter.SceneModel.log_kappa` of the ``learn`` / ``model`` mixture after the
     chains, in one call (what were ~8 kernel and numpy calls a frame): the wide stds ``std ·``
     :data:`NEAR_SCALE` (:meth:`NearClutter.wide_std_of`), ``chained`` / ``persist`` (the chain
@@ -939,7 +943,9 @@ def scene_frame(states, w, Z, std, length, scores, par, m1, m2, extent, mem_z, m
     :func:`._kernels.grid_cell`'s cells), :func:`_scene_terms` and, with ``par[P_RATIO]``, the
     score fit of ``score_sums`` (and ``persist_sums`` with ``par[P_USE_PSUMS]``) and its ratio
     ``clip(slope (s − mid), ±c)`` taken off the mixture (:meth:`.filter.SceneModel.
-    log_score_ratio`).  The same operations in the same order: the same floats.  Returns
+    log_score_ratio`).  ``pos_ext``: the particles' position extent as the prediction made
+    it (:func:`._kernels.propagate_into`; empty: none, the grid makes it).  The same
+    operations in the same order: the same floats.  Returns
     ``(code, near, wide, chained, persist, n_dup, m, grid, m_near, out, final)``: code 0
     non-finite particle positions (nothing after M(z) computed), 2 gate_sums' one-pass grid
     declined (``out`` holds the density only: the caller finishes), 1 done; ``out`` (7, N_z) as
@@ -962,8 +968,8 @@ def scene_frame(states, w, Z, std, length, scores, par, m1, m2, extent, mem_z, m
     a = par[P_A_NEAR]
     near = (1 - a) * par[P_NEAR] + a * (tot / nz)
     cell = _kernels.grid_cell(std, r2)
-    code, m, grid, m_near = _kernels.mass_near_two(states, w, Z, std, r2, cell[0], cell[1],
-                                                   wide, chained)
+    code, m, grid, m_near = _kernels.mass_near_two_at(states, w, Z, std, r2, cell[0], cell[1],
+                                                      wide, chained, pos_ext)
     out = np.empty((7, nz))
     final = np.empty(nz)
     if not code:

@@ -605,8 +605,14 @@ class SceneModel:
         #: :func:`.clutter.scene_frame`'s scalars (written each frame), the clutter gate's
         #: log volume of unit stds with the settings it is for
         self._par = np.zeros(N_SCENE_PAR)
-        self._lv0: Optional[tuple] = None
+        self._fset: Optional[tuple] = None     # (_fused_settings)
+        #: _weights_exposure's two exps, and the one weight as a read-only view of them
+        b = np.empty(2)
+        v = b[:1]
+        v.setflags(write=False)         # (the weights property's type: one specialisation)
+        self._wexp = (b, v)
         self._lpar = np.zeros(_N_L)
+        self._lset: Optional[tuple] = None     # (cl, r2, dup r2) _lpar's settings' scalars are of
 
     def set_likelihood(self, lk: LikelihoodParams) -> None:
         """New observation-noise widths for the clutter volumes (PHDFilter.set_params)."""
@@ -632,6 +638,11 @@ class SceneModel:
     def _image_area(self, frame: Optional[Frame]) -> float:
         """The frame's pixel area when it has an image, else 0 (the density takes the area of
         the detections' extent then: :func:`.clutter.scene_density`)."""
+        if type(frame) is Frame:
+            im = frame.image
+            if type(im) is np.ndarray:       # (frame.width * frame.height: its shape's)
+                sh = im.shape
+                return float(int(sh[1]) * int(sh[0])) if len(sh) >= 2 and im.size else 0.0
         im = None if frame is None else getattr(frame, "image", None)
         if im is not None and (im.ndim if isinstance(im, np.ndarray) else np.ndim(im)) >= 2 \
                 and im.size:
@@ -744,17 +755,17 @@ class SceneModel:
         predicted particles: the same floats and the same state after it as the calls one by
         one (the reference, ``fused`` False).  None (nothing done) elsewhere."""
         cl = self.cl
+        fs = self._fset
+        if fs is None or fs[0] is not cl or fs[1] is not self.sp:
+            fs = self._fset = self._fused_settings()
         nz = len(Z)
-        if not (cl.learn_update == "model" and cl.near_learn and nz >= 1
-                and nz * nz < BRUTE_PAIRS and cl.duplicate_prior > 0
+        if not (fs[2] and nz >= 1 and nz * nz < BRUTE_PAIRS
                 and predicted is not None and len(predicted)
                 and type(Z) is np.ndarray and Z.dtype == np.float64 and Z.ndim == 2
                 and Z.shape[1] == OBS_DIM and Z.flags.c_contiguous
                 and len(self.chains.length) == nz):
             return None
-        r2 = gate_threshold(cl.clutter_gate, OBS_DIM)
-        if r2 != self._birth_r2:
-            return None
+        r2 = fs[3]
         if std is None:
             std = obs_std(Z[:, 2:4], self.lk)
         if not (type(std) is np.ndarray and std.dtype == np.float64 and std.flags.c_contiguous):
@@ -769,37 +780,29 @@ class SceneModel:
         place.cl = people.cl = dups.cl = cl
         if self.extent is None:
             self.extent = _no_extent()
-        w, exposure = _weights_exposure(predicted)
+        w, exposure = _weights_exposure(predicted, self._wexp)
         people.record(predicted, exposure)
         # scene_frame's scalars, written into this model's own array (the same floats as
-        # np.array of them; the gate's log volume kept for these settings)
+        # np.array of them; those of the settings alone written by _fused_settings)
         par = self._par
-        lv0 = self._lv0
-        if lv0 is None or lv0[0] is not cl:
-            lv0 = self._lv0 = (cl, log_gate_volume0(cl))
-        par[P_R2] = r2
         par[P_A_NEAR] = 1.0 / min(self.frames + 5, cl.clutter_memory)
         par[P_NEAR] = self.near
         par[P_A] = 1.0 / min(self.size_frames + 1, cl.clutter_memory)
-        par[P_SEE] = 1.0
         par[P_LOG_RATE] = math.log(self.rate) if self.rate > 0 else -math.inf
         par[P_AREA] = self._image_area(frame)
-        par[P_LOG_V0] = lv0[1]
-        par[P_FLOOR] = self._LOG_SIZE_FLOOR
         par[P_N0_BETA] = PRIOR_FRAMES * place.beta
         par[P_NU] = people.nu
         par[P_Q] = dups.q
         par[P_RATIO] = 1.0 if ratio else 0.0
         par[P_SCORE_FLOOR] = self.score_floor
         par[P_USE_PSUMS] = 0.0 if self.persist_sums is None else 1.0
-        par[P_CLIP] = self.sp.max_log_ratio
-        par[P_PERSIST] = self.sp.persist_frames
         ss = self.score_sums if ratio else _NO_SUMS
         code, near, wide, chained, persist_now, n_dup, m, grid, m_near, out, final = scene_frame(
             predicted.states, w, Z, std, self.chains.length,
             scores if ratio else _NO_SCORES, par, self.size_m1, self.size_m2, self.extent,
             place.mem_z, place.mem_w, place.mem_e, ss,
-            self.persist_sums if ratio and self.persist_sums is not None else ss)
+            self.persist_sums if ratio and self.persist_sums is not None else ss,
+            predicted.__dict__.get(_POS_EXT, _NO_EXT))
         if not code:
             raise ValueError("mass_near: non-finite particle positions")
         self.near = near
@@ -823,6 +826,25 @@ class SceneModel:
             self._persist = persist_now
         birth = out[6] if cl.spot_places else shadow
         return birth, (final if ratio else shadow)
+
+    def _fused_settings(self) -> tuple:
+        """``(cl, sp, ok, r2)`` of this model's settings (kept while they are the same objects:
+        :meth:`_log_kappa_fused`): ``ok`` whether they are the fused path's (``learn_update``
+        'model', ``near_learn``, the duplicate term on, the birth gate the clutter gate), r2
+        the clutter gate's; writes :func:`.clutter.scene_frame`'s scalars of the settings
+        alone into ``_par``."""
+        cl, sp = self.cl, self.sp
+        r2 = gate_threshold(cl.clutter_gate, OBS_DIM)
+        ok = (cl.learn_update == "model" and bool(cl.near_learn) and cl.duplicate_prior > 0
+              and r2 == self._birth_r2)
+        par = self._par
+        par[P_R2] = r2
+        par[P_SEE] = 1.0
+        par[P_LOG_V0] = log_gate_volume0(cl)
+        par[P_FLOOR] = self._LOG_SIZE_FLOOR
+        par[P_CLIP] = sp.max_log_ratio
+        par[P_PERSIST] = sp.persist_frames
+        return cl, sp, ok, r2
 
     def _near_mass(self, Z: np.ndarray, predicted: Optional[ParticleSet], std: np.ndarray,
                    std_wide: Optional[np.ndarray]) -> Optional[np.ndarray]:
@@ -974,18 +996,23 @@ class SceneModel:
         prev_link, chain_c = self.chains.prev_link, self._chain_clutter
         use_chain = (spot and prev_link is not None and chain_c is not None
                      and len(prev_link) == nz and len(chain_c) > 0)
-        lk, r2, S, exposure = place._sums_of()
+        fs = self._fset
+        lk, r2, S, exposure = place._sums_of(fs[3] if fs is not None and fs[0] is cl else None)
         a = 1.0 / min(self.frames + 5, cl.clutter_memory)
         par = self._lpar                    # (scene_learn's scalars, as _log_kappa_fused's)
-        par[_L_FADE] = place.fade
-        par[_L_MIN_W] = MIN_WEIGHT
-        par[_L_R2] = r2
-        par[_L_BUDGET] = INCREMENT_PAIRS
+        lset = self._lset
+        if lset is None or lset[0] is not cl or lset[1] != r2 or lset[2] != r2_dup:
+            # those of the settings alone: written again when they change
+            par[_L_FADE] = place.fade
+            par[_L_MIN_W] = MIN_WEIGHT
+            par[_L_R2] = r2
+            par[_L_BUDGET] = INCREMENT_PAIRS
+            par[_L_DUP_R2] = r2_dup
+            par[_L_D] = 1.0 - 1.0 / cl.clutter_memory
+            self._lset = (cl, r2, r2_dup)
         par[_L_DUP] = 0.0 if dups._pairs is None else 1.0
-        par[_L_DUP_R2] = r2_dup
         par[_L_SCORES] = 1.0 if use_s else 0.0
         par[_L_PERSIST] = 1.0 if use_p else 0.0
-        par[_L_D] = 1.0 - 1.0 / cl.clutter_memory
         sh, ssum, mem, num, den = scene_learn(
             won, out, prev_link if use_chain else _NO_I, chain_c if use_chain else _NO_F,
             place.mem_z, place.mem_s, place.mem_w, place.mem_e, S, Z, std, wide, n_dup, s,
@@ -997,7 +1024,7 @@ class SceneModel:
             self._chain_clutter = sh[4]
         place.em_step(a, float(ssum[1]), exposure)
         place.keep_memory(lk, r2, mem)
-        people.learn(sh[3], a, float(ssum[2]))
+        people.learn(None, a, float(ssum[2]))       # (the near shares' sum is all it reads)
         dups.em_step(a, num, den)
         self._parts = None
         self.frames += 1
@@ -1015,16 +1042,25 @@ def _weights_of(ps: ParticleSet) -> np.ndarray:
     return ps.weights
 
 
-def _weights_exposure(ps: ParticleSet) -> tuple:
+def _weights_exposure(ps: ParticleSet, buf: Optional[tuple] = None) -> tuple:
     """``(_weights_of(ps), exposure)``: where the set's weights are known equal and neither
     they nor its mass are made yet, their one value and :meth:`.clutter.NearClutter.record`'s
     exposure (the set's mass) from ONE np.exp of the two arguments ``(lw_0, log n + lw_0)``
     (numpy's exp of an element does not depend on its neighbours or the array's length: the
-    two calls' floats); else ``(_weights_of(ps), None)`` (record computes the exposure)."""
+    two calls' floats); else ``(_weights_of(ps), None)`` (record computes the exposure).
+    ``buf``: ``(b, v)``, a (2,) float64 array and a read-only view of its first element,
+    which the one value and the exposure are written into (``np.exp(b, b)``: the same floats,
+    no arrays made), the caller's to keep until the next call."""
     n = len(ps)
     if n > 1 and not ps.made("weights", "mass", "log_mass") and ps.is_known_equal():
         lw0 = float(ps.log_weights[0])
         if math.isfinite(lw0):
+            if buf is not None:
+                b = buf[0]
+                b[0] = lw0
+                b[1] = _log_count(n) + lw0
+                np.exp(b, b)
+                return buf[1], float(b[1])
             e = np.exp(np.array((lw0, _log_count(n) + lw0)))
             w = e[:1]
             w.setflags(write=False)         # (the property's type: one specialisation)
@@ -1035,6 +1071,7 @@ def _weights_exposure(ps: ParticleSet) -> tuple:
 _NO_PERSIST = np.zeros(0, dtype=np.bool_)
 _NO_SUMS = np.zeros((2, 3))
 _NO_SCORES = np.zeros(0)
+_NO_EXT = np.zeros(0)
 
 
 def _no_extent() -> np.ndarray:
@@ -1111,6 +1148,13 @@ def scene_learn(won, parts, prev_link, chain_clutter, mem_z, mem_s, mem_w, mem_e
 
 # ----------------------------------------------------------------------------- the four stages
 
+#: the key under which :func:`predict` leaves, in the predicted set's dict, its positions'
+#: extent ``(x0, y0, x1, y1, finite)`` (:func:`._kernels.propagate_into`) for the scene model's
+#: grid (:meth:`SceneModel._log_kappa_fused`); a set made otherwise has none (its arrays are
+#: never changed in place: the extent stays the set's)
+_POS_EXT = "_pos_extent"
+
+
 def predict(ps: ParticleSet, mp: MotionParams, rng: np.random.Generator,
             out: Optional[tuple[np.ndarray, np.ndarray]] = None) -> ParticleSet:
     """Persistent particles at k: ``x ~ f(.|x_{k-1})`` (q = f, so eq. (4) reduces to the
@@ -1128,10 +1172,16 @@ def predict(ps: ParticleSet, mp: MotionParams, rng: np.random.Generator,
             and S.shape[1] == STATE_DIM:
         # the filter's buffers (PHDFilter.step): motion.propagate's kernel call without its
         # checks and views (the same call: every argument of the same type)
+        # (and the new positions' extent: the scene model's grid skips its own pass, _POS_EXT)
+        ext = np.empty(5)
         _kernels.propagate_into(x, stream(key_from(rng)), float(mp.sigma_v),
                                 float(mp.sigma_size), float(mp.accel_to_position),
-                                float(mp.min_size), S, lw0, float(log_e), L)
-        states, lw = S[:n], L[:n]
+                                float(mp.min_size), S, lw0, float(log_e), L, ext)
+        out = ParticleSet(S[:n], L[:n], ps.labels, ps.extra)
+        out.__dict__[_POS_EXT] = ext
+        if ps.is_known_equal():
+            out.known_equal()
+        return out
     elif n and type(lw0) is np.ndarray and lw0.dtype == np.float64 and L.dtype == np.float64:
         # ω · e written by the motion kernel's pass (numpy's add, the same floats)
         states = motion.propagate(ps.states, rng, sigma_v=mp.sigma_v, sigma_size=mp.sigma_size,

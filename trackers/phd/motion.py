@@ -67,7 +67,7 @@ def propagate(states: np.ndarray, rng: np.random.Generator, *, sigma_v: float = 
                          f"{n} states")
     propagate_into(x, stream(key_from(rng)), float(sigma_v), float(sigma_size),
                    float(accel_to_position), float(min_size), out, log_weights, float(log_e),
-                   lw_out)
+                   lw_out, _NO_LW)
     return out
 
 
