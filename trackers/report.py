@@ -279,8 +279,10 @@ class StageLog:
     of code and objects when the step's caches are cold).  Every check is made in the call
     (a wrong stage, an item that is not one, raises there)."""
 
+    __slots__ = ("declared", "_rank", "_flat", "_name", "_pos", "_where")
+
     def __init__(self, stages: Sequence[str], level: Optional[str] = None):
-        self.declared = tuple(stages)
+        self.declared = stages if type(stages) is tuple else tuple(stages)
         self._rank = -1 if level is None else level_rank(level)
         self._flat: list = []
         self._name: Optional[str] = None
@@ -292,6 +294,12 @@ class StageLog:
             where = _WHERE[self.declared] = {n: i for i, n in reversed(list(enumerate(
                 self.declared)))}
         self._where = where
+
+    @property
+    def recorded(self) -> bool:
+        """False at ``level=None``: nothing but scalars and events is wanted (``wants`` is
+        False for every level)."""
+        return self._rank >= 0
 
     def wants(self, level: str) -> bool:
         """Should an item of ``level`` be built?"""
