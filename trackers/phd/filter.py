@@ -1885,7 +1885,8 @@ class PHDFilter:
         fused = prev.labels is None and prev.extra is None
         buf = None
         if fused:
-            cap = n + max_births(len(Z), p.birth)
+            bp = p.birth                # (max_births, inline)
+            cap = n + min(len(Z) * bp.j_max, bp.max_births_per_frame)
             buf = (np.empty((cap, STATE_DIM)), np.empty(cap))
         predicted = predict(prev, p.motion, self.rng, buf)
         # the scene model's stds are these when it has the filter's likelihood (set_params)

@@ -134,7 +134,7 @@ class ParticleSet:
                    np.zeros((0, n_extra)) if n_extra else None)
 
     def __len__(self) -> int:
-        return int(self.states.shape[0])     # as many log-weights (checked when made)
+        return self.states.shape[0]          # as many log-weights (checked when made)
 
     @property
     def dim(self) -> int:
