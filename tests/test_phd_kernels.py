@@ -31,6 +31,17 @@ from pfscope.trackers.smc import random as R
 from pfscope.trackers.smc.resampling import _systematic_index, _systematic_take
 
 _NO_F = np.zeros(0, np.float64)
+_NO_LOGS = np.zeros((0, 4), np.float64)
+
+
+def _birth_consts(j_max, complement, cap, lk, spread, speed_mean, speed_std, min_size, lw_c):
+    """:func:`K.birth_alloc_fill`'s settings array (read-only, as the filter makes it)."""
+    c = np.array([j_max, 1.0 if complement else 0.0, cap, lk.sigma_obs, lk.sigma_obs_min,
+                  lk.sigma_obs_pos_ratio, spread, speed_mean, speed_std, min_size, *lw_c],
+                 dtype=np.float64)
+    assert K.BIRTH_LW_C == 10
+    c.setflags(write=False)
+    return c
 
 OBS = [0, 1, 4, 5]
 
@@ -240,11 +251,10 @@ def test_birth_alloc_fill_is_numpys_allocation_and_birth_fill(seed):
         n_max = min(nz * j_max, cap)
         states, log_w = np.full((n_max + 5, 6), np.nan), np.full(n_max + 5, np.nan)
         det = np.full(n_max + 5, -1, np.int64)
-        j, n = K.birth_alloc_fill(m_near, j_max, complement, cap, lw_base, 0, _NO_F, _NO_F,
+        c = _birth_consts(j_max, complement, cap, lk, 1.3, 0.05, 0.1, 4.0, _NO_F)
+        j, n = K.birth_alloc_fill(m_near, c, lw_base, 0, _NO_LOGS,
                                   revive if rev else np.zeros(0, np.bool_), 0.7, Z,
-                                  R.stream(11), lk.sigma_obs, lk.sigma_obs_min,
-                                  lk.sigma_obs_pos_ratio, 1.3, 0.05, 0.1, 4.0, states, log_w,
-                                  det)
+                                  R.stream(11), states, log_w, det)
         np.testing.assert_array_equal(j, j_np)
         assert n == j_np.sum() <= n_max
         want, want_lw, want_det = _birth(Z, j_np, lw_np, 11)
@@ -263,11 +273,10 @@ def test_birth_alloc_fill_is_numpys_allocation_and_birth_fill(seed):
         states, log_w = np.full((rows, 6), np.nan), np.full(rows, np.nan)
         det = np.full(rows, -1, np.int64)
         with np.errstate(invalid="ignore"):
-            _, n = K.birth_alloc_fill(m, 1000, True, 50_000, lw_base, 0, _NO_F, _NO_F,
-                                      np.zeros(0, np.bool_),
-                                      0.0, Z, R.stream(11), lk.sigma_obs, lk.sigma_obs_min,
-                                      lk.sigma_obs_pos_ratio, 1.3, 0.05, 0.1, 4.0, states,
-                                      log_w, det)
+            _, n = K.birth_alloc_fill(m, _birth_consts(1000, True, 50_000, lk, 1.3, 0.05, 0.1,
+                                                       4.0, _NO_F),
+                                      lw_base, 0, _NO_LOGS, np.zeros(0, np.bool_), 0.0, Z,
+                                      R.stream(11), states, log_w, det)
         assert n == -1 and np.isnan(states).all() and (det == -1).all()
 
 
@@ -285,26 +294,54 @@ def test_birth_alloc_fill_makes_log_birth_weights_bit_for_bit(odds):
         Z = np.c_[rng.uniform(0, 600, nz), rng.uniform(0, 400, nz),
                   rng.uniform(0.5, 90, nz), rng.uniform(0.5, 200, nz)]
         std, log_norm = detection_noise(Z, lk)
+        log_std = np.log(std)                # (what the kernel takes: it sums each row)
         log_kappa = rng.normal(-14, 3, nz)
         m_near = rng.uniform(0, 1.2, nz)
         lw_base, mode, c = _birth_weight_terms(params, log_kappa)
         assert mode == (2 if odds > 0 else 1)
         states, log_w = np.empty((nz * 50, 6)), np.empty(nz * 50)
         det = np.empty(nz * 50, np.int64)
-        j, n = K.birth_alloc_fill(m_near, 50, True, 50_000, lw_base, mode, log_norm, c,
-                                  np.zeros(0, np.bool_), 0.0, Z, R.stream(3), lk.sigma_obs,
-                                  lk.sigma_obs_min, lk.sigma_obs_pos_ratio, 1.3, 0.0, 0.1,
-                                  1.0, states, log_w, det)
+        j, n = K.birth_alloc_fill(m_near, _birth_consts(50, True, 50_000, lk, 1.3, 0.0, 0.1,
+                                                        1.0, c),
+                                  lw_base, mode, log_std, np.zeros(0, np.bool_), 0.0, Z,
+                                  R.stream(3), states, log_w, det)
+        # the filter's own constants array: these settings, the same lw_c
+        lw_base2, mode2, c2 = _birth_weight_terms(params, log_kappa, True)
+        assert mode2 == mode and lw_base2 is lw_base
+        np.testing.assert_array_equal(c2[K.BIRTH_LW_C:], c)
+        np.testing.assert_array_equal(c2[:K.BIRTH_LW_C], [
+            params.birth.j_max, 1.0, params.birth.max_births_per_frame, lk.sigma_obs,
+            lk.sigma_obs_min, lk.sigma_obs_pos_ratio, params.birth.birth_spread,
+            params.birth.birth_speed_mean, params.birth.birth_speed_std,
+            params.motion.min_size])
+        assert _birth_weight_terms(params, log_kappa, True)[2] is c2      # made once
         want = log_birth_weight(Z, params, log_kappa, log_norm)
         want = np.repeat(want - np.array([libm.log(float(max(v, 1))) for v in j]), j)
         assert n == j.sum()
         np.testing.assert_array_equal(log_w[:n].view(np.int64), want.view(np.int64))
 
 
+@njit(cache=False)
+def _log_norms(log_std):
+    return K._log_norms(log_std)
+
+
+def test_log_norms_is_numpys_row_sum():
+    """The kernels' Σ log σ per row is numpy's ``log(std).sum(-1)`` bit for bit, over
+    magnitudes where the order of the three adds shows (one row and many)."""
+    rng = np.random.default_rng(8)
+    for n in (1, 3, 17, 400):
+        for _ in range(20):
+            logs = np.log(rng.uniform(0.5, 50.0, (n, 4)) * rng.choice([1e-3, 1.0, 1e3], (n, 4)))
+            np.testing.assert_array_equal(_log_norms(logs).view(np.int64),
+                                          logs.sum(-1).view(np.int64))
+
+
 def test_observation_noise_is_obs_std_and_as_observations_checks():
     """The detections' one-pass kernel: obs_std's stds bit for bit (sizes on both sides of the
     σ floor, ties with it) and as_observations' verdict (finite first, then sizes > 0), and
-    observations_noise = as_observations + detection_noise, errors included."""
+    observations_noise = as_observations + (obs_std, numpy's log of it), errors included,
+    whose rows the kernels sum as detection_noise's Σ log σ (numpy's sum, bit for bit)."""
     rng = np.random.default_rng(5)
     lk = LikelihoodParams()
     for _ in range(200):
@@ -316,10 +353,14 @@ def test_observation_noise_is_obs_std_and_as_observations_checks():
                                         lk.sigma_obs_pos_ratio)
         assert code == 0
         np.testing.assert_array_equal(std, obs_std(Z[:, 2:4], lk))
-        z2, (s2, ln2) = observations_noise(Z, lk)
+        z2, (s2, logs2) = observations_noise(Z, lk)
         s1, ln1 = detection_noise(as_observations(Z), lk)
         np.testing.assert_array_equal(s2, s1)
-        np.testing.assert_array_equal(ln2.view(np.int64), ln1.view(np.int64))
+        np.testing.assert_array_equal(logs2.view(np.int64), np.log(s1).view(np.int64))
+        np.testing.assert_array_equal(_log_norms(logs2).view(np.int64), ln1.view(np.int64))
+        z3, (s3, logs3) = observations_noise(list(map(list, Z)), lk)    # the numpy route
+        np.testing.assert_array_equal(s3, s1)
+        np.testing.assert_array_equal(logs3.view(np.int64), logs2.view(np.int64))
         bad = Z.copy()
         if rng.random() < 0.5:            # a size <= 0 too: the non-finite value wins
             bad[int(rng.integers(nz)), 2 + int(rng.integers(2))] = 0.0
@@ -712,7 +753,7 @@ def test_updated_log_weights_made_on_read_are_the_kernels(p_miss):
     log_pm = np.log(p_miss) if p_miss > 0 else -np.inf
     log_pd = np.log1p(-p_miss) if p_miss < 1 else -np.inf
     cell = 2 * np.sqrt(r2) * np.median(std[:, :2], axis=0)
-    ok, want, *_ = K.gauss_update(x, lw, Z, std, np.log(std).sum(-1), True, log_kappa, log_pd,
+    ok, want, *_ = K.gauss_update(x, lw, Z, std, np.log(std), True, log_kappa, log_pd,
                                   log_pm, r2, cell[0], cell[1])
     assert ok
     np.testing.assert_array_equal(got.particles.log_weights, want)
@@ -788,20 +829,20 @@ def test_update_on_the_birth_grid_and_newborn_blocks_is_the_one_grid_update(seed
 
 @pytest.mark.parametrize("p_miss", [0.05, 1.0])
 def test_update_kernels_log_den_is_numpys_logaddexp(p_miss):
-    """The linear update's log(κ + C) per detection is ``np.logaddexp(log κ, log C)`` with
-    numpy's ``where(isfinite, ., 0)``, bit for bit: κ below, equal to and above C, C = 0 (a
-    detection far from every particle, or p_D = 0), κ = 0 (log κ = -inf, alone and with
-    C = 0), and an infinite κ."""
+    """The linear update's share per detection is ``log C − log(κ + C)`` with log(κ + C)
+    ``np.logaddexp(log κ, log C)`` and numpy's ``where(isfinite, ., 0)``, bit for bit: κ
+    below, equal to and above C, C = 0 (a detection far from every particle, or p_D = 0),
+    κ = 0 (log κ = -inf, alone and with C = 0), and an infinite κ."""
     rng = np.random.default_rng(4)
     x = _states(rng, 800, far=10)
     Z = _dets_near(rng, x, 12)
     Z[3, :2] += 1e5                                    # no particle in its gate: C = 0
     Z[4, :2] -= 1e5
-    std, log_norm = detection_noise(Z, LikelihoodParams())
+    std, _ = detection_noise(Z, LikelihoodParams())
     lw = np.full(len(x), -7.0)
     log_pd = np.log1p(-p_miss) if p_miss < 1 else -np.inf
     log_pm = np.log(p_miss)
-    args = (x, lw, Z, std, log_norm)
+    args = (x, lw, Z, std, np.log(std))
     first = K.gauss_update_linear(*args, rng.normal(-14, 1, len(Z)), log_pd, log_pm,
                                   tail_radius2(1e-12), 30.0, 30.0, len(x), _NO_GRID,
                                   np.empty(0, np.int64), False)
@@ -811,14 +852,14 @@ def test_update_kernels_log_den_is_numpys_logaddexp(p_miss):
     log_kappa[[7, 4]] = -np.inf                        # κ = 0, with C > 0 and with C = 0
     log_kappa[8] = np.inf
     log_kappa[3] = -13.5
-    ok, done, *_, den = K.gauss_update_linear(*args, log_kappa, log_pd, log_pm,
-                                              tail_radius2(1e-12), 30.0, 30.0, len(x),
-                                              _NO_GRID, np.empty(0, np.int64), False)
+    ok, done, *_, share = K.gauss_update_linear(*args, log_kappa, log_pd, log_pm,
+                                                tail_radius2(1e-12), 30.0, 30.0, len(x),
+                                                _NO_GRID, np.empty(0, np.int64), False)
     assert ok and done
     got_c = _[1]
     want = np.logaddexp(log_kappa, got_c)
     want = np.where(np.isfinite(want), want, 0.0)
-    np.testing.assert_array_equal(den.view(np.int64), want.view(np.int64))
+    np.testing.assert_array_equal(share.view(np.int64), (got_c - want).view(np.int64))
     assert np.isfinite(got_c[[5, 6, 7, 9, 10, 11]]).all() == (p_miss < 1)
     assert got_c[3] == got_c[4] == -np.inf
 

@@ -110,6 +110,71 @@ def test_stage_log_enforces_the_declared_order():
         Mask("m", np.full((2, 2), 2), classes=("bg", "fg"))
 
 
+def test_level_none_log_makes_the_same_stages_when_read():
+    """A level-None log records the frame and StepResult makes the Stage tuple on the first
+    read of ``stages``: the very stages a log at a level makes of the same calls (scalars,
+    events, an empty stage); the checks still raise in the call."""
+    from pfscope.trackers.report import Event, PendingStages, Scalar, Stage
+
+    def fill(log):
+        log.stage("a")
+        log.scalar("x", 3)
+        log.event("e", "hello", "DEBUG")
+        log.stage("b")
+        log.stage("c")
+        log.scalar("y", np.float32(0.5))
+        log.scalar("z", 2.25)
+
+    lazy, eager = StageLog(("a", "b", "c"), None), StageLog(("a", "b", "c"), "tracks")
+    fill(lazy)
+    fill(eager)
+    pending, want = lazy.result(), eager.result()
+    assert isinstance(pending, PendingStages) and type(want) is tuple
+    res = StepResult(TrackSet.empty(), [], pending)
+    assert "stages" not in res.__dict__                 # nothing made yet
+    assert type(res.stages) is tuple and res.stages == want and res.stages is res.stages
+    assert want == (Stage("a", (Scalar("x", 3.0), Event("e", "hello", "DEBUG"))),
+                    Stage("b"), Stage("c", (Scalar("y", 0.5), Scalar("z", 2.25))))
+    assert pending == want and list(pending) == list(want) and len(pending) == 3
+    assert StepResult(TrackSet.empty()).stages == () and StepResult(TrackSet.empty()).rows == []
+    log = StageLog(("a", "b"), None)
+    with pytest.raises(ValueError, match="before any stage"):
+        log.scalar("x", 1.0)
+    log.stage("b")
+    with pytest.raises(ValueError, match="order"):
+        log.stage("a")
+    with pytest.raises(TypeError, match="not a report item"):
+        log.add("text")
+    with pytest.raises(ValueError, match="severity"):
+        log.event("e", "m", "LOUD")
+
+
+def test_phd_level_none_stages_are_the_levels_scalars_and_events():
+    """PHD-MT at level None (a run's pipeline: stages made only if read) reports the same
+    scalars and events frame by frame as at level 'tracks'."""
+    from pfscope.trackers.report import Event, Scalar
+
+    got = {}
+    for level in (None, "tracks"):
+        seen = []
+
+        class Keep(BaseHook):
+            def on_frame(self, report):
+                res = report.results["phd"]
+                assert ("stages" in res.__dict__) == (level is not None)
+                seen.append([(st.name, [(type(i).__name__, i.path, getattr(i, "value", None),
+                                         getattr(i, "message", None)) for i in st.items
+                                        if isinstance(i, (Scalar, Event))])
+                             for st in res.stages])
+
+        run(_scene(20), {"phd": make_tracker("phd", 0, preset="practical")}, level=level,
+            hooks=[Keep()], keep_rows=False, score=False)
+        got[level] = seen
+    assert got[None] == got["tracks"]
+    flat = [i for frame in got[None] for _, items in frame for i in items]
+    assert any(k == "Event" for k, *_ in flat) and sum(k == "Scalar" for k, *_ in flat) > 80
+
+
 # ----------------------------------------------------------------------------- a tracker that needs
 # the image and no detections, with its own stages and every new vocabulary item
 

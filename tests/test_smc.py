@@ -228,6 +228,28 @@ def test_lazy_particle_set_makes_its_log_weights_once_and_only_when_read():
         _ = LazyParticleSet(x, lambda: lw[:7]).log_weights
 
 
+def test_unchecked_sets_are_the_checked_ones():
+    """ParticleSet.unchecked and LazyParticleSet.unchecked / its keywords (what a filter makes
+    of its own arrays) hold what the constructor and the known_* records hold."""
+    rng = np.random.default_rng(3)
+    x, lw = rng.normal(size=(50, 6)), rng.normal(-5, 1, 50)
+    a, b = ParticleSet(x, lw), ParticleSet.unchecked(x, lw)
+    assert type(b) is ParticleSet and a.__dict__ == b.__dict__ and b.mass == a.mass
+    w = np.exp(lw - lw.max())
+    lm = float(logsumexp(lw))
+    want = LazyParticleSet(x, lambda: lw)
+    want.known_normalised(w, 1.0 / w.sum())
+    want.known_log_mass(lm)
+    for got in (LazyParticleSet.unchecked(x, lambda: lw, lm, (w, 1.0 / w.sum())),
+                LazyParticleSet(x, lambda: lw, log_mass=lm, normalised=(w, 1.0 / w.sum()))):
+        assert type(got) is LazyParticleSet and got.labels is None and got.extra is None
+        assert got.log_mass == want.log_mass and got.normalised == want.normalised
+        assert got.mass == want.mass and got.states is x
+        np.testing.assert_array_equal(got.log_weights, lw)
+    bare = LazyParticleSet.unchecked(x, lambda: lw, lm)
+    assert bare.normalised is None and bare.log_mass == lm
+
+
 def test_weights_of_equal_log_weights_are_numpys_exps():
     """The equal-weight shortcut of ParticleSet.weights (one exp) gives np.exp's floats;
     resampling and a PHD prediction of its output record the equality, a set with one weight

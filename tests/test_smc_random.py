@@ -97,6 +97,17 @@ def test_key_from_follows_the_generator():
     assert R.key_from(g) != R.key_from(g)
 
 
+def test_key_stream_is_stream_of_key_from():
+    """key_stream(rng): the word stream(key_from(rng)) makes, as the same uint64 (1,) array,
+    and it advances the generator as key_from does."""
+    a, b = np.random.default_rng(3), np.random.default_rng(3)
+    for _ in range(20):
+        want, got = R.stream(R.key_from(a)), R.key_stream(b)
+        assert got.dtype == want.dtype == np.uint64 and got.shape == want.shape == (1,)
+        assert got[0] == want[0]
+    assert a.random() == b.random()
+
+
 def test_direction_is_uniform_on_the_circle():
     n = 400_000
     c, s = np.empty(n), np.empty(n)

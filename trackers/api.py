@@ -25,14 +25,14 @@ import numpy as np
 
 from .errors import did_you_mean
 from .params import describe, to_dict, with_options
-from .report import Stage
+from .report import PendingStages, Stage
 from .types import Detections, Frame, TrackSet
 
 #: Rows for the tracks file: ``(frame index, TrackSet)``, final (never revised).
 Rows = list[tuple[int, TrackSet]]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, init=False)
 class StepResult:
     """What one :meth:`Tracker.step` returns.
 
@@ -40,12 +40,35 @@ class StepResult:
     rows: rows final for the tracks file, possibly of earlier frames (a tracker that confirms
         tracks with a bounded lag reports a track from its first frame once confirmed).
     stages: the frame's stage data, in the order of the tracker's ``stages``
-        (:mod:`pfscope.trackers.report`).
+        (:mod:`pfscope.trackers.report`).  Given a :class:`~.report.PendingStages` (what a
+        level-None :class:`~.report.StageLog` returns), the tuple is made on first read.
     """
 
     tracks: TrackSet
-    rows: Rows = field(default_factory=list)
-    stages: tuple[Stage, ...] = ()
+    rows: Rows
+    stages: tuple[Stage, ...]
+
+    def __init__(self, tracks: TrackSet, rows: Optional[Rows] = None,
+                 stages: "tuple[Stage, ...] | PendingStages" = ()):
+        # (a frozen dataclass's generated __init__ sets each field by object.__setattr__:
+        # the instance dict directly; made every frame of every lane)
+        d = self.__dict__
+        d["tracks"] = tracks
+        d["rows"] = [] if rows is None else rows
+        if type(stages) is PendingStages:
+            d["_pending"] = stages
+        else:
+            d["stages"] = stages
+
+    def __getattr__(self, name):
+        # only for a missing instance attribute: ``stages`` when still pending
+        if name == "stages":
+            d = self.__dict__
+            pending = d.get("_pending")
+            if pending is not None:
+                d["stages"] = st = pending.stages()
+                return st
+        raise AttributeError(name)
 
 
 @runtime_checkable

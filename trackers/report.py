@@ -269,13 +269,22 @@ class StageLog:
     """Builds a frame's :class:`Stage` tuple while a tracker steps, and checks the contract:
     stages must come from ``stages`` (the tracker's declared list) in increasing order, items
     must be vocabulary items.  ``level`` is the recording level (``None``: nothing but scalars
-    and events is wanted)."""
+    and events is wanted).
+
+    The log records the frame flat (stage names, ``(path, value)`` scalars and items, in
+    call order) and makes the :class:`Stage` and :class:`Scalar` objects of it in
+    :meth:`result`; at ``level=None`` not even then: :meth:`result` hands back a
+    :class:`PendingStages` that makes them when first read (a run's pipeline reads no stage
+    data of an unrecorded frame, and making ~6 stages and ~7 scalars a frame touched ~10 us
+    of code and objects when the step's caches are cold).  Every check is made in the call
+    (a wrong stage, an item that is not one, raises there)."""
+
+    __slots__ = ("declared", "_rank", "_flat", "_name", "_pos", "_where")
 
     def __init__(self, stages: Sequence[str], level: Optional[str] = None):
-        self.declared = tuple(stages)
+        self.declared = stages if type(stages) is tuple else tuple(stages)
         self._rank = -1 if level is None else level_rank(level)
-        self._stages: list[Stage] = []
-        self._items: list[Item] = []
+        self._flat: list = []
         self._name: Optional[str] = None
         self._pos = -1
         # stage name -> its place in the declared list (a tracker declares one tuple and
@@ -285,6 +294,12 @@ class StageLog:
             where = _WHERE[self.declared] = {n: i for i, n in reversed(list(enumerate(
                 self.declared)))}
         self._where = where
+
+    @property
+    def recorded(self) -> bool:
+        """False at ``level=None``: nothing but scalars and events is wanted (``wants`` is
+        False for every level)."""
+        return self._rank >= 0
 
     def wants(self, level: str) -> bool:
         """Should an item of ``level`` be built?"""
@@ -300,7 +315,7 @@ class StageLog:
         if pos <= self._pos:
             raise ValueError(f"stage {name!r} after {self.declared[self._pos]!r}: stages must "
                              f"follow the declared order {self.declared}")
-        self._close()
+        self._flat.append(name)
         self._name, self._pos = name, pos
 
     def add(self, item: Item) -> None:
@@ -308,27 +323,84 @@ class StageLog:
             raise ValueError("StageLog.add before any stage()")
         if not isinstance(item, ITEM_TYPES):
             raise TypeError(f"not a report item: {type(item).__name__}")
-        self._items.append(item)
+        self._flat.append(item)
 
     def scalar(self, path: str, value: float) -> None:
         if self._name is None:
             raise ValueError("StageLog.add before any stage()")
-        self._items.append(_made(Scalar, path=path, value=float(value)))
+        self._flat.append((path, float(value)))
 
     def event(self, path: str, message: str, severity: str = "INFO") -> None:
         self.add(Event(path, message, severity))
 
-    def _close(self) -> None:
-        if self._name is not None:
-            self._stages.append(_made(Stage, name=self._name, items=tuple(self._items)))
-        self._items = []
-
-    def result(self) -> tuple[Stage, ...]:
-        """The frame's stages (call once, after the step)."""
-        self._close()
+    def result(self) -> "tuple[Stage, ...] | PendingStages":
+        """The frame's stages (call once, after the step): a tuple, or at ``level=None`` a
+        :class:`PendingStages` of them (:class:`~pfscope.trackers.api.StepResult` takes
+        either; its ``stages`` is always the tuple)."""
+        flat, self._flat = self._flat, []
         self._name = None
-        out, self._stages = tuple(self._stages), []
-        return out
+        if self._rank < 0:
+            return PendingStages(flat)
+        return _stages_of(flat)
+
+
+def _stages_of(flat: list) -> "tuple[Stage, ...]":
+    """The :class:`Stage` tuple of a :class:`StageLog`'s flat record: a ``str`` starts a stage,
+    a tuple is a scalar's ``(path, value)``, anything else an item."""
+    stages: list = []
+    name: Optional[str] = None
+    items: list = []
+    for x in flat:
+        if type(x) is str:
+            if name is not None:
+                stages.append(_made(Stage, name=name, items=tuple(items)))
+            name, items = x, []
+        elif type(x) is tuple:
+            items.append(_made(Scalar, path=x[0], value=x[1]))
+        else:
+            items.append(x)
+    if name is not None:
+        stages.append(_made(Stage, name=name, items=tuple(items)))
+    return tuple(stages)
+
+
+class PendingStages:
+    """A level-None :class:`StageLog`'s frame, made into its :class:`Stage` tuple on first
+    use (:meth:`stages`; also a read-only sequence of them).  The record holds floats and
+    immutable items only, so the stages are those the step would have made."""
+
+    __slots__ = ("_flat", "_stages")
+
+    def __init__(self, flat: list):
+        self._flat = flat
+        self._stages: Optional[tuple] = None
+
+    def stages(self) -> "tuple[Stage, ...]":
+        st = self._stages
+        if st is None:
+            st = self._stages = _stages_of(self._flat)
+            self._flat = []
+        return st
+
+    def __len__(self) -> int:
+        return len(self.stages())
+
+    def __iter__(self):
+        return iter(self.stages())
+
+    def __getitem__(self, i):
+        return self.stages()[i]
+
+    def __eq__(self, other) -> bool:
+        if isinstance(other, PendingStages):
+            other = other.stages()
+        return self.stages() == other
+
+    def __hash__(self) -> int:
+        return hash(self.stages())
+
+    def __repr__(self) -> str:
+        return repr(self.stages())
 
 
 def find(stages: Sequence[Stage], path: str, kind: Optional[type] = None) -> list:
@@ -338,4 +410,4 @@ def find(stages: Sequence[Stage], path: str, kind: Optional[type] = None) -> lis
 
 
 __all__ = ["LEVELS", "ID_KINDS", "level_rank", "Points", "Boxes", "Segments", "Mask", "Field",
-           "Scalar", "Event", "Item", "ITEM_TYPES", "Stage", "StageLog", "find"]
+           "Scalar", "Event", "Item", "ITEM_TYPES", "Stage", "StageLog", "PendingStages", "find"]

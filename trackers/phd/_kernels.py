@@ -768,6 +768,19 @@ def mass_near_few(states, w, Z, std_z, r2, cell_x, cell_y):
     return True, out
 
 
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
+def _log_norms(log_std):
+    """``Σ_d log σ_d`` per row of ``log_std`` (M, 4) = numpy's ``log(std)``: the sum
+    ``((l₀ + l₁) + l₂) + l₃``, numpy's ``add.reduce`` along a row's four values (the filter
+    hands the logs over, not their sums: one numpy reduction a frame fewer)."""
+    m = log_std.shape[0]
+    out = np.empty(m, np.float64)
+    for k in range(m):
+        out[k] = ((log_std[k, 0] + log_std[k, 1]) + log_std[k, 2]) + log_std[k, 3]
+    return out
+
+
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
 def birth_counts(m_near, j_max, complement, max_per_frame):
     """J_z (N_z,) int64 of :func:`~.filter.allocate_births`, numpy's floats spelt out:
@@ -792,20 +805,25 @@ def birth_counts(m_near, j_max, complement, max_per_frame):
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
-def birth_alloc_fill(m_near, j_max, complement, max_per_frame, lw_base, lw_mode, log_norm,
-                     lw_c, revive, log_revive, Z, st, sigma_obs, sigma_min, pos_ratio, spread,
-                     speed_mean, speed_std, min_size, states, log_w, det):
+def birth_alloc_fill(m_near, consts, lw_base, lw_mode, log_std, revive, log_revive, Z, st,
+                     states, log_w, det):
     """:func:`birth_counts`, each detection's newborn log-weight ``base_z − log max(J_z, 1)``
     (``+ log_revive`` where ``revive``, else ``+ 0``; ``revive`` empty: none) and
     :func:`birth_fill` into the first J = ΣJ_z rows of ``states``, ``log_w``, ``det`` (which
     must hold them: ``max_births`` rows), in one call: ``(j, J)``; ``J`` = -1 (nothing
     written) when a J_z is negative (a NaN M(z)) or the total does not fit the buffers.
 
+    ``consts`` (float64): the settings, read once per frame from one array (an argument
+    costs the call more than a load): ``j_max, complement (0/1), max_per_frame, sigma_obs,
+    sigma_min, pos_ratio, spread, speed_mean, speed_std, min_size`` (``j_max`` and
+    ``max_per_frame`` whole numbers), then ``lw_c`` from index :data:`BIRTH_LW_C`.
+
     ``base_z`` (``filter.log_birth_weight``'s floats, its numpy operations in their order):
     ``lw_mode`` 0: ``lw_base[z]``; 1: the constant ``lw_c[0]``; 2: the ``birth_odds`` weight
-    of ``lw_base`` = log κ and ``log_norm`` = Σ log σ(z), ``lw_c`` = (log odds, log(1 − p_M),
+    of ``lw_base`` = log κ and ``log_norm`` = Σ log σ(z) (:func:`_log_norms` of ``log_std``
+    (N_z, 4), the detections' log σ; read in mode 2 only), ``lw_c`` = (log odds, log(1 − p_M),
     ½ d log 2π, ½ d log(1 + spread²)): ``((c₀ + log κ) − c₁) − ((−log_norm − c₂) − c₃)``."""
-    j = birth_counts(m_near, j_max, complement, max_per_frame)
+    j = birth_counts(m_near, np.int64(consts[0]), consts[1] != 0.0, np.int64(consts[2]))
     nz = j.shape[0]
     n = 0
     for z in range(nz):
@@ -815,22 +833,29 @@ def birth_alloc_fill(m_near, j_max, complement, max_per_frame, lw_base, lw_mode,
     if n > states.shape[0] or n > log_w.shape[0] or n > det.shape[0]:
         return j, -1
     lw_det = np.empty(nz, np.float64)
+    c = BIRTH_LW_C
+    log_norm = _log_norms(log_std) if lw_mode == 2 else lw_det
     n = 0
     for z in range(nz):
         jz = j[z]
         if lw_mode == 0:
             base = lw_base[z]
         elif lw_mode == 1:
-            base = lw_c[0]
+            base = consts[c]
         else:
-            base = ((lw_c[0] + lw_base[z]) - lw_c[1]) - ((-log_norm[z] - lw_c[2]) - lw_c[3])
+            base = (((consts[c] + lw_base[z]) - consts[c + 1])
+                    - ((-log_norm[z] - consts[c + 2]) - consts[c + 3]))
         lw_det[z] = base - math.log(float(jz if jz > 1 else 1))
         if revive.shape[0] == nz:
             lw_det[z] = lw_det[z] + (log_revive if revive[z] else 0.0)
         n += jz
-    birth_fill(Z, j, lw_det, st, sigma_obs, sigma_min, pos_ratio, spread, speed_mean,
-               speed_std, min_size, states, log_w, det)        # (writes their first n rows)
+    birth_fill(Z, j, lw_det, st, consts[3], consts[4], consts[5], consts[6], consts[7],
+               consts[8], consts[9], states, log_w, det)     # (writes their first n rows)
     return j, n
+
+
+#: where :func:`birth_alloc_fill`'s ``consts`` hold the newborn weight's constants ``lw_c``
+BIRTH_LW_C = 10
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
@@ -1073,17 +1098,19 @@ _LIN_RANGE = 600.0
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
-def gauss_update_linear(states, lw, Z, std, log_norm, log_kappa, log_pd, log_pm, r2,
+def gauss_update_linear(states, lw, Z, std, log_std, log_kappa, log_pd, log_pm, r2,
                         cell_x, cell_y, n_grid, grid, j_born, equal):
     """:func:`gauss_update`'s linear route alone (per-detection stds), the same floats:
-    ``(ok, done, bracket, log_c, log_mass, log_pred, lin, scale, log_den)``, ``bracket`` (N,) each
+    ``(ok, done, bracket, log_c, log_mass, log_pred, lin, scale, log_share)``, ``bracket`` (N,) each
     particle's ``p_M + Σ_z ψ_z/(κ_z + C_z)`` (:func:`bracket_log_weights` makes the new
     log-weights of it, only when someone reads them: a run reads the mass and ``lin``),
     ``lin · scale`` (N,) the normalised weights ``e^{new_lw − log_mass}`` as the update's sums
     made them (for the resampling walk: no exp a particle there); ``done`` False when the
-    weights span more than e^600 (nothing computed: call :func:`gauss_update`); ``log_den``
-    (N_z,) ``log(κ + C)`` as numpy's ``np.logaddexp(log_kappa, log_c)`` (its formula, libm's
-    exp and log1p), 0 where not finite (κ = C = 0: the filter's ``np.where``).  A run whose weights never
+    weights span more than e^600 (nothing computed: call :func:`gauss_update`); ``log_share``
+    (N_z,) ``log C − log(κ + C)``, the log of the mass each detection wins, with ``log(κ + C)``
+    as numpy's ``np.logaddexp(log_kappa, log_c)`` (its formula, libm's exp and log1p), 0 where
+    not finite (κ = C = 0: the filter's ``np.where``), and the subtraction numpy's (the
+    filter's ``np.exp`` of it is the share: one numpy call where there were two).  A run whose weights never
     spread that wide compiles this kernel only, not the log-space route (first-run compile).
 
     A detection's gated pairs come from two kinds of rows: the first ``n_grid`` through
@@ -1163,6 +1190,7 @@ def gauss_update_linear(states, lw, Z, std, log_norm, log_kappa, log_pd, log_pm,
     for k in range(std.shape[0]):
         for d in range(4):
             inv[k, d] = 1.0 / std[k, d]
+    log_norm = _log_norms(log_std)
     r = math.sqrt(r2)
     e = np.empty(n, np.float64)
     b = np.empty(n, np.float64)
@@ -1269,6 +1297,8 @@ def gauss_update_linear(states, lw, Z, std, log_norm, log_kappa, log_pd, log_pm,
         tot += v
         e[i] = v                          # the linear weight, e^{new_lw − top}
     log_pred = top + math.log(tot_pred) if tot_pred > 0.0 else -np.inf
+    for j in range(nz):                   # log C − log(κ + C): numpy's subtraction
+        den[j] = log_c[j] - den[j]
     return (True, True, b, log_c, (top + math.log(tot)) if tot > 0.0 else -np.inf,
             log_pred, e, 1.0 / tot if tot > 0.0 else 0.0, den)
 
@@ -1303,13 +1333,14 @@ def bracket_log_weights(lw: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
-def gauss_update(states, lw, Z, std, log_norm, by_det, log_kappa, log_pd, log_pm, r2,
+def gauss_update(states, lw, Z, std, log_std, by_det, log_kappa, log_pd, log_pm, r2,
                  cell_x, cell_y):
     """Eq. (5) of maggio2007 with the Gaussian g(z|x) of §2/§4 on the pairs inside the gate
     ``d² <= r2`` (``d² = Σ_d ((x_d − z_d)/σ_d)²`` on the observed columns (0, 1, 4, 5)).
 
-    ``std`` (N_z, 4) and ``log_norm`` (N_z,) = ``Σ log σ`` per detection (``by_det``) or
-    (N, 4) / (N,) per particle.  ``log g = −d²/2 − log_norm − 2 log 2π``.  Returns
+    ``std`` (N_z, 4) and ``log_std`` its numpy ``log`` per detection (``by_det``) or (N, 4)
+    per particle; ``log g = −d²/2 − log_norm − 2 log 2π`` with ``log_norm = Σ log σ``
+    (:func:`_log_norms`, numpy's sum).  Returns
     ``(ok, new_lw (N,), log_c (N_z,), log_mass, log_pred)`` with
     ``log C(z) = log Σ_i (1 − p_M) g(z|x_i) ω_i``, ``new_lw = lw + log[p_M + Σ_z ψ_z/(κ_z + C_z)]``
     (κ = C = 0: the term is 0), ``log_mass = log Σ_i exp(new_lw_i)`` and ``log_pred`` the same
@@ -1324,7 +1355,7 @@ def gauss_update(states, lw, Z, std, log_norm, by_det, log_kappa, log_pd, log_pm
     when it can, so a first run compiles the log route only if a frame needs it)."""
     if by_det:
         ok, done, b, log_c, log_mass, log_pred, _, _, _ = gauss_update_linear(
-            states, lw, Z, std, log_norm, log_kappa, log_pd, log_pm, r2, cell_x, cell_y,
+            states, lw, Z, std, log_std, log_kappa, log_pd, log_pm, r2, cell_x, cell_y,
             states.shape[0], (0.0, 0.0, cell_x, cell_y, 0, 0, np.empty(0, np.int64),
                               _zero_start()), np.empty(0, np.int64), False)
         if done:
@@ -1343,6 +1374,7 @@ def gauss_update(states, lw, Z, std, log_norm, by_det, log_kappa, log_pd, log_pm
     for k in range(std.shape[0]):
         for d in range(4):
             inv[k, d] = 1.0 / std[k, d]
+    log_norm = _log_norms(log_std)
     r = math.sqrt(r2)
     hx_all = 0.0
     hy_all = 0.0

@@ -101,7 +101,7 @@ from .scene_motion import Chains
 from .gating import BRUTE_PAIRS, DEFAULT_BUDGET, LogGPairs, gate_pairs, gate_sums, tail_radius2
 from ..smc.resampling import SCHEMES
 from ..smc.resampling import resample as _resample_set
-from ..smc.random import key_from, stream
+from ..smc.random import key_from, key_stream, stream
 from ..smc.weights import LazyParticleSet, ParticleSet, logsumexp
 from ..types import Frame
 
@@ -392,22 +392,26 @@ def as_observations(Z) -> np.ndarray:
 
 def observations_noise(Z, lk: LikelihoodParams) -> tuple[np.ndarray,
                                                          tuple[np.ndarray, np.ndarray]]:
-    """:func:`as_observations` then :func:`detection_noise` (the same arrays and errors), the
-    checks and the stds of a float64 (N_z, 4) array in one kernel pass
-    (:func:`._kernels.observation_noise`): what :meth:`PHDFilter.step` needs of ``Z``."""
+    """:func:`as_observations` (the same array and errors) and the detections' noise
+    ``(σ, log σ)``, both (N_z, 4): :func:`obs_std` of their sizes and numpy's ``log`` of it,
+    the checks and the stds of a float64 (N_z, 4) array in one kernel pass
+    (:func:`._kernels.observation_noise`): what :meth:`PHDFilter.step` needs of ``Z``.  The
+    kernels that read the noise sum a row's logs themselves (``Σ_d log σ_d`` of
+    :func:`detection_noise`, numpy's sum: :func:`._kernels._log_norms`)."""
     if type(Z) is not np.ndarray and hasattr(Z, "observations"):   # (no failed lookup on
         Z = Z.observations()                                        # an array: a raise)
     if not (type(Z) is np.ndarray and Z.dtype == np.float64 and Z.ndim == 2
             and Z.shape[1] == OBS_DIM and len(Z) and Z.flags.c_contiguous):
         Z = as_observations(Z)
-        return Z, detection_noise(Z, lk)
+        std = obs_std(Z[:, 2:4], lk)
+        return Z, (std, np.log(std))
     code, std = _kernels.observation_noise(Z, lk.sigma_obs, lk.sigma_obs_min,
                                            lk.sigma_obs_pos_ratio)
     if code:
         as_observations(Z)              # raises its error
         raise AssertionError("observations_noise: the kernel's check and numpy's disagree")
-    # Σ_d log σ_d: numpy's log (not libm's: one ulp apart at times) and ndarray.sum's reduce
-    return Z, (std, np.add.reduce(np.log(std), -1))
+    # log σ: numpy's log (not libm's: one ulp apart at times)
+    return Z, (std, np.log(std))
 
 
 def obs_std(sizes: np.ndarray, lk: LikelihoodParams = LikelihoodParams()) -> np.ndarray:
@@ -1350,20 +1354,51 @@ def log_birth_weight(Z: np.ndarray, params: PHDParams,
     return math.log(bp.birth_odds) + np.asarray(log_kappa) - log_pd - log_gbar
 
 
-def _birth_weight_terms(params: PHDParams, log_kappa: Optional[np.ndarray]
-                        ) -> tuple[np.ndarray, int, np.ndarray]:
+def _birth_weight_terms(params: PHDParams, log_kappa: Optional[np.ndarray],
+                        settings: bool = False) -> tuple[np.ndarray, int, np.ndarray]:
     """:func:`log_birth_weight` as ``(lw_base, lw_mode, lw_c)`` for
     :func:`._kernels.birth_alloc_fill`, which does its arithmetic (the same operations in the
-    same order): mode 1 the constant ``log birth_intensity``, mode 2 the ``birth_odds``
-    weight of ``log_kappa`` and the detections' ``Σ log σ``."""
+    same order): mode 1 the constant ``log birth_intensity``, mode 2 the ``birth_odds`` weight
+    of ``log_kappa`` and the detections' ``Σ log σ``.  ``settings``: the kernel's whole
+    ``consts`` array (:func:`_birth_consts`) in place of ``lw_c``."""
     bp = params.birth
-    if bp.birth_odds <= 0 or log_kappa is None:
-        return _NO_LW, 1, _weight_consts(bp.birth_intensity, 0.0, 0.0, False)
+    odds = not (bp.birth_odds <= 0 or log_kappa is None)
+    if settings:
+        c = _birth_consts(params, odds)
+    elif odds:
+        c = _weight_consts(bp.birth_odds, params.likelihood.p_miss, bp.birth_spread, True)
+    else:
+        c = _weight_consts(bp.birth_intensity, 0.0, 0.0, False)
+    if not odds:
+        return _NO_LW, 1, c
     lkap = log_kappa
     if not (type(lkap) is np.ndarray and lkap.dtype == np.float64 and lkap.ndim == 1):
         lkap = np.asarray(lkap, dtype=np.float64).reshape(-1)
-    return lkap, 2, _weight_consts(bp.birth_odds, params.likelihood.p_miss, bp.birth_spread,
-                                   True)
+    return lkap, 2, c
+
+
+#: the last settings' kernel constants per weight mode: (params, array) (one object a run)
+_BIRTH_CONSTS: dict = {}
+
+
+def _birth_consts(params: PHDParams, odds: bool) -> np.ndarray:
+    """:func:`._kernels.birth_alloc_fill`'s ``consts`` for ``params`` (read-only; made once
+    per settings object and weight mode): the birth, likelihood and size settings, then
+    :func:`_weight_consts`'s ``lw_c``."""
+    last = _BIRTH_CONSTS.get(odds)
+    if last is not None and last[0] is params:
+        return last[1]
+    bp, lk = params.birth, params.likelihood
+    lw_c = (_weight_consts(bp.birth_odds, lk.p_miss, bp.birth_spread, True) if odds
+            else _weight_consts(bp.birth_intensity, 0.0, 0.0, False))
+    c = np.array([float(int(bp.j_max)), 1.0 if bp.birth_allocation == "complement" else 0.0,
+                  float(int(bp.max_births_per_frame)), lk.sigma_obs, lk.sigma_obs_min,
+                  lk.sigma_obs_pos_ratio, bp.birth_spread, bp.birth_speed_mean,
+                  bp.birth_speed_std, params.motion.min_size, *lw_c], dtype=np.float64)
+    assert len(c) == _kernels.BIRTH_LW_C + len(lw_c)
+    c.setflags(write=False)
+    _BIRTH_CONSTS[odds] = (params, c)
+    return c
 
 
 _NO_LW = np.zeros(0, np.float64)
@@ -1401,20 +1436,21 @@ def birth(predicted: ParticleSet, Z, params: PHDParams, rng: np.random.Generator
     the detections that get ``revive_odds`` instead of ``birth_odds``.  Takes one word of
     ``rng``, the key of the generator the kernel draws from (:func:`._kernels.birth_fill`).
     ``out`` = (states (M, 6), log-weights (M,)) with M >= :func:`max_births`: the newborn are
-    written into their first J rows.  ``noise`` = (``obs_std(Z[:, 2:4])``, its ``Σ log σ``)
-    from a caller that has them and has checked ``Z`` (:func:`detection_noise`,
+    written into their first J rows.  ``noise`` = (``obs_std(Z[:, 2:4])``, its numpy ``log``)
+    from a caller that has them and has checked ``Z`` (:func:`observations_noise`,
     :meth:`PHDFilter.step`); ``ahead``: the M(z) the scene model computed in its own pass
     (:meth:`SceneModel.take_birth_mass`, :func:`_mass_near`)."""
     if noise is None:
         Z = as_observations(Z)
-        noise = detection_noise(Z, params.likelihood)
+        std = obs_std(Z[:, 2:4], params.likelihood)
+        noise = (std, np.log(std))
     bp, lk = params.birth, params.likelihood
     m_near, grid = _mass_near(predicted, Z, bp, lk, noise[0], ahead)
-    st = stream(key_from(rng))
+    st = key_stream(rng)
     # eq. (4), newborn branch, with γ_z ∝ p_z: every newborn of z weighs birth_intensity / J_z
     # (log_birth_weight's arithmetic, the division and the revive odds in the kernel: numpy's
     # floats, no array operation here)
-    lw_base, lw_mode, lw_c = _birth_weight_terms(params, log_kappa)
+    lw_base, lw_mode, consts = _birth_weight_terms(params, log_kappa, True)
     if lw_mode == 2 and len(lw_base) != len(Z):
         raise ValueError(f"birth: {len(lw_base)} clutter densities for {len(Z)} detections")
     if revive is not None and bp.revive_odds > bp.birth_odds > 0 and log_kappa is not None:
@@ -1433,16 +1469,13 @@ def birth(predicted: ParticleSet, Z, params: PHDParams, rng: np.random.Generator
     # one call (numba): J_z (allocate_births), then one fused pass drawing its own numbers:
     # (y, w, h) = z + spread σ(z) ε, speed (mean + std n) sqrt(w h) in a uniform direction,
     # sizes clipped to min_size
-    j, n = _kernels.birth_alloc_fill(
-        m_near, int(bp.j_max), bp.birth_allocation == "complement",
-        int(bp.max_births_per_frame), lw_base, lw_mode, noise[1], lw_c, revive, log_revive,
-        Z, st, lk.sigma_obs,
-        lk.sigma_obs_min, lk.sigma_obs_pos_ratio, bp.birth_spread, bp.birth_speed_mean,
-        bp.birth_speed_std, params.motion.min_size, states, log_w, det)
+    j, n = _kernels.birth_alloc_fill(m_near, consts, lw_base, lw_mode, noise[1], revive,
+                                     log_revive, Z, st, states, log_w, det)
     if n < 0:
         raise ValueError(f"birth: newborn counts {j.tolist()} do not fit the {cap} places "
                          f"(is M(z) finite? {np.asarray(m_near).tolist()})")
-    return BirthResult(ParticleSet(states[:n], log_w[:n]), j, m_near, det[:n], grid)
+    # (the kernel filled float64 rows of one count: a set without the constructor's checks)
+    return BirthResult(ParticleSet.unchecked(states[:n], log_w[:n]), j, m_near, det[:n], grid)
 
 
 _NO_REVIVE = np.zeros(0, np.bool_)
@@ -1501,8 +1534,9 @@ class GatedGaussian:
     detection (a grid on their positions, :func:`._kernels.gauss_update`), with no pair
     arrays.  ``Z`` (N_z, 4) the detections, ``params`` the likelihood's settings, ``r2`` the
     squared Mahalanobis gate radius (``tail_radius2(gate_tail)``, bound in :mod:`.gating`; the
-    test is in float64 here, exactly the ellipsoid).  ``noise``: :func:`detection_noise` of
-    ``Z`` under ``params`` when the caller has it (read only with per-detection stds).
+    test is in float64 here, exactly the ellipsoid).  ``noise``: ``(σ, log σ)`` of
+    ``Z`` under ``params`` when the caller has them (:func:`observations_noise`; read only
+    with per-detection stds).
     ``persistent`` = ``(n, grid, j)`` when the particles are ``n`` predicted ones followed by
     the newborn, ``j`` (N_z,) of each detection in turn, and ``grid`` is the one M(z)'s
     kernel bucketed the predicted on (:attr:`BirthResult.grid`): the update then buckets no
@@ -1624,10 +1658,10 @@ def _update_gaussian(particles: ParticleSet, g: GatedGaussian, log_kappa: np.nda
     lk = g.params
     by_det = lk.obs_std_source == "detection"
     if by_det and g.noise is not None:
-        std, log_norm = g.noise
+        std, log_std = g.noise
     else:
         std = obs_std(Z[:, 2:4] if by_det else particles.states[:, 4:6], lk)
-        log_norm = np.log(std).sum(-1)
+        log_std = np.log(std)                   # (the kernels sum each row: numpy's sum)
     done = False
     if by_det:      # the linear route alone (weights within e^600: every PHD frame)
         equal = False
@@ -1636,32 +1670,35 @@ def _update_gaussian(particles: ParticleSet, g: GatedGaussian, log_kappa: np.nda
             equal, cell = len(g.persistent) > 3 and bool(g.persistent[3]), (1.0, 1.0)
         else:
             n_grid, grid, j_born, cell = n, _NO_GRID, _NO_BLOCKS, _grid_cell(std, g.r2)
-        ok, done, bracket, log_c, log_mass, log_pred, lin, scale, log_den = (
-            _kernels.gauss_update_linear(particles.states, lw, Z, std, log_norm, log_kappa,
+        ok, done, bracket, log_c, log_mass, log_pred, lin, scale, log_share = (
+            _kernels.gauss_update_linear(particles.states, lw, Z, std, log_std, log_kappa,
                                          log_pd, log_pm, float(g.r2), cell[0], cell[1],
                                          n_grid, grid, j_born, equal))
     if not done:
         cell = _grid_cell(std if by_det else np.max(std[:, :2], axis=0, keepdims=True), g.r2)
         ok, new_lw, log_c, log_mass, log_pred = _kernels.gauss_update(
-            particles.states, lw, Z, std, log_norm, by_det, log_kappa, log_pd, log_pm,
+            particles.states, lw, Z, std, log_std, by_det, log_kappa, log_pd, log_pm,
             float(g.r2), cell[0], cell[1])
     if not ok:
         raise ValueError("update: non-finite particle positions")
     if not done:    # (the linear route's kernel made these, the same floats)
         log_den = np.logaddexp(log_kappa, log_c)
         log_den = np.where(np.isfinite(log_den), log_den, 0.0)          # κ = C = 0: term is 0
-    if done:        # the logs of the bracket made only if read (a run reads lin and the mass)
-        out: ParticleSet = LazyParticleSet(
-            particles.states, partial(_kernels.bracket_log_weights, lw, bracket),
-            particles.labels, particles.extra)
-        if scale > 0.0:
-            out.known_normalised(lin, scale)                            # (the resampling walk)
-    else:
+        log_share = log_c - log_den
         out = ParticleSet(particles.states, new_lw, particles.labels, particles.extra)
-    out.known_log_mass(log_mass)                                        # the kernel summed it
+        out.known_log_mass(log_mass)                                    # the kernel summed it
+    else:           # the logs of the bracket made only if read (a run reads lin and the mass)
+        # (the kernel summed the mass; the resampling walk reads the normalised weights)
+        make = partial(_kernels.bracket_log_weights, lw, bracket)
+        norm = (lin, scale) if scale > 0.0 else None
+        if particles.labels is None and particles.extra is None:
+            out = LazyParticleSet.unchecked(particles.states, make, log_mass, norm)
+        else:
+            out = LazyParticleSet(particles.states, make, particles.labels, particles.extra,
+                                  log_mass=log_mass, normalised=norm)
     particles.known_log_mass(log_pred)
     # (C(z) and κ made if read: _UpdateResultLogs)
-    return _UpdateResultLogs(out, log_c, log_kappa, np.exp(log_c - log_den),
+    return _UpdateResultLogs(out, log_c, log_kappa, np.exp(log_share),
                              p_miss * math.exp(log_pred))
 
 
@@ -1898,7 +1935,8 @@ class PHDFilter:
         fused = prev.labels is None and prev.extra is None
         buf = None
         if fused:
-            cap = n + max_births(len(Z), p.birth)
+            bp = p.birth                # (max_births, inline)
+            cap = n + min(len(Z) * bp.j_max, bp.max_births_per_frame)
             buf = (np.empty((cap, STATE_DIM)), np.empty(cap))
         predicted = predict(prev, p.motion, self.rng, buf)
         # the scene model's stds are these when it has the filter's likelihood (set_params)
@@ -1910,7 +1948,7 @@ class PHDFilter:
                      self.scene.take_birth_mass())
         m = n + len(born.particles)
         if fused and born.particles.states.base is buf[0]:
-            candidates = ParticleSet(buf[0][:m], buf[1][:m])
+            candidates = ParticleSet.unchecked(buf[0][:m], buf[1][:m])
         else:
             candidates = predicted.concat(born.particles)
         if type(self.likelihood) is GaussianLikelihood:

@@ -581,7 +581,9 @@ class PHDTracker(_AssociatingTracker):
         """The filter's and K-means' stage data (arrays the step computed anyway; ``n_kept``:
         the kept clusters, the estimates' count -- a count of the mask would be one more
         numpy call, ~7 us a frame on a cold cache)."""
-        want_p, want_c = log.wants("particles"), log.wants("clusters")
+        want_p = want_c = False
+        if log.recorded:                # (level None: scalars only)
+            want_p, want_c = log.wants("particles"), log.wants("clusters")
         log.stage("predict")
         if self.params.rate.camera_motion and self.scene_motion is not None:
             cam = self._camera

@@ -89,6 +89,12 @@ def stream(key: int) -> np.ndarray:
     return np.array([key], dtype=np.uint64)
 
 
+def key_stream(rng: np.random.Generator) -> np.ndarray:
+    """``stream(key_from(rng))`` in one call: the generator's next word as a one-element
+    uint64 array (``random_raw(1)``: the same word, advancing ``rng`` the same)."""
+    return rng.bit_generator.random_raw(1)
+
+
 @intrinsic
 def _fma(typingctx, a, b, c):
     """``a · b + c`` rounded once (LLVM's ``llvm.fma.f64``: one instruction on x86-64 with FMA

@@ -116,6 +116,17 @@ class ParticleSet:
             object.__setattr__(self, "extra", ex)
 
     @classmethod
+    def unchecked(cls, states: np.ndarray, log_weights: np.ndarray) -> "ParticleSet":
+        """A set of arrays its maker knows valid -- float64 ``states`` (N, D) and
+        ``log_weights`` (N,), no labels or extra (a filter's own buffers) -- made without
+        :meth:`__post_init__`'s checks (the same set)."""
+        ps = object.__new__(cls)
+        d = ps.__dict__
+        d["states"], d["log_weights"], d["labels"], d["extra"] = (states, log_weights, None,
+                                                                  None)
+        return ps
+
+    @classmethod
     def empty(cls, dim: int, *, labels: bool = False, n_extra: int = 0) -> "ParticleSet":
         """No particles, of state dimension ``dim`` (with empty labels / ``n_extra`` columns)."""
         return cls(np.zeros((0, dim)), np.zeros(0),
@@ -123,7 +134,7 @@ class ParticleSet:
                    np.zeros((0, n_extra)) if n_extra else None)
 
     def __len__(self) -> int:
-        return int(self.states.shape[0])     # as many log-weights (checked when made)
+        return self.states.shape[0]          # as many log-weights (checked when made)
 
     @property
     def dim(self) -> int:
@@ -278,15 +289,40 @@ class LazyParticleSet(ParticleSet):
     (N,) float64 log-weights of ``states``' N rows, the same every call)."""
 
     def __init__(self, states: np.ndarray, make: Callable[[], np.ndarray],
-                 labels: Optional[np.ndarray] = None, extra: Optional[np.ndarray] = None):
-        s = np.asarray(states, dtype=np.float64)
-        if s.ndim != 2:
-            raise ValueError(f"ParticleSet.states: expected shape (N, D), got {s.shape}")
+                 labels: Optional[np.ndarray] = None, extra: Optional[np.ndarray] = None,
+                 *, log_mass: Optional[float] = None,
+                 normalised: Optional[tuple[np.ndarray, float]] = None):
+        # ``log_mass`` / ``normalised``: :meth:`known_log_mass` / :meth:`known_normalised`
+        # recorded as the set is made (the PHD update's kernel summed them)
+        s = states
+        if not (type(s) is np.ndarray and s.dtype == np.float64 and s.ndim == 2):
+            s = np.asarray(states, dtype=np.float64)
+            if s.ndim != 2:
+                raise ValueError(f"ParticleSet.states: expected shape (N, D), got {s.shape}")
         if labels is not None or extra is not None:     # checked as a ParticleSet checks them
             checked = ParticleSet(s, np.zeros(len(s)), labels, extra)
             labels, extra = checked.labels, checked.extra
         d = self.__dict__
         d["states"], d["labels"], d["extra"], d["_make"] = s, labels, extra, make
+        if log_mass is not None:
+            d["log_mass"] = float(log_mass)
+        if normalised is not None:
+            d["_normalised"] = (normalised[0], float(normalised[1]))
+
+    @classmethod
+    def unchecked(cls, states: np.ndarray, make: Callable[[], np.ndarray],  # type: ignore[override]
+                  log_mass: float, normalised: Optional[tuple[np.ndarray, float]] = None
+                  ) -> "LazyParticleSet":
+        """A lazy set of float64 ``states`` (N, D) its maker knows valid, no labels or extra
+        (the PHD update's particles), its ``log_mass`` and ``normalised`` weights recorded
+        (as the constructor's keywords), made without the constructor's checks."""
+        ps = object.__new__(cls)
+        d = ps.__dict__
+        d["states"], d["labels"], d["extra"], d["_make"] = states, None, None, make
+        d["log_mass"] = float(log_mass)
+        if normalised is not None:
+            d["_normalised"] = (normalised[0], float(normalised[1]))
+        return ps
 
     @property
     def log_weights(self) -> np.ndarray:               # type: ignore[override]
