@@ -619,6 +619,145 @@ def _assign_moved(X, centers, inv, prev, labels, dmin, moved, boxes):
                       np.bool_(False), r0, n, prev[r0])
 
 
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
+def _summaries(labels, dmin, bl, bub, b_lo, b_hi):
+    """For the blocks ``b_lo:b_hi`` of :data:`_BLOCK` particles: ``bl`` the label all their
+    particles share (-1 when they differ) and ``bub`` their largest d² (NaN when one is NaN
+    or infinite)."""
+    n = labels.shape[0]
+    for b in range(b_lo, b_hi):
+        b0 = b * _BLOCK
+        b1 = b0 + _BLOCK if b0 + _BLOCK < n else n
+        lab = labels[b0]
+        mx = -np.inf
+        fin = True
+        for i in range(b0, b1):
+            if labels[i] != lab:
+                lab = -1
+            v = dmin[i]
+            fin = fin and v - v == 0.0
+            mx = v if v > mx else mx
+        bl[b] = lab
+        bub[b] = mx if fin else np.nan
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
+def _take_new(labels, new, touched, r0, r1):
+    """``labels[r0:r1] = new[r0:r1]``, marking the clusters a particle left or joined in
+    ``touched``; whether any label changed."""
+    changed = False
+    for i in range(r0, r1):
+        if new[i] != labels[i]:
+            changed = True
+            touched[new[i]] = True
+            touched[labels[i]] = True
+            labels[i] = new[i]
+    return changed
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
+def _moved_inplace(X, centers, inv, labels, dmin, moved, boxes, bl, bub, new, touched, summ):
+    """:func:`_assign_moved` with the labels and d² updated in place (``new`` (N,) scratch),
+    the clusters a particle left or joined marked in ``touched`` (K,); ``bl``/``bub`` the
+    blocks' :func:`_summaries` (``summ``: up to date, else taken here): a block of one
+    unmoved centre whose moved centres' lower bounds all exceed its largest d² is not read
+    at all (a late iteration where two centres creep costs about the blocks near them).
+    Returns ``(changed, summ)``: whether a label changed, whether ``bl``/``bub`` are up to
+    date (for :func:`lloyd`'s sums of the touched clusters)."""
+    K = centers.shape[0]
+    n = X.shape[0]
+    nb = boxes.shape[0]
+    idx = _moved_list(moved)
+    nm = idx.shape[0]
+    cc, blocks = _centre_rows(centers, inv, _BLOCKS_MIN)
+    if 2 * nm > K or not blocks or nb == 0:
+        _assign_moved(X, centers, inv, labels, new, dmin, moved, boxes)
+        return _take_new(labels, new, touched, 0, n), False
+    if not summ:
+        _summaries(labels, dmin, bl, bub, 0, nb)
+    cand = np.empty(K, np.int64)
+    changed = False
+    run = np.int64(-1)              # the first of a run of blocks that need the full look
+    for b in range(nb + 1):
+        b0 = b * _BLOCK if b < nb else n
+        b1 = b0 + _BLOCK if b0 + _BLOCK < n else n
+        if b < nb:
+            ok = boxes[b, 8] != 0.0
+            lab = bl[b]
+            ub = bub[b]
+            if ok and lab < 0:                             # a block of several centres
+                ub = -np.inf
+                for i in range(b0, b1):
+                    v = dmin[i]
+                    if moved[labels[i]] or not v - v == 0.0:
+                        ok = False
+                        break
+                    ub = v if v > ub else ub
+            elif ok:
+                ok = not moved[lab] and ub - ub == 0.0
+            if not ok:
+                if run < 0:
+                    run = b
+                continue
+        if run >= 0:                                       # the full look, by box bounds
+            r0 = run * _BLOCK
+            _assign_range(X, centers, inv, new, dmin, boxes, boxes, dmin, dmin, boxes,
+                          np.bool_(False), r0, b0, labels[r0])
+            changed = _take_new(labels, new, touched, r0, b0) or changed
+            _summaries(labels, dmin, bl, bub, run, b)
+            run = -1
+        if b == nb:
+            break
+        l0 = boxes[b, 0]
+        l1 = boxes[b, 1]
+        l2 = boxes[b, 2]
+        l3 = boxes[b, 3]
+        h0 = boxes[b, 4]
+        h1 = boxes[b, 5]
+        h2 = boxes[b, 6]
+        h3 = boxes[b, 7]
+        nc = 0
+        for k in range(nm):
+            c = idx[k]
+            if not _lower(cc, c, l0, l1, l2, l3, h0, h1, h2, h3, ub) > ub:
+                cand[nc] = c
+                nc += 1
+        if nc == 0:
+            continue
+        moved_here = False
+        for i in range(b0, b1):
+            x0 = X[i, 0]
+            x1 = X[i, 1]
+            x2 = X[i, 2]
+            x3 = X[i, 3]
+            lab = labels[i]
+            best = dmin[i]
+            for k in range(nc):
+                c = cand[k]
+                a0 = x0 - cc[c, 0]
+                a1 = x1 - cc[c, 1]
+                a2 = x2 - cc[c, 2]
+                a3 = x3 - cc[c, 3]
+                d = (((a0 * a0) * cc[c, 4] + (a1 * a1) * cc[c, 5]) + (a2 * a2) * cc[c, 6]) \
+                    + (a3 * a3) * cc[c, 7]
+                if d < best or (d == best and c < lab):
+                    best = d
+                    lab = c
+            if lab != labels[i]:
+                touched[lab] = True
+                touched[labels[i]] = True
+                labels[i] = lab
+                moved_here = True
+            dmin[i] = best
+        if moved_here:
+            changed = True
+            _summaries(labels, dmin, bl, bub, b, b + 1)
+    return changed, True
+
+
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
 def _scaled(X, i, rm, cs, c):
     """Euclidean distance of particle i to centre c in the space scaled by ``rm`` (4,)."""
@@ -1237,15 +1376,30 @@ def lloyd(X, S, w, centers, max_iter, tol, sigma_obs, sigma_min, pos_ratio, grid
     boxes = _boxes(X) if grid_min is None and K >= _BLOCKS_MIN else np.empty((0, 9), np.float64)
     it = 0
     done = False
+    # the blocks' summaries for the late dense iterations (:func:`_moved_inplace`)
+    bl = np.empty(boxes.shape[0], np.int64)
+    bub = np.empty(boxes.shape[0], np.float64)
+    summ = False
     for it in range(1, max_iter + 1):
         inv = _inv_var(centers, sigma_obs, sigma_min, pos_ratio)
         summed = False
+        late = False
         if grid_min is None:
             if it == 1:
                 # the labels and the sums in one pass (their copy and the sums pass below
                 # are not needed: every cluster is touched, the sums start at zero)
                 _assign_blocks(X, centers, inv, labels, dmin, boxes, S, w, m, sums, np.bool_(True))
                 summed = True
+            elif D == 6 and boxes.shape[0] > 0:
+                # in place, the comparison and the blocks' summaries with it
+                for c in range(K):
+                    touched[c] = False
+                changed, summ = _moved_inplace(X, centers, inv, labels, dmin, moved, boxes,
+                                               bl, bub, new, touched, summ)
+                if not changed:
+                    done = True
+                    break
+                late = True
             else:
                 _assign_moved(X, centers, inv, labels, new, dmin, moved, boxes)
         else:
@@ -1266,7 +1420,9 @@ def lloyd(X, S, w, centers, max_iter, tol, sigma_obs, sigma_min, pos_ratio, grid
                 if same_space:
                     _unstable_near_moved(centers, space, moved, stable, reach_c)
             _assign(X, centers, inv, labels, new, dmin, grid_min, space, stable, reach)
-        if it > 1:
+        if late:
+            pass                                # (compared and copied in place)
+        elif it > 1:
             for c in range(K):
                 touched[c] = False
             changed = False
@@ -1291,7 +1447,28 @@ def lloyd(X, S, w, centers, max_iter, tol, sigma_obs, sigma_min, pos_ratio, grid
                     for d in range(D):
                         sums[c, d] = 0.0
                     reach_c[c] = 0.0
-            if grid_min is None and D == 6:
+            if grid_min is None and D == 6 and summ:
+                # the blocks of one touched cluster, the others' not read, the blocks of
+                # several by runs (:func:`_add_one`: the same additions in the same order)
+                nbk = boxes.shape[0]
+                for b in range(nbk):
+                    b0 = b * _BLOCK
+                    b1 = b0 + _BLOCK if b0 + _BLOCK < n else n
+                    c = bl[b]
+                    if c >= 0:
+                        if touched[c]:
+                            _add_one(S, w, m, sums, c, b0, b1)
+                        continue
+                    i = b0
+                    while i < b1:
+                        c = labels[i]
+                        j = i + 1
+                        while j < b1 and labels[j] == c:
+                            j += 1
+                        if touched[c]:
+                            _add_one(S, w, m, sums, c, i, j)
+                        i = j
+            elif grid_min is None and D == 6:
                 # each run of particles of one touched cluster with its sums in registers
                 # (:func:`_add_one`: the same additions in the same order)
                 i = 0
