@@ -1729,7 +1729,8 @@ def peaks(states, log_w, copies, pos, Z, extra, scale, cfg, grid_min):
     guarded (1.0 / 0.0), max_splits, n_near, max_iter, tol, sigma_obs, sigma_min, pos_ratio``
     (:func:`split_clusters`, :func:`lloyd`: integers as floats).
 
-    Returns ``(bad, centers, masses, labels, runs, kept, origin, n_splits, n_iter)``:
+    Returns ``(bad, centers, masses, labels, runs, kept, origin, n_splits, n_iter,
+    kept_centers)`` (``kept_centers`` = ``centers[kept]``):
     ``bad`` 1 for a non-finite observation, 2 for a width or height <= 0 (nothing else
     computed), else 0; ``labels`` (M,) of the merged rows, ``runs`` (M,) their lengths."""
     T = cfg[0]
@@ -1761,7 +1762,7 @@ def peaks(states, log_w, copies, pos, Z, extra, scale, cfg, grid_min):
     if bad != 0:
         return (bad, np.empty((0, 6), np.float64), np.empty(0, np.float64),
                 np.empty(0, np.int64), np.empty(0, np.int64), np.empty(0, np.bool_),
-                np.empty(0, np.int64), 0, 0)
+                np.empty(0, np.int64), 0, 0, np.empty((0, 6), np.float64))
     if copies.shape[0] > 0:
         lmax, w, shift, S, X, runs = prepare_copies(states, log_w, copies, pos)
     else:
@@ -1799,9 +1800,18 @@ def peaks(states, log_w, copies, pos, Z, extra, scale, cfg, grid_min):
     K = C.shape[0]
     kept = np.empty(K, np.bool_)
     origin = np.empty(K, np.int64)
+    nk = 0
     for c in range(K):
         for d in range(6):
             C[c, d] += shift[d]
         kept[c] = M[c] >= T
+        nk += kept[c]
         origin[c] = c if c < nz else (ORIGIN_EXTRA if c < k0 else ORIGIN_SPLIT)
-    return bad, C, M, lab, runs, kept, origin, n_splits, it + it2
+    kc = np.empty((nk, 6), np.float64)             # ``C[kept]``
+    q = 0
+    for c in range(K):
+        if kept[c]:
+            for d in range(6):
+                kc[q, d] = C[c, d]
+            q += 1
+    return bad, C, M, lab, runs, kept, origin, n_splits, it + it2, kc
