@@ -68,8 +68,10 @@ def _nearest_dense(X, i, centers, inv):
 
 #: From this many centres on, the dense assignment takes the particles in blocks of
 #: :data:`_BLOCK` and looks, for a block, only at the centres that could beat the previous
-#: particle's centre somewhere in the block's box (:func:`_assign_dense`).
-_BLOCKS_MIN = 6
+#: particle's centre somewhere in the block's box (:func:`_assign_dense`).  (The split
+#: trials' local Lloyd runs have 2-5 centres: with the blocks a trial on the bench scene at
+#: 16 targets costs ~50 us where the serial look took ~80.)
+_BLOCKS_MIN = 2
 #: Particles per block of :func:`_assign_dense`.
 _BLOCK = 32
 #: The blocks' coordinates (particles and centres) stay within this many pixels: their
