@@ -1275,7 +1275,10 @@ def prepare_copies(states, log_w, copies, pos):
     w = np.empty(R, np.float64)
     S = np.empty((R, 6), np.float64)
     X = np.empty((R, 4), np.float64)
-    runs = np.empty(R, np.int64)
+    # the rows' run lengths are ``copies`` until two runs merge (rare: none on the bench
+    # scene): no array of their own to write until then
+    runs = copies
+    merged = False
     if n == 0 or not lmax - lmax == 0.0:          # (not finite; no np.isfinite to compile)
         return lmax, w[:0], shift, S[:0], X[:0], runs[:0]
     a0 = 0.0
@@ -1302,11 +1305,17 @@ def prepare_copies(states, log_w, copies, pos):
                 and states[i, 2] == states[i - 1, 2] and states[i, 3] == states[i - 1, 3] \
                 and states[i, 4] == states[i - 1, 4] and states[i, 5] == states[i - 1, 5]:
             w[m - 1] += c                          # the previous run's row again: merged
+            if not merged:
+                runs = np.empty(R, np.int64)
+                for q in range(m):
+                    runs[q] = copies[q]
+                merged = True
             runs[m - 1] += c
             i += c
             continue
         w[m] = c
-        runs[m] = c
+        if merged:
+            runs[m] = c
         for d in range(6):
             S[m, d] = states[i, d] - shift[d]
         X[m, 0] = S[m, 0]
