@@ -96,6 +96,22 @@ def test_clusters_below_T_are_discarded():
     assert len(kmeans_peaks(ps, obs(A, far), T=0.3).kept_centers) == 2
 
 
+@pytest.mark.parametrize("T", [0.3, 0.6, 2.0])
+def test_kept_centers_are_the_kept_rows_in_a_new_array_each_read(T):
+    """``kept_centers`` (made by the K-means kernel on the first read) is ``centers[kept]``
+    byte for byte, and each read is a new array (a caller may change its copy)."""
+    rng = np.random.default_rng(6)
+    far = [400.0, 300.0, 0.0, 0.0, 20.0, 40.0]
+    ps = cloud(rng, A, 0.7).concat(cloud(rng, far, 0.4)).concat(cloud(rng, B, 1.3))
+    c = kmeans_peaks(ps, obs(A, far, B), T=T)
+    want = c.centers[c.kept]
+    first = c.kept_centers
+    assert first.shape == want.shape and first.tobytes() == want.tobytes()
+    first[:] = -1.0
+    second = c.kept_centers
+    assert second is not first and second.tobytes() == want.tobytes()
+
+
 def test_centres_are_mass_weighted_means():
     # Two particles of one cluster, the heavier one pulls the centre three quarters of the way.
     s = np.array([[100.0, 100.0, 0, 0, 30, 60], [104.0, 100.0, 2.0, 0, 30, 60]])

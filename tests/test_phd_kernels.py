@@ -1018,7 +1018,7 @@ def test_dense_assign_is_the_serial_scan_bit_for_bit(k):
         assert d2.tobytes() == d[np.arange(n), want].tobytes()
 
 
-@pytest.mark.parametrize("k", [KM._BLOCKS_MIN, 9, 19, 31])
+@pytest.mark.parametrize("k", [KM._BLOCKS_MIN, 4, 9, 19, 31])
 def test_dense_assign_blocks_are_the_serial_scan_bit_for_bit(k):
     """Finite centres (from ``_BLOCKS_MIN`` on): the blocks of particles with their box's
     bounds (a centre whose d² lower bound over the box exceeds the previous centre's upper
@@ -1029,13 +1029,16 @@ def test_dense_assign_blocks_are_the_serial_scan_bit_for_bit(k):
     rng = np.random.default_rng(5 + k)
     lk = LikelihoodParams()
     centers = _centers(rng, k)                     # (centres 1 and k // 2 equal: ties)
-    centers[2, :2] = (2000.0, 2000.0)
-    centers[k - 1] = centers[2]
-    centers[k - 1, 0] += 40.0                      # 2 and k - 1 mirrored about y1 + 20
+    tie = k >= 4
+    if tie:
+        centers[2, :2] = (2000.0, 2000.0)
+        centers[k - 1] = centers[2]
+        centers[k - 1, 0] += 40.0                  # 2 and k - 1 mirrored about y1 + 20
     n = 5000
     src = np.sort(rng.integers(0, k, n))
     X = centers[src][:, OBS] + rng.normal(0, 6, (n, 4)) * rng.uniform(0.2, 3, (n, 1))
-    X[400:440] = centers[2, OBS] + (20.0, 0.0, 0.0, 0.0)        # on the tie of 2 and k - 1
+    if tie:
+        X[400:440] = centers[2, OBS] + (20.0, 0.0, 0.0, 0.0)    # on the tie of 2 and k - 1
     X[500:530] = centers[1, OBS]                                # on the tied centres 1, k // 2
     X[600:640, :2] = rng.uniform(-5e3, 5e3, (40, 2))            # far from every centre
     X[700, 1] = np.nan
@@ -1056,9 +1059,63 @@ def test_dense_assign_blocks_are_the_serial_scan_bit_for_bit(k):
             want[d[np.arange(n), c] < d[np.arange(n), want]] = c
         np.testing.assert_array_equal(lab, want)
         assert d2.tobytes() == d[np.arange(n), want].tobytes()
-        if order[0] == 0:
+        if order[0] == 0 and tie:
             assert np.all(want[np.arange(400, 440)] == 2)       # the ties were there
             assert np.all(want[np.arange(500, 530)] == 1)
+
+
+@njit
+def _moved_look(X, centers, inv, prev, dmin, moved):
+    """``_assign_moved`` with the blocks' boxes (its callers' arguments)."""
+    labels = np.empty(X.shape[0], np.int64)
+    KM._assign_moved(X, centers, inv, prev, labels, dmin, moved, KM._boxes(X))
+    return labels
+
+
+@pytest.mark.parametrize("k", [KM._BLOCKS_MIN, 3, 6, 9, 19])
+def test_late_dense_look_is_the_serial_scan_bit_for_bit(k):
+    """A late Lloyd iteration (``_assign_moved``: a few centres moved since the labels and d²
+    were taken) gives the serial scan's labels and d² bytes: the blocks whose particles'
+    centres stayed look at the moved centres only, the runs of blocks with a particle of a
+    moved centre (or a NaN, inf or huge coordinate) get the full look by the box bounds --
+    particles side by side and shuffled, ties, far particles."""
+    rng = np.random.default_rng(11 + k)
+    lk = LikelihoodParams()
+    centers = _centers(rng, k)
+    n = 4000
+    src = np.sort(rng.integers(0, k, n))
+    X = centers[src][:, OBS] + rng.normal(0, 6, (n, 4)) * rng.uniform(0.2, 3, (n, 1))
+    X[500:530] = centers[1, OBS]                                # on the tied centres 1, k // 2
+    X[600:640, :2] = rng.uniform(-5e3, 5e3, (40, 2))            # far from every centre
+    X[700, 1] = np.nan
+    X[740, 3] = np.inf
+    X[780, 0] = -1e200
+    changed = 0
+    for order in (np.arange(n), rng.permutation(n)):
+        Xo = np.ascontiguousarray(X[order])
+        inv0 = KM._inv_var(centers, lk.sigma_obs, lk.sigma_obs_min, lk.sigma_obs_pos_ratio)
+        prev, d0 = np.empty(n, dtype=np.int64), np.empty(n)
+        KM._assign_dense(Xo, centers, inv0, prev, d0)
+        for picked in ([0], [min(2, k - 1), k - 1], [1]):
+            moved = np.zeros(k, dtype=bool)
+            moved[picked] = True
+            c1 = centers.copy()
+            c1[moved, :2] += rng.normal(0, 15, (moved.sum(), 2))   # moved (and resized)
+            c1[moved, 4:] *= 1.1
+            inv = KM._inv_var(c1, lk.sigma_obs, lk.sigma_obs_min, lk.sigma_obs_pos_ratio)
+            dm = d0.copy()
+            lab = _moved_look(Xo, c1, inv, prev, dm, moved)
+            with np.errstate(over="ignore", invalid="ignore"):
+                a = Xo[:, None, :] - c1[:, OBS][None, :, :]
+                d = (((a[..., 0] * a[..., 0]) * inv[:, 0] + (a[..., 1] * a[..., 1]) * inv[:, 1])
+                     + (a[..., 2] * a[..., 2]) * inv[:, 2]) + (a[..., 3] * a[..., 3]) * inv[:, 3]
+            want = np.zeros(n, dtype=np.int64)
+            for c in range(1, k):
+                want[d[np.arange(n), c] < d[np.arange(n), want]] = c
+            np.testing.assert_array_equal(lab, want)
+            assert dm.tobytes() == d[np.arange(n), want].tobytes()
+            changed += np.count_nonzero(want != prev)
+    assert changed > 20                                 # the moved centres changed labels
 
 
 @pytest.mark.parametrize("layout", ["many", "line", "same", "cluster+far"])

@@ -68,8 +68,10 @@ def _nearest_dense(X, i, centers, inv):
 
 #: From this many centres on, the dense assignment takes the particles in blocks of
 #: :data:`_BLOCK` and looks, for a block, only at the centres that could beat the previous
-#: particle's centre somewhere in the block's box (:func:`_assign_dense`).
-_BLOCKS_MIN = 6
+#: particle's centre somewhere in the block's box (:func:`_assign_dense`).  (The split
+#: trials' local Lloyd runs have 2-5 centres: with the blocks a trial on the bench scene at
+#: 16 targets costs ~50 us where the serial look took ~80.)
+_BLOCKS_MIN = 2
 #: Particles per block of :func:`_assign_dense`.
 _BLOCK = 32
 #: The blocks' coordinates (particles and centres) stay within this many pixels: their
@@ -230,9 +232,8 @@ def _boxes(X):
 def _assign_dense(X, centers, inv, labels, dmin):
     """:func:`_nearest_dense` of every particle: the same labels and d² floats
     (:func:`_assign_blocks`, the blocks' boxes taken here)."""
-    _assign_blocks(X, centers, inv, labels, dmin,
-                   _boxes(X) if centers.shape[0] >= _BLOCKS_MIN else np.empty((0, 9), np.float64),
-                   X, dmin, dmin, X, np.bool_(False))
+    bx = _boxes(X) if centers.shape[0] >= _BLOCKS_MIN else np.empty((0, 9), np.float64)
+    _assign_blocks(X, centers, inv, labels, dmin, bx, bx, dmin, dmin, bx, np.bool_(False))
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
@@ -312,36 +313,51 @@ def _assign_blocks(X, centers, inv, labels, dmin, boxes, S, w, m, sums, acc):
     (g among them) are, in index order, the first of the smallest d² winning -- the serial
     rule's answer, as no d² is NaN there (a particle with a NaN coordinate makes its block
     take the serial look).  Resampling lays a target's particles side by side: on the bench
-    scene ~95 % of the blocks have g alone, one d² a particle.
+    scene ~94 % of the blocks have g alone, one d² a particle, and a run of such blocks with
+    the same g is labelled in one loop with no branch (:func:`_run_rows`).
 
     ``acc``: each particle's weight ``w`` and weighted state ``S`` row are also added to
     its cluster's ``m`` (K,) and ``sums`` (K, D) as soon as its block is labelled (the
     block still in the cache; per cluster in particle order: :func:`lloyd`'s sums pass,
     the same floats); else ``S``, ``w``, ``m``, ``sums`` are not read (any arrays of
     their types)."""
+    _assign_range(X, centers, inv, labels, dmin, boxes, S, w, m, sums, acc, np.int64(0),
+                  X.shape[0], np.int64(0))
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
+def _assign_range(X, centers, inv, labels, dmin, boxes, S, w, m, sums, acc, r0, r1, g):
+    """:func:`_assign_blocks` of the particles ``r0:r1`` (``r0`` a multiple of :data:`_BLOCK`,
+    ``r1`` one or the particle count), ``g`` the centre the first block's upper bound is
+    taken from (any centre: the answer is the same)."""
     K = centers.shape[0]
     if K == 0:
         return
     cc, blocks = _centre_rows(centers, inv, _BLOCKS_MIN)
     n = X.shape[0]
     B = _BLOCK
-    g = 0
     if not blocks or boxes.shape[0] == 0:
-        for i in range(n):
+        for i in range(r0, r1):
             lab, best = _dense_row(cc, X[i, 0], X[i, 1], X[i, 2], X[i, 3], g)
             labels[i] = lab
             dmin[i] = best
             g = lab
         if acc:
-            _add_sums(S, w, labels, m, sums, 0, n)
+            _add_sums(S, w, labels, m, sums, r0, r1)
         return
     cand = np.empty(K, np.int64)
-    for b in range(boxes.shape[0]):
+    run = np.int64(-1)              # a run of blocks whose one candidate is centre ``run``
+    q0 = np.int64(0)                # (its first particle)
+    for b in range(r0 // B, (r1 + B - 1) // B):
         b0 = b * B
         b1 = b0 + B if b0 + B < n else n
-        ok = boxes[b, 8] != 0.0
-        summed = False
-        if ok:
+        # the centres whose lower bound of the d² over the block's box (each term at its
+        # near side) is not above g's upper bound (each term at the far side); none looked
+        # at (nc 0) when the box is beyond _BLOCK_MAX_ABS.  (Spelt out here: as a call per
+        # block it costs twice as much.)
+        nc = 0
+        if boxes[b, 8] != 0.0:
             l0 = boxes[b, 0]
             l1 = boxes[b, 1]
             l2 = boxes[b, 2]
@@ -350,7 +366,6 @@ def _assign_blocks(X, centers, inv, labels, dmin, boxes, S, w, m, sums, acc):
             h1 = boxes[b, 5]
             h2 = boxes[b, 6]
             h3 = boxes[b, 7]
-            # an upper bound of every row's d² to g: each term at the box's far side
             a = l0 - cc[g, 0]
             e = h0 - cc[g, 0]
             a = a * a
@@ -371,67 +386,99 @@ def _assign_blocks(X, centers, inv, labels, dmin, boxes, S, w, m, sums, acc):
             a = a * a
             e = e * e
             ub = ub + (a if a > e else e) * cc[g, 7]
-            # the centres whose lower bound (each term at the box's near side) is not above it
-            nc = 0
             for c in range(K):
                 if not _lower(cc, c, l0, l1, l2, l3, h0, h1, h2, h3, ub) > ub:
                     cand[nc] = c
                     nc += 1
-            nan = False
-            if nc == 1:
-                c = cand[0]
-                for i in range(b0, b1):
-                    a0 = X[i, 0] - cc[c, 0]
-                    a1 = X[i, 1] - cc[c, 1]
-                    a2 = X[i, 2] - cc[c, 2]
-                    a3 = X[i, 3] - cc[c, 3]
-                    d = (((a0 * a0) * cc[c, 4] + (a1 * a1) * cc[c, 5]) + (a2 * a2) * cc[c, 6]) \
-                        + (a3 * a3) * cc[c, 7]
-                    labels[i] = c
-                    dmin[i] = d
-                    nan = nan or d != d
-                if acc and not nan and S.shape[1] == 6:
-                    _add_one(S, w, m, sums, c, b0, b1)
-                    summed = True
-            else:
-                for i in range(b0, b1):
-                    x0 = X[i, 0]
-                    x1 = X[i, 1]
-                    x2 = X[i, 2]
-                    x3 = X[i, 3]
-                    lab = cand[0]
-                    a0 = x0 - cc[lab, 0]
-                    a1 = x1 - cc[lab, 1]
-                    a2 = x2 - cc[lab, 2]
-                    a3 = x3 - cc[lab, 3]
-                    best = (((a0 * a0) * cc[lab, 4] + (a1 * a1) * cc[lab, 5])
-                            + (a2 * a2) * cc[lab, 6]) + (a3 * a3) * cc[lab, 7]
-                    nan = nan or best != best
-                    for k in range(1, nc):
-                        c = cand[k]
-                        a0 = x0 - cc[c, 0]
-                        a1 = x1 - cc[c, 1]
-                        p = (a0 * a0) * cc[c, 4] + (a1 * a1) * cc[c, 5]
-                        if p > best:
-                            continue
-                        a2 = x2 - cc[c, 2]
-                        a3 = x3 - cc[c, 3]
-                        d = (p + (a2 * a2) * cc[c, 6]) + (a3 * a3) * cc[c, 7]
-                        if d < best:
-                            best = d
-                            lab = c
-                    labels[i] = lab
-                    dmin[i] = best
-            ok = not nan
-        if not ok:
+        if nc == 1 and cand[0] == run:
+            continue                                   # the run goes on
+        if run >= 0:
+            _run_rows(X, cc, run, q0, b0, labels, dmin, S, w, m, sums, acc)
+            run = -1
+        if nc == 1:                                    # a run starts
+            run = cand[0]
+            q0 = b0
+            g = run
+            continue
+        nan = nc == 0
+        if nc > 1:
+            for i in range(b0, b1):
+                x0 = X[i, 0]
+                x1 = X[i, 1]
+                x2 = X[i, 2]
+                x3 = X[i, 3]
+                lab = cand[0]
+                a0 = x0 - cc[lab, 0]
+                a1 = x1 - cc[lab, 1]
+                a2 = x2 - cc[lab, 2]
+                a3 = x3 - cc[lab, 3]
+                best = (((a0 * a0) * cc[lab, 4] + (a1 * a1) * cc[lab, 5])
+                        + (a2 * a2) * cc[lab, 6]) + (a3 * a3) * cc[lab, 7]
+                nan = nan or best != best
+                for k in range(1, nc):
+                    c = cand[k]
+                    a0 = x0 - cc[c, 0]
+                    a1 = x1 - cc[c, 1]
+                    p = (a0 * a0) * cc[c, 4] + (a1 * a1) * cc[c, 5]
+                    if p > best:
+                        continue
+                    a2 = x2 - cc[c, 2]
+                    a3 = x3 - cc[c, 3]
+                    d = (p + (a2 * a2) * cc[c, 6]) + (a3 * a3) * cc[c, 7]
+                    if d < best:
+                        best = d
+                        lab = c
+                labels[i] = lab
+                dmin[i] = best
+        if nan:                         # a box beyond _BLOCK_MAX_ABS, or a NaN d²
             for i in range(b0, b1):
                 lab, best = _dense_row(cc, X[i, 0], X[i, 1], X[i, 2], X[i, 3], g)
                 labels[i] = lab
                 dmin[i] = best
                 g = lab
-        if acc and not summed:
+        if acc:
             _add_sums(S, w, labels, m, sums, b0, b1)
         g = labels[b1 - 1]
+    if run >= 0:
+        _run_rows(X, cc, run, q0, r1, labels, dmin, S, w, m, sums, acc)
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
+def _run_rows(X, cc, c, r0, r1, labels, dmin, S, w, m, sums, acc):
+    """Particles ``r0:r1`` of :func:`_assign_range`, blocks whose one candidate is centre c:
+    its d² to each (one loop over the whole run, no branch in it), or, when one is NaN, the
+    serial look; ``acc``: the sums (:func:`_add_one`)."""
+    c0 = cc[c, 0]                   # (in locals: the stores below could alias ``cc``)
+    c1 = cc[c, 1]
+    c2 = cc[c, 2]
+    c3 = cc[c, 3]
+    i0 = cc[c, 4]
+    i1 = cc[c, 5]
+    i2 = cc[c, 6]
+    i3 = cc[c, 7]
+    nan = 0
+    for i in range(r0, r1):
+        a0 = X[i, 0] - c0
+        a1 = X[i, 1] - c1
+        a2 = X[i, 2] - c2
+        a3 = X[i, 3] - c3
+        d = (((a0 * a0) * i0 + (a1 * a1) * i1) + (a2 * a2) * i2) + (a3 * a3) * i3
+        labels[i] = c
+        dmin[i] = d
+        nan |= d != d
+    if nan != 0:
+        g = c
+        for i in range(r0, r1):
+            lab, best = _dense_row(cc, X[i, 0], X[i, 1], X[i, 2], X[i, 3], g)
+            labels[i] = lab
+            dmin[i] = best
+            g = lab
+    if acc:
+        if nan == 0 and S.shape[1] == 6:
+            _add_one(S, w, m, sums, c, r0, r1)
+        else:
+            _add_sums(S, w, labels, m, sums, r0, r1)
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
@@ -488,12 +535,16 @@ def _assign_moved(X, centers, inv, prev, labels, dmin, moved, boxes):
     from :func:`_boxes`, empty: none), in blocks of :data:`_BLOCK` particles: a block whose particles' centres all stayed put looks
     only at the moved centres whose lower bound over the block's box is not above the
     block's largest d² (the others can neither beat nor tie any particle's own centre), often
-    none; a block with a particle whose centre moved, each particle as above."""
+    none; a run of blocks with a particle whose centre moved gets the full look of
+    :func:`_assign_blocks` (bounded by the boxes: about one d² a particle, where looking at
+    every centre for each of the moved clusters' particles cost as much as a whole
+    assignment in each late iteration)."""
     K = centers.shape[0]
     idx = _moved_list(moved)
     nm = idx.shape[0]
     if 2 * nm > K:
-        _assign_blocks(X, centers, inv, labels, dmin, boxes, X, dmin, dmin, X, np.bool_(False))
+        _assign_blocks(X, centers, inv, labels, dmin, boxes, boxes, dmin, dmin, boxes,
+                       np.bool_(False))
         return
     n = X.shape[0]
     cc, blocks = _centre_rows(centers, inv, _BLOCKS_MIN)
@@ -501,6 +552,7 @@ def _assign_moved(X, centers, inv, prev, labels, dmin, moved, boxes):
         _moved_rows(X, 0, n, centers, inv, prev, labels, dmin, moved, idx)
         return
     cand = np.empty(K, np.int64)
+    run = np.int64(-1)              # the first of a run of blocks that need the full look
     for b in range(boxes.shape[0]):
         b0 = b * _BLOCK
         b1 = b0 + _BLOCK if b0 + _BLOCK < n else n
@@ -522,8 +574,17 @@ def _assign_moved(X, centers, inv, prev, labels, dmin, moved, boxes):
                     break
                 ub = v if v > ub else ub
         if not ok:
-            _moved_rows(X, b0, b1, centers, inv, prev, labels, dmin, moved, idx)
+            # a particle whose centre moved (or with a NaN or inf d², or a box beyond
+            # _BLOCK_MAX_ABS): the block gets the full look (every centre, by the box
+            # bounds of :func:`_assign_blocks`), with the next such blocks in one call
+            if run < 0:
+                run = b
             continue
+        if run >= 0:
+            r0 = run * _BLOCK
+            _assign_range(X, centers, inv, labels, dmin, boxes, boxes, dmin, dmin, boxes,
+                          np.bool_(False), r0, b0, prev[r0])
+            run = -1
         nc = 0
         for k in range(nm):
             c = idx[k]
@@ -554,6 +615,149 @@ def _assign_moved(X, centers, inv, prev, labels, dmin, moved, boxes):
                     lab = c
             labels[i] = lab
             dmin[i] = best
+    if run >= 0:
+        r0 = run * _BLOCK
+        _assign_range(X, centers, inv, labels, dmin, boxes, boxes, dmin, dmin, boxes,
+                      np.bool_(False), r0, n, prev[r0])
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
+def _summaries(labels, dmin, bl, bub, b_lo, b_hi):
+    """For the blocks ``b_lo:b_hi`` of :data:`_BLOCK` particles: ``bl`` the label all their
+    particles share (-1 when they differ) and ``bub`` their largest d² (NaN when one is NaN
+    or infinite)."""
+    n = labels.shape[0]
+    for b in range(b_lo, b_hi):
+        b0 = b * _BLOCK
+        b1 = b0 + _BLOCK if b0 + _BLOCK < n else n
+        lab = labels[b0]
+        mx = -np.inf
+        fin = True
+        for i in range(b0, b1):
+            if labels[i] != lab:
+                lab = -1
+            v = dmin[i]
+            fin = fin and v - v == 0.0
+            mx = v if v > mx else mx
+        bl[b] = lab
+        bub[b] = mx if fin else np.nan
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
+def _take_new(labels, new, touched, r0, r1):
+    """``labels[r0:r1] = new[r0:r1]``, marking the clusters a particle left or joined in
+    ``touched``; whether any label changed."""
+    changed = False
+    for i in range(r0, r1):
+        if new[i] != labels[i]:
+            changed = True
+            touched[new[i]] = True
+            touched[labels[i]] = True
+            labels[i] = new[i]
+    return changed
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
+def _moved_inplace(X, centers, inv, labels, dmin, moved, boxes, bl, bub, new, touched, summ):
+    """:func:`_assign_moved` with the labels and d² updated in place (``new`` (N,) scratch),
+    the clusters a particle left or joined marked in ``touched`` (K,); ``bl``/``bub`` the
+    blocks' :func:`_summaries` (``summ``: up to date, else taken here): a block of one
+    unmoved centre whose moved centres' lower bounds all exceed its largest d² is not read
+    at all (a late iteration where two centres creep costs about the blocks near them).
+    Returns ``(changed, summ)``: whether a label changed, whether ``bl``/``bub`` are up to
+    date (for :func:`lloyd`'s sums of the touched clusters)."""
+    K = centers.shape[0]
+    n = X.shape[0]
+    nb = boxes.shape[0]
+    idx = _moved_list(moved)
+    nm = idx.shape[0]
+    cc, blocks = _centre_rows(centers, inv, _BLOCKS_MIN)
+    if 2 * nm > K or not blocks or nb == 0:
+        _assign_moved(X, centers, inv, labels, new, dmin, moved, boxes)
+        return _take_new(labels, new, touched, 0, n), False
+    if not summ:
+        _summaries(labels, dmin, bl, bub, 0, nb)
+    cand = np.empty(K, np.int64)
+    changed = False
+    run = np.int64(-1)              # the first of a run of blocks that need the full look
+    for b in range(nb + 1):
+        b0 = b * _BLOCK if b < nb else n
+        b1 = b0 + _BLOCK if b0 + _BLOCK < n else n
+        if b < nb:
+            ok = boxes[b, 8] != 0.0
+            lab = bl[b]
+            ub = bub[b]
+            if ok and lab < 0:                             # a block of several centres
+                ub = -np.inf
+                for i in range(b0, b1):
+                    v = dmin[i]
+                    if moved[labels[i]] or not v - v == 0.0:
+                        ok = False
+                        break
+                    ub = v if v > ub else ub
+            elif ok:
+                ok = not moved[lab] and ub - ub == 0.0
+            if not ok:
+                if run < 0:
+                    run = b
+                continue
+        if run >= 0:                                       # the full look, by box bounds
+            r0 = run * _BLOCK
+            _assign_range(X, centers, inv, new, dmin, boxes, boxes, dmin, dmin, boxes,
+                          np.bool_(False), r0, b0, labels[r0])
+            changed = _take_new(labels, new, touched, r0, b0) or changed
+            _summaries(labels, dmin, bl, bub, run, b)
+            run = -1
+        if b == nb:
+            break
+        l0 = boxes[b, 0]
+        l1 = boxes[b, 1]
+        l2 = boxes[b, 2]
+        l3 = boxes[b, 3]
+        h0 = boxes[b, 4]
+        h1 = boxes[b, 5]
+        h2 = boxes[b, 6]
+        h3 = boxes[b, 7]
+        nc = 0
+        for k in range(nm):
+            c = idx[k]
+            if not _lower(cc, c, l0, l1, l2, l3, h0, h1, h2, h3, ub) > ub:
+                cand[nc] = c
+                nc += 1
+        if nc == 0:
+            continue
+        moved_here = False
+        for i in range(b0, b1):
+            x0 = X[i, 0]
+            x1 = X[i, 1]
+            x2 = X[i, 2]
+            x3 = X[i, 3]
+            lab = labels[i]
+            best = dmin[i]
+            for k in range(nc):
+                c = cand[k]
+                a0 = x0 - cc[c, 0]
+                a1 = x1 - cc[c, 1]
+                a2 = x2 - cc[c, 2]
+                a3 = x3 - cc[c, 3]
+                d = (((a0 * a0) * cc[c, 4] + (a1 * a1) * cc[c, 5]) + (a2 * a2) * cc[c, 6]) \
+                    + (a3 * a3) * cc[c, 7]
+                if d < best or (d == best and c < lab):
+                    best = d
+                    lab = c
+            if lab != labels[i]:
+                touched[lab] = True
+                touched[labels[i]] = True
+                labels[i] = lab
+                moved_here = True
+            dmin[i] = best
+        if moved_here:
+            changed = True
+            _summaries(labels, dmin, bl, bub, b, b + 1)
+    return changed, True
 
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True)
@@ -1071,7 +1275,10 @@ def prepare_copies(states, log_w, copies, pos):
     w = np.empty(R, np.float64)
     S = np.empty((R, 6), np.float64)
     X = np.empty((R, 4), np.float64)
-    runs = np.empty(R, np.int64)
+    # the rows' run lengths are ``copies`` until two runs merge (rare: none on the bench
+    # scene): no array of their own to write until then
+    runs = copies
+    merged = False
     if n == 0 or not lmax - lmax == 0.0:          # (not finite; no np.isfinite to compile)
         return lmax, w[:0], shift, S[:0], X[:0], runs[:0]
     a0 = 0.0
@@ -1098,11 +1305,17 @@ def prepare_copies(states, log_w, copies, pos):
                 and states[i, 2] == states[i - 1, 2] and states[i, 3] == states[i - 1, 3] \
                 and states[i, 4] == states[i - 1, 4] and states[i, 5] == states[i - 1, 5]:
             w[m - 1] += c                          # the previous run's row again: merged
+            if not merged:
+                runs = np.empty(R, np.int64)
+                for q in range(m):
+                    runs[q] = copies[q]
+                merged = True
             runs[m - 1] += c
             i += c
             continue
         w[m] = c
-        runs[m] = c
+        if merged:
+            runs[m] = c
         for d in range(6):
             S[m, d] = states[i, d] - shift[d]
         X[m, 0] = S[m, 0]
@@ -1174,15 +1387,30 @@ def lloyd(X, S, w, centers, max_iter, tol, sigma_obs, sigma_min, pos_ratio, grid
     boxes = _boxes(X) if grid_min is None and K >= _BLOCKS_MIN else np.empty((0, 9), np.float64)
     it = 0
     done = False
+    # the blocks' summaries for the late dense iterations (:func:`_moved_inplace`)
+    bl = np.empty(boxes.shape[0], np.int64)
+    bub = np.empty(boxes.shape[0], np.float64)
+    summ = False
     for it in range(1, max_iter + 1):
         inv = _inv_var(centers, sigma_obs, sigma_min, pos_ratio)
         summed = False
+        late = False
         if grid_min is None:
             if it == 1:
                 # the labels and the sums in one pass (their copy and the sums pass below
                 # are not needed: every cluster is touched, the sums start at zero)
                 _assign_blocks(X, centers, inv, labels, dmin, boxes, S, w, m, sums, np.bool_(True))
                 summed = True
+            elif D == 6 and boxes.shape[0] > 0:
+                # in place, the comparison and the blocks' summaries with it
+                for c in range(K):
+                    touched[c] = False
+                changed, summ = _moved_inplace(X, centers, inv, labels, dmin, moved, boxes,
+                                               bl, bub, new, touched, summ)
+                if not changed:
+                    done = True
+                    break
+                late = True
             else:
                 _assign_moved(X, centers, inv, labels, new, dmin, moved, boxes)
         else:
@@ -1203,7 +1431,9 @@ def lloyd(X, S, w, centers, max_iter, tol, sigma_obs, sigma_min, pos_ratio, grid
                 if same_space:
                     _unstable_near_moved(centers, space, moved, stable, reach_c)
             _assign(X, centers, inv, labels, new, dmin, grid_min, space, stable, reach)
-        if it > 1:
+        if late:
+            pass                                # (compared and copied in place)
+        elif it > 1:
             for c in range(K):
                 touched[c] = False
             changed = False
@@ -1228,7 +1458,28 @@ def lloyd(X, S, w, centers, max_iter, tol, sigma_obs, sigma_min, pos_ratio, grid
                     for d in range(D):
                         sums[c, d] = 0.0
                     reach_c[c] = 0.0
-            if grid_min is None and D == 6:
+            if grid_min is None and D == 6 and summ:
+                # the blocks of one touched cluster, the others' not read, the blocks of
+                # several by runs (:func:`_add_one`: the same additions in the same order)
+                nbk = boxes.shape[0]
+                for b in range(nbk):
+                    b0 = b * _BLOCK
+                    b1 = b0 + _BLOCK if b0 + _BLOCK < n else n
+                    c = bl[b]
+                    if c >= 0:
+                        if touched[c]:
+                            _add_one(S, w, m, sums, c, b0, b1)
+                        continue
+                    i = b0
+                    while i < b1:
+                        c = labels[i]
+                        j = i + 1
+                        while j < b1 and labels[j] == c:
+                            j += 1
+                        if touched[c]:
+                            _add_one(S, w, m, sums, c, i, j)
+                        i = j
+            elif grid_min is None and D == 6:
                 # each run of particles of one touched cluster with its sums in registers
                 # (:func:`_add_one`: the same additions in the same order)
                 i = 0
@@ -1269,7 +1520,8 @@ def lloyd(X, S, w, centers, max_iter, tol, sigma_obs, sigma_min, pos_ratio, grid
         inv = _inv_var(centers, sigma_obs, sigma_min, pos_ratio)
         if grid_min is None:
             if it == 0:
-                _assign_blocks(X, centers, inv, new, dmin, boxes, X, dmin, dmin, X, np.bool_(False))
+                _assign_blocks(X, centers, inv, new, dmin, boxes, boxes, dmin, dmin, boxes,
+                               np.bool_(False))
             else:
                 _assign_moved(X, centers, inv, labels, new, dmin, moved, boxes)
         else:
@@ -1488,7 +1740,8 @@ def peaks(states, log_w, copies, pos, Z, extra, scale, cfg, grid_min):
     guarded (1.0 / 0.0), max_splits, n_near, max_iter, tol, sigma_obs, sigma_min, pos_ratio``
     (:func:`split_clusters`, :func:`lloyd`: integers as floats).
 
-    Returns ``(bad, centers, masses, labels, runs, kept, origin, n_splits, n_iter)``:
+    Returns ``(bad, centers, masses, labels, runs, kept, origin, n_splits, n_iter,
+    kept_centers)`` (``kept_centers`` = ``centers[kept]``):
     ``bad`` 1 for a non-finite observation, 2 for a width or height <= 0 (nothing else
     computed), else 0; ``labels`` (M,) of the merged rows, ``runs`` (M,) their lengths."""
     T = cfg[0]
@@ -1520,7 +1773,7 @@ def peaks(states, log_w, copies, pos, Z, extra, scale, cfg, grid_min):
     if bad != 0:
         return (bad, np.empty((0, 6), np.float64), np.empty(0, np.float64),
                 np.empty(0, np.int64), np.empty(0, np.int64), np.empty(0, np.bool_),
-                np.empty(0, np.int64), 0, 0)
+                np.empty(0, np.int64), 0, 0, np.empty((0, 6), np.float64))
     if copies.shape[0] > 0:
         lmax, w, shift, S, X, runs = prepare_copies(states, log_w, copies, pos)
     else:
@@ -1558,9 +1811,18 @@ def peaks(states, log_w, copies, pos, Z, extra, scale, cfg, grid_min):
     K = C.shape[0]
     kept = np.empty(K, np.bool_)
     origin = np.empty(K, np.int64)
+    nk = 0
     for c in range(K):
         for d in range(6):
             C[c, d] += shift[d]
         kept[c] = M[c] >= T
+        nk += kept[c]
         origin[c] = c if c < nz else (ORIGIN_EXTRA if c < k0 else ORIGIN_SPLIT)
-    return bad, C, M, lab, runs, kept, origin, n_splits, it + it2
+    kc = np.empty((nk, 6), np.float64)             # ``C[kept]``
+    q = 0
+    for c in range(K):
+        if kept[c]:
+            for d in range(6):
+                kc[q, d] = C[c, d]
+            q += 1
+    return bad, C, M, lab, runs, kept, origin, n_splits, it + it2, kc

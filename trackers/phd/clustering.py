@@ -146,16 +146,19 @@ class Clusters:
     n_iter: int = 0
     _labeller: Optional[Callable[[], np.ndarray]] = field(default=None, repr=False,
                                                           compare=False)
+    _kept_centers: Optional[np.ndarray] = field(default=None, repr=False, compare=False)
 
     def __init__(self, centers: np.ndarray, masses: np.ndarray, _labels: Optional[np.ndarray],
                  kept: np.ndarray, origin: np.ndarray, n_splits: int = 0, n_iter: int = 0,
-                 _labeller: Optional[Callable[[], np.ndarray]] = None):
+                 _labeller: Optional[Callable[[], np.ndarray]] = None,
+                 _kept_centers: Optional[np.ndarray] = None):
         # (the frozen dataclass's generated __init__ sets each field by object.__setattr__:
         # the instance dict directly costs a fraction; made every frame)
         d = self.__dict__
         d["centers"], d["masses"], d["_labels"], d["kept"] = centers, masses, _labels, kept
         d["origin"], d["n_splits"], d["n_iter"], d["_labeller"] = (origin, n_splits, n_iter,
                                                                    _labeller)
+        d["_kept_centers"] = _kept_centers
 
     def __len__(self) -> int:
         return len(self.masses)
@@ -172,7 +175,13 @@ class Clusters:
 
     @property
     def kept_centers(self) -> np.ndarray:
-        """(K_kept, 6) the estimated target states X̂_k passed to data association."""
+        """(K_kept, 6) the estimated target states X̂_k passed to data association (a new
+        array at each read: the first, :func:`kmeans_peaks`' kernel made it -- a boolean
+        gather costs ~10-30 us when the caches are cold, as between two frames of a run)."""
+        kc = self._kept_centers
+        if kc is not None:
+            self.__dict__["_kept_centers"] = None
+            return kc
         return self.centers[self.kept]
 
     @property
@@ -287,7 +296,8 @@ def kmeans_peaks(ps: ParticleSet, Z, T: float = 0.6, *, params: PHDParams | None
             [T, split_above, 2.0 * min_split_mass if guarded else -np.inf, min_split_mass,
              1.0 if guarded else 0.0, int(max_splits), int(SPLIT_NEIGHBOURS), int(max_iter),
              tol, lk.sigma_obs, lk.sigma_obs_min, lk.sigma_obs_pos_ratio], dtype=np.float64)
-    bad, centers, masses, labels, runs, kept, origin, n_splits, n_iter = _kmeans_kernels.peaks(
+    (bad, centers, masses, labels, runs, kept, origin, n_splits, n_iter,
+     kc) = _kmeans_kernels.peaks(
         np.ascontiguousarray(states, dtype=np.float64),
         np.ascontiguousarray(log_w, dtype=np.float64), copies, pos, Z, extra, np.exp(lmax), cfg,
         int(INDEX_MIN_CENTERS) if K0 >= INDEX_MIN_CENTERS else None)
@@ -295,11 +305,11 @@ def kmeans_peaks(ps: ParticleSet, Z, T: float = 0.6, *, params: PHDParams | None
         as_observations(Z)              # (raises its message)
     if full is not None:
         return Clusters(centers, masses, None, kept, origin, n_splits, n_iter,
-                        partial(_nearest_labels, full, ps.log_weights, centers, params))
+                        partial(_nearest_labels, full, ps.log_weights, centers, params), kc)
     if len(labels) != n:                # merged rows: every particle's label when first read
         return Clusters(centers, masses, None, kept, origin, n_splits, n_iter,
-                        partial(np.repeat, labels, runs))
-    return Clusters(centers, masses, labels, kept, origin, n_splits, n_iter)
+                        partial(np.repeat, labels, runs), kc)
+    return Clusters(centers, masses, labels, kept, origin, n_splits, n_iter, None, kc)
 
 
 _NO_OBS = np.zeros((0, OBS_DIM))
@@ -405,4 +415,4 @@ def measurement_estimates(clusters: Clusters, ps: ParticleSet, Z, won: np.ndarra
     for d in OBS_COLS:
         m = np.bincount(cols, weights=w * states[rows, d], minlength=len(Z))
         centers[cluster_of[det], d] = m[det] / total[det]
-    return replace(clusters, centers=centers)
+    return replace(clusters, centers=centers, _kept_centers=None)
