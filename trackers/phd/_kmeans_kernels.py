@@ -202,6 +202,52 @@ def _lower(cc, c, l0, l1, l2, l3, h0, h1, h2, h3, ub):
     a = l3 - v if v < l3 else (h3 - v if v > h3 else 0.0)
     return lb + (a * a) * cc[c, 7]
 
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
+def _box_cands(cc, idx, nm, boxes, b, ub, cand):
+    """The centres ``idx[:nm]`` whose :func:`_lower` bound over block ``b``'s box is not above
+    ``ub`` (those that could beat a d² of ``ub`` somewhere in it), written to ``cand`` in
+    ``idx``'s order; returns their count."""
+    l0 = boxes[b, 0]
+    l1 = boxes[b, 1]
+    l2 = boxes[b, 2]
+    l3 = boxes[b, 3]
+    h0 = boxes[b, 4]
+    h1 = boxes[b, 5]
+    h2 = boxes[b, 6]
+    h3 = boxes[b, 7]
+    nc = 0
+    for k in range(nm):
+        c = idx[k]
+        if not _lower(cc, c, l0, l1, l2, l3, h0, h1, h2, h3, ub) > ub:
+            cand[nc] = c
+            nc += 1
+    return nc
+
+
+@njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+      no_cpython_wrapper=True)
+def _row_vs(X, i, cc, cand, nc, lab, best):
+    """Particle ``i``'s label and d² after looking at the centres ``cand[:nc]`` from centre
+    ``lab`` at d² ``best`` (:func:`_d2`'s sums; a tie goes to the lower index)."""
+    x0 = X[i, 0]
+    x1 = X[i, 1]
+    x2 = X[i, 2]
+    x3 = X[i, 3]
+    for k in range(nc):
+        c = cand[k]
+        a0 = x0 - cc[c, 0]
+        a1 = x1 - cc[c, 1]
+        a2 = x2 - cc[c, 2]
+        a3 = x3 - cc[c, 3]
+        d = (((a0 * a0) * cc[c, 4] + (a1 * a1) * cc[c, 5]) + (a2 * a2) * cc[c, 6]) \
+            + (a3 * a3) * cc[c, 7]
+        if d < best or (d == best and c < lab):
+            best = d
+            lab = c
+    return lab, best
+
+
 
 @njit(cache=True, nogil=True, error_model="numpy", no_cfunc_wrapper=True,
       no_cpython_wrapper=True)
@@ -557,14 +603,6 @@ def _assign_moved(X, centers, inv, prev, labels, dmin, moved, boxes):
         b0 = b * _BLOCK
         b1 = b0 + _BLOCK if b0 + _BLOCK < n else n
         ok = boxes[b, 8] != 0.0
-        l0 = boxes[b, 0]
-        l1 = boxes[b, 1]
-        l2 = boxes[b, 2]
-        l3 = boxes[b, 3]
-        h0 = boxes[b, 4]
-        h1 = boxes[b, 5]
-        h2 = boxes[b, 6]
-        h3 = boxes[b, 7]
         ub = -np.inf
         if ok:
             for i in range(b0, b1):
@@ -585,34 +623,13 @@ def _assign_moved(X, centers, inv, prev, labels, dmin, moved, boxes):
             _assign_range(X, centers, inv, labels, dmin, boxes, boxes, dmin, dmin, boxes,
                           np.bool_(False), r0, b0, prev[r0])
             run = -1
-        nc = 0
-        for k in range(nm):
-            c = idx[k]
-            if not _lower(cc, c, l0, l1, l2, l3, h0, h1, h2, h3, ub) > ub:
-                cand[nc] = c
-                nc += 1
+        nc = _box_cands(cc, idx, nm, boxes, b, ub, cand)
         if nc == 0:
             for i in range(b0, b1):
                 labels[i] = prev[i]
             continue
         for i in range(b0, b1):
-            x0 = X[i, 0]
-            x1 = X[i, 1]
-            x2 = X[i, 2]
-            x3 = X[i, 3]
-            lab = prev[i]
-            best = dmin[i]
-            for k in range(nc):
-                c = cand[k]
-                a0 = x0 - cc[c, 0]
-                a1 = x1 - cc[c, 1]
-                a2 = x2 - cc[c, 2]
-                a3 = x3 - cc[c, 3]
-                d = (((a0 * a0) * cc[c, 4] + (a1 * a1) * cc[c, 5]) + (a2 * a2) * cc[c, 6]) \
-                    + (a3 * a3) * cc[c, 7]
-                if d < best or (d == best and c < lab):
-                    best = d
-                    lab = c
+            lab, best = _row_vs(X, i, cc, cand, nc, prev[i], dmin[i])
             labels[i] = lab
             dmin[i] = best
     if run >= 0:
@@ -713,41 +730,12 @@ def _moved_inplace(X, centers, inv, labels, dmin, moved, boxes, bl, bub, new, to
             run = -1
         if b == nb:
             break
-        l0 = boxes[b, 0]
-        l1 = boxes[b, 1]
-        l2 = boxes[b, 2]
-        l3 = boxes[b, 3]
-        h0 = boxes[b, 4]
-        h1 = boxes[b, 5]
-        h2 = boxes[b, 6]
-        h3 = boxes[b, 7]
-        nc = 0
-        for k in range(nm):
-            c = idx[k]
-            if not _lower(cc, c, l0, l1, l2, l3, h0, h1, h2, h3, ub) > ub:
-                cand[nc] = c
-                nc += 1
+        nc = _box_cands(cc, idx, nm, boxes, b, ub, cand)
         if nc == 0:
             continue
         moved_here = False
         for i in range(b0, b1):
-            x0 = X[i, 0]
-            x1 = X[i, 1]
-            x2 = X[i, 2]
-            x3 = X[i, 3]
-            lab = labels[i]
-            best = dmin[i]
-            for k in range(nc):
-                c = cand[k]
-                a0 = x0 - cc[c, 0]
-                a1 = x1 - cc[c, 1]
-                a2 = x2 - cc[c, 2]
-                a3 = x3 - cc[c, 3]
-                d = (((a0 * a0) * cc[c, 4] + (a1 * a1) * cc[c, 5]) + (a2 * a2) * cc[c, 6]) \
-                    + (a3 * a3) * cc[c, 7]
-                if d < best or (d == best and c < lab):
-                    best = d
-                    lab = c
+            lab, best = _row_vs(X, i, cc, cand, nc, labels[i], dmin[i])
             if lab != labels[i]:
                 touched[lab] = True
                 touched[labels[i]] = True
