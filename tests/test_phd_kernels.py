@@ -449,12 +449,12 @@ def test_predict_leaves_its_positions_extent_for_the_scene_grid():
     ps = ParticleSet(_states(rng, 900), np.full(900, -2.0))
     buf = (np.empty((950, 6)), np.empty(950))
     pred = F.predict(ps, F.MotionParams(), np.random.default_rng(1), buf)
-    ext = pred.__dict__[F._POS_EXT]
+    ext = pred.extent()
     x = pred.states
     assert x.base is buf[0] and len(x) == 900
     np.testing.assert_array_equal(ext, [x[:, 0].min(), x[:, 1].min(), x[:, 0].max(),
                                         x[:, 1].max(), 1.0])
-    assert F._POS_EXT not in F.predict(ps, F.MotionParams(), np.random.default_rng(1)).__dict__
+    assert F.predict(ps, F.MotionParams(), np.random.default_rng(1)).extent() is None
 
 
 def test_grid_of_no_points_is_empty():

@@ -801,12 +801,13 @@ class SceneModel:
         par[P_SCORE_FLOOR] = self.score_floor
         par[P_USE_PSUMS] = 0.0 if self.persist_sums is None else 1.0
         ss = self.score_sums if ratio else _NO_SUMS
+        pos_ext = predicted.extent()        # (predict's: the grid skips a pass over the rows)
         code, near, wide, chained, persist_now, n_dup, m, grid, m_near, out, final = scene_frame(
             predicted.states, w, Z, std, self.chains.length,
             scores if ratio else _NO_SCORES, par, self.size_m1, self.size_m2, self.extent,
             place.mem_z, place.mem_w, place.mem_e, ss,
             self.persist_sums if ratio and self.persist_sums is not None else ss,
-            predicted.__dict__.get(_POS_EXT, _NO_EXT))
+            _NO_EXT if pos_ext is None else pos_ext)
         if not code:
             raise ValueError("mass_near: non-finite particle positions")
         self.near = near
@@ -1152,13 +1153,6 @@ def scene_learn(won, parts, prev_link, chain_clutter, mem_z, mem_s, mem_w, mem_e
 
 # ----------------------------------------------------------------------------- the four stages
 
-#: the key under which :func:`predict` leaves, in the predicted set's dict, its positions'
-#: extent ``(x0, y0, x1, y1, finite)`` (:func:`._kernels.propagate_into`) for the scene model's
-#: grid (:meth:`SceneModel._log_kappa_fused`); a set made otherwise has none (its arrays are
-#: never changed in place: the extent stays the set's)
-_POS_EXT = "_pos_extent"
-
-
 def predict(ps: ParticleSet, mp: MotionParams, rng: np.random.Generator,
             out: Optional[tuple[np.ndarray, np.ndarray]] = None) -> ParticleSet:
     """Persistent particles at k: ``x ~ f(.|x_{k-1})`` (q = f, so eq. (4) reduces to the
@@ -1176,13 +1170,13 @@ def predict(ps: ParticleSet, mp: MotionParams, rng: np.random.Generator,
             and S.shape[1] == STATE_DIM:
         # the filter's buffers (PHDFilter.step): motion.propagate's kernel call without its
         # checks and views (the same call: every argument of the same type)
-        # (and the new positions' extent: the scene model's grid skips its own pass, _POS_EXT)
+        # (and the new positions' extent: the scene model's grid skips its own pass)
         ext = np.empty(5)
         _kernels.propagate_into(x, stream(key_from(rng)), float(mp.sigma_v),
                                 float(mp.sigma_size), float(mp.accel_to_position),
                                 float(mp.min_size), S, lw0, float(log_e), L, ext)
         out = ParticleSet(S[:n], L[:n], ps.labels, ps.extra)
-        out.__dict__[_POS_EXT] = ext
+        out.known_extent(ext)
         if ps.is_known_equal():
             out.known_equal()
         return out

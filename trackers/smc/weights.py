@@ -184,6 +184,17 @@ class ParticleSet:
         pass of its own), else None."""
         return self.__dict__.get("_copy_sums")
 
+    def known_extent(self, ext: np.ndarray) -> None:
+        """Record ``ext`` = ``(x0, y0, x1, y1, finite)``, the extent of the states' first two
+        columns (min then max; ``finite`` 0.0 when one of them is not), when the maker computed
+        it in its own pass (the PHD prediction's kernel): the scene model's grid then skips a
+        pass of its own (:meth:`extent`)."""
+        self.__dict__["_extent"] = ext
+
+    def extent(self) -> Optional[np.ndarray]:
+        """The extent :meth:`known_extent` recorded, else None."""
+        return self.__dict__.get("_extent")
+
     def is_known_equal(self) -> bool:
         """True when :meth:`known_equal` was recorded, or the equal-weights test already ran
         and found them equal (no pass over the weights here)."""
