@@ -343,9 +343,7 @@ class _AssociatingTracker:
         if ndim >= 2:
             shape = image.shape    # (frame.width × frame.height)
             self.associator.area = float(int(shape[1]) * int(shape[0]))
-        # (Frame.has_pixels on the image read above: real pixels, not a blank stand-in)
-        if (self.associator.params.app_weight > 0 and ndim == 3 and image.size > 0
-                and 0 not in image.strides):
+        if self.associator.params.app_weight > 0 and frame.has_pixels:
             feats = box_features(image, states)
         res = self.associator.step(frame.index, states, feats, detections,
                                    edges=log.wants("clusters"))
