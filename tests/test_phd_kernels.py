@@ -942,6 +942,21 @@ def _brute_d2(X, centers, lk):
     return acc
 
 
+def _serial_scan(X, centers, inv):
+    """The dense assignment's reference: every particle's d² to every centre in
+    :func:`._kmeans_kernels._d2`'s order, and the serial scan's labels (centre 0, then each
+    strictly less; ties to the lowest index).  Returns (labels, their d²)."""
+    n, k = len(X), len(centers)
+    with np.errstate(over="ignore", invalid="ignore"):
+        a = X[:, None, :] - centers[:, OBS][None, :, :]             # (n, k, 4)
+        d = (((a[..., 0] * a[..., 0]) * inv[:, 0] + (a[..., 1] * a[..., 1]) * inv[:, 1])
+             + (a[..., 2] * a[..., 2]) * inv[:, 2]) + (a[..., 3] * a[..., 3]) * inv[:, 3]
+    want = np.zeros(n, dtype=np.int64)
+    for c in range(1, k):
+        want[d[np.arange(n), c] < d[np.arange(n), want]] = c
+    return want, d[np.arange(n), want]
+
+
 def _centers(rng, k):
     c = np.zeros((k, 6))
     c[:, :2] = rng.uniform(-300, 300, (k, 2))
@@ -1007,15 +1022,9 @@ def test_dense_assign_is_the_serial_scan_bit_for_bit(k):
         Xo = np.ascontiguousarray(X[order])
         lab, d2 = np.empty(n, dtype=np.int64), np.empty(n)
         KM._assign_dense(Xo, centers, inv, lab, d2)
-        C = centers[:, OBS]
-        a = Xo[:, None, :] - C[None, :, :]             # (n, k, 4), :func:`_d2`'s order
-        d = (((a[..., 0] * a[..., 0]) * inv[:, 0] + (a[..., 1] * a[..., 1]) * inv[:, 1])
-             + (a[..., 2] * a[..., 2]) * inv[:, 2]) + (a[..., 3] * a[..., 3]) * inv[:, 3]
-        want = np.zeros(n, dtype=np.int64)             # the serial scan: 0, then strictly less
-        for c in range(1, k):
-            want[d[np.arange(n), c] < d[np.arange(n), want]] = c
+        want, d_want = _serial_scan(Xo, centers, inv)
         np.testing.assert_array_equal(lab, want)
-        assert d2.tobytes() == d[np.arange(n), want].tobytes()
+        assert d2.tobytes() == d_want.tobytes()
 
 
 @pytest.mark.parametrize("k", [KM._BLOCKS_MIN, 4, 9, 19, 31])
@@ -1045,20 +1054,13 @@ def test_dense_assign_blocks_are_the_serial_scan_bit_for_bit(k):
     X[740, 3] = np.inf
     X[780, 0] = -1e200
     inv = KM._inv_var(centers, lk.sigma_obs, lk.sigma_obs_min, lk.sigma_obs_pos_ratio)
-    C = centers[:, OBS]
     for order in (np.arange(n), rng.permutation(n)):
         Xo = np.ascontiguousarray(X[order])
         lab, d2 = np.empty(n, dtype=np.int64), np.empty(n)
         KM._assign_dense(Xo, centers, inv, lab, d2)
-        with np.errstate(over="ignore", invalid="ignore"):
-            a = Xo[:, None, :] - C[None, :, :]
-            d = (((a[..., 0] * a[..., 0]) * inv[:, 0] + (a[..., 1] * a[..., 1]) * inv[:, 1])
-                 + (a[..., 2] * a[..., 2]) * inv[:, 2]) + (a[..., 3] * a[..., 3]) * inv[:, 3]
-        want = np.zeros(n, dtype=np.int64)
-        for c in range(1, k):
-            want[d[np.arange(n), c] < d[np.arange(n), want]] = c
+        want, d_want = _serial_scan(Xo, centers, inv)
         np.testing.assert_array_equal(lab, want)
-        assert d2.tobytes() == d[np.arange(n), want].tobytes()
+        assert d2.tobytes() == d_want.tobytes()
         if order[0] == 0 and tie:
             assert np.all(want[np.arange(400, 440)] == 2)       # the ties were there
             assert np.all(want[np.arange(500, 530)] == 1)
@@ -1105,15 +1107,9 @@ def test_late_dense_look_is_the_serial_scan_bit_for_bit(k):
             inv = KM._inv_var(c1, lk.sigma_obs, lk.sigma_obs_min, lk.sigma_obs_pos_ratio)
             dm = d0.copy()
             lab = _moved_look(Xo, c1, inv, prev, dm, moved)
-            with np.errstate(over="ignore", invalid="ignore"):
-                a = Xo[:, None, :] - c1[:, OBS][None, :, :]
-                d = (((a[..., 0] * a[..., 0]) * inv[:, 0] + (a[..., 1] * a[..., 1]) * inv[:, 1])
-                     + (a[..., 2] * a[..., 2]) * inv[:, 2]) + (a[..., 3] * a[..., 3]) * inv[:, 3]
-            want = np.zeros(n, dtype=np.int64)
-            for c in range(1, k):
-                want[d[np.arange(n), c] < d[np.arange(n), want]] = c
+            want, d_want = _serial_scan(Xo, c1, inv)
             np.testing.assert_array_equal(lab, want)
-            assert dm.tobytes() == d[np.arange(n), want].tobytes()
+            assert dm.tobytes() == d_want.tobytes()
             changed += np.count_nonzero(want != prev)
     assert changed > 20                                 # the moved centres changed labels
 
