@@ -1435,9 +1435,7 @@ def birth(predicted: ParticleSet, Z, params: PHDParams, rng: np.random.Generator
     :meth:`PHDFilter.step`); ``ahead``: the M(z) the scene model computed in its own pass
     (:meth:`SceneModel.take_birth_mass`, :func:`_mass_near`)."""
     if noise is None:
-        Z = as_observations(Z)
-        std = obs_std(Z[:, 2:4], params.likelihood)
-        noise = (std, np.log(std))
+        Z, noise = observations_noise(Z, params.likelihood)
     bp, lk = params.birth, params.likelihood
     m_near, grid = _mass_near(predicted, Z, bp, lk, noise[0], ahead)
     st = key_stream(rng)
