@@ -642,16 +642,11 @@ class SceneModel:
     def _image_area(self, frame: Optional[Frame]) -> float:
         """The frame's pixel area when it has an image, else 0 (the density takes the area of
         the detections' extent then: :func:`.clutter.scene_density`)."""
-        if type(frame) is Frame:
-            im = frame.image
-            if type(im) is np.ndarray:       # (frame.width * frame.height: its shape's)
-                sh = im.shape
-                return float(int(sh[1]) * int(sh[0])) if len(sh) >= 2 and im.size else 0.0
         im = None if frame is None else getattr(frame, "image", None)
-        if im is not None and (im.ndim if isinstance(im, np.ndarray) else np.ndim(im)) >= 2 \
-                and im.size:
-            return float(frame.width * frame.height)
-        return 0.0
+        if im is None:
+            return 0.0
+        sh = np.shape(im)               # (frame.width * frame.height: its shape's)
+        return float(int(sh[1]) * int(sh[0])) if len(sh) >= 2 and np.size(im) else 0.0
 
     def log_kappa(self, Z: np.ndarray, scores: Optional[np.ndarray],
                   frame: Optional[Frame], predicted: Optional[ParticleSet] = None,
