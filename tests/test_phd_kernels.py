@@ -16,6 +16,7 @@ from pfscope.trackers.phd.filter import (
     _NO_GRID,
     _grid_cell,
     _birth_weight_terms,
+    _weight_consts,
     as_observations,
     detection_noise,
     log_birth_weight,
@@ -297,24 +298,24 @@ def test_birth_alloc_fill_makes_log_birth_weights_bit_for_bit(odds):
         log_std = np.log(std)                # (what the kernel takes: it sums each row)
         log_kappa = rng.normal(-14, 3, nz)
         m_near = rng.uniform(0, 1.2, nz)
-        lw_base, mode, c = _birth_weight_terms(params, log_kappa)
+        lw_base, mode, c2 = _birth_weight_terms(params, log_kappa)
         assert mode == (2 if odds > 0 else 1)
+        c = c2[K.BIRTH_LW_C:]               # lw_c: log_birth_weight's constants of this mode
+        np.testing.assert_array_equal(c, _weight_consts(odds, 0.07, 1.3, True) if odds > 0
+                                      else _weight_consts(0.02, 0.0, 0.0, False))
         states, log_w = np.empty((nz * 50, 6)), np.empty(nz * 50)
         det = np.empty(nz * 50, np.int64)
         j, n = K.birth_alloc_fill(m_near, _birth_consts(50, True, 50_000, lk, 1.3, 0.0, 0.1,
                                                         1.0, c),
                                   lw_base, mode, log_std, np.zeros(0, np.bool_), 0.0, Z,
                                   R.stream(3), states, log_w, det)
-        # the filter's own constants array: these settings, the same lw_c
-        lw_base2, mode2, c2 = _birth_weight_terms(params, log_kappa, True)
-        assert mode2 == mode and lw_base2 is lw_base
-        np.testing.assert_array_equal(c2[K.BIRTH_LW_C:], c)
+        # the filter's own constants array: these settings, then lw_c
         np.testing.assert_array_equal(c2[:K.BIRTH_LW_C], [
             params.birth.j_max, 1.0, params.birth.max_births_per_frame, lk.sigma_obs,
             lk.sigma_obs_min, lk.sigma_obs_pos_ratio, params.birth.birth_spread,
             params.birth.birth_speed_mean, params.birth.birth_speed_std,
             params.motion.min_size])
-        assert _birth_weight_terms(params, log_kappa, True)[2] is c2      # made once
+        assert _birth_weight_terms(params, log_kappa)[2] is c2            # made once
         want = log_birth_weight(Z, params, log_kappa, log_norm)
         want = np.repeat(want - np.array([libm.log(float(max(v, 1))) for v in j]), j)
         assert n == j.sum()

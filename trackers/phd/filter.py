@@ -1343,21 +1343,15 @@ def log_birth_weight(Z: np.ndarray, params: PHDParams,
     return math.log(bp.birth_odds) + np.asarray(log_kappa) - log_pd - log_gbar
 
 
-def _birth_weight_terms(params: PHDParams, log_kappa: Optional[np.ndarray],
-                        settings: bool = False) -> tuple[np.ndarray, int, np.ndarray]:
-    """:func:`log_birth_weight` as ``(lw_base, lw_mode, lw_c)`` for
+def _birth_weight_terms(params: PHDParams, log_kappa: Optional[np.ndarray]
+                        ) -> tuple[np.ndarray, int, np.ndarray]:
+    """:func:`log_birth_weight` as ``(lw_base, lw_mode, consts)`` for
     :func:`._kernels.birth_alloc_fill`, which does its arithmetic (the same operations in the
     same order): mode 1 the constant ``log birth_intensity``, mode 2 the ``birth_odds`` weight
-    of ``log_kappa`` and the detections' ``Σ log σ``.  ``settings``: the kernel's whole
-    ``consts`` array (:func:`_birth_consts`) in place of ``lw_c``."""
-    bp = params.birth
-    odds = not (bp.birth_odds <= 0 or log_kappa is None)
-    if settings:
-        c = _birth_consts(params, odds)
-    elif odds:
-        c = _weight_consts(bp.birth_odds, params.likelihood.p_miss, bp.birth_spread, True)
-    else:
-        c = _weight_consts(bp.birth_intensity, 0.0, 0.0, False)
+    of ``log_kappa`` and the detections' ``Σ log σ``; ``consts`` the kernel's settings array
+    (:func:`_birth_consts`, its mode's ``lw_c`` last)."""
+    odds = not (params.birth.birth_odds <= 0 or log_kappa is None)
+    c = _birth_consts(params, odds)
     if not odds:
         return _NO_LW, 1, c
     lkap = log_kappa
@@ -1437,7 +1431,7 @@ def birth(predicted: ParticleSet, Z, params: PHDParams, rng: np.random.Generator
     # eq. (4), newborn branch, with γ_z ∝ p_z: every newborn of z weighs birth_intensity / J_z
     # (log_birth_weight's arithmetic, the division and the revive odds in the kernel: numpy's
     # floats, no array operation here)
-    lw_base, lw_mode, consts = _birth_weight_terms(params, log_kappa, True)
+    lw_base, lw_mode, consts = _birth_weight_terms(params, log_kappa)
     if lw_mode == 2 and len(lw_base) != len(Z):
         raise ValueError(f"birth: {len(lw_base)} clutter densities for {len(Z)} detections")
     if revive is not None and bp.revive_odds > bp.birth_odds > 0 and log_kappa is not None:
