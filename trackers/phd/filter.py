@@ -101,7 +101,7 @@ from .scene_motion import Chains
 from .gating import BRUTE_PAIRS, DEFAULT_BUDGET, LogGPairs, gate_pairs, gate_sums, tail_radius2
 from ..smc.resampling import SCHEMES
 from ..smc.resampling import resample as _resample_set
-from ..smc.random import key_from, key_stream, stream
+from ..smc.random import key_stream
 from ..smc.weights import LazyParticleSet, ParticleSet, logsumexp
 from ..types import Frame
 
@@ -1167,7 +1167,7 @@ def predict(ps: ParticleSet, mp: MotionParams, rng: np.random.Generator,
         # checks and views (the same call: every argument of the same type)
         # (and the new positions' extent: the scene model's grid skips its own pass)
         ext = np.empty(5)
-        _kernels.propagate_into(x, stream(key_from(rng)), float(mp.sigma_v),
+        _kernels.propagate_into(x, key_stream(rng), float(mp.sigma_v),
                                 float(mp.sigma_size), float(mp.accel_to_position),
                                 float(mp.min_size), S, lw0, float(log_e), L, ext)
         out = ParticleSet(S[:n], L[:n], ps.labels, ps.extra)

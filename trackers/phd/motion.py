@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..smc.random import key_from, stream
+from ..smc.random import key_stream
 from ._kernels import propagate_into
 
 #: maggio2007 §4 defaults.
@@ -65,7 +65,7 @@ def propagate(states: np.ndarray, rng: np.random.Generator, *, sigma_v: float = 
     elif not (len(log_weights) == n and len(lw_out) >= n):
         raise ValueError(f"propagate: {len(log_weights)} log-weights (out {len(lw_out)}) for "
                          f"{n} states")
-    propagate_into(x, stream(key_from(rng)), float(sigma_v), float(sigma_size),
+    propagate_into(x, key_stream(rng), float(sigma_v), float(sigma_size),
                    float(accel_to_position), float(min_size), out, log_weights, float(log_e),
                    lw_out, _NO_LW)
     return out
